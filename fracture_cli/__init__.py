@@ -1,0 +1,13 @@
+"""fracture: prefractured fragments and a realtime impact file from a game asset.
+
+Implements "Breaking Good: Fracture Modes for Realtime Destruction" (Sellan et al.,
+ACM TOG 2023). Each stage is a plain function ``stage(data, options) -> data``
+living in :mod:`fracture_cli.stages`; the CLI in :mod:`fracture_cli.cli` only
+parses options and calls them.
+"""
+
+__version__ = "0.1.0"
+
+from fracture_cli.errors import FractureError, InputError, StageError  # noqa: E402
+
+__all__ = ["__version__", "FractureError", "InputError", "StageError"]

@@ -1,0 +1,177 @@
+"""A small, deterministic glTF 2.0 (GLB) writer.
+
+We write GLB ourselves rather than through trimesh so that (a) one node and one
+mesh hold all primitives of a fragment (outer materials + interior), (b) the
+bytes are reproducible (no generator timestamps, fixed key order), and (c) the
+layout is exactly what the format doc promises.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from fracture_cli import __version__
+from fracture_cli.types import Material
+
+_FLOAT = 5126
+_UINT32 = 5125
+_ARRAY_BUFFER = 34962
+_ELEMENT_ARRAY_BUFFER = 34963
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """One glTF primitive: triangles of a single material.
+
+    Attributes
+    ----------
+    positions : (n, 3) float
+    normals : (n, 3) float
+    uvs : (n, 2) float or None
+        OpenGL convention (v up); flipped to glTF's (v down) on write.
+    indices : (m, 3) int
+    material : int
+        Index into the material list passed to :func:`glb_bytes`.
+    """
+
+    positions: np.ndarray
+    normals: np.ndarray
+    uvs: np.ndarray | None
+    indices: np.ndarray
+    material: int
+
+
+def _material_json(material: Material, texture_index: int | None) -> dict:
+    pbr = {
+        "baseColorFactor": [round(float(c), 6) for c in material.base_color],
+        "metallicFactor": 0.0,
+        "roughnessFactor": 1.0,
+    }
+    src = material.source
+    for key, attr in (("metallicFactor", "metallicFactor"), ("roughnessFactor", "roughnessFactor")):
+        value = getattr(src, attr, None)
+        if value is not None:
+            pbr[key] = round(float(value), 6)
+    if texture_index is not None:
+        pbr["baseColorTexture"] = {"index": texture_index, "texCoord": 0}
+    out = {"name": material.name, "pbrMetallicRoughness": pbr}
+    if material.base_color[3] < 1.0:
+        out["alphaMode"] = "BLEND"
+    return out
+
+
+def _texture_png(material: Material) -> bytes | None:
+    image = getattr(material.source, "baseColorTexture", None)
+    if image is None:
+        image = getattr(material.source, "image", None)
+    if image is None or not hasattr(image, "save"):
+        return None
+    buf = io.BytesIO()
+    image.save(buf, format="PNG", optimize=False)
+    return buf.getvalue()
+
+
+def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Material, ...]) -> bytes:
+    """Encode meshes as a GLB file, one node per mesh.
+
+    Parameters
+    ----------
+    meshes : list of (name, list of Primitive)
+        Node/mesh names and their primitives, in output order.
+    materials : tuple of Material
+        Material slots referenced by ``Primitive.material``.
+
+    Returns
+    -------
+    bytes
+        A complete, deterministic GLB file.
+    """
+    binary = bytearray()
+    buffer_views: list[dict] = []
+    accessors: list[dict] = []
+
+    def add_view(data: bytes, target: int | None) -> int:
+        while len(binary) % 4:
+            binary.append(0)
+        view = {"buffer": 0, "byteOffset": len(binary), "byteLength": len(data)}
+        if target is not None:
+            view["target"] = target
+        binary.extend(data)
+        buffer_views.append(view)
+        return len(buffer_views) - 1
+
+    def add_accessor(array: np.ndarray, kind: str, component: int, target: int | None, bounds: bool = False) -> int:
+        view = add_view(array.tobytes(), target)
+        acc = {"bufferView": view, "componentType": component, "count": int(array.shape[0]), "type": kind}
+        if bounds:
+            acc["min"] = [float(x) for x in array.min(axis=0)]
+            acc["max"] = [float(x) for x in array.max(axis=0)]
+        accessors.append(acc)
+        return len(accessors) - 1
+
+    images, textures, samplers = [], [], []
+    material_json = []
+    for material in materials:
+        png = _texture_png(material)
+        tex = None
+        if png is not None:
+            if not samplers:
+                samplers.append({"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497})
+            view = add_view(png, None)
+            images.append({"bufferView": view, "mimeType": "image/png"})
+            textures.append({"sampler": 0, "source": len(images) - 1})
+            tex = len(textures) - 1
+        material_json.append(_material_json(material, tex))
+
+    gl_meshes, nodes = [], []
+    for name, primitives in meshes:
+        prims = []
+        for prim in primitives:
+            if len(prim.indices) == 0:
+                continue
+            pos = np.ascontiguousarray(prim.positions, dtype="<f4")
+            nrm = np.ascontiguousarray(prim.normals, dtype="<f4")
+            attributes = {
+                "POSITION": add_accessor(pos, "VEC3", _FLOAT, _ARRAY_BUFFER, bounds=True),
+                "NORMAL": add_accessor(nrm, "VEC3", _FLOAT, _ARRAY_BUFFER),
+            }
+            if prim.uvs is not None:
+                uv = np.array(prim.uvs, dtype=np.float64)
+                uv[:, 1] = 1.0 - uv[:, 1]
+                attributes["TEXCOORD_0"] = add_accessor(np.ascontiguousarray(uv, dtype="<f4"), "VEC2", _FLOAT, _ARRAY_BUFFER)
+            idx = np.ascontiguousarray(prim.indices, dtype="<u4").reshape(-1)
+            indices = add_accessor(idx, "SCALAR", _UINT32, _ELEMENT_ARRAY_BUFFER)
+            prims.append({"attributes": attributes, "indices": indices, "material": int(prim.material), "mode": 4})
+        gl_meshes.append({"name": name, "primitives": prims})
+        nodes.append({"name": name, "mesh": len(gl_meshes) - 1})
+
+    while len(binary) % 4:
+        binary.append(0)
+    doc = {
+        "asset": {"version": "2.0", "generator": f"fracture {__version__}"},
+        "scene": 0,
+        "scenes": [{"nodes": list(range(len(nodes)))}],
+        "nodes": nodes,
+        "meshes": gl_meshes,
+        "materials": material_json,
+        "accessors": accessors,
+        "bufferViews": buffer_views,
+        "buffers": [{"byteLength": len(binary)}],
+    }
+    if images:
+        doc["images"] = images
+        doc["textures"] = textures
+        doc["samplers"] = samplers
+    js = json.dumps(doc, separators=(",", ":"), sort_keys=False).encode("utf-8")
+    js += b" " * ((4 - len(js) % 4) % 4)
+    total = 12 + 8 + len(js) + 8 + len(binary)
+    out = bytearray()
+    out += struct.pack("<4sII", b"glTF", 2, total)
+    out += struct.pack("<I4s", len(js), b"JSON") + js
+    out += struct.pack("<I4s", len(binary), b"BIN\x00") + bytes(binary)
+    return bytes(out)

@@ -1,0 +1,232 @@
+"""Read a mesh file into a :class:`~fracture_cli.types.SurfaceMesh`.
+
+Every format trimesh reads goes through one function, :func:`load_surface`,
+which checks what the pipeline relies on (finite coordinates, at least one
+triangle) and reports problems as one-line :class:`InputError` messages that
+name the file.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from fracture_cli.errors import InputError
+from fracture_cli.options import option
+from fracture_cli.types import Material, Normalization, SurfaceMesh
+
+log = logging.getLogger(__name__)
+
+# Extension -> trimesh file type; the only formats we promise to read.
+READERS = {
+    ".obj": "obj",
+    ".ply": "ply",
+    ".stl": "stl",
+    ".off": "off",
+    ".glb": "glb",
+    ".gltf": "gltf",
+}
+
+
+@dataclass(frozen=True)
+class LoadOptions:
+    """Options of the ``load`` stage."""
+
+    max_triangles: int = option(5_000_000, "refuse inputs with more triangles than this", min=1)
+
+
+def _material_from_trimesh(visual, fallback_name: str) -> Material:
+    mat = getattr(visual, "material", None)
+    if mat is None:
+        return Material(name=fallback_name)
+    name = getattr(mat, "name", None) or fallback_name
+    color = None
+    factor = getattr(mat, "baseColorFactor", None)
+    if factor is not None:
+        color = np.asarray(factor, dtype=np.float64).reshape(-1)
+    elif getattr(mat, "diffuse", None) is not None:
+        color = np.asarray(mat.diffuse, dtype=np.float64).reshape(-1)
+    if color is not None and color.size >= 3:
+        if color.max() > 1.0:
+            color = color / 255.0
+        rgba = tuple(float(c) for c in np.append(color[:4], [1.0] * (4 - min(color.size, 4))))
+    else:
+        rgba = (0.8, 0.8, 0.8, 1.0)
+    return Material(name=str(name), base_color=rgba, source=mat)
+
+
+def smooth_normals_welded(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (n, 3) computed over positions, not vertex ids.
+
+    Vertices split at UV seams share a position; averaging per position keeps the
+    shading continuous across seams, which per-id normals would not.
+    """
+    _, pos_id = np.unique(vertices, axis=0, return_inverse=True)
+    pos_id = pos_id.reshape(-1)
+    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
+    fn = np.cross(b - a, c - a)  # length = 2 * area: area weighting for free
+    acc = np.zeros((pos_id.max() + 1 if len(pos_id) else 0, 3))
+    for corner in range(3):
+        np.add.at(acc, pos_id[faces[:, corner]], fn)
+    n = acc[pos_id]
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    out = np.zeros_like(n)
+    ok = norm[:, 0] > 0
+    out[ok] = n[ok] / norm[ok]
+    out[~ok] = (0.0, 0.0, 1.0)
+    return out
+
+
+def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) -> SurfaceMesh:
+    """Read a mesh file into a normalized :class:`SurfaceMesh`.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        An OBJ, PLY, STL, OFF, GLB or glTF file.
+    options : LoadOptions, optional
+        Limits applied while loading.
+
+    Returns
+    -------
+    SurfaceMesh
+        All geometry of the file (scene node transforms applied), with UVs,
+        normals, vertex colours and material ids where present, normalized to a
+        unit bounding-box diagonal (ALGORITHM.md section 0).
+
+    Raises
+    ------
+    InputError
+        Missing, empty or unreadable file; unsupported extension; no triangles;
+        NaN or inf coordinates; more triangles than ``options.max_triangles``.
+    """
+    import trimesh
+
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in READERS:
+        raise InputError(
+            f"unsupported file type '{ext or '(none)'}'; pick one of {', '.join(sorted(READERS))}", path=path
+        )
+    if not os.path.exists(path):
+        raise InputError("no such file", path=path)
+    if os.path.isdir(path):
+        raise InputError("is a directory, not a mesh file", path=path)
+    if os.path.getsize(path) == 0:
+        raise InputError("file is empty (0 bytes)", path=path)
+
+    try:
+        scene = trimesh.load_scene(path, file_type=READERS[ext], process=False)
+    except Exception as exc:  # trimesh raises many types; all mean "unreadable"
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"could not be read as {READERS[ext].upper()}: {reason[:200]}", path=path) from exc
+
+    parts = []
+    for node in sorted(scene.graph.nodes_geometry):
+        transform, geom_name = scene.graph[node]
+        geom = scene.geometry.get(geom_name)
+        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
+            continue
+        parts.append((node, np.asarray(transform, dtype=np.float64), geom))
+    if not parts:
+        raise InputError("contains no triangles (a point cloud, lines, or an empty scene)", path=path)
+    total = sum(len(g.faces) for _, _, g in parts)
+    if total > options.max_triangles:
+        raise InputError(
+            f"has {total:,} triangles, more than the limit of {options.max_triangles:,} "
+            "(raise it with --max-triangles, or decimate the asset first)",
+            path=path,
+        )
+
+    vertices, faces, uvs, normals, colors, mat_ids = [], [], [], [], [], []
+    materials: list[Material] = []
+    mat_index: dict[str, int] = {}
+    any_uv = any(getattr(g.visual, "uv", None) is not None for _, _, g in parts)
+    any_normals = all("vertex_normals" in g._cache.cache for _, _, g in parts)
+    any_colors = any(getattr(g.visual, "kind", None) == "vertex" for _, _, g in parts)
+    offset = 0
+    for node, transform, geom in parts:
+        v = np.asarray(geom.vertices, dtype=np.float64)
+        if not np.all(np.isfinite(v)):
+            raise InputError("has non-finite vertex coordinates (NaN or inf)", path=path)
+        f = np.asarray(geom.faces, dtype=np.int64)
+        if f.min() < 0 or f.max() >= len(v):
+            raise InputError("has faces that reference missing vertices", path=path)
+        v = v @ transform[:3, :3].T + transform[:3, 3]
+        flip = np.linalg.det(transform[:3, :3]) < 0
+        if flip:  # a mirroring node transform turns triangles inside out
+            f = f[:, ::-1]
+        vertices.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+        uv = getattr(geom.visual, "uv", None)
+        if any_uv:
+            uvs.append(np.asarray(uv, dtype=np.float64)[:, :2] if uv is not None and len(uv) == len(v) else np.zeros((len(v), 2)))
+        if any_normals:
+            n = np.asarray(geom.vertex_normals, dtype=np.float64) @ np.linalg.inv(transform[:3, :3])
+            nn = np.linalg.norm(n, axis=1, keepdims=True)
+            normals.append(np.divide(n, nn, out=np.zeros_like(n), where=nn > 0))
+        if any_colors:
+            if getattr(geom.visual, "kind", None) == "vertex":
+                colors.append(np.asarray(geom.visual.vertex_colors, dtype=np.float64)[:, :4] / 255.0)
+            else:
+                colors.append(np.ones((len(v), 4)))
+        material = _material_from_trimesh(geom.visual, fallback_name=f"material_{len(materials)}")
+        if material.name not in mat_index:
+            mat_index[material.name] = len(materials)
+            materials.append(material)
+        mat_ids.append(np.full(len(f), mat_index[material.name], dtype=np.int32))
+
+    V = np.concatenate(vertices)
+    F = np.concatenate(faces)
+    used = np.unique(F)
+    if not np.all(np.isfinite(V[used])):
+        raise InputError("has non-finite vertex coordinates (NaN or inf)", path=path)
+    normalization = Normalization.from_points(V[used])
+    if normalization.scale <= 0 or not np.isfinite(normalization.scale):
+        raise InputError("has no extent (all vertices at one point)", path=path)
+    Vn = normalization.to_normalized(V)
+    if normals:
+        N = np.concatenate(normals)
+    else:
+        N = smooth_normals_welded(Vn, F)
+    surface = SurfaceMesh(
+        vertices=Vn,
+        faces=F,
+        uvs=np.concatenate(uvs) if uvs else None,
+        normals=N,
+        colors=np.concatenate(colors) if colors else None,
+        material_ids=np.concatenate(mat_ids),
+        materials=tuple(materials),
+        normalization=normalization,
+        name=os.path.basename(path),
+    )
+    log.info("load: %s: %d vertices, %d triangles, %d material(s)%s", surface.name, surface.num_vertices,
+             surface.num_faces, len(materials), ", UVs" if surface.uvs is not None else "")
+    return surface
+
+
+def surface_from_trimesh(mesh, name: str = "mesh") -> SurfaceMesh:
+    """Wrap an in-memory ``trimesh.Trimesh`` (world units) as a normalized SurfaceMesh.
+
+    Used by tests and benchmarks that build shapes in code.
+    """
+    V = np.asarray(mesh.vertices, dtype=np.float64)
+    F = np.asarray(mesh.faces, dtype=np.int64)
+    normalization = Normalization.from_points(V)
+    Vn = normalization.to_normalized(V)
+    uv = getattr(mesh.visual, "uv", None)
+    return SurfaceMesh(
+        vertices=Vn,
+        faces=F,
+        uvs=np.asarray(uv, dtype=np.float64)[:, :2] if uv is not None else None,
+        normals=smooth_normals_welded(Vn, F),
+        colors=None,
+        material_ids=np.zeros(len(F), dtype=np.int32),
+        materials=(Material(name="material_0"),),
+        normalization=normalization,
+        name=name,
+    )

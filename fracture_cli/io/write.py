@@ -1,0 +1,109 @@
+"""Write surfaces and fragments, one writer per format, always atomically."""
+
+from __future__ import annotations
+
+import logging
+import os
+
+import numpy as np
+
+from fracture_cli.errors import InputError
+from fracture_cli.io.atomic import atomic_path, write_bytes_atomic
+from fracture_cli.io.gltf import Primitive, glb_bytes
+from fracture_cli.types import Fragments, Normalization, SurfaceMesh
+
+log = logging.getLogger(__name__)
+
+WRITERS = (".glb", ".obj", ".ply", ".stl", ".off")
+
+
+def split_by_material(vertices, faces, normals, uvs, material_ids, normalization: Normalization) -> list[Primitive]:
+    """Split a mesh into one primitive per material, in world units.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        Normalized positions.
+    faces : (m, 3) int
+    normals : (n, 3) float
+    uvs : (n, 2) float or None
+    material_ids : (m,) int
+    normalization : Normalization
+        Maps positions back to the input's units.
+
+    Returns
+    -------
+    list of Primitive
+        Sorted by material id; each with only the vertices it uses (in
+        increasing id order, so output is deterministic).
+    """
+    world = normalization.to_world(vertices)
+    prims = []
+    for mat in np.unique(material_ids):
+        sel = faces[material_ids == mat]
+        used, local = np.unique(sel, return_inverse=True)
+        prims.append(
+            Primitive(
+                positions=world[used],
+                normals=normals[used],
+                uvs=None if uvs is None else uvs[used],
+                indices=local.reshape(-1, 3),
+                material=int(mat),
+            )
+        )
+    return prims
+
+
+def save_surface(path: str | os.PathLike, surface: SurfaceMesh) -> None:
+    """Write ``surface`` in the input's units; the format follows the extension.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Output file: .glb, .obj, .ply, .stl or .off.
+    surface : SurfaceMesh
+
+    Raises
+    ------
+    InputError
+        Unsupported extension.
+    """
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in WRITERS:
+        raise InputError(f"cannot write '{ext or '(none)'}'; pick one of {', '.join(WRITERS)}", path=path)
+    normals = surface.normals if surface.normals is not None else np.zeros_like(surface.vertices)
+    if ext == ".glb":
+        prims = split_by_material(surface.vertices, surface.faces, normals, surface.uvs, surface.material_ids,
+                                  surface.normalization)
+        name = os.path.splitext(surface.name)[0] or "mesh"
+        write_bytes_atomic(path, glb_bytes([(name, prims)], surface.materials))
+        return
+    import trimesh
+
+    mesh = trimesh.Trimesh(
+        vertices=surface.world_vertices(), faces=surface.faces, vertex_normals=normals, process=False
+    )
+    if surface.uvs is not None and ext == ".obj":
+        mesh.visual = trimesh.visual.TextureVisuals(uv=surface.uvs)
+    with atomic_path(path) as tmp:
+        mesh.export(tmp, file_type=ext[1:])
+
+
+def fragment_name(index: int) -> str:
+    """Stable node name of fragment ``index`` (export order)."""
+    return f"fragment_{index:03d}"
+
+
+def write_fragments_glb(path: str | os.PathLike, fragments: Fragments) -> None:
+    """Write all fragments to one GLB: one node and mesh per fragment, named ``fragment_###``.
+
+    Each mesh has one primitive per material it uses (the input's materials and
+    the interior material), in the input's units and placement.
+    """
+    meshes = []
+    for i, frag in enumerate(fragments.fragments):
+        prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids,
+                                  fragments.normalization)
+        meshes.append((fragment_name(i), prims))
+    write_bytes_atomic(path, glb_bytes(meshes, fragments.materials))

@@ -1,0 +1,70 @@
+"""One way to declare stage options, shared by the library, the CLI and recipes.
+
+Every stage has a frozen dataclass of options whose fields are declared with
+:func:`option`. The metadata (help text, allowed range or choices) is read by
+the CLI to build its flags and by :mod:`fracture_cli.recipe` to validate
+recipes and ``--set`` overrides, so the three can never disagree on a default
+or a range.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import field
+from typing import Any
+
+
+def option(default: Any, help: str, *, min: float | None = None, max: float | None = None,
+           choices: tuple | None = None, min_exclusive: bool = False):
+    """Declare one option field.
+
+    Parameters
+    ----------
+    default : object
+        Default value; its type is the option's type.
+    help : str
+        One line for ``--help`` and ``fracture recipes show``.
+    min, max : float, optional
+        Inclusive bounds for numbers (``min`` exclusive when ``min_exclusive``).
+    choices : tuple, optional
+        The allowed values.
+    """
+    meta = {"help": help, "min": min, "max": max, "choices": choices, "min_exclusive": min_exclusive}
+    if isinstance(default, (list, dict)):
+        return field(default_factory=lambda: type(default)(default), metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+def option_fields(options_cls) -> list[dataclasses.Field]:
+    """The declared option fields of an options dataclass, in declaration order."""
+    return [f for f in dataclasses.fields(options_cls) if "help" in f.metadata]
+
+
+def check_value(options_cls, name: str, value: Any) -> str | None:
+    """Return why ``value`` is not allowed for option ``name``, or None if it is."""
+    fields = {f.name: f for f in option_fields(options_cls)}
+    if name not in fields:
+        return f"unknown option '{name}'; valid: {', '.join(sorted(fields))}"
+    f = fields[name]
+    meta = f.metadata
+    default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+    if meta["choices"] is not None and value not in meta["choices"]:
+        return f"{name} = {value!r} is not one of {', '.join(map(repr, meta['choices']))}"
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            return f"{name} = {value!r} must be true or false"
+        return None
+    if isinstance(default, (int, float)) and not isinstance(default, bool):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return f"{name} = {value!r} must be a number"
+        if isinstance(default, int) and not isinstance(value, int):
+            return f"{name} = {value!r} must be a whole number"
+        lo, hi = meta["min"], meta["max"]
+        bad_lo = lo is not None and (value <= lo if meta["min_exclusive"] else value < lo)
+        bad_hi = hi is not None and value > hi
+        if bad_lo or bad_hi:
+            left = "(" if meta["min_exclusive"] else "["
+            return f"{name} = {value!r} is out of range {left}{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
+    if isinstance(default, str) and not isinstance(value, str):
+        return f"{name} = {value!r} must be a string"
+    return None

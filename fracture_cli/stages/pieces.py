@@ -1,0 +1,214 @@
+"""Atomic pieces, their modes and the piece graph (ALGORITHM.md section 3)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from fracture_cli.errors import StageError
+from fracture_cli.options import option
+from fracture_cli.types import Modes, Pieces, TetMesh
+
+log = logging.getLogger(__name__)
+
+STAGE = "pieces"
+
+
+@dataclass(frozen=True)
+class PiecesOptions:
+    """Options of :func:`pieces`."""
+
+    min_volume_fraction: float = option(
+        0.0,
+        "merge pieces smaller than this fraction of the total volume into their largest-interface neighbour (0 = off)",
+        min=0.0,
+        max=0.5,
+    )
+    deviation_warning: float = option(
+        1e-2,
+        "warn when a mode deviates from its piece mean by more than this fraction of the mode's largest value",
+        min=0.0,
+    )
+
+
+def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptions()) -> Pieces:
+    """Atomic pieces of a tet mesh under a set of fracture modes.
+
+    Two tets sharing an interior face are glued when that face is cut in no
+    mode; the connected components of the glued tets are the atomic pieces.
+
+    Parameters
+    ----------
+    tet_mesh : TetMesh
+        The tet mesh the modes live on (``t`` tets, ``f`` interior faces).
+    modes : Modes
+        Fracture modes; ``modes.U`` is (k, t, d) and ``modes.cut`` is (k, f) bool
+        over ``tet_mesh.interior_faces``.
+    options : PiecesOptions, optional
+        ``min_volume_fraction`` (default 0.0, off) and ``deviation_warning``
+        (default 1e-2).
+
+    Returns
+    -------
+    Pieces
+        ``tet_piece`` (t,) numbered by lowest tet id (piece 0 holds tet 0), piece
+        modes ``W`` (k, p, d), volumes, centroids, and the piece graph: edges
+        (e, 2) with ``P < Q`` sorted, shared interface areas, area-weighted
+        interface centroids and unit normals pointing from ``P`` to ``Q``.
+
+    Raises
+    ------
+    StageError
+        If ``modes`` does not match ``tet_mesh``.
+
+    Notes
+    -----
+    ALGORITHM.md section 3. Each mode is constant on an atomic piece up to the
+    solver's tolerance: ``W`` stores the volume-weighted mean and
+    ``max_deviation`` the worst deviation of any tet from it, relative to the
+    mode's largest magnitude (a warning is logged above
+    ``deviation_warning``). Merging tiny pieces (``min_volume_fraction > 0``)
+    trades that guarantee for fewer slivers: a merged piece's modes are no
+    longer constant, which ``max_deviation`` then reports.
+    """
+    t = tet_mesh.num_tets
+    face_tets = tet_mesh.interior_face_tets
+    U = np.asarray(modes.U, dtype=np.float64)
+    cut = np.asarray(modes.cut, dtype=bool)
+    if U.ndim != 3 or U.shape[1] != t:
+        raise StageError(f"modes have shape {U.shape}, expected (k, {t}, d) for this tet mesh", stage=STAGE)
+    if cut.ndim != 2 or cut.shape[1] != len(face_tets) or cut.shape[0] != U.shape[0]:
+        raise StageError(
+            f"modes.cut has shape {cut.shape}, expected ({U.shape[0]}, {len(face_tets)}): "
+            "the modes were computed on another tet mesh",
+            stage=STAGE,
+        )
+
+    glued = ~cut.any(axis=0)
+    tet_piece = _components(t, face_tets[glued])
+    volumes_t = np.abs(tet_mesh.tet_volumes)
+
+    if options.min_volume_fraction > 0:
+        tet_piece = _merge_small(tet_piece, face_tets, tet_mesh.interior_face_areas, volumes_t,
+                                 options.min_volume_fraction)
+    p = int(tet_piece.max()) + 1 if t else 0
+
+    volumes = np.bincount(tet_piece, weights=volumes_t, minlength=p)
+    centroids = np.stack(
+        [np.bincount(tet_piece, weights=volumes_t * tet_mesh.tet_centroids[:, a], minlength=p) for a in range(3)],
+        axis=1,
+    ) / volumes[:, None]
+
+    # Volume-weighted mean per piece: W[i, P] = sum_{t in P} vol_t U[i, t] / vol_P.
+    average = sp.csr_matrix((volumes_t / volumes[tet_piece], (tet_piece, np.arange(t))), shape=(p, t))
+    k, _, d = U.shape
+    W = (average @ U.transpose(1, 0, 2).reshape(t, k * d)).reshape(p, k, d).transpose(1, 0, 2)
+    W = np.ascontiguousarray(W)
+
+    max_deviation = 0.0
+    for i in range(k):
+        scale = float(np.abs(U[i]).max()) if U[i].size else 0.0
+        if scale > 0:
+            dev = float(np.linalg.norm(U[i] - W[i][tet_piece], axis=1).max()) / scale
+            max_deviation = max(max_deviation, dev)
+    if max_deviation > options.deviation_warning:
+        log.warning(
+            "%s: a mode deviates from its piece mean by %.3g of its largest value (> %.3g): the modes are not "
+            "piecewise constant on the atomic pieces; the modes' solver tolerance or cut threshold may be too loose",
+            STAGE, max_deviation, options.deviation_warning,
+        )
+
+    edges, edge_areas, edge_centroids, edge_normals = _piece_graph(tet_mesh, tet_piece, centroids)
+    log.info("%s: %d atomic pieces from %d modes, %d graph edges, volumes %.3g..%.3g, max deviation %.2g",
+             STAGE, p, k, len(edges), volumes.min() if p else 0.0, volumes.max() if p else 0.0, max_deviation)
+    return Pieces(
+        tet_piece=tet_piece.astype(np.int32),
+        W=W,
+        volumes=volumes,
+        centroids=centroids,
+        edges=edges,
+        edge_areas=edge_areas,
+        edge_centroids=edge_centroids,
+        edge_normals=edge_normals,
+        max_deviation=max_deviation,
+    )
+
+
+def _components(t: int, pairs: np.ndarray) -> np.ndarray:
+    """Connected components (t,) of ``t`` nodes joined by ``pairs`` (e, 2), numbered by lowest member."""
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(t, t))
+    _, labels = connected_components(graph, directed=False)
+    return _renumber_by_first(labels)
+
+
+def _renumber_by_first(labels: np.ndarray) -> np.ndarray:
+    """Relabel so that labels appear in increasing order of their lowest index."""
+    _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    return rank[inverse.reshape(-1)].astype(np.int64)
+
+
+def _merge_small(tet_piece, face_tets, face_areas, volumes_t, fraction):
+    """Merge pieces below ``fraction`` of the total volume into their largest-interface neighbour.
+
+    Smallest piece first (ties by id); repeats until none is left below the
+    threshold or a small piece has no neighbour.
+    """
+    total = volumes_t.sum()
+    labels = tet_piece.copy()
+    stuck = set()
+    while True:
+        p = int(labels.max()) + 1
+        vol = np.bincount(labels, weights=volumes_t, minlength=p)
+        small = [P for P in np.lexsort((np.arange(p), vol)) if vol[P] < fraction * total and P not in stuck]
+        if not small or p == 1:
+            break
+        P = int(small[0])
+        a, b = labels[face_tets[:, 0]], labels[face_tets[:, 1]]
+        touching = (a != b) & ((a == P) | (b == P))
+        if not touching.any():
+            stuck.add(P)
+            continue
+        other = np.where(a[touching] == P, b[touching], a[touching])
+        shared = np.bincount(other, weights=face_areas[touching], minlength=p)
+        Q = int(np.argmax(shared))  # argmax takes the lowest id on ties
+        log.info("%s: merging piece of volume %.3g into its neighbour (interface %.3g)", STAGE, vol[P], shared[Q])
+        labels[labels == P] = Q
+        labels = _renumber_by_first(labels)
+        stuck = set()
+    return labels
+
+
+def _piece_graph(tet_mesh: TetMesh, tet_piece: np.ndarray, centroids: np.ndarray):
+    """Edges (P < Q), shared areas, area-weighted centroids and P-to-Q normals."""
+    face_tets = tet_mesh.interior_face_tets
+    a, b = tet_piece[face_tets[:, 0]], tet_piece[face_tets[:, 1]]
+    between = np.flatnonzero(a != b)
+    if len(between) == 0:
+        return (np.zeros((0, 2), np.int32), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+    a, b = a[between], b[between]
+    P, Q = np.minimum(a, b), np.maximum(a, b)
+    # interior_face_normals point from face_tets[:, 0] to face_tets[:, 1]; flip where that tet is in Q.
+    sign = np.where(a == P, 1.0, -1.0)
+    areas = tet_mesh.interior_face_areas[between]
+    normals = tet_mesh.interior_face_normals[between] * sign[:, None]
+    centres = tet_mesh.vertices[tet_mesh.interior_faces[between]].mean(axis=1)
+    pairs, inverse = np.unique(np.stack([P, Q], axis=1), axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    e = len(pairs)
+    edge_areas = np.bincount(inverse, weights=areas, minlength=e)
+    edge_centroids = np.stack(
+        [np.bincount(inverse, weights=areas * centres[:, c], minlength=e) for c in range(3)], axis=1
+    ) / edge_areas[:, None]
+    summed = np.stack([np.bincount(inverse, weights=areas * normals[:, c], minlength=e) for c in range(3)], axis=1)
+    norm = np.linalg.norm(summed, axis=1, keepdims=True)
+    # A curved interface can have a near-zero mean normal; fall back to the centroid direction.
+    fallback = centroids[pairs[:, 1]] - centroids[pairs[:, 0]]
+    fallback /= np.maximum(np.linalg.norm(fallback, axis=1, keepdims=True), 1e-300)
+    edge_normals = np.where(norm > 1e-12 * edge_areas[:, None], summed / np.maximum(norm, 1e-300), fallback)
+    return pairs.astype(np.int32), edge_areas, edge_centroids, edge_normals

@@ -1,0 +1,154 @@
+"""Vectorized geometry of tetrahedral meshes: volumes, faces, FEM matrices.
+
+All functions take plain arrays so they can be tested on tiny meshes built in
+code; :class:`fracture_cli.types.TetMesh` caches their results.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+# Faces of a positively oriented tet (a, b, c, d), each oriented outward (its
+# normal points away from the opposite vertex).
+TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
+
+
+def tet_volumes(V: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Signed volumes of tetrahedra.
+
+    Parameters
+    ----------
+    V : (n, 3) float
+        Vertex positions.
+    T : (t, 4) int
+        Tetrahedra.
+
+    Returns
+    -------
+    vol : (t,) float64
+        ``det(b - a, c - a, d - a) / 6``; positive for positively oriented tets.
+    """
+    a, b, c, d = (V[T[:, i]] for i in range(4))
+    return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) / 6.0
+
+
+def triangle_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Areas (m,) of triangles ``F`` (m, 3) over vertices ``V`` (n, 3)."""
+    if len(F) == 0:
+        return np.zeros(0)
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def tet_faces(T: np.ndarray):
+    """Interior and boundary faces of a tet mesh.
+
+    Parameters
+    ----------
+    T : (t, 4) int
+        Positively oriented tetrahedra.
+
+    Returns
+    -------
+    interior : (f, 3) int64
+        Vertex ids of faces shared by two tets, oriented outward from the first.
+    interior_tets : (f, 2) int64
+        The two tets of each interior face, smaller id first.
+    boundary : (b, 3) int64
+        Vertex ids of faces with one tet, oriented outward.
+    boundary_tets : (b,) int64
+        The tet of each boundary face.
+
+    Raises
+    ------
+    ValueError
+        If a face is shared by more than two tets (not a valid tet mesh).
+    """
+    T = np.asarray(T, dtype=np.int64)
+    t = len(T)
+    all_faces = T[:, TET_FACES].reshape(-1, 3)  # (4t, 3), outward per tet
+    owner = np.repeat(np.arange(t, dtype=np.int64), 4)
+    key = np.sort(all_faces, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    if np.any(counts > 2):
+        raise ValueError(f"{int(np.sum(counts > 2))} faces are shared by more than two tets")
+    # Stable sort so that, within a face group, the lower tet id comes first.
+    order = np.lexsort((owner, inverse))
+    grouped = inverse[order]
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = grouped[1:] != grouped[:-1]
+    starts = np.flatnonzero(first)
+    group_counts = counts[grouped[starts]]
+    interior_starts = starts[group_counts == 2]
+    boundary_starts = starts[group_counts == 1]
+    interior = all_faces[order[interior_starts]]
+    interior_tets = np.stack([owner[order[interior_starts]], owner[order[interior_starts + 1]]], axis=1)
+    boundary = all_faces[order[boundary_starts]]
+    boundary_tets = owner[order[boundary_starts]]
+    return interior, interior_tets, boundary, boundary_tets
+
+
+def interior_face_normals(V: np.ndarray, T: np.ndarray, faces: np.ndarray, face_tets: np.ndarray) -> np.ndarray:
+    """Unit normals (f, 3) of interior ``faces`` (f, 3), pointing from ``face_tets[:, 0]`` to ``face_tets[:, 1]``.
+
+    ``faces`` are those returned by :func:`tet_faces` (already outward from the
+    first tet), so only a normalization is needed.
+    """
+    if len(faces) == 0:
+        return np.zeros((0, 3))
+    a, b, c = V[faces[:, 0]], V[faces[:, 1]], V[faces[:, 2]]
+    n = np.cross(b - a, c - a)
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+def barycentric_gradients(V: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Gradients (t, 4, 3) of the four barycentric (hat) functions in each tet."""
+    x0 = V[T[:, 0]]
+    E = np.stack([V[T[:, 1]] - x0, V[T[:, 2]] - x0, V[T[:, 3]] - x0], axis=1)  # (t, 3, 3) rows = edges
+    Einv = np.linalg.inv(E)  # columns = gradients of lambda_1..3
+    G123 = np.transpose(Einv, (0, 2, 1))  # (t, 3, 3) rows = gradients
+    G0 = -G123.sum(axis=1, keepdims=True)
+    return np.concatenate([G0, G123], axis=1)
+
+
+def stiffness_matrix(V: np.ndarray, T: np.ndarray) -> sp.csr_matrix:
+    """Cotangent (P1 FEM) stiffness matrix ``K`` (n, n), positive semi-definite.
+
+    ``K = sum_t vol_t G_t G_t^T`` with ``G_t`` the hat-function gradients; this
+    equals the cotangent formula (libigl's ``cotmatrix`` is ``-K``).
+    """
+    n = len(V)
+    vol = np.abs(tet_volumes(V, T))
+    G = barycentric_gradients(V, T)
+    local = np.einsum("tid,tjd->tij", G, G) * vol[:, None, None]  # (t, 4, 4)
+    rows = np.repeat(T, 4, axis=1).reshape(-1)
+    cols = np.tile(T, (1, 4)).reshape(-1)
+    K = sp.coo_matrix((local.reshape(-1), (rows, cols)), shape=(n, n)).tocsr()
+    K.sum_duplicates()
+    # Exact symmetry, so SPD factorizations of M + tau K see a symmetric matrix.
+    return ((K + K.T) * 0.5).tocsr()
+
+
+def lumped_mass(V: np.ndarray, T: np.ndarray) -> sp.dia_matrix:
+    """Lumped vertex mass matrix (n, n): each vertex gets a quarter of its tets' volume."""
+    n = len(V)
+    vol = np.abs(tet_volumes(V, T))
+    m = np.bincount(T.reshape(-1), weights=np.repeat(vol, 4), minlength=n)
+    return sp.diags(m)
+
+
+def tet_from_vertex(T: np.ndarray, n: int) -> sp.csr_matrix:
+    """Averaging operator ``C`` (t, n): each tet takes the mean of its four vertices."""
+    t = len(T)
+    rows = np.repeat(np.arange(t), 4)
+    return sp.csr_matrix((np.full(4 * t, 0.25), (rows, T.reshape(-1))), shape=(t, n))
+
+
+def orient_positive(V: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Return ``T`` (t, 4) with negatively oriented tets flipped (swap of two vertices)."""
+    T = np.array(T, dtype=np.int64, copy=True)
+    neg = tet_volumes(V, T) < 0
+    T[neg, 2], T[neg, 3] = T[neg, 3].copy(), T[neg, 2].copy()
+    return T
