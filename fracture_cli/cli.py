@@ -53,6 +53,7 @@ class PipelineState:
     tet_mesh: Any = None
     modes: Any = None
     pieces: Any = None
+    eta: Any = None
     regions: Any = None
     fragments: Any = None
 
@@ -191,6 +192,20 @@ class FractureGroup(click.Group):
             ctx.exit(EXIT_FAILURE)
 
 
+class TerminalCommand(click.Command):
+    """A command that ends the chain, so its options may follow its arguments.
+
+    In a chain group click parses subcommands with interspersed options off
+    (an argument would otherwise swallow the next command). Commands that take
+    everything after them (bake, impact, preview, recipes) turn it back on, so
+    ``fracture bake in.glb -o out`` works as users expect.
+    """
+
+    def make_context(self, info_name, args, parent=None, **extra):
+        extra["allow_interspersed_args"] = True
+        return super().make_context(info_name, args, parent=parent, **extra)
+
+
 @click.group(cls=FractureGroup, chain=True, invoke_without_command=False, epilog=EXAMPLES,
              context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(__version__, "--version", prog_name="fracture")
@@ -251,6 +266,365 @@ def save_cmd(path):
 
         save_surface(path, state.need("surface", "save", "load PATH"))
         log.info("save: wrote %s", path)
+        return state
+
+    return process
+
+
+def _stage_class(section: str):
+    from fracture_cli.recipe import options_class
+
+    return options_class(section)
+
+
+@cli.command("cage")
+@stage_options(_stage_class("cage"))
+def cage_cmd(**kwargs):
+    """Build the nested cage: a coarse closed surface around the input."""
+    options = build_options(_stage_class("cage"), kwargs)
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.stages.cage import cage
+
+        return dataclasses.replace(state, cage=cage(state.need("surface", "cage", "load PATH"), options))
+
+    return process
+
+
+@cli.command("save-cage")
+@click.argument("path", type=click.Path(dir_okay=False, path_type=str))
+def save_cage_cmd(path):
+    """Write the cage surface (OBJ, PLY, STL, OFF) for inspection."""
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.io.cage_io import save_cage
+
+        save_cage(path, state.need("cage", "save-cage", "cage"))
+        return state
+
+    return process
+
+
+@cli.command("tetra")
+@stage_options(_stage_class("tetra"))
+def tetra_cmd(**kwargs):
+    """Tetrahedralize the cage (TetGen), keeping its surface."""
+    options = build_options(_stage_class("tetra"), kwargs)
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.stages.tetra import tetra
+
+        return dataclasses.replace(state, tet_mesh=tetra(state.need("cage", "tetra", "cage"), options))
+
+    return process
+
+
+@cli.command("save-tets")
+@click.argument("path", type=click.Path(dir_okay=False, path_type=str))
+def save_tets_cmd(path):
+    """Write the tet mesh as .npz (vertices, tets, normalization)."""
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.io.cage_io import save_tetmesh
+
+        save_tetmesh(path, state.need("tet_mesh", "save-tets", "tetra"))
+        return state
+
+    return process
+
+
+@cli.command("load-tets")
+@click.argument("path", type=click.Path(dir_okay=False, path_type=str))
+def load_tets_cmd(path):
+    """Read a tet mesh saved by save-tets (to resume a chain from it)."""
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.io.cage_io import load_tetmesh
+
+        return dataclasses.replace(state, tet_mesh=load_tetmesh(path))
+
+    return process
+
+
+@cli.command("material")
+@stage_options(_stage_class("material"))
+def material_cmd(**kwargs):
+    """Set material weights (grain, painted strength) on the tet faces."""
+    options = build_options(_stage_class("material"), kwargs)
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.stages.material import material
+
+        eta = material(state.need("tet_mesh", "material", "tetra"), state.surface, options)
+        return dataclasses.replace(state, eta=eta)
+
+    return process
+
+
+@cli.command("modes")
+@stage_options(_stage_class("modes"), short={"num_modes": "-k"})
+def modes_cmd(**kwargs):
+    """Compute the fracture modes of the tet mesh."""
+    options = build_options(_stage_class("modes"), kwargs)
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.stages.modes import modes
+
+        result = modes(state.need("tet_mesh", "modes", "tetra"), options, eta=state.eta)
+        return dataclasses.replace(state, modes=result)
+
+    return process
+
+
+@cli.command("pieces")
+@stage_options(_stage_class("pieces"))
+def pieces_cmd(**kwargs):
+    """Split the tet mesh into atomic pieces and build the piece graph."""
+    options = build_options(_stage_class("pieces"), kwargs)
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.stages.pieces import pieces
+
+        result = pieces(state.need("tet_mesh", "pieces", "tetra"), state.need("modes", "pieces", "modes"), options)
+        return dataclasses.replace(state, pieces=result)
+
+    return process
+
+
+@cli.command("smooth")
+@stage_options(_stage_class("smooth"))
+def smooth_cmd(**kwargs):
+    """Smooth the fault surfaces between pieces (Laplacian smoothing)."""
+    options = build_options(_stage_class("smooth"), kwargs)
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.stages.smooth import smooth
+
+        regions = smooth(state.need("tet_mesh", "smooth", "tetra"), state.need("pieces", "smooth", "pieces"), options)
+        return dataclasses.replace(state, regions=regions)
+
+    return process
+
+
+@cli.command("fragments")
+@stage_options(_stage_class("fragments"))
+def fragments_cmd(**kwargs):
+    """Cut the input mesh into one closed fragment per piece."""
+    options = build_options(_stage_class("fragments"), kwargs)
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.stages.fragments import fragments
+        from fracture_cli.stages.smooth import SmoothOptions, smooth
+
+        regions = state.regions
+        if regions is None:  # no 'smooth' in the chain: tet-aligned faults
+            regions = smooth(state.need("tet_mesh", "fragments", "tetra"),
+                             state.need("pieces", "fragments", "pieces"),
+                             dataclasses.replace(SmoothOptions(), smoothing=0.0))
+        result = fragments(state.need("surface", "fragments", "load PATH"), regions, options)
+        return dataclasses.replace(state, regions=regions, fragments=result)
+
+    return process
+
+
+@cli.command("export")
+@click.argument("out_dir", type=click.Path(file_okay=False, path_type=str))
+@stage_options(_stage_class("runtime"))
+def export_cmd(out_dir, **kwargs):
+    """Write <stem>.glb and the runtime file <stem>.fracture.json/.bin into OUT_DIR."""
+    options = build_options(_stage_class("runtime"), kwargs)
+
+    def process(state: PipelineState) -> PipelineState:
+        import os
+
+        from fracture_cli.io.write import fragment_name, write_fragments_glb
+        from fracture_cli.runtime.format import write_runtime
+        from fracture_cli.stages.runtime import runtime
+
+        frags = state.need("fragments", "export", "fragments")
+        tet_mesh = state.need("tet_mesh", "export", "tetra")
+        pieces = state.need("pieces", "export", "pieces")
+        stem = os.path.splitext(os.path.basename(state.source or "asset"))[0]
+        order = [int(f.piece) for f in frags.fragments]
+        names = tuple(fragment_name(i) for i in range(len(order)))
+        data = runtime(tet_mesh, state.need("modes", "export", "modes"), pieces, options,
+                       fragment_pieces=order, fragment_names=names)
+        os.makedirs(out_dir, exist_ok=True)
+        write_fragments_glb(os.path.join(out_dir, f"{stem}.glb"), frags)
+        write_runtime(data, os.path.join(out_dir, f"{stem}.fracture.json"))
+        log.info("export: wrote %s/%s.glb and %s.fracture.json/.bin", out_dir, stem, stem)
+        return state
+
+    return process
+
+
+@cli.command("bake", cls=TerminalCommand)
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=str))
+@click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=str),
+              help="Output folder (created if missing).")
+@click.option("-r", "--recipe", "recipe_name", default="default", show_default=True,
+              help="Recipe name (see 'fracture recipes') or path to a .toml file.")
+@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
+              help="Override one recipe parameter, e.g. --set modes.num_modes=16 (repeatable).")
+@click.option("--json", "as_json", is_flag=True, help="Print the bake report(s) as JSON on stdout.")
+@click.option("--preview", is_flag=True, help="Also write <stem>.preview.png (input, fragments, modes, an impact).")
+@click.option("-q", "--quiet", is_flag=True, help="Print only errors.")
+@click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
+@click.pass_context
+def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, quiet, debug):
+    """Run the whole pipeline on INPUTS with a recipe, writing into OUT.
+
+    For each input <stem>: <stem>.glb (fragments), <stem>.fracture.json/.bin
+    (runtime file) and <stem>.report.json.
+    """
+    if debug:
+        ctx.find_root().meta["fracture.debug"] = True
+    if quiet:
+        configure_logging(0, True)
+
+    def process(state: PipelineState) -> PipelineState:
+        import json as _json
+
+        from fracture_cli.bake import bake
+        from fracture_cli.recipe import load_recipe
+
+        recipe = load_recipe(recipe_name, overrides)
+        reports = []
+        for path in inputs:
+            result = bake(path, out_dir, recipe)
+            reports.append(result.report)
+            if preview:
+                import os
+
+                from fracture_cli.preview import render_preview
+
+                stem = os.path.splitext(os.path.basename(path))[0]
+                render_preview(os.path.join(out_dir, f"{stem}.fracture.json"),
+                               os.path.join(out_dir, f"{stem}.preview.png"))
+            if not (quiet or as_json):
+                r = result.report
+                c = r["counts"]
+                click.echo(
+                    f"baked {path} with recipe '{recipe.name}': {c['fragments']} fragments, {c['modes']} modes, "
+                    f"{c['tets']} tets, volume error {r['checks'].get('volume_error', float('nan')):.2e}, "
+                    f"{sum(r['seconds'].values()):.1f} s -> {out_dir}",
+                    err=True,
+                )
+        if as_json:
+            click.echo(_json.dumps(reports[0] if len(reports) == 1 else reports, indent=2, sort_keys=True))
+        return state
+
+    return process
+
+
+@cli.command("recipes", cls=TerminalCommand)
+@click.argument("action", required=False, type=click.Choice(["list", "show"]), default="list")
+@click.argument("name", required=False)
+@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE", help="Apply overrides before showing.")
+def recipes_cmd(action, name, overrides):
+    """List the destructible materials, or 'recipes show NAME' for one's resolved parameters."""
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.recipe import list_recipes, load_recipe
+
+        if action == "list":
+            for recipe_name in list_recipes():
+                recipe = load_recipe(recipe_name)
+                click.echo(f"{recipe_name:<12} {recipe.description}")
+            return state
+        if not name:
+            raise UsageError("'recipes show' needs a recipe name, e.g. 'fracture recipes show glass'")
+        recipe = load_recipe(name, overrides)
+        click.echo(f"# {recipe.name}: {recipe.description}")
+        if len(recipe.chain) > 1:
+            click.echo(f"# extends: {' -> '.join(recipe.chain[1:])}")
+        for section, values in recipe.to_dict().items():
+            click.echo(f"\n[{section}]")
+            for key, value in values.items():
+                click.echo(f"{key} = {_toml_value(value)}")
+        return state
+
+    return process
+
+
+def _toml_value(value) -> str:
+    import json as _json
+
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return _json.dumps(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + " }"
+    return repr(value)
+
+
+@cli.command("impact", cls=TerminalCommand)
+@click.argument("runtime_file", type=click.Path(dir_okay=False, path_type=str))
+@click.option("--point", nargs=3, type=float, required=True, metavar="X Y Z", help="Hit point, asset units.")
+@click.option("--impulse", nargs=3, type=float, required=True, metavar="X Y Z", help="Impulse vector.")
+@click.option("--threshold", type=float, default=None, help="Toughness (default: the file's).")
+@click.option("-o", "--out", "out_glb", type=click.Path(dir_okay=False, path_type=str), default=None,
+              help="Write the fragments regrouped into one mesh per group (GLB).")
+@click.option("--png", "out_png", type=click.Path(dir_okay=False, path_type=str), default=None,
+              help="Render a preview picture of this impact.")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+def impact_cmd(runtime_file, point, impulse, threshold, out_glb, out_png, as_json):
+    """Project an impact on a baked asset and print which fragments move together."""
+
+    def process(state: PipelineState) -> PipelineState:
+        import json as _json
+        import os
+
+        from fracture_cli.runtime.format import load_runtime
+        from fracture_cli.runtime.impact import project_impact
+
+        data = load_runtime(runtime_file)
+        result = project_impact(data, point, impulse, threshold)
+        groups: dict[int, list[str]] = {}
+        for j, g in enumerate(result.groups):
+            groups.setdefault(int(g), []).append(data.fragment_names[j])
+        if as_json:
+            click.echo(_json.dumps({"site": int(result.site), "broken_bonds": int(result.broken.sum()),
+                                    "groups": list(groups.values())}, indent=2))
+        else:
+            click.echo(f"{len(groups)} group(s), {int(result.broken.sum())} of {len(result.broken)} bonds broken")
+            for i, members in enumerate(groups.values()):
+                click.echo(f"group {i}: {' '.join(members)}")
+        if out_glb:
+            from fracture_cli.io.regroup import write_groups_glb
+
+            glb = runtime_file[: -len(".fracture.json")] + ".glb" if runtime_file.endswith(".fracture.json") else None
+            if glb is None or not os.path.exists(glb):
+                raise UsageError(f"cannot find the fragments file next to {runtime_file} (expected <stem>.glb)")
+            write_groups_glb(glb, result.groups, out_glb)
+        if out_png:
+            from fracture_cli.preview import render_preview
+
+            render_preview(runtime_file, out_png, impact=(point, impulse, threshold))
+        return state
+
+    return process
+
+
+@cli.command("preview", cls=TerminalCommand)
+@click.argument("runtime_file", type=click.Path(dir_okay=False, path_type=str))
+@click.option("-o", "--out", "out_png", required=True, type=click.Path(dir_okay=False, path_type=str),
+              help="Output PNG.")
+@click.option("--size", nargs=2, type=int, default=(1600, 1000), show_default=True, metavar="W H",
+              help="Image size in pixels.")
+def preview_cmd(runtime_file, out_png, size):
+    """Render a PNG of a bake: input, exploded fragments, modes, an example impact."""
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.preview import render_preview
+
+        if size[0] < 200 or size[1] < 150 or size[0] > 8000 or size[1] > 8000:
+            raise UsageError(f"--size {size[0]} {size[1]} is out of range (200..8000 x 150..8000)")
+        render_preview(runtime_file, out_png, width=size[0], height=size[1])
+        log.info("preview: wrote %s", out_png)
         return state
 
     return process

@@ -50,6 +50,10 @@ def check_value(options_cls, name: str, value: Any) -> str | None:
     default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
     if meta["choices"] is not None and value not in meta["choices"]:
         return f"{name} = {value!r} is not one of {', '.join(map(repr, meta['choices']))}"
+    if isinstance(default, list):
+        if not isinstance(value, list):
+            return f"{name} = {value!r} must be a list"
+        return None
     if isinstance(default, bool):
         if not isinstance(value, bool):
             return f"{name} = {value!r} must be true or false"

@@ -135,7 +135,7 @@ def lumped_mass(V: np.ndarray, T: np.ndarray) -> sp.dia_matrix:
     """Lumped vertex mass matrix (n, n): each vertex gets a quarter of its tets' volume."""
     n = len(V)
     vol = np.abs(tet_volumes(V, T))
-    m = np.bincount(T.reshape(-1), weights=np.repeat(vol, 4), minlength=n)
+    m = np.bincount(T.reshape(-1), weights=np.repeat(vol / 4.0, 4), minlength=n)
     return sp.diags(m)
 
 

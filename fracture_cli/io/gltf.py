@@ -175,3 +175,60 @@ def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Materi
     out += struct.pack("<I4s", len(js), b"JSON") + js
     out += struct.pack("<I4s", len(binary), b"BIN\x00") + bytes(binary)
     return bytes(out)
+
+
+@dataclass(frozen=True)
+class GlbMesh:
+    """One node of a GLB file as read back by :func:`read_glb`."""
+
+    name: str
+    primitives: tuple[Primitive, ...]
+
+
+def read_glb(path: str) -> tuple[list[GlbMesh], list[str]]:
+    """Read the meshes of a GLB file as written by :func:`glb_bytes`.
+
+    A deliberately small reader (float32 positions/normals/UVs, uint32 or uint16
+    indices, node transforms ignored) for previews and tests of our own output.
+
+    Returns
+    -------
+    meshes : list of GlbMesh
+        One per node with a mesh, in node order.
+    material_names : list of str
+    """
+    with open(path, "rb") as fh:
+        data = fh.read()
+    if len(data) < 20 or data[:4] != b"glTF":
+        raise ValueError("not a binary glTF (GLB) file")
+    json_len = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + json_len])
+    bin_start = 20 + json_len + 8
+    binary = data[bin_start:]
+
+    def accessor(index: int) -> np.ndarray:
+        acc = doc["accessors"][index]
+        view = doc["bufferViews"][acc["bufferView"]]
+        width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]
+        dtype = {5126: "<f4", 5125: "<u4", 5123: "<u2"}[acc["componentType"]]
+        offset = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+        arr = np.frombuffer(binary, dtype=dtype, count=acc["count"] * width, offset=offset)
+        return arr.reshape(acc["count"], width) if width > 1 else arr
+
+    meshes = []
+    for node in doc.get("nodes", []):
+        if "mesh" not in node:
+            continue
+        prims = []
+        for prim in doc["meshes"][node["mesh"]]["primitives"]:
+            attrs = prim["attributes"]
+            pos = accessor(attrs["POSITION"]).astype(np.float64)
+            nrm = accessor(attrs["NORMAL"]).astype(np.float64) if "NORMAL" in attrs else np.zeros_like(pos)
+            uv = None
+            if "TEXCOORD_0" in attrs:
+                uv = accessor(attrs["TEXCOORD_0"]).astype(np.float64).copy()
+                uv[:, 1] = 1.0 - uv[:, 1]
+            idx = accessor(prim["indices"]).astype(np.int64).reshape(-1, 3)
+            prims.append(Primitive(pos, nrm, uv, idx, int(prim.get("material", 0))))
+        meshes.append(GlbMesh(node.get("name", ""), tuple(prims)))
+    return meshes, [m.get("name", "") for m in doc.get("materials", [])]

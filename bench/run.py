@@ -1,0 +1,67 @@
+"""Run every bench/bench_*.py and write their sections to one markdown file.
+
+    python bench/run.py --out bench/RESULTS.md [--quick] [--only cage,modes]
+
+Each benchmark module exposes ``run(quick: bool = False) -> str`` returning a
+markdown section. Speed and memory targets live here, never in tests.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import importlib.util
+import os
+import platform
+import sys
+import time
+import traceback
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default=os.path.join(HERE, "RESULTS.md"))
+    parser.add_argument("--quick", action="store_true", help="smaller sizes, for a smoke run")
+    parser.add_argument("--only", default="", help="comma-separated benchmark names (e.g. cage,modes)")
+    args = parser.parse_args()
+    only = {s.strip() for s in args.only.split(",") if s.strip()}
+    names = sorted(f[len("bench_"):-3] for f in os.listdir(HERE) if f.startswith("bench_") and f.endswith(".py"))
+    if only:
+        names = [n for n in names if n in only]
+    import numpy
+
+    header = [
+        "# Benchmark results",
+        "",
+        f"- date: {datetime.date.today().isoformat()}",
+        f"- machine: {os.cpu_count()} cores, {platform.machine()}, {platform.system()}",
+        f"- python {platform.python_version()}, numpy {numpy.__version__}",
+        f"- mode: {'quick' if args.quick else 'full'}",
+        "",
+        "Regenerate with `make bench`. Each section says what it measures and the target.",
+        "",
+    ]
+    sections, failed = [], 0
+    for name in names:
+        spec = importlib.util.spec_from_file_location(f"bench_{name}", os.path.join(HERE, f"bench_{name}.py"))
+        module = importlib.util.module_from_spec(spec)
+        t0 = time.perf_counter()
+        try:
+            spec.loader.exec_module(module)
+            section = module.run(quick=args.quick)
+        except Exception:  # a benchmark failure is reported in the results, then the run fails
+            failed += 1
+            section = f"## {name}\n\nFAILED:\n\n```\n{traceback.format_exc()}\n```\n"
+        sections.append(section.rstrip() + f"\n\n_(section took {time.perf_counter() - t0:.1f} s)_\n")
+        print(f"bench {name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    with open(args.out, "w") as fh:
+        fh.write("\n".join(header) + "\n" + "\n".join(sections))
+    print(f"wrote {args.out}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

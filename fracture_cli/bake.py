@@ -1,0 +1,199 @@
+"""``bake``: the whole pipeline from an asset and a recipe to game-ready files.
+
+For input ``<stem>`` a bake writes, into the output folder:
+
+* ``<stem>.glb``            one node and mesh per fragment (``fragment_000`` ...);
+* ``<stem>.fracture.json``  + ``<stem>.fracture.bin``: the runtime file (docs/FORMAT.md);
+* ``<stem>.report.json``    what was done: versions, recipe, counts, checks, seconds.
+
+Everything is first written into a temporary folder beside the outputs and then
+renamed into place, so a failed or interrupted bake leaves the previous outputs
+untouched and no partial files. The meshes and the runtime file are
+byte-identical for the same input, recipe and tool version; the report is too,
+except for its ``seconds`` block.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import logging
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from fracture_cli import __version__
+from fracture_cli.errors import StageError
+from fracture_cli.recipe import Recipe
+from fracture_cli.types import Fragments
+
+log = logging.getLogger(__name__)
+
+STAGES = ("load", "cage", "tetra", "material", "modes", "pieces", "smooth", "fragments", "runtime", "export")
+
+
+@dataclass(frozen=True)
+class BakeResult:
+    """What a bake produced: the report and the paths of the files written."""
+
+    report: dict
+    outputs: tuple[str, ...]
+
+
+def file_sha256(path: str) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _signed_volume(V: np.ndarray, F: np.ndarray) -> float:
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def fragment_summary(fragments: Fragments) -> list[dict]:
+    """Per-fragment summary for reports and golden files (input units, rounded)."""
+    out = []
+    scale = fragments.normalization.scale
+    for i, frag in enumerate(fragments.fragments):
+        world = fragments.normalization.to_world(frag.vertices)
+        out.append({
+            "name": f"fragment_{i:03d}",
+            "piece": int(frag.piece),
+            "triangles": int(len(frag.faces)),
+            "volume": float(_signed_volume(frag.vertices, frag.faces) * scale**3),
+            "bbox_min": [float(x) for x in world.min(axis=0)],
+            "bbox_max": [float(x) for x in world.max(axis=0)],
+        })
+    return out
+
+
+@contextlib.contextmanager
+def _staging_dir(out_dir: str, stem: str):
+    os.makedirs(out_dir, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix=f".{stem}.bake-", dir=out_dir)
+    try:
+        yield tmp
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
+    """Run the whole pipeline on one asset and write its outputs.
+
+    Parameters
+    ----------
+    input_path : str
+        The asset (any format :func:`~fracture_cli.io.read.load_surface` reads).
+    out_dir : str
+        Output folder; created if missing.
+    recipe : Recipe
+        The destructible material: options of every stage.
+
+    Returns
+    -------
+    BakeResult
+
+    Raises
+    ------
+    FractureError
+        On bad input or a stage that cannot finish; no output is then written.
+    """
+    from fracture_cli.io.read import load_surface
+    from fracture_cli.io.write import fragment_name, write_fragments_glb
+    from fracture_cli.runtime.format import write_runtime
+    from fracture_cli.stages.cage import cage
+    from fracture_cli.stages.checks import fragment_invariants
+    from fracture_cli.stages.fragments import fragments as cut_fragments
+    from fracture_cli.stages.material import material
+    from fracture_cli.stages.modes import modes as solve_modes
+    from fracture_cli.stages.pieces import pieces as atomic_pieces
+    from fracture_cli.stages.runtime import runtime as precompute_runtime
+    from fracture_cli.stages.smooth import smooth
+    from fracture_cli.stages.tetra import tetra
+
+    stem = os.path.splitext(os.path.basename(input_path))[0]
+    seconds: dict[str, float] = {}
+    step = [0]
+
+    @contextlib.contextmanager
+    def timed(name):
+        step[0] += 1
+        log.info("bake %s: [%d/%d] %s ...", stem, step[0], len(STAGES), name)
+        t0 = time.perf_counter()
+        yield
+        seconds[name] = round(time.perf_counter() - t0, 3)
+        log.info("bake %s: [%d/%d] %s done in %.2f s", stem, step[0], len(STAGES), name, seconds[name])
+
+    with timed("load"):
+        surface = load_surface(input_path, recipe["load"])
+    with timed("cage"):
+        cage_result = cage(surface, recipe["cage"])
+    with timed("tetra"):
+        tet_mesh = tetra(cage_result, recipe["tetra"])
+    with timed("material"):
+        eta = material(tet_mesh, surface, recipe["material"])
+    with timed("modes"):
+        modes = solve_modes(tet_mesh, recipe["modes"], eta=eta)
+    with timed("pieces"):
+        pieces = atomic_pieces(tet_mesh, modes, recipe["pieces"])
+    with timed("smooth"):
+        regions = smooth(tet_mesh, pieces, recipe["smooth"])
+    with timed("fragments"):
+        frags = cut_fragments(surface, regions, recipe["fragments"])
+        checks = fragment_invariants(surface, frags)
+        checks["input_volume"] = float(frags.input_volume * surface.normalization.scale**3)
+    if not frags.fragments:
+        raise StageError("no fragment intersects the input; is the asset empty?", stage="fragments", path=input_path)
+    with timed("runtime"):
+        fragment_pieces = [int(f.piece) for f in frags.fragments]
+        names = tuple(fragment_name(i) for i in range(len(frags.fragments)))
+        runtime_data = precompute_runtime(tet_mesh, modes, pieces, recipe["runtime"],
+                                          fragment_pieces=fragment_pieces, fragment_names=names)
+
+    report = {
+        "tool": "fracture",
+        "version": __version__,
+        "input": {"name": os.path.basename(input_path), "sha256": file_sha256(input_path),
+                  "triangles": surface.num_faces, "vertices": surface.num_vertices,
+                  "scale": surface.normalization.scale},
+        "recipe": {"name": recipe.name, "chain": list(recipe.chain), "description": recipe.description,
+                   "parameters": recipe.to_dict()},
+        "counts": {
+            "cage_faces": int(len(cage_result.faces)),
+            "cage_offset": float(cage_result.offset),
+            "tets": tet_mesh.num_tets,
+            "modes": modes.num_modes,
+            "mode_pieces": [int(c) for c in modes.piece_counts],
+            "pieces": pieces.num_pieces,
+            "fragments": len(frags.fragments),
+            "bonds": int(runtime_data.num_edges),
+            "contact_sites": int(runtime_data.num_sites),
+        },
+        "checks": checks,
+        "fragments": fragment_summary(frags),
+        "outputs": [f"{stem}.glb", f"{stem}.fracture.json", f"{stem}.fracture.bin", f"{stem}.report.json"],
+    }
+
+    with timed("export"), _staging_dir(out_dir, stem) as staging:
+        write_fragments_glb(os.path.join(staging, f"{stem}.glb"), frags)
+        write_runtime(runtime_data, os.path.join(staging, f"{stem}.fracture.json"))
+        report["seconds"] = dict(seconds)
+        with open(os.path.join(staging, f"{stem}.report.json"), "w") as fh:
+            json.dump(report, fh, indent=2, sort_keys=True)
+            fh.write("\n")
+        # Data files first, the report last: a report on disk means a complete bake.
+        outputs = []
+        for name in (f"{stem}.fracture.bin", f"{stem}.fracture.json", f"{stem}.glb", f"{stem}.report.json"):
+            os.replace(os.path.join(staging, name), os.path.join(out_dir, name))
+            outputs.append(os.path.join(out_dir, name))
+    report["seconds"] = dict(seconds)
+    return BakeResult(report=report, outputs=tuple(outputs))

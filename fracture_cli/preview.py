@@ -1,0 +1,296 @@
+"""Preview pictures of a bake: the asset, exploded fragments, modes, an impact.
+
+Rendering is headless and dependency-light: matplotlib's Agg backend, flat
+shading, back-face culling and painter's ordering (far triangles first). It
+needs no display and no GPU, so it runs in CI.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from fracture_cli.errors import InputError
+from fracture_cli.types import INTERIOR_MATERIAL_NAME
+
+log = logging.getLogger(__name__)
+
+# Camera looks from the front-right-above of a +Y-up asset (glTF convention).
+VIEW_DIR = np.array([1.0, 0.8, 1.4]) / np.linalg.norm([1.0, 0.8, 1.4])
+UP = np.array([0.0, 1.0, 0.0])
+LIGHT = np.array([0.4, 1.0, 0.6]) / np.linalg.norm([0.4, 1.0, 0.6])
+
+
+@dataclass(frozen=True)
+class FragmentGeometry:
+    """Triangles of one fragment, split into outer (input) and interior faces.
+
+    Attributes
+    ----------
+    outer : (m, 3, 3) float
+        Outer triangles, input units.
+    inner : (q, 3, 3) float
+        Interior (fault) triangles.
+    outer_colors : (m, 3) float
+        Base colour of each outer triangle's material.
+    """
+
+    outer: np.ndarray
+    inner: np.ndarray
+    outer_colors: np.ndarray
+
+    @property
+    def centroid(self) -> np.ndarray:
+        tris = np.concatenate([self.outer, self.inner]) if len(self.inner) else self.outer
+        return tris.reshape(-1, 3).mean(axis=0)
+
+
+def load_fragments(glb_path: str) -> list[FragmentGeometry]:
+    """Read the fragments of a baked GLB for drawing."""
+    from fracture_cli.io.gltf import read_glb
+
+    meshes, material_names = read_glb(glb_path)
+    with open(glb_path, "rb") as fh:
+        import struct
+
+        data = fh.read()
+        json_len = struct.unpack_from("<I", data, 12)[0]
+        doc = json.loads(data[20:20 + json_len])
+    base_colors = [m.get("pbrMetallicRoughness", {}).get("baseColorFactor", [0.8, 0.8, 0.8, 1]) for m in
+                   doc.get("materials", [])]
+    out = []
+    for mesh in meshes:
+        outer, inner, colors = [], [], []
+        for prim in mesh.primitives:
+            tris = prim.positions[prim.indices]
+            name = material_names[prim.material] if prim.material < len(material_names) else ""
+            if name == INTERIOR_MATERIAL_NAME:
+                inner.append(tris)
+            else:
+                outer.append(tris)
+                color = np.asarray(base_colors[prim.material][:3], dtype=float) if base_colors else np.full(3, 0.8)
+                colors.append(np.repeat(color[None], len(tris), axis=0))
+        out.append(FragmentGeometry(
+            outer=np.concatenate(outer) if outer else np.zeros((0, 3, 3)),
+            inner=np.concatenate(inner) if inner else np.zeros((0, 3, 3)),
+            outer_colors=np.concatenate(colors) if colors else np.zeros((0, 3)),
+        ))
+    return out
+
+
+def _camera():
+    forward = -VIEW_DIR
+    right = np.cross(forward, UP)
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    return right, up, forward
+
+
+def draw_triangles(ax, tris: np.ndarray, colors: np.ndarray, *, center: np.ndarray, extent: float,
+                   edge_alpha: float = 0.0) -> None:
+    """Draw triangles with flat shading, back-face culling and painter's order.
+
+    Parameters
+    ----------
+    ax : matplotlib Axes
+    tris : (m, 3, 3) float
+        Triangles in world coordinates.
+    colors : (m, 3) float
+        Base RGB colour per triangle.
+    center : (3,) float
+        World point at the middle of the panel.
+    extent : float
+        Half-size of the visible square, world units.
+    """
+    from matplotlib.collections import PolyCollection
+
+    ax.set_xlim(-extent, extent)
+    ax.set_ylim(-extent, extent)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    if len(tris) == 0:
+        return
+    right, up, forward = _camera()
+    normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    length = np.linalg.norm(normals, axis=1)
+    keep = (normals @ forward < 0) & (length > 0)  # facing the camera
+    tris, normals, length, colors = tris[keep], normals[keep], length[keep], colors[keep]
+    normals = normals / length[:, None]
+    rel = tris - center
+    xy = np.stack([rel @ right, rel @ up], axis=-1)  # (m, 3, 2)
+    depth = (rel @ forward).mean(axis=1)
+    order = np.argsort(-depth, kind="stable")  # far first
+    shade = 0.35 + 0.65 * np.clip(normals @ LIGHT, 0.0, 1.0)
+    rgb = np.clip(colors * shade[:, None], 0.0, 1.0)
+    coll = PolyCollection(xy[order], facecolors=rgb[order], edgecolors=rgb[order] * 0.85,
+                          linewidths=0.15 if edge_alpha == 0 else 0.3, antialiased=False)
+    ax.add_collection(coll)
+
+
+def project(points: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """Screen coordinates (n, 2) of world points (n, 3), matching :func:`draw_triangles`."""
+    right, up, _ = _camera()
+    rel = np.atleast_2d(points) - center
+    return np.stack([rel @ right, rel @ up], axis=-1)
+
+
+def palette(n: int) -> np.ndarray:
+    """``n`` distinct, deterministic RGB colours."""
+    import matplotlib
+
+    base = np.asarray(matplotlib.colormaps["tab20"].colors)
+    if n <= len(base):
+        return base[:n]
+    hues = (np.arange(n) * 0.61803398875) % 1.0
+    import colorsys
+
+    return np.array([colorsys.hsv_to_rgb(h, 0.55, 0.9) for h in hues])
+
+
+def pick_example_impact(data, center: np.ndarray):
+    """A deterministic, telling example hit: the highest contact site, hit downward-inward.
+
+    The impulse magnitude is the smallest of a geometric series that breaks the
+    object into at least three groups (or the largest tried).
+    """
+    from fracture_cli.runtime.impact import project_impact
+
+    sites = np.asarray(data.sites, dtype=np.float64)
+    score = sites @ (UP + 0.5 * VIEW_DIR)
+    site = int(np.argmax(score))
+    point = sites[site]
+    direction = center - point
+    direction /= max(np.linalg.norm(direction), 1e-12)
+    threshold = data.default_threshold
+    best = None
+    for magnitude in np.geomspace(0.25, 256.0, 11):
+        result = project_impact(data, point, direction * magnitude, threshold)
+        best = (point, direction * magnitude, result)
+        if len(np.unique(result.groups)) >= 3:
+            break
+    return best
+
+
+def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: int = 1000,
+                   impact: tuple | None = None, max_modes: int = 6) -> dict:
+    """Render the preview PNG of a bake.
+
+    Parameters
+    ----------
+    json_path : str
+        ``<stem>.fracture.json``; ``<stem>.glb`` (and ``<stem>.report.json`` if
+        present) are read from beside it.
+    png_path : str
+        Output PNG (written atomically).
+    width, height : int, optional (default 1600 x 1000)
+        Image size in pixels.
+    impact : (point (3,), impulse (3,), threshold or None), optional
+        The impact to show; default: :func:`pick_example_impact`.
+    max_modes : int, optional (default 6)
+        How many modes to draw in the grid.
+
+    Returns
+    -------
+    dict
+        What was drawn: fragments, modes, groups of the example impact.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fracture_cli.io.atomic import atomic_path
+    from fracture_cli.runtime.format import load_runtime
+    from fracture_cli.runtime.impact import project_impact
+
+    if not json_path.endswith(".fracture.json"):
+        raise InputError("expected a <stem>.fracture.json runtime file", path=json_path)
+    stem_path = json_path[: -len(".fracture.json")]
+    glb_path = stem_path + ".glb"
+    if not os.path.exists(glb_path):
+        raise InputError(f"cannot find the fragments file {os.path.basename(glb_path)} next to it", path=json_path)
+    data = load_runtime(json_path)
+    frags = load_fragments(glb_path)
+    report = {}
+    if os.path.exists(stem_path + ".report.json"):
+        with open(stem_path + ".report.json") as fh:
+            report = json.load(fh)
+
+    all_pts = np.concatenate([np.concatenate([f.outer, f.inner]).reshape(-1, 3) for f in frags])
+    lo, hi = all_pts.min(axis=0), all_pts.max(axis=0)
+    center = (lo + hi) / 2.0
+    radius = float(np.linalg.norm(hi - lo)) / 2.0
+    centroids = np.array([f.centroid for f in frags])
+    colors = palette(len(frags))
+
+    fig = plt.figure(figsize=(width / 100.0, height / 100.0), dpi=100)
+    fig.patch.set_facecolor("white")
+    grid = fig.add_gridspec(2, 4, height_ratios=[1.0, 1.0], hspace=0.12, wspace=0.02,
+                            left=0.01, right=0.99, top=0.9, bottom=0.02)
+
+    # (a) the asset as it looks (outer faces only, its own materials)
+    ax = fig.add_subplot(grid[0, 0])
+    tris = np.concatenate([f.outer for f in frags])
+    draw_triangles(ax, tris, np.concatenate([f.outer_colors for f in frags]), center=center, extent=radius * 1.05)
+    ax.set_title("input", fontsize=11)
+
+    # (b) exploded fragments, interior faces tinted
+    ax = fig.add_subplot(grid[0, 1:3])
+    push = (centroids - center) * 0.6
+    tris, cols = [], []
+    for j, f in enumerate(frags):
+        tris += [f.outer + push[j], f.inner + push[j]]
+        cols += [np.repeat(colors[j][None], len(f.outer), 0), np.repeat((colors[j] * 0.55)[None], len(f.inner), 0)]
+    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.7)
+    ax.set_title(f"{len(frags)} fragments (exploded; darker = interior faces)", fontsize=11)
+
+    # (d) example impact
+    ax = fig.add_subplot(grid[0, 3])
+    if impact is None:
+        point, impulse, result = pick_example_impact(data, center)
+    else:
+        point, impulse, threshold = impact
+        point, impulse = np.asarray(point, float), np.asarray(impulse, float)
+        result = project_impact(data, point, impulse, threshold)
+    group_ids, group_of = np.unique(result.groups, return_inverse=True)
+    gcol = palette(len(group_ids))
+    gcent = np.array([centroids[group_of == g].mean(axis=0) for g in range(len(group_ids))])
+    gpush = (gcent - center) * 0.35 if len(group_ids) > 1 else np.zeros_like(gcent)
+    tris = [np.concatenate([f.outer, f.inner]) + gpush[group_of[j]] for j, f in enumerate(frags)]
+    cols = [np.repeat(gcol[group_of[j]][None], len(tris[j]), 0) for j in range(len(frags))]
+    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.35)
+    p2 = project(point[None], center)[0]
+    tail = project((point - impulse / max(np.linalg.norm(impulse), 1e-12) * radius * 0.6)[None], center)[0]
+    ax.annotate("", xy=p2, xytext=tail, arrowprops=dict(arrowstyle="-|>", color="crimson", lw=2.5))
+    ax.plot([p2[0]], [p2[1]], "o", color="crimson", ms=7)
+    ax.set_title(f"impact |n|={np.linalg.norm(impulse):.3g}: {len(group_ids)} group(s)", fontsize=11)
+
+    # (c) the first modes, fragments coloured by their mode displacement
+    cmap = matplotlib.colormaps["coolwarm"]
+    k = min(data.k, max_modes)
+    sub = grid[1, :].subgridspec(1, max(k, 1), wspace=0.02)
+    W = np.asarray(data.W, dtype=np.float64)
+    for i in range(k):
+        ax = fig.add_subplot(sub[0, i])
+        w = W[i, :, 0] if data.dim == 1 else np.linalg.norm(W[i], axis=1) * np.sign(W[i, :, 0] + 1e-30)
+        scale = max(np.abs(w).max(), 1e-30)
+        fc = cmap(0.5 + 0.5 * w / scale)[:, :3]
+        tris = [np.concatenate([f.outer, f.inner]) for f in frags]
+        cols = [np.repeat(fc[j][None], len(tris[j]), 0) for j in range(len(frags))]
+        draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.05)
+        ax.set_title(f"mode {i + 1}", fontsize=10)
+
+    counts = report.get("counts", {})
+    recipe = report.get("recipe", {}).get("name", "?")
+    title = (f"{os.path.basename(stem_path)}  |  recipe: {recipe}  |  {len(frags)} fragments, {data.k} modes, "
+             f"{counts.get('tets', '?')} tets, cage {counts.get('cage_faces', '?')} faces  |  "
+             f"radius {data.radius:g}, threshold {data.default_threshold:g}")
+    fig.suptitle(title, fontsize=13)
+    with atomic_path(png_path) as tmp:
+        fig.savefig(tmp, format="png", dpi=100, metadata={"Software": None})
+    plt.close(fig)
+    return {"fragments": len(frags), "modes_drawn": k, "impact_groups": int(len(group_ids))}

@@ -1,0 +1,225 @@
+"""Crash-safe TetGen: tetrahedralize in a child process.
+
+TetGen does not always raise on bad input: on a self-intersecting or otherwise
+invalid surface it can abort or crash the whole process (SIGABRT, SIGSEGV). The
+cage search deliberately feeds it surfaces that may be invalid, so every call
+goes to a persistent worker process (``python -m fracture_cli.stages._tetgen``,
+talking pickled frames over a pipe). A crash or a timeout kills only the
+worker; the caller gets a :class:`TetGenFailure` and the next call starts a
+fresh worker. A plain subprocess rather than :mod:`multiprocessing` because
+the ``spawn`` method re-imports the caller's ``__main__``, which breaks scripts
+without an ``if __name__ == "__main__"`` guard.
+
+TetGen is licensed under the AGPL (through the ``tetgen`` package).
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import os
+import pickle
+import struct
+import subprocess
+import sys
+import threading
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+_HEADER = struct.Struct("<Q")
+
+
+class TetGenFailure(Exception):
+    """TetGen produced no tet mesh: it reported an error, crashed or timed out.
+
+    Attributes
+    ----------
+    reason : str
+        One line for logs and error messages.
+    """
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+def _read_exact(stream, size: int) -> bytes:
+    chunks = []
+    while size > 0:
+        chunk = stream.read(size)
+        if not chunk:
+            raise EOFError
+        chunks.append(chunk)
+        size -= len(chunk)
+    return b"".join(chunks)
+
+
+def _read_frame(stream):
+    (size,) = _HEADER.unpack(_read_exact(stream, _HEADER.size))
+    return pickle.loads(_read_exact(stream, size))
+
+
+def _write_frame(stream, obj) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(_HEADER.pack(len(data)) + data)
+    stream.flush()
+
+
+def _serve() -> None:
+    """Worker loop: read ``(vertices, faces, switches)`` frames, write result frames."""
+    # TetGen's C++ code prints to stdout: keep the real stdout for the protocol
+    # and send everything else to stderr.
+    protocol_out = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
+    protocol_in = sys.stdin.buffer
+    import tetgen
+
+    while True:
+        try:
+            request = _read_frame(protocol_in)
+        except EOFError:
+            return
+        if request is None:
+            return
+        vertices, faces, switches = request
+        try:
+            tgen = tetgen.TetGen(vertices, faces)
+            nodes, elems, _, _ = tgen.tetrahedralize(switches=switches)
+            reply = ("ok", np.asarray(nodes, dtype=np.float64), np.asarray(elems, dtype=np.int64))
+        except Exception as exc:  # reported to the parent, which decides what it means
+            reply = ("error", f"{type(exc).__name__}: {exc}", None)
+        _write_frame(protocol_out, reply)
+
+
+class _Worker:
+    """One child process running :func:`_serve`, restarted after a crash or timeout."""
+
+    def __init__(self):
+        self._process: subprocess.Popen | None = None
+        self._lock = threading.Lock()
+
+    def _start(self) -> None:
+        package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH", "")) if p)
+        self._process = subprocess.Popen(
+            [sys.executable, "-m", "fracture_cli.stages._tetgen"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
+        )
+
+    def _kill(self) -> None:
+        process, self._process = self._process, None
+        if process is None:
+            return
+        if process.poll() is None:
+            process.kill()
+        process.wait(timeout=10)
+        for stream in (process.stdin, process.stdout):
+            try:
+                stream.close()
+            except OSError:
+                pass
+
+    def stop(self) -> None:
+        with self._lock:
+            process = self._process
+            if process is not None and process.poll() is None:
+                try:
+                    _write_frame(process.stdin, None)
+                    process.wait(timeout=2)
+                except (OSError, subprocess.TimeoutExpired):
+                    pass
+            self._kill()
+
+    def _exit_reason(self) -> str:
+        try:
+            code = self._process.wait(timeout=2)
+        except subprocess.TimeoutExpired:
+            return "no exit code"
+        return f"signal {-code}" if code < 0 else f"exit code {code}"
+
+    def run(self, vertices: np.ndarray, faces: np.ndarray, switches: str, timeout: float):
+        with self._lock:
+            if self._process is None or self._process.poll() is not None:
+                self._kill()
+                self._start()
+            process = self._process
+            try:
+                _write_frame(process.stdin, (vertices, faces, switches))
+            except OSError:
+                reason = self._exit_reason()
+                self._kill()
+                raise TetGenFailure(f"TetGen worker died ({reason})") from None
+            # A reader thread keeps the timeout portable (no select() on pipes on Windows).
+            box: list = []
+
+            def read() -> None:
+                try:
+                    box.append(_read_frame(process.stdout))
+                except (EOFError, OSError, pickle.UnpicklingError):
+                    pass
+
+            reader = threading.Thread(target=read, daemon=True)
+            reader.start()
+            reader.join(timeout)
+            if reader.is_alive():
+                self._kill()
+                reader.join(5)
+                raise TetGenFailure(f"TetGen timed out after {timeout:g} s")
+            if not box:
+                reason = self._exit_reason()
+                self._kill()
+                raise TetGenFailure(f"TetGen crashed ({reason})")
+            status, first, second = box[0]
+        if status != "ok":
+            raise TetGenFailure(f"TetGen failed: {first}")
+        return first, second
+
+
+_worker = _Worker()
+atexit.register(_worker.stop)
+
+
+def tetrahedralize(vertices: np.ndarray, faces: np.ndarray, switches: str, timeout: float = 60.0):
+    """Tetrahedralize a closed surface with TetGen in a child process.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        Surface vertices.
+    faces : (m, 3) int
+        Surface triangles.
+    switches : str
+        TetGen command-line switches, e.g. ``"pYQ"`` (see the TetGen manual).
+    timeout : float, optional (default 60)
+        Seconds before the worker is killed.
+
+    Returns
+    -------
+    nodes : (k, 3) float64
+        Tet mesh vertices; the first ``n`` are the input vertices.
+    tets : (t, 4) int64
+        Tetrahedra, as TetGen orients them.
+
+    Raises
+    ------
+    TetGenFailure
+        If TetGen reported an error, crashed, timed out or produced no tets.
+    """
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int32)
+    nodes, tets = _worker.run(vertices, faces, switches, timeout)
+    if tets is None or len(tets) == 0:
+        raise TetGenFailure("TetGen produced no tetrahedra")
+    return nodes, tets
+
+
+def shutdown() -> None:
+    """Stop the worker process (it is restarted on the next call)."""
+    _worker.stop()
+
+
+if __name__ == "__main__":
+    _serve()

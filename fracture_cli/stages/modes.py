@@ -1,0 +1,351 @@
+"""Fracture modes of a tet mesh: the stage ``modes`` (ALGORITHM.md section 2).
+
+Per-tet displacements, an interior-face discontinuity energy, and the adapted
+ICCM loop (paper Algorithm 1) started from the tet mesh's generalized Laplacian
+eigenvectors. The convex subproblem of each ICCM round is solved exactly by
+:class:`fracture_cli.discontinuity.CutSubproblemSolver` (default, ``solver =
+"fast"``) or by the interior-point baseline
+:class:`fracture_cli.discontinuity.ConicSubproblemSolver` (``solver = "clarabel"``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.sparse.linalg import eigsh
+
+from fracture_cli.discontinuity import (
+    ConicSubproblemSolver,
+    CutSubproblemSolver,
+    discontinuity_energy,
+    face_weights,
+    jump_norms,
+)
+from fracture_cli.errors import StageError
+from fracture_cli.options import option
+from fracture_cli.types import Modes, TetMesh
+
+log = logging.getLogger(__name__)
+
+STAGE = "modes"
+
+
+@dataclass(frozen=True)
+class ModesOptions:
+    """Options of :func:`modes`."""
+
+    num_modes: int = option(12, "number of non-trivial fracture modes k (translations are not counted)", min=1,
+                            max=200)
+    dim: int = option(1, "displacement dimension: 1 = scalar modes (fast default), 3 = vector modes", choices=(1, 3))
+    solver: str = option("fast", "subproblem solver: 'fast' (exact min-cut column generation, d=1 per axis) or "
+                         "'clarabel' (interior-point baseline)", choices=("fast", "clarabel"))
+    sigma: float = option(1e-3, "a face is cut when its jump exceeds sigma times the mode's largest jump", min=0.0,
+                          max=1.0, min_exclusive=True)
+    tol: float = option(1e-6, "ICCM stops when max|U_i - c| <= tol * max|c|", min=0.0, max=1.0, min_exclusive=True)
+    max_iter: int = option(30, "ICCM rounds per mode at most", min=1, max=10000)
+    inner_tol: float = option(1e-9, "subproblem tolerance (relative dual violation / interior-point gap)", min=0.0,
+                              max=1e-2, min_exclusive=True)
+    inner_max_iter: int = option(1000, "subproblem iterations at most (max-flows or interior-point steps)", min=1,
+                                 max=1000000)
+    seed: int = option(0, "seed of the eigensolver's start vector (fixed: results are reproducible)", min=0)
+
+
+def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.ndarray | None = None) -> Modes:
+    """Compute the ``k`` lowest fracture modes of a tet mesh.
+
+    Parameters
+    ----------
+    tet_mesh : TetMesh
+        The (cage) tet mesh; ``t`` tets, ``f`` interior faces.
+    options : ModesOptions, optional
+        See :class:`ModesOptions` (default: 12 scalar modes, fast solver).
+    eta : (f,) or (f, d) float, optional (default all ones)
+        Material weight of every interior face (and axis, for ``d = 3``):
+        anisotropy and strength maps. A large value makes a face effectively
+        unbreakable. Must be positive and finite.
+
+    Returns
+    -------
+    Modes
+        ``U (k, t, d)`` M_T-orthonormal and M_T-orthogonal to translations,
+        ``labels (k, t)``, ``cut (k, f)``, ``piece_counts``, ``energies``
+        (``sum_f A_f ||eta_f o jump_f||``), ICCM ``iterations`` and ``stats``
+        (solver name, seconds and subproblem counters per mode, duality gaps).
+
+    Raises
+    ------
+    StageError
+        If the mesh is too small for ``k`` modes, ``eta`` has the wrong shape or
+        values, or a subproblem solver fails.
+
+    Notes
+    -----
+    ALGORITHM.md section 2 and the paper's Algorithm 1 (adapted ICCM). Each ICCM
+    round solves ``min E_D(u)`` subject to ``U_j^T M_T u = 0`` (earlier modes and
+    translations) and ``c^T M_T u = 1``, then sets ``c = u / ||u||_M``.
+
+    For ``d = 3`` the start vectors are the scalar eigenvectors times the axes,
+    ``s_j (x) e_a`` (mode ``i`` uses ``s_{i // 3} (x) e_{i % 3}``). With such a
+    ``c`` and axis-aligned earlier modes, the vector subproblem has an
+    axis-aligned minimiser: ``sum_f w_f ||eta_f o jump_f|| >= sum_f w_f eta_fa
+    |jump_fa|``, the right side is the scalar problem on axis ``a`` with weights
+    ``w_f eta_fa``, and that scalar minimiser times ``e_a`` attains it. So the
+    fast solver computes ``d = 3`` modes exactly as scalar modes per axis (once
+    per distinct column of ``eta``); the Clarabel baseline solves the vector
+    problem itself and reaches the same energies.
+    """
+    opts = options
+    t = tet_mesh.num_tets
+    k = int(opts.num_modes)
+    d = int(opts.dim)
+    face_tets = tet_mesh.interior_face_tets
+    f = len(face_tets)
+    if t < 2 or f == 0:
+        raise StageError(f"the tet mesh has {t} tets and {f} interior faces; fracture modes need at least two "
+                         "tets sharing a face", stage=STAGE)
+    scalar_count = k if d == 1 else math.ceil(k / 3)
+    if scalar_count + 2 > tet_mesh.num_vertices or k > d * (t - 1):
+        raise StageError(f"{k} modes of dimension {d} need a larger tet mesh (it has {t} tets, "
+                         f"{tet_mesh.num_vertices} vertices); lower num_modes or refine the mesh", stage=STAGE)
+    eta2 = _check_eta(eta, f, d)
+    areas = face_weights(tet_mesh)
+    volumes = np.asarray(tet_mesh.tet_volumes, dtype=np.float64)
+    if np.any(volumes <= 0):
+        raise StageError("the tet mesh has tets with non-positive volume; re-run the tetrahedralization",
+                         stage=STAGE)
+
+    start = time.perf_counter()
+    scalar_init = _scalar_start_vectors(tet_mesh, scalar_count, opts.seed)
+    eig_seconds = time.perf_counter() - start
+    log.info("%s: %d start vectors from the Laplacian eigenproblem in %.2f s", STAGE, scalar_count, eig_seconds)
+
+    if opts.solver == "fast":
+        U, info = _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts)
+    else:
+        U, info = _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts)
+
+    labels = np.zeros((k, t), dtype=np.int32)
+    cut = np.zeros((k, f), dtype=bool)
+    piece_counts = np.zeros(k, dtype=np.int32)
+    energies = np.zeros(k)
+    for i in range(k):
+        cut[i], labels[i], piece_counts[i] = mode_pieces(U[i], face_tets, t, opts.sigma)
+        energies[i] = discontinuity_energy(U[i], face_tets, areas, eta2)
+        if piece_counts[i] < 2:
+            log.warning("%s: mode %d has a single piece (degenerate)", STAGE, i)
+    stats = {
+        "solver": opts.solver,
+        "dim": d,
+        "eigensolver_seconds": eig_seconds,
+        "seconds": time.perf_counter() - start,
+        **info,
+    }
+    log.info("%s: %d modes in %.2f s (%.3f s per mode), pieces per mode %s", STAGE, k, stats["seconds"],
+             stats["seconds"] / k, piece_counts.tolist())
+    return Modes(U=U, labels=labels, cut=cut, piece_counts=piece_counts, energies=energies,
+                 iterations=np.asarray(info["iterations"], dtype=np.int32), stats=stats)
+
+
+def mode_pieces(u: np.ndarray, face_tets: np.ndarray, num_tets: int, sigma: float):
+    """Cut faces and pieces of one mode.
+
+    Parameters
+    ----------
+    u : (t, d) or (t,) float
+        One mode.
+    face_tets : (f, 2) int
+        Interior faces' tets.
+    num_tets : int
+        ``t``.
+    sigma : float
+        Relative threshold: a face is cut when its jump exceeds ``sigma`` times the largest jump.
+
+    Returns
+    -------
+    cut : (f,) bool
+    labels : (t,) int32
+        Connected components of the face-adjacency graph without cut faces.
+    count : int
+        Number of pieces.
+    """
+    jumps = jump_norms(u, face_tets)
+    largest = float(jumps.max()) if len(jumps) else 0.0
+    cut = jumps > sigma * largest if largest > 0 else np.zeros(len(jumps), dtype=bool)
+    keep = ~cut
+    a, b = face_tets[keep, 0], face_tets[keep, 1]
+    graph = sp.csr_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(num_tets, num_tets))
+    count, labels = connected_components(graph, directed=False)
+    return cut, labels.astype(np.int32), int(count)
+
+
+def _check_eta(eta, f: int, d: int) -> np.ndarray:
+    if eta is None:
+        return np.ones((f, d))
+    eta = np.asarray(eta, dtype=np.float64)
+    if eta.ndim == 1:
+        eta = eta[:, None] * np.ones((1, d))
+    if eta.shape != (f, d):
+        raise StageError(f"eta has shape {eta.shape}; expected ({f},) or ({f}, {d}) (one weight per interior face "
+                         "and axis)", stage=STAGE)
+    if not np.all(np.isfinite(eta)) or np.any(eta <= 0):
+        raise StageError("eta must be positive and finite; use a large value (e.g. 1e6) for unbreakable faces",
+                         stage=STAGE)
+    return eta
+
+
+def _scalar_start_vectors(tet_mesh: TetMesh, count: int, seed: int) -> np.ndarray:
+    """The first ``count`` non-constant generalized eigenvectors of ``(K, M_V)``, averaged onto tets.
+
+    Returns (count, t). Shift-invert just below 0 (``K`` is singular); ARPACK's
+    start vector is drawn from ``seed`` so runs are reproducible.
+    """
+    K = tet_mesh.stiffness.tocsc()
+    M = tet_mesh.vertex_mass.tocsc()
+    n = K.shape[0]
+    want = min(count + 1, n - 1)
+    # Below the spectrum by a margin far smaller than the first non-zero eigenvalue.
+    shift = -1e-6 * float(K.diagonal().sum() / M.diagonal().sum())
+    v0 = np.random.default_rng(seed).standard_normal(n)
+    try:
+        values, vectors = eigsh(K, k=want, M=M, sigma=shift, which="LM", v0=v0)
+    except Exception as error:  # ARPACK raises several types; report one message
+        raise StageError(f"the Laplacian eigensolver failed ({error}); is the tet mesh connected and valid?",
+                         stage=STAGE) from error
+    order = np.argsort(values, kind="stable")
+    vectors = vectors[:, order[1:]]  # the first is the constant
+    return np.asarray((tet_mesh.tet_from_vertex @ vectors).T)
+
+
+class _MInner:
+    """M_T inner products of (t, d) fields."""
+
+    def __init__(self, volumes: np.ndarray, d: int):
+        self.vol = volumes
+        self.d = d
+        self.translations = []
+        for a in range(d):
+            e = np.zeros((len(volumes), d))
+            e[:, a] = 1.0 / math.sqrt(volumes.sum())
+            self.translations.append(e)
+
+    def dot(self, x, y) -> float:
+        return float(np.einsum("t,td,td->", self.vol, x, y))
+
+    def orthonormalize(self, c, basis):
+        """``c`` minus its M_T-projection on ``basis`` (M_T-orthonormal), normalized; None if nothing is left."""
+        norm0 = math.sqrt(self.dot(c, c))
+        for _ in range(2):  # twice is enough (Gram-Schmidt reorthogonalization)
+            for b in basis:
+                c = c - self.dot(c, b) * b
+        norm = math.sqrt(self.dot(c, c))
+        if not norm > 1e-8 * norm0:
+            return None
+        return c / norm
+
+
+def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, random_start):
+    """Adapted ICCM (paper Algorithm 1): ``count`` modes (t, d) from start vectors ``starts``.
+
+    ``solve(c, earlier_modes) -> SubproblemResult``.
+    """
+    found = []
+    per_mode = []
+    for i in range(count):
+        mode_start = time.perf_counter()
+        c = inner.orthonormalize(starts[i], inner.translations + found)
+        attempts = 0
+        while c is None:  # the start vector lies in the span of the earlier modes
+            attempts += 1
+            c = inner.orthonormalize(random_start(attempts), inner.translations + found)
+        inner_iterations = 0
+        gaps = []
+        converged = False
+        rounds = 0
+        for rounds in range(1, opts.max_iter + 1):
+            try:
+                result = solve(c, found)
+            except (RuntimeError, ValueError) as error:
+                raise StageError(f"mode {i}{label}: subproblem failed in ICCM round {rounds}: {error}",
+                                 stage=STAGE) from error
+            inner_iterations += result.iterations
+            gaps.append(result.energy - result.lower_bound)
+            u = result.u
+            u = u / math.sqrt(inner.dot(u, u))
+            change = float(np.abs(u - c).max()) / max(float(np.abs(c).max()), 1e-300)
+            c = u
+            if change <= opts.tol:
+                converged = True
+                break
+        if not converged:
+            log.warning("%s: mode %d%s did not converge in %d ICCM rounds (last change above tol=%g)", STAGE, i,
+                        label, opts.max_iter, opts.tol)
+        found.append(c)
+        seconds = time.perf_counter() - mode_start
+        per_mode.append({"rounds": rounds, "converged": converged, "inner_iterations": inner_iterations,
+                         "seconds": seconds, "max_gap": float(max(gaps)), "last_gap": float(gaps[-1])})
+        log.info("%s: mode %d%s: %d ICCM rounds, %d inner iterations, %.3f s", STAGE, i, label, rounds,
+                 inner_iterations, seconds)
+    return found, per_mode
+
+
+def _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
+    """Scalar modes per distinct axis weight (see the Notes of :func:`modes`)."""
+    t = len(volumes)
+    inner = _MInner(volumes, 1)
+    rng = np.random.default_rng(opts.seed + 1)
+    axis_count = [len(range(a, k, d)) for a in range(d)]
+    per_axis_modes = [None] * d
+    per_axis_stats = [None] * d
+    for a in range(d):
+        if per_axis_modes[a] is not None:
+            continue
+        same = [b for b in range(a, d) if np.array_equal(eta2[:, b], eta2[:, a])]
+        count = max(axis_count[b] for b in same)
+        solver = CutSubproblemSolver(face_tets, areas * eta2[:, a], volumes, tol=opts.inner_tol,
+                                     max_iter=opts.inner_max_iter, weight_scale=float(areas.mean()))
+        label = "" if d == 1 else f" (axis {'xyz'[a]})"
+        found, stats = _iccm(lambda c, fixed: solver.solve(c, fixed), scalar_init[:, :, None], count, inner, opts,
+                             label, lambda n: rng.standard_normal((t, 1)))
+        for b in same:
+            per_axis_modes[b] = found
+            per_axis_stats[b] = stats
+    U = np.zeros((k, t, d))
+    per_mode = []
+    for i in range(k):
+        a, j = i % d, i // d
+        U[i, :, a] = per_axis_modes[a][j][:, 0]
+        per_mode.append(dict(per_axis_stats[a][j]))
+    return U, _summary(per_mode)
+
+
+def _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
+    t = len(volumes)
+    inner = _MInner(volumes, d)
+    solver = ConicSubproblemSolver(face_tets, areas, eta2, volumes, tol=opts.inner_tol, max_iter=opts.inner_max_iter,
+                                   weight_scale=float(areas.mean()))
+    starts = []
+    for i in range(k):
+        s = np.zeros((t, d))
+        s[:, i % d] = scalar_init[i // d]
+        starts.append(s)
+    rng = np.random.default_rng(opts.seed + 1)
+    found, per_mode = _iccm(lambda c, fixed: solver.solve(c, fixed), starts, k, inner, opts, "",
+                            lambda n: rng.standard_normal((t, d)))
+    return np.stack(found), _summary(per_mode)
+
+
+def _summary(per_mode):
+    return {
+        "iterations": [m["rounds"] for m in per_mode],
+        "converged": [m["converged"] for m in per_mode],
+        "inner_iterations": [m["inner_iterations"] for m in per_mode],
+        "mode_seconds": [m["seconds"] for m in per_mode],
+        "max_gap": max(m["max_gap"] for m in per_mode),
+        "per_mode": per_mode,
+    }

@@ -1,0 +1,164 @@
+"""End-to-end `fracture bake`: outputs, determinism, atomicity, glTF structure."""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fracture_cli.cli import cli
+
+from conftest import SAMPLE_ASSETS
+
+# Small settings so an end-to-end bake takes seconds; goldens use the real recipes.
+FAST = ["--set", "cage.target_faces=600", "--set", "modes.num_modes=4"]
+CHAIR = os.path.join(SAMPLE_ASSETS, "chair.glb")
+
+
+def bake(*args):
+    return CliRunner().invoke(cli, ["bake", *args])
+
+
+@pytest.fixture(scope="module")
+def chair_bake(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bake")
+    result = bake(CHAIR, "-o", str(out), *FAST, "--json")
+    assert result.exit_code == 0, result.output
+    return out, result
+
+
+def read_glb(path):
+    data = open(path, "rb").read()
+    magic, version, length = struct.unpack_from("<4sII", data, 0)
+    assert magic == b"glTF" and version == 2 and length == len(data)
+    json_len, json_type = struct.unpack_from("<I4s", data, 12)
+    assert json_type == b"JSON" and json_len % 4 == 0
+    doc = json.loads(data[20:20 + json_len])
+    bin_len, bin_type = struct.unpack_from("<I4s", data, 20 + json_len)
+    assert bin_type == b"BIN\x00" and bin_len % 4 == 0
+    binary = data[28 + json_len:28 + json_len + bin_len]
+    return doc, binary
+
+
+def test_bake_writes_all_outputs(chair_bake):
+    out, result = chair_bake
+    for name in ("chair.glb", "chair.fracture.json", "chair.fracture.bin", "chair.report.json"):
+        assert (out / name).is_file(), name
+    assert not [p for p in os.listdir(out) if p.startswith(".")]  # no staging leftovers
+    report = json.loads(result.stdout)
+    assert report["recipe"]["name"] == "default"
+    assert report["recipe"]["parameters"]["modes"]["num_modes"] == 4
+    assert report["counts"]["fragments"] >= 2
+    assert report["checks"]["watertight"] is True
+    assert abs(report["checks"]["volume_error"]) < 1e-3
+    assert set(report["seconds"]) >= {"load", "cage", "modes", "fragments"}
+    assert os.sep + "tmp" not in json.dumps({k: v for k, v in report.items() if k != "seconds"})
+
+
+def test_glb_structure_is_valid_gltf(chair_bake):
+    out, result = chair_bake
+    doc, binary = read_glb(out / "chair.glb")
+    report = json.loads(result.stdout)
+    assert doc["asset"]["version"] == "2.0"
+    names = [n["name"] for n in doc["nodes"]]
+    assert names == [f"fragment_{i:03d}" for i in range(report["counts"]["fragments"])]
+    assert [m["name"] for m in doc["materials"]][-1] == "interior"
+    for acc in doc["accessors"]:
+        view = doc["bufferViews"][acc["bufferView"]]
+        size = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[acc["type"]] * 4
+        assert view["byteOffset"] % 4 == 0
+        assert view["byteOffset"] + acc["count"] * size <= len(binary)
+    for mesh in doc["meshes"]:
+        for prim in mesh["primitives"]:
+            pos = doc["accessors"][prim["attributes"]["POSITION"]]
+            assert "min" in pos and "max" in pos
+            idx = doc["accessors"][prim["indices"]]
+            view = doc["bufferViews"][idx["bufferView"]]
+            indices = np.frombuffer(binary, "<u4", idx["count"], view["byteOffset"])
+            assert indices.max() < pos["count"]
+            assert {"NORMAL", "TEXCOORD_0"} <= set(prim["attributes"])
+
+
+def test_fragments_sit_where_the_input_was(chair_bake):
+    import trimesh
+
+    out, _ = chair_bake
+    original = trimesh.load_scene(CHAIR).to_geometry()
+    baked = trimesh.load_scene(str(out / "chair.glb")).to_geometry()
+    np.testing.assert_allclose(baked.bounds, original.bounds, atol=1e-4)
+
+
+def test_repeat_bake_is_byte_identical(chair_bake, tmp_path):
+    out, _ = chair_bake
+    result = bake(CHAIR, "-o", str(tmp_path), *FAST, "--quiet")
+    assert result.exit_code == 0, result.output
+    for name in ("chair.glb", "chair.fracture.json", "chair.fracture.bin"):
+        assert (tmp_path / name).read_bytes() == (out / name).read_bytes(), name
+    a = json.loads((tmp_path / "chair.report.json").read_text())
+    b = json.loads((out / "chair.report.json").read_text())
+    a.pop("seconds"), b.pop("seconds")
+    assert a == b
+
+
+def test_failed_bake_leaves_previous_outputs_untouched(chair_bake, tmp_path, monkeypatch):
+    import shutil
+
+    out, _ = chair_bake
+    for name in os.listdir(out):
+        shutil.copy(out / name, tmp_path / name)
+    before = {name: (tmp_path / name).read_bytes() for name in os.listdir(tmp_path)}
+
+    import fracture_cli.stages.runtime as runtime_stage
+
+    def explode(*args, **kwargs):
+        raise RuntimeError("injected failure")
+
+    monkeypatch.setattr(runtime_stage, "runtime", explode)
+    result = bake(CHAIR, "-o", str(tmp_path), *FAST)
+    assert result.exit_code == 1
+    assert "injected failure" in result.output and "Traceback" not in result.output
+    after = {name: (tmp_path / name).read_bytes() for name in os.listdir(tmp_path)}
+    assert after == before
+
+
+def test_missing_input_is_one_line(tmp_path):
+    result = bake(str(tmp_path / "nope.glb"), "-o", str(tmp_path / "out"))
+    assert result.exit_code == 1
+    assert result.output.strip().count("\n") == 0 and "nope.glb" in result.output
+    assert not (tmp_path / "out").exists() or not os.listdir(tmp_path / "out")
+
+
+def test_impact_cli_on_baked_chair(chair_bake, tmp_path):
+    out, _ = chair_bake
+    runtime = str(out / "chair.fracture.json")
+    result = CliRunner().invoke(cli, ["impact", runtime, "--point", "0.45", "0.85", "-0.45",
+                                      "--impulse", "0", "-50", "0", "--json", "-o", str(tmp_path / "broken.glb")])
+    assert result.exit_code == 0, result.output
+    groups = json.loads(result.stdout)["groups"]
+    assert sum(len(g) for g in groups) == len(read_glb(out / "chair.glb")[0]["nodes"])
+    assert (tmp_path / "broken.glb").is_file()
+    zero = CliRunner().invoke(cli, ["impact", runtime, "--point", "0", "0", "0", "--impulse", "0", "0", "0", "--json"])
+    assert zero.exit_code == 0
+    assert len(json.loads(zero.stdout)["groups"]) == 1
+
+
+def test_khronos_gltf_validator_accepts_output(chair_bake):
+    """The Khronos validator (installed by `make test` when npm exists) finds no errors."""
+    import shutil
+    import subprocess
+
+    from conftest import REPO
+
+    modules = os.path.join(REPO, "build", "node", "node_modules")
+    if not shutil.which("node") or not os.path.isdir(os.path.join(modules, "gltf-validator")):
+        pytest.skip("gltf-validator not installed (needs npm); structure is checked by test_glb_structure_is_valid_gltf")
+    out, _ = chair_bake
+    proc = subprocess.run(["node", os.path.join(REPO, "scripts", "validate_gltf.cjs"), modules, str(out / "chair.glb")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    report = json.loads(proc.stdout.splitlines()[0])
+    assert report["errors"] == 0 and report["warnings"] == 0, report

@@ -1,0 +1,99 @@
+"""Golden-file tests: bake every sample asset with its manifest recipe and compare.
+
+Goldens live in tests/golden/<asset>.<recipe>.json. Regenerate after an intended
+change with `make goldens` (pytest --update-goldens) and review the diff.
+Comparisons use explicit tolerances; a failure names the asset, the quantity,
+the expected and the obtained value.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tomllib
+
+import numpy as np
+import pytest
+import trimesh
+
+from fracture_cli.bake import bake
+from fracture_cli.recipe import load_recipe
+
+from conftest import REPO, SAMPLE_ASSETS
+
+GOLDEN_DIR = os.path.join(REPO, "tests", "golden")
+with open(os.path.join(SAMPLE_ASSETS, "manifest.toml"), "rb") as _fh:
+    MANIFEST = sorted(tomllib.load(_fh)["assets"].items())
+
+# Tolerances: counts exact, volumes and boxes relative to the asset's size.
+VOLUME_RTOL = 1e-4
+BBOX_ATOL_REL = 1e-5  # of the bounding-box diagonal
+
+
+def summarize(out_dir: str, stem: str) -> dict:
+    """The reviewable summary of a bake: counts, rounded volumes and boxes, a geometry hash."""
+    with open(os.path.join(out_dir, f"{stem}.report.json")) as fh:
+        report = json.load(fh)
+    scene = trimesh.load_scene(os.path.join(out_dir, f"{stem}.glb"))
+    digest = hashlib.sha256()
+    for node in sorted(scene.graph.nodes_geometry):
+        transform, geom = scene.graph[node]
+        verts = np.round(np.asarray(scene.geometry[geom].vertices), 4)
+        digest.update(node.encode() + np.ascontiguousarray(verts[np.lexsort(verts.T[::-1])]).tobytes())
+    counts = {k: v for k, v in report["counts"].items() if k != "cage_offset"}
+    return {
+        "asset": report["input"]["name"],
+        "recipe": report["recipe"]["name"],
+        "counts": counts,
+        "cage_offset": round(report["counts"]["cage_offset"], 6),
+        "input_volume": report["checks"]["input_volume"],
+        "fragments": [
+            {"name": f["name"], "volume": f["volume"], "bbox_min": f["bbox_min"], "bbox_max": f["bbox_max"]}
+            for f in report["fragments"]
+        ],
+        "vertex_hash": digest.hexdigest(),
+    }
+
+
+def compare(expected: dict, got: dict, asset: str) -> list[str]:
+    problems = []
+    diag = float(np.linalg.norm(np.subtract(expected["fragments"][0]["bbox_max"], expected["fragments"][0]["bbox_min"])))
+    for key, value in expected["counts"].items():
+        if got["counts"].get(key) != value:
+            problems.append(f"{asset}: counts.{key}: expected {value}, got {got['counts'].get(key)}")
+    if len(expected["fragments"]) != len(got["fragments"]):
+        return problems + [f"{asset}: fragment count: expected {len(expected['fragments'])}, got {len(got['fragments'])}"]
+    if not np.isclose(expected["input_volume"], got["input_volume"], rtol=VOLUME_RTOL):
+        problems.append(f"{asset}: input_volume: expected {expected['input_volume']}, got {got['input_volume']}")
+    for e, g in zip(expected["fragments"], got["fragments"]):
+        if not np.isclose(e["volume"], g["volume"], rtol=VOLUME_RTOL, atol=1e-12):
+            problems.append(f"{asset}: {e['name']}.volume: expected {e['volume']:.6g}, got {g['volume']:.6g}")
+        for key in ("bbox_min", "bbox_max"):
+            if not np.allclose(e[key], g[key], atol=BBOX_ATOL_REL * max(diag, 1e-12) * 100):
+                problems.append(f"{asset}: {e['name']}.{key}: expected {e[key]}, got {g[key]}")
+    if not problems and expected["vertex_hash"] != got["vertex_hash"]:
+        problems.append(f"{asset}: vertex_hash: expected {expected['vertex_hash'][:12]}, got {got['vertex_hash'][:12]}"
+                        " (geometry moved by more than 1e-4 somewhere; inspect and `make goldens` if intended)")
+    return problems
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("asset, recipe", MANIFEST, ids=[a for a, _ in MANIFEST])
+def test_golden(asset, recipe, tmp_path, update_goldens):
+    stem = os.path.splitext(asset)[0]
+    bake(os.path.join(SAMPLE_ASSETS, asset), str(tmp_path), load_recipe(recipe))
+    got = summarize(str(tmp_path), stem)
+    path = os.path.join(GOLDEN_DIR, f"{stem}.{recipe}.json")
+    if update_goldens or not os.path.exists(path):
+        if not update_goldens:
+            pytest.fail(f"{asset}: no golden file {os.path.relpath(path, REPO)}; run `make goldens` and review it")
+        os.makedirs(GOLDEN_DIR, exist_ok=True)
+        with open(path, "w") as fh:
+            json.dump(got, fh, indent=2, sort_keys=True)
+            fh.write("\n")
+        return
+    with open(path) as fh:
+        expected = json.load(fh)
+    problems = compare(expected, got, asset)
+    assert not problems, "\n".join(problems)

@@ -1,0 +1,164 @@
+"""Fault smoothing and piece regions (fracture_cli.stages.smooth), checked independently."""
+
+import itertools
+import logging
+
+import manifold3d
+import numpy as np
+import pytest
+
+from fracture_cli.stages.pieces import pieces
+from fracture_cli.stages.smooth import SmoothOptions, smooth
+from fracture_cli.testing import grid_tetmesh
+from fracture_cli.types import Modes, TetMesh
+
+
+def jittered_grid(n=6, seed=0):
+    """Unit cube centred at 0, interior vertices jittered (generic faults), boundary kept flat."""
+    g = grid_tetmesh((n, n, n), spacing=1 / n, origin=(-0.5, -0.5, -0.5))
+    V = g.vertices.copy()
+    inside = np.all(np.abs(V) < 0.5 - 1e-9, axis=1)
+    V[inside] += np.random.default_rng(seed).uniform(-0.1 / n, 0.1 / n, (inside.sum(), 3))
+    return TetMesh(vertices=V, tets=g.tets)
+
+
+def label_modes(tm, labels):
+    labels = np.atleast_2d(labels)
+    ft = tm.interior_face_tets
+    cut = labels[:, ft[:, 0]] != labels[:, ft[:, 1]]
+    return Modes(U=labels[:, :, None].astype(float), labels=labels.astype(np.int32), cut=cut,
+                 piece_counts=labels.max(axis=1) + 1, energies=np.zeros(len(labels)),
+                 iterations=np.ones(len(labels), np.int32))
+
+
+def plane_pieces(tm):
+    c = tm.tet_centroids
+    lab = (c[:, 0] > 0.02).astype(int) + 2 * (c[:, 1] + 0.4 * c[:, 2] > -0.1)
+    return pieces(tm, label_modes(tm, lab))
+
+
+def signed_volume(V, F):
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    return np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0
+
+
+def edge_manifold_by_index(F):
+    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    # every directed edge once, and its reverse present
+    as_set = {tuple(e) for e in directed.tolist()}
+    return len(as_set) == len(directed) and all((b, a) in as_set for a, b in as_set)
+
+
+def closed_by_position(V, F):
+    _, pos = np.unique(V, axis=0, return_inverse=True)
+    return edge_manifold_by_index(pos.reshape(-1)[F])
+
+
+def solid(V, F):
+    return manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.ascontiguousarray(V, dtype=np.float64),
+                                                 tri_verts=np.ascontiguousarray(F, dtype=np.uint64)))
+
+
+def check_partition(tm, regions, tol):
+    total = np.abs(tm.tet_volumes).sum()
+    solids = [solid(V, F) for V, F in regions.meshes]
+    volumes = np.array([signed_volume(V, F) for V, F in regions.meshes])
+    assert np.all(volumes > 0)
+    assert abs(volumes.sum() - total) < tol * total
+    for a, b in itertools.combinations(range(len(solids)), 2):
+        assert (solids[a] ^ solids[b]).volume() < tol * min(volumes[a], volumes[b])
+    return volumes
+
+
+def inner_roughness(regions):
+    """Independent roughness: length-weighted dihedral angle over area of faces off the cube's boundary."""
+    total_turn, total_area = 0.0, 0.0
+    for V, F in regions.meshes:
+        P = V[F]
+        on_box = np.any(np.all(np.abs(np.abs(P) - 0.5) < 1e-9, axis=1), axis=1)
+        F, P = F[~on_box], P[~on_box]
+        n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+        area = np.linalg.norm(n, axis=1)
+        n = n / area[:, None]
+        total_area += area.sum() / 2
+        edges = {}
+        for f, tri in enumerate(F.tolist()):
+            for k in range(3):
+                key = tuple(sorted((tri[k], tri[(k + 1) % 3])))
+                edges.setdefault(key, []).append(f)
+        for (a, b), fs in edges.items():
+            if len(fs) == 2:
+                angle = np.arccos(np.clip(n[fs[0]] @ n[fs[1]], -1, 1))
+                total_turn += np.linalg.norm(V[a] - V[b]) * angle
+    return total_turn / total_area
+
+
+def test_lambda_zero_is_tet_aligned():
+    tm = jittered_grid()
+    P = plane_pieces(tm)
+    R = smooth(tm, P, SmoothOptions(smoothing=0.0))
+    assert len(R.meshes) == P.num_pieces and R.vanished == ()
+    volumes = check_partition(tm, R, 1e-9)
+    np.testing.assert_allclose(volumes, P.volumes, rtol=1e-9)
+    for V, F in R.meshes:
+        assert edge_manifold_by_index(F) and closed_by_position(V, F)
+        # every region vertex is a tet mesh vertex (or within the pinch separation of one)
+        d = np.min(np.linalg.norm(V[:, None, :] - tm.vertices[None, :, :], axis=2), axis=1)
+        assert d.max() < 1e-6
+
+
+def test_lambda_zero_piece_touching_itself_along_an_edge():
+    # 2x2x2 voxels; piece A wraps around the vertical edge x=y=1 where its two bottom voxels touch.
+    mask_a = {(0, 0, 0), (1, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1)}
+    tm = grid_tetmesh((2, 2, 2))
+    c = tm.tet_centroids
+    voxel = [tuple(v) for v in np.floor(c).astype(int).tolist()]
+    lab = np.array([0 if v in mask_a else 1 + v[0] + 2 * v[1] + 4 * v[2] for v in voxel])
+    _, lab = np.unique(lab, return_inverse=True)
+    P = pieces(tm, label_modes(tm, lab))
+    R = smooth(tm, P, SmoothOptions(smoothing=0.0))
+    # The copies of the pinched edge are moved 1e-7 apart: volumes change by ~1e-7.
+    volumes = check_partition(tm, R, 1e-6)
+    np.testing.assert_allclose(volumes, P.volumes, rtol=1e-6)
+    for V, F in R.meshes:
+        assert edge_manifold_by_index(F)
+        assert closed_by_position(V, F)
+
+
+def test_smoothing_partitions_and_rounds_faults():
+    tm = jittered_grid(7)
+    P = plane_pieces(tm)
+    R0 = smooth(tm, P, SmoothOptions(smoothing=0.0))
+    R1 = smooth(tm, P, SmoothOptions())
+    assert R1.smoothing == SmoothOptions().smoothing
+    volumes = check_partition(tm, R1, 1e-7)
+    assert len(volumes) == P.num_pieces
+    for V, F in R1.meshes:
+        assert edge_manifold_by_index(F) and closed_by_position(V, F)
+    rough0, rough1 = inner_roughness(R0), inner_roughness(R1)
+    print(f"inner-face roughness: lambda=0 {rough0:.2f}, default lambda {rough1:.2f}")
+    assert rough1 < 0.8 * rough0
+
+
+def test_vanishing_piece_keeps_its_tets(caplog):
+    tm = jittered_grid(5)
+    c = tm.tet_centroids
+    lab = (c[:, 0] > 0.0).astype(int)
+    lonely = int(np.argmin(np.linalg.norm(c - [-0.2, 0.1, 0.1], axis=1)))
+    lab[lonely] = 2
+    P = pieces(tm, label_modes(tm, lab))
+    lonely_piece = int(P.tet_piece[lonely])
+    with caplog.at_level(logging.WARNING):
+        R = smooth(tm, P, SmoothOptions(smoothing=1e-2))
+    assert lonely_piece in R.vanished
+    assert any("vanish" in r.message for r in caplog.records)
+    volumes = check_partition(tm, R, 1e-7)
+    np.testing.assert_allclose(volumes[lonely_piece], abs(tm.tet_volumes[lonely]), rtol=1e-6)
+
+
+def test_deterministic():
+    tm = jittered_grid(5)
+    P = plane_pieces(tm)
+    A, B = smooth(tm, P), smooth(tm, P)
+    for (va, fa), (vb, fb) in zip(A.meshes, B.meshes):
+        assert va.tobytes() == vb.tobytes() and fa.tobytes() == fb.tobytes()
