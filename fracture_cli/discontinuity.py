@@ -46,7 +46,13 @@ log = logging.getLogger(__name__)
 _FLOW_UNITS = float(2**29)
 _INT32_MAX = 2**31 - 1
 _FLOW_UNITS_64 = float(2**52)
-_DUMP = None
+_HIGHS_SETTINGS = {"solver": "simplex", "simplex_strategy": 1, "primal_feasibility_tolerance": 1e-9,
+                   "dual_feasibility_tolerance": 1e-9, "threads": 1}
+
+try:  # HiGHS's own bindings allow warm starts; scipy's linprog (same solver) is the fallback
+    import highspy as _highspy
+except ImportError:
+    _highspy = None
 # The master LP's duals are the pricing's supply: keep HiGHS's tolerances tight.
 _HIGHS_OPTIONS = (("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9}),
                   ("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9,
@@ -123,7 +129,8 @@ class _Constraints:
     def project(self, y: np.ndarray) -> np.ndarray:
         """Remove the M_T-mean of each column (the translation component), per axis."""
         y = np.asarray(y, dtype=np.float64)
-        mean = (self.vol @ y) / self.total
+        # A plain reduction, not BLAS: tiny products are slow when BLAS threads wait on a busy machine.
+        mean = np.einsum("t,t...->...", self.vol, y) / self.total
         return y - mean
 
 
@@ -190,7 +197,12 @@ class CutSubproblemSolver:
         t, f = self.t, len(self._fa)
         self._max_flow = _MinCut(self.face_tets, self.omega, t)
         self.cells = np.zeros(t, dtype=np.int64)
+        self._partition_version = 0
         self._fixed_count = -1
+        self._fixed_cache = []
+        self._lp = None
+        self._lp_key = None
+        self._lp_G = None
         self._cell_cache = None
         self.counters = {"max_flows": 0, "certified_without_flow": 0, "master_lps": 0, "refinements": 0, "stalls": 0}
 
@@ -199,25 +211,43 @@ class CutSubproblemSolver:
         """Split every cell along the tet set ``members``, keeping cells connected; True if any cell split."""
         inside = np.zeros(self.t, dtype=bool)
         inside[members] = True
-        return self._refine_by(self.cells * 2 + inside)
+        fa, fb = self._fa, self._fb
+        return self._refine_by((self.cells[fa] == self.cells[fb]) & (inside[fa] == inside[fb]))
 
     def seed_labels(self, labels: np.ndarray) -> None:
         """Refine the partition by a labelling (t,) int (e.g. pieces known in advance)."""
         labels = np.asarray(labels, dtype=np.int64)
-        _, key = np.unique(np.column_stack([self.cells, labels]), axis=0, return_inverse=True)
-        self._refine_by(key.reshape(-1))
+        fa, fb = self._fa, self._fb
+        self._refine_by((self.cells[fa] == self.cells[fb]) & (labels[fa] == labels[fb]))
+
+    @property
+    def max_flow_backend(self) -> str:
+        """'ortools' or 'scipy'."""
+        return self._max_flow.backend
+
+    def _project_fixed(self, k: int, y) -> np.ndarray:
+        """Projected fixed vector ``k``, cached (the same earlier modes recur in every ICCM round)."""
+        y = np.asarray(y, dtype=np.float64).reshape(-1)
+        if k < len(self._fixed_cache) and (self._fixed_cache[k][0] is y or np.array_equal(self._fixed_cache[k][0], y)):
+            return self._fixed_cache[k][1]
+        del self._fixed_cache[k:]
+        self._fixed_cache.append((y, self._constraints.project(y)))
+        return self._fixed_cache[k][1]
 
     def _restart_partition(self, fixed) -> None:
         """Partition into the pieces of the fixed vectors (connected sets of equal values)."""
         self.cells = np.zeros(self.t, dtype=np.int64)
         self._cell_cache = None
+        self._partition_version += 1
         if len(fixed):
-            values = np.column_stack([np.asarray(y, dtype=np.float64).reshape(-1) for y in fixed])
-            _, key = np.unique(values, axis=0, return_inverse=True)
-            self._refine_by(key.reshape(-1))
+            keep = np.ones(len(self._fa), dtype=bool)
+            for y in fixed:
+                y = np.asarray(y).reshape(-1)
+                keep &= y[self._fa] == y[self._fb]
+            self._refine_by(keep)
 
-    def _refine_by(self, key: np.ndarray) -> bool:
-        keep = key[self._fa] == key[self._fb]
+    def _refine_by(self, keep: np.ndarray) -> bool:
+        """Cells = connected components of the faces in ``keep`` (f,) bool; True if the partition changed."""
         graph = sp.csr_matrix((np.ones(int(keep.sum()), dtype=np.int8), (self._fa[keep], self._fb[keep])),
                               shape=(self.t, self.t))
         count, cells = connected_components(graph, directed=False)
@@ -225,6 +255,7 @@ class CutSubproblemSolver:
             return False
         self.cells = cells.astype(np.int64)
         self._cell_cache = None
+        self._partition_version += 1
         return True
 
     def _cell_graph(self):
@@ -263,7 +294,7 @@ class CutSubproblemSolver:
             self._fixed_count = len(fixed)
             self._restart_partition(fixed)
         cp = self._constraints.project(np.asarray(c, dtype=np.float64).reshape(-1))
-        fixed = [self._constraints.project(np.asarray(y, dtype=np.float64).reshape(-1)) for y in fixed]
+        fixed = [self._project_fixed(k, y) for k, y in enumerate(fixed)]
         if not np.any(cp):
             raise ValueError("c is constant: no displacement with c^T M u = 1 is orthogonal to translations")
         Y = np.column_stack(fixed + [cp])
@@ -309,45 +340,97 @@ class CutSubproblemSolver:
                                 seconds=time.perf_counter() - start, stats=stats)
 
     def _master(self, Y, b, v_cost):
-        """The LP restricted to cell-constant ``u`` plus ``theta`` times the start vector."""
+        """The LP restricted to cell-constant ``u`` plus ``theta`` times the start vector.
+
+        Variables ``x (n cells, free), p (E), q (E), theta >= 0``; rows
+        ``x_P - x_Q - p_e + q_e = 0`` per cell edge, the constraint rows
+        ``G x + g theta = b`` (scaled), and ``vol^T x = 0``. Returns ``x``,
+        ``theta``, the (unscaled) duals of the constraint rows and the objective.
+        """
         n, edges, edge_omega, indicator = self._cell_graph()
         E = len(edges)
         m = Y.shape[1]
         G = np.asarray((indicator @ Y).T)  # (m, n): y_j^T M_T 1_P
-        cell_vol = np.asarray(indicator.sum(axis=1)).reshape(-1)
         # Row scaling for HiGHS (tet volumes are tiny in normalized units); duals are scaled back.
         row_scale = 1.0 / np.maximum(self.vol @ np.abs(Y), 1e-300)
         G = G * row_scale[:, None]
         G[np.abs(G) < 1e-12] = 0.0  # round-off of sums that cancel; keeps HiGHS's matrix clean
         b = b * row_scale
-        cell_vol = cell_vol / cell_vol.sum()
-        # Variables: x (n, free), p (E), q (E), theta; x_P - x_Q - p + q = 0.
+        self.counters["master_lps"] += 1
+        if _highspy is not None:
+            x, theta, duals, objective = self._master_highs(n, edges, edge_omega, indicator, G, b, row_scale, v_cost)
+        else:
+            x, theta, duals, objective = self._master_linprog(n, edges, edge_omega, indicator, G, b, row_scale,
+                                                              v_cost)
+        return x, theta, duals * row_scale, objective
+
+    def _master_matrix(self, n, edges, edge_omega, indicator, G, b, row_scale, v_cost):
+        E, m = len(edges), G.shape[0]
         eidx = np.arange(E)
-        jump = sp.csr_matrix(
-            (np.concatenate([np.ones(E), -np.ones(E), -np.ones(E), np.ones(E)]),
-             (np.tile(eidx, 4), np.concatenate([edges[:, 0], edges[:, 1], n + eidx, n + E + eidx]))),
-            shape=(E, n + 2 * E + 1))
-        theta_col = np.zeros((m, 1))
-        theta_col[-1, 0] = row_scale[-1]  # the start vector meets every constraint row exactly
-        dense = sp.csr_matrix(np.vstack([np.hstack([G, np.zeros((m, 2 * E)), theta_col]),
-                                         np.concatenate([cell_vol, np.zeros(2 * E + 1)])[None, :]]))
-        A_eq = sp.vstack([jump, dense], format="csr")
-        b_eq = np.concatenate([np.zeros(E), b, [0.0]])
+        cell_vol = np.asarray(indicator.sum(axis=1)).reshape(-1)
+        Gs = sp.coo_matrix(G)
+        rows = np.concatenate([eidx, eidx, eidx, eidx, E + Gs.row, np.full(n, E + m), [E + m - 1]])
+        cols = np.concatenate([edges[:, 0], edges[:, 1], n + eidx, n + E + eidx, Gs.col, np.arange(n), [n + 2 * E]])
+        vals = np.concatenate([np.ones(E), -np.ones(E), -np.ones(E), np.ones(E), Gs.data, cell_vol / cell_vol.sum(),
+                               [row_scale[-1]]])  # the start vector meets every constraint row exactly
+        A = sp.csc_matrix((vals, (rows, cols)), shape=(E + m + 1, n + 2 * E + 1))
         cost = np.concatenate([np.zeros(n), edge_omega, edge_omega, [v_cost]])
-        bounds = np.zeros((n + 2 * E + 1, 2))
-        bounds[:n, 0] = -np.inf
-        bounds[:, 1] = np.inf
-        if _DUMP is not None: _DUMP.append((cost, A_eq, b_eq, bounds))
+        lower = np.concatenate([np.full(n, -np.inf), np.zeros(2 * E + 1)])
+        upper = np.full(n + 2 * E + 1, np.inf)
+        rhs = np.concatenate([np.zeros(E), b, [0.0]])
+        return A, cost, lower, upper, rhs
+
+    def _master_highs(self, n, edges, edge_omega, indicator, G, b, row_scale, v_cost):
+        E, m = len(edges), G.shape[0]
+        key = (self._partition_version, m)
+        h = self._lp
+        warm = h is not None and self._lp_key == key and np.array_equal(self._lp_G[:-1], G[:-1])
+        if warm:
+            # Same partition and fixed rows: only the c row changed; keep HiGHS's basis.
+            row = E + m - 1
+            changed = np.flatnonzero(self._lp_G[-1] != G[-1])
+            for P in changed:
+                h.changeCoeff(int(row), int(P), float(G[-1, P]))
+            h.changeCoeff(int(row), int(n + 2 * E), float(row_scale[-1]))
+            h.changeRowBounds(int(row), float(b[-1]), float(b[-1]))
+            h.changeColCost(int(n + 2 * E), float(v_cost))
+        else:
+            A, cost, lower, upper, rhs = self._master_matrix(n, edges, edge_omega, indicator, G, b, row_scale, v_cost)
+            h = _highspy.Highs()
+            h.setOptionValue("output_flag", False)
+            for name, value in _HIGHS_SETTINGS.items():
+                h.setOptionValue(name, value)
+            lp = _highspy.HighsLp()
+            lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
+            lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, lower, upper
+            lp.row_lower_, lp.row_upper_ = rhs, rhs
+            lp.a_matrix_.format_ = _highspy.MatrixFormat.kColwise
+            lp.a_matrix_.start_ = A.indptr
+            lp.a_matrix_.index_ = A.indices
+            lp.a_matrix_.value_ = A.data
+            h.passModel(lp)
+        self._lp, self._lp_key, self._lp_G = h, key, G
+        h.run()
+        if h.getModelStatus() != _highspy.HighsModelStatus.kOptimal:
+            # Rare numerical trouble: retry from scratch with scipy's HiGHS chain (no presolve, IPM).
+            self._lp = None
+            return self._master_linprog(n, edges, edge_omega, indicator, G, b, row_scale, v_cost)
+        solution = h.getSolution()
+        x = np.asarray(solution.col_value)
+        duals = np.asarray(solution.row_dual)[E:E + m]
+        return x[:n], float(x[-1]), duals, float(h.getInfo().objective_function_value)
+
+    def _master_linprog(self, n, edges, edge_omega, indicator, G, b, row_scale, v_cost):
+        E, m = len(edges), G.shape[0]
+        A, cost, lower, upper, rhs = self._master_matrix(n, edges, edge_omega, indicator, G, b, row_scale, v_cost)
+        bounds = np.column_stack([lower, upper])
         for method, options in _HIGHS_OPTIONS:  # dual simplex; without presolve or IPM + crossover if it fails
-            res = linprog(cost, A_eq=A_eq, b_eq=b_eq, bounds=bounds, method=method, options=options)
-            self.counters["master_lps"] += 1
+            res = linprog(cost, A_eq=A, b_eq=rhs, bounds=bounds, method=method, options=options)
             if res.status == 0:
                 break
         else:
-            import pickle; pickle.dump((cost, A_eq, b_eq, bounds), open('/tmp/modes_scratch/badlp.pkl','wb'))
             raise RuntimeError(f"master LP failed: {res.message}")
-        lam = res.eqlin.marginals[E:E + m] * row_scale
-        return res.x[:n], float(res.x[-1]), lam, float(res.fun)
+        return res.x[:n], float(res.x[-1]), res.eqlin.marginals[E:E + m], float(res.fun)
 
     def _price(self, supply: np.ndarray):
         """Tet set minimising ``w(boundary of S) - supply(S)``, and that value; (None, 0) if none is negative."""

@@ -292,7 +292,9 @@ def test_self_intersections_and_manifold_checks():
     assert not trigeom.edge_manifold_closed(flipped)
 
 
-def test_tetgen_crash_is_reported_not_fatal():
+def test_tetgen_crash_is_reported_not_fatal(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _tetgen.shutdown()  # the next worker starts from this directory
     sphere = trimesh.creation.icosphere(1)
     V = np.vstack([sphere.vertices, sphere.vertices + [0.5, 0, 0]])
     F = np.vstack([sphere.faces, sphere.faces + len(sphere.vertices)])  # two overlapping shells
@@ -300,3 +302,4 @@ def test_tetgen_crash_is_reported_not_fatal():
         _tetgen.tetrahedralize(V, F, "pYQ", timeout=30)
     nodes, tets = _tetgen.tetrahedralize(sphere.vertices, sphere.faces, "pYQ", timeout=30)
     assert len(tets) > 0 and len(nodes) >= len(sphere.vertices)
+    assert list(tmp_path.iterdir()) == []  # TetGen's debug files stay out of the user's directory

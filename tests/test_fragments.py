@@ -110,7 +110,8 @@ def check_invariants(surf, frags, input_volume):
     for a, b in itertools.combinations(range(len(solids)), 2):
         assert (solids[a] ^ solids[b]).volume() < 1e-3 * min(volumes[a], volumes[b])
     # outer faces lie on the input
-    import open3d as o3d
+    from fracture_cli._open3d import open3d as _import_open3d
+    o3d = _import_open3d()
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(surf.vertices.astype(np.float32)),

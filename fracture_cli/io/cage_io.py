@@ -1,8 +1,8 @@
 """Save cages and tet meshes for inspection and to resume a bake from them.
 
-* :func:`save_cage` writes the cage surface as OBJ or PLY (chosen by the
-  extension) **in the input's units**, so it overlays the input asset in any
-  viewer.
+* :func:`save_cage` writes the cage surface as OBJ, PLY (binary), STL (binary)
+  or OFF, chosen by the extension, **in the input's units**, so it overlays the
+  input asset in any viewer.
 * :func:`save_tetmesh` / :func:`load_tetmesh` use a NumPy ``.npz`` archive with
   these keys:
 
@@ -33,11 +33,11 @@ from fracture_cli.types import Cage, Normalization, TetMesh
 
 TETMESH_FORMAT_VERSION = 1
 
-CAGE_FORMATS = (".obj", ".ply")
+CAGE_FORMATS = (".obj", ".ply", ".stl", ".off")
 
 
 def save_cage(path: str | os.PathLike, cage: Cage) -> None:
-    """Write the cage surface to ``path`` (``.obj`` or ``.ply``), in the input's units.
+    """Write the cage surface to ``path`` (``.obj``, ``.ply``, ``.stl`` or ``.off``), in the input's units.
 
     Parameters
     ----------
@@ -58,10 +58,8 @@ def save_cage(path: str | os.PathLike, cage: Cage) -> None:
     world = cage.normalization.to_world(cage.vertices)
     faces = np.asarray(cage.faces, dtype=np.int64)
     with atomic_path(path) as tmp:
-        if ext == ".obj":
-            _write_obj(tmp, world, faces, cage.offset)
-        else:
-            _write_ply(tmp, world, faces)
+        writer = {".obj": _write_obj, ".ply": _write_ply, ".stl": _write_stl, ".off": _write_off}[ext]
+        writer(tmp, world, faces, cage.offset)
 
 
 def _write_obj(path: str, vertices: np.ndarray, faces: np.ndarray, offset: float) -> None:
@@ -73,7 +71,7 @@ def _write_obj(path: str, vertices: np.ndarray, faces: np.ndarray, offset: float
         fh.write("\n".join(lines) + "\n")
 
 
-def _write_ply(path: str, vertices: np.ndarray, faces: np.ndarray) -> None:
+def _write_ply(path: str, vertices: np.ndarray, faces: np.ndarray, offset: float) -> None:
     header = (
         "ply\nformat binary_little_endian 1.0\ncomment fracture cage\n"
         f"element vertex {len(vertices)}\nproperty double x\nproperty double y\nproperty double z\n"
@@ -86,6 +84,28 @@ def _write_ply(path: str, vertices: np.ndarray, faces: np.ndarray) -> None:
         fh.write(header.encode("ascii"))
         fh.write(np.ascontiguousarray(vertices, dtype="<f8").tobytes())
         fh.write(face_records.tobytes())
+
+
+def _write_stl(path: str, vertices: np.ndarray, faces: np.ndarray, offset: float) -> None:
+    T = vertices[faces]
+    normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    records = np.zeros(len(faces), dtype=[("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+    records["n"] = normal
+    records["v"] = T
+    header = f"fracture cage, offset {offset:.6g}".encode("ascii").ljust(80, b" ")
+    with open(path, "wb") as fh:
+        fh.write(header)
+        fh.write(np.uint32(len(faces)).tobytes())
+        fh.write(records.tobytes())
+
+
+def _write_off(path: str, vertices: np.ndarray, faces: np.ndarray, offset: float) -> None:
+    lines = ["OFF", f"# fracture cage, offset {offset:.6g}", f"{len(vertices)} {len(faces)} 0"]
+    lines += [f"{x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
+    lines += [f"3 {a} {b} {c}" for a, b, c in faces]
+    with open(path, "w", encoding="ascii", newline="\n") as fh:
+        fh.write("\n".join(lines) + "\n")
 
 
 def save_tetmesh(path: str | os.PathLike, tet_mesh: TetMesh) -> None:

@@ -22,6 +22,7 @@ import pickle
 import struct
 import subprocess
 import sys
+import tempfile
 import threading
 
 import numpy as np
@@ -98,15 +99,20 @@ class _Worker:
 
     def __init__(self):
         self._process: subprocess.Popen | None = None
+        self._workdir: tempfile.TemporaryDirectory | None = None
         self._lock = threading.Lock()
 
     def _start(self) -> None:
         package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH", "")) if p)
+        # TetGen writes debug files (tetgen-tmpfile_skipped.*) into its working
+        # directory on bad input: give it a private one, never the user's.
+        self._workdir = tempfile.TemporaryDirectory(prefix="fracture-tetgen-")
         self._process = subprocess.Popen(
             [sys.executable, "-m", "fracture_cli.stages._tetgen"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
+            cwd=self._workdir.name,
         )
 
     def _kill(self) -> None:
@@ -121,6 +127,9 @@ class _Worker:
                 stream.close()
             except OSError:
                 pass
+        workdir, self._workdir = self._workdir, None
+        if workdir is not None:
+            workdir.cleanup()
 
     def stop(self) -> None:
         with self._lock:

@@ -166,7 +166,8 @@ def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -
     """
     if len(points) == 0:
         return 0.0
-    import open3d as o3d
+    from fracture_cli._open3d import open3d as _import_open3d
+    o3d = _import_open3d()
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))

@@ -314,14 +314,15 @@ def _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
                              label, lambda n: rng.standard_normal((t, 1)))
         for b in same:
             per_axis_modes[b] = found
-            per_axis_stats[b] = stats
+            per_axis_stats[b] = stats if b == a else [dict(m, seconds=0.0, replicated=True) for m in stats]
+        backend = solver.max_flow_backend
     U = np.zeros((k, t, d))
     per_mode = []
     for i in range(k):
         a, j = i % d, i // d
         U[i, :, a] = per_axis_modes[a][j][:, 0]
         per_mode.append(dict(per_axis_stats[a][j]))
-    return U, _summary(per_mode)
+    return U, {**_summary(per_mode), "max_flow_backend": backend}
 
 
 def _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):

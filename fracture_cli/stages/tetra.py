@@ -102,8 +102,14 @@ def tetra(cage: Cage, options: TetraOptions = TetraOptions()) -> TetMesh:
     _, _, boundary, _ = tetgeom.tet_faces(tets)
     if not _same_triangles(boundary, faces):
         raise StageError("the tet mesh boundary differs from the cage surface (TetGen changed it)", stage=STAGE)
-    log.info("tetra: %d tets, %d vertices (%d inside) in %.2f s, switches %s", len(tets), len(nodes),
-             len(nodes) - len(vertices), time.perf_counter() - started, switches)
+    # Shape measure: volume / longest edge^3 (0.118 for a regular tet). Flat
+    # tets can remain where four cage vertices are nearly coplanar, because the
+    # boundary may not be split; report the worst so later stages can be judged.
+    edges = nodes[tets[:, [0, 0, 0, 1, 1, 2]]] - nodes[tets[:, [1, 2, 3, 2, 3, 3]]]
+    shape = volumes / np.linalg.norm(edges, axis=2).max(axis=1) ** 3
+    log.info("tetra: %d tets, %d vertices (%d inside) in %.2f s, switches %s, worst shape %.2e (%d below 1e-6)",
+             len(tets), len(nodes), len(nodes) - len(vertices), time.perf_counter() - started, switches,
+             float(shape.min()), int(np.sum(shape < 1e-6)))
     return TetMesh(vertices=nodes, tets=tets, normalization=cage.normalization)
 
 

@@ -1,0 +1,102 @@
+"""Benchmark of the fracture-modes stage: seconds per mode against the paper's table.
+
+Tet meshes of about 3k, 6k and 12k tets are made with TetGen (switches
+``pq1.5a<vol>Y``) from a fixed non-convex solid (two spheres, a rod and a bar,
+unioned with manifold3d), so the numbers are reproducible without assets.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from fracture_cli import tetgeom
+from fracture_cli.stages.modes import ModesOptions, modes
+from fracture_cli.types import Normalization, TetMesh
+
+# The paper's Table (4-core laptop, commercial solver): tets -> seconds per mode.
+PAPER = {3545: 0.63, 6316: 2.86, 12162: 11.6}
+NUM_MODES = 12
+
+
+def bench_solid(segments: int):
+    """A dumbbell-like solid (vertices (n, 3), faces (m, 3)) in normalized coordinates."""
+    import manifold3d as m3
+
+    a = m3.Manifold.sphere(0.5, segments).translate([-0.8, 0.0, 0.0])
+    b = m3.Manifold.sphere(0.4, segments).translate([0.8, 0.1, 0.0])
+    rod = m3.Manifold.cylinder(1.6, 0.18, 0.18, max(segments * 2 // 3, 8)).rotate([0, 90, 0]).translate([-0.8, 0, 0])
+    bar = m3.Manifold.cube([0.3, 1.2, 0.3], True).translate([0.0, 0.3, 0.0])
+    mesh = (a + b + rod + bar).to_mesh()
+    V = np.asarray(mesh.vert_properties)[:, :3].astype(np.float64)
+    F = np.asarray(mesh.tri_verts).astype(np.int64)
+    return Normalization.from_points(V).to_normalized(V), F
+
+
+def bench_tetmesh(target_tets: int) -> TetMesh:
+    """A TetGen mesh of :func:`bench_solid` with roughly ``target_tets`` tets."""
+    import tetgen
+    import trimesh
+
+    V, F = bench_solid(16 if target_tets < 5000 else 24 if target_tets < 9000 else 40)
+    max_volume = trimesh.Trimesh(V, F).volume / target_tets * 1.2
+    for _ in range(8):
+        nodes, elems, *_ = tetgen.TetGen(V, F).tetrahedralize(switches=f"pq1.5a{max_volume:.4e}YQ")
+        if abs(len(elems) - target_tets) < 0.08 * target_tets:
+            break
+        max_volume *= len(elems) / target_tets
+    nodes = np.asarray(nodes, dtype=np.float64)
+    T = tetgeom.orient_positive(nodes, np.asarray(elems, dtype=np.int64))
+    return TetMesh(vertices=nodes, tets=T)
+
+
+def _time_modes(mesh: TetMesh, solver: str, num_modes: int):
+    start = time.perf_counter()
+    result = modes(mesh, ModesOptions(num_modes=num_modes, solver=solver))
+    seconds = time.perf_counter() - start
+    return seconds, result
+
+
+def run(quick: bool = False) -> str:
+    """Markdown section: seconds per mode of the fast solver (and the Clarabel baseline)."""
+    targets = [3000] if quick else [3000, 6000, 12000]
+    rows = []
+    measured = []
+    for target in targets:
+        mesh = bench_tetmesh(target)
+        seconds, result = _time_modes(mesh, "fast", NUM_MODES)
+        measured.append((mesh.num_tets, seconds / NUM_MODES))
+        stats = result.stats
+        rows.append((mesh.num_tets, "fast", NUM_MODES, seconds / NUM_MODES, stats["eigensolver_seconds"],
+                     int(np.sum(result.iterations)), int(np.sum(stats["inner_iterations"])),
+                     float(np.sum(result.energies)), stats.get("max_flow_backend", "")))
+        baseline_modes = 0 if quick else (NUM_MODES if target <= 3000 else 4 if target <= 6000 else 0)
+        if baseline_modes:
+            seconds_b, result_b = _time_modes(mesh, "clarabel", baseline_modes)
+            rows.append((mesh.num_tets, "clarabel", baseline_modes, seconds_b / baseline_modes,
+                         result_b.stats["eigensolver_seconds"], int(np.sum(result_b.iterations)),
+                         int(np.sum(result_b.stats["inner_iterations"])), float(np.sum(result_b.energies)), ""))
+    lines = [
+        "## Fracture modes (stage `modes`)",
+        "",
+        f"Scalar modes (d = 1), k = {NUM_MODES} unless noted, 2-core machine shared with other jobs. "
+        "'ICCM' = total ICCM rounds, 'inner' = max-flows (fast) or interior-point steps (clarabel). "
+        "Paper (4-core laptop, commercial solver): "
+        + ", ".join(f"{t:,} tets {s} s/mode" for t, s in PAPER.items()) + ".",
+        "",
+        "| tets | solver | modes | s/mode | eigsh s | ICCM | inner | sum of energies | max-flow |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for tets, solver, k, per_mode, eig, rounds, inner, energy, backend in rows:
+        lines.append(f"| {tets:,} | {solver} | {k} | {per_mode:.3f} | {eig:.2f} | {rounds} | {inner} | {energy:.6g} "
+                     f"| {backend} |")
+    if len(measured) >= 2:
+        (t0, s0), (t1, s1) = measured[0], measured[-1]
+        exponent = np.log(s1 / s0) / np.log(t1 / t0)
+        lines += ["", f"Cost growth (fast): s/mode ~ t^{exponent:.2f} between {t0:,} and {t1:,} tets."]
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    print(run())

@@ -1,0 +1,186 @@
+"""Properties of the fracture-modes stage (ALGORITHM.md section 2) on tiny meshes built in code."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fracture_cli.discontinuity import (
+    ConicSubproblemSolver,
+    CutSubproblemSolver,
+    discontinuity_energy,
+    face_weights,
+)
+from fracture_cli.errors import StageError
+from fracture_cli.stages.modes import ModesOptions, mode_pieces, modes
+from fracture_cli.testing import grid_tetmesh, two_boxes_with_neck
+
+
+def adjusted_rand_index(a: np.ndarray, b: np.ndarray) -> float:
+    """Adjusted Rand index of two labellings (1 = same partition)."""
+    _, a = np.unique(a, return_inverse=True)
+    _, b = np.unique(b, return_inverse=True)
+    table = np.zeros((a.max() + 1, b.max() + 1))
+    np.add.at(table, (a, b), 1)
+    pairs = lambda x: float(np.sum(x * (x - 1) / 2))  # noqa: E731
+    index, rows, cols, total = pairs(table), pairs(table.sum(1)), pairs(table.sum(0)), pairs(np.array([len(a)]))
+    expected = rows * cols / total
+    maximum = (rows + cols) / 2
+    return 1.0 if maximum == expected else (index - expected) / (maximum - expected)
+
+
+def asymmetric_mesh():
+    """A voxel solid without symmetries (so optimal cuts are unique)."""
+    mask = np.ones((6, 4, 3), dtype=bool)
+    mask[3:, 2:, :] = False
+    mask[5, :, 2] = False
+    mask[0, 0, 0] = False
+    mask[2, 3, 1:] = False
+    return grid_tetmesh(mask.shape, mask=mask, spacing=0.2)
+
+
+@pytest.fixture(scope="module")
+def neck():
+    mesh = two_boxes_with_neck(3)
+    return mesh, modes(mesh, ModesOptions(num_modes=5))
+
+
+def test_neck_breaks_first(neck):
+    mesh, result = neck
+    n = 3
+    x = mesh.tet_centroids[:, 0]
+    left, right = x < n / (2 * n + 1), x > (n + 1) / (2 * n + 1)
+    assert result.piece_counts[0] == 2
+    labels = result.labels[0]
+    assert len(np.unique(labels[left])) == 1 and len(np.unique(labels[right])) == 1
+    assert labels[left][0] != labels[right][0]
+    # Every cut face lies in the neck.
+    cut_x = mesh.tet_centroids[mesh.interior_face_tets[result.cut[0]]][..., 0]
+    assert np.all((cut_x > (n - 1) / (2 * n + 1)) & (cut_x < (n + 2) / (2 * n + 1)))
+    assert np.all(np.diff(result.energies[:2]) > 0)
+
+
+def test_orthonormal_and_zero_mean(neck):
+    mesh, result = neck
+    vol = mesh.tet_volumes
+    U = result.U.reshape(result.num_modes, -1)
+    gram = np.einsum("it,t,jt->ij", result.U[..., 0], vol, result.U[..., 0])
+    assert np.abs(gram - np.eye(result.num_modes)).max() < 1e-6
+    assert np.abs(np.einsum("ktd,t->kd", result.U, vol)).max() < 1e-9 * np.abs(U).max()
+    assert result.U.shape == (5, mesh.num_tets, 1)
+    assert result.labels.dtype == np.int32 and result.cut.shape == (5, len(mesh.interior_faces))
+    # Exactly piecewise constant: the labelling does not depend on sigma.
+    for i in range(result.num_modes):
+        cut, labels, count = mode_pieces(result.U[i], mesh.interior_face_tets, mesh.num_tets, 1e-9)
+        assert count == result.piece_counts[i]
+
+
+def test_dim3_isotropic_gives_triples():
+    # Not the neck mesh: its one-voxel neck can be cut on either side at equal cost (a tie).
+    mesh = asymmetric_mesh()
+    scalar = modes(mesh, ModesOptions(num_modes=2))
+    fast3 = modes(mesh, ModesOptions(num_modes=6, dim=3))
+    cone3 = modes(mesh, ModesOptions(num_modes=6, dim=3, solver="clarabel"))
+    for i in range(6):
+        j = i // 3
+        assert np.allclose(fast3.energies[i], scalar.energies[j], rtol=1e-9)
+        assert np.allclose(cone3.energies[i], scalar.energies[j], rtol=1e-5)
+        assert adjusted_rand_index(cone3.labels[i], scalar.labels[j]) >= 0.99
+        assert fast3.piece_counts[i] == scalar.piece_counts[j]
+    vol = mesh.tet_volumes
+    for result in (fast3, cone3):
+        U = result.U.reshape(6, -1)
+        gram = U @ (np.repeat(vol, 3)[:, None] * U.T)
+        assert np.abs(gram - np.eye(6)).max() < 1e-6
+        assert np.abs(np.einsum("ktd,t->kd", result.U, vol)).max() < 1e-7
+
+
+def test_large_eta_prevents_cuts():
+    mesh = two_boxes_with_neck(3)
+    n = 3
+    ft = mesh.interior_face_tets
+    x = mesh.tet_centroids[ft][..., 0]
+    neck_faces = np.any((x > n / (2 * n + 1)) & (x < (n + 1) / (2 * n + 1)), axis=1)
+    eta = np.ones(len(ft))
+    eta[neck_faces] = 1e6
+    result = modes(mesh, ModesOptions(num_modes=3), eta=eta)
+    assert not np.any(result.cut[:, neck_faces])
+    assert np.all(result.piece_counts >= 2)
+
+
+def _record_subproblems(monkeypatch, mesh, num_modes):
+    calls = []
+    original = CutSubproblemSolver.solve
+
+    def recording(self, c, fixed=()):
+        result = original(self, c, fixed)
+        calls.append((np.array(c, dtype=np.float64).reshape(-1), [np.array(y).reshape(-1) for y in fixed], result))
+        return result
+
+    monkeypatch.setattr(CutSubproblemSolver, "solve", recording)
+    modes(mesh, ModesOptions(num_modes=num_modes))
+    return calls
+
+
+def _constraint_residual(u, c, fixed, vol):
+    rows = [np.ones_like(vol)] + list(fixed) + [c]
+    values = np.array([np.dot(vol * y, u) for y in rows])
+    values[-1] -= 1.0
+    scale = np.array([np.dot(vol, np.abs(y * u)) for y in rows])
+    return float(np.max(np.abs(values) / np.maximum(scale, 1e-300)))
+
+
+def test_fast_matches_clarabel_subproblem_by_subproblem(monkeypatch):
+    mesh = asymmetric_mesh()
+    calls = _record_subproblems(monkeypatch, mesh, 5)
+    ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
+    cone = ConicSubproblemSolver(ft, w, np.ones((len(ft), 1)), vol)
+    assert len(calls) >= 5
+    for c, fixed, fast in calls:
+        base = cone.solve(c, fixed)
+        u_fast, u_base = fast.u[:, 0], base.u[:, 0]
+        assert _constraint_residual(u_fast, c, fixed, vol) < 1e-8
+        assert _constraint_residual(u_base, c, fixed, vol) < 1e-8
+        e_fast = discontinuity_energy(u_fast, ft, w)
+        e_base = discontinuity_energy(u_base, ft, w)
+        assert e_fast <= e_base * (1 + 1e-4)
+        assert abs(e_fast - e_base) <= 1e-4 * e_base
+        assert fast.lower_bound <= e_fast * (1 + 1e-9) and e_fast - fast.lower_bound <= 1e-7 * e_fast
+        labels_fast = mode_pieces(u_fast, ft, mesh.num_tets, 1e-3)[1]
+        labels_base = mode_pieces(u_base, ft, mesh.num_tets, 1e-3)[1]
+        assert adjusted_rand_index(labels_fast, labels_base) >= 0.99
+
+
+def test_ties_on_a_symmetric_box_are_both_optimal():
+    """A cube has several optimal cuts of equal energy: the fast solver returns one vertex, the
+    interior-point baseline may return a blend. Both are optimal: same energy, both feasible."""
+    mesh = grid_tetmesh((3, 3, 3), spacing=1.0 / 3)
+    ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
+    x, y = mesh.tet_centroids[:, 0] - 0.5, mesh.tet_centroids[:, 1] - 0.5
+    c = x + y  # symmetric in x and y: cutting across x or across y is a tie
+    fast = CutSubproblemSolver(ft, w, vol).solve(c)
+    base = ConicSubproblemSolver(ft, w, np.ones((len(ft), 1)), vol).solve(c)
+    assert abs(fast.energy - base.energy) <= 1e-6 * base.energy
+    assert _constraint_residual(fast.u[:, 0], c, [], vol) < 1e-8
+    assert _constraint_residual(base.u[:, 0], c, [], vol) < 1e-8
+    assert fast.energy - fast.lower_bound <= 1e-7 * fast.energy
+
+
+def test_deterministic():
+    mesh = asymmetric_mesh()
+    a = modes(mesh, ModesOptions(num_modes=4))
+    b = modes(mesh, ModesOptions(num_modes=4))
+    assert a.U.tobytes() == b.U.tobytes()
+    assert a.labels.tobytes() == b.labels.tobytes()
+    assert a.cut.tobytes() == b.cut.tobytes()
+
+
+def test_bad_eta_and_too_many_modes():
+    mesh = two_boxes_with_neck(2)
+    f = len(mesh.interior_faces)
+    with pytest.raises(StageError, match="eta"):
+        modes(mesh, ModesOptions(num_modes=2), eta=np.ones(f + 1))
+    with pytest.raises(StageError, match="eta"):
+        modes(mesh, ModesOptions(num_modes=2), eta=-np.ones(f))
+    with pytest.raises(StageError, match="num_modes"):
+        modes(grid_tetmesh((1, 1, 1)), ModesOptions(num_modes=50))

@@ -1,0 +1,66 @@
+"""Preview pictures: valid PNG, expected size, not blank, deterministic."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from PIL import Image
+
+from fracture_cli.cli import cli
+
+from conftest import SAMPLE_ASSETS
+
+FAST = ["--set", "cage.target_faces=600", "--set", "modes.num_modes=4"]
+
+
+@pytest.fixture(scope="module", params=["chair.glb", "pillar.glb"])
+def baked(request, tmp_path_factory):
+    out = tmp_path_factory.mktemp("preview")
+    result = CliRunner().invoke(cli, ["bake", os.path.join(SAMPLE_ASSETS, request.param), "-o", str(out),
+                                      *FAST, "--preview", "--quiet"])
+    assert result.exit_code == 0, result.output
+    return out, os.path.splitext(request.param)[0]
+
+
+def test_bake_preview_png_is_valid_and_not_blank(baked):
+    out, stem = baked
+    image = Image.open(out / f"{stem}.preview.png")
+    image.verify()
+    image = Image.open(out / f"{stem}.preview.png").convert("RGB")
+    assert image.size == (1600, 1000)
+    pixels = np.asarray(image)
+    # The exploded-fragments panel (top middle) shows several distinct colours.
+    panel = pixels[100:500, 400:1200].reshape(-1, 3)
+    colours = {tuple(c) for c in panel[np.any(panel < 240, axis=1)] // 16}
+    assert len(colours) >= 6
+    assert (pixels < 240).any(axis=2).mean() > 0.05  # not blank
+
+
+def test_preview_command_size_and_determinism(baked, tmp_path):
+    out, stem = baked
+    runtime = str(out / f"{stem}.fracture.json")
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    for target in (a, b):
+        result = CliRunner().invoke(cli, ["preview", runtime, "-o", str(target), "--size", "800", "500"])
+        assert result.exit_code == 0, result.output
+    assert Image.open(a).size == (800, 500)
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_impact_png(baked, tmp_path):
+    out, stem = baked
+    runtime = str(out / f"{stem}.fracture.json")
+    result = CliRunner().invoke(cli, ["impact", runtime, "--point", "0", "1", "0", "--impulse", "0", "-5", "0",
+                                      "--png", str(tmp_path / "hit.png")])
+    assert result.exit_code == 0, result.output
+    assert Image.open(tmp_path / "hit.png").size == (1600, 1000)
+
+
+def test_preview_of_missing_file_is_one_line(tmp_path):
+    result = CliRunner().invoke(cli, ["preview", str(tmp_path / "x.fracture.json"), "-o", str(tmp_path / "p.png")])
+    assert result.exit_code == 1
+    assert "x.fracture.json" in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "p.png").exists()
