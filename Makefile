@@ -38,8 +38,8 @@ gltf-validator:
 
 # Bakes one sample asset end to end into build/demo/.
 demo: install
-	$(FRACTURE) bake sample_assets/pillar.glb -o build/demo --recipe default
-	@echo "demo output: $(CURDIR)/build/demo/"
+	$(FRACTURE) -v bake sample_assets/chair.glb -o build/demo --recipe wood --preview
+	@echo "demo output: $(CURDIR)/build/demo/ (chair.glb, chair.fracture.json/.bin, chair.report.json, chair.preview.png)"
 
 bench: install
 	$(PY) bench/run.py --out bench/RESULTS.md

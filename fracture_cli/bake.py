@@ -28,13 +28,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli import __version__
-from fracture_cli.errors import StageError
+from fracture_cli.errors import FractureError, StageError
 from fracture_cli.recipe import Recipe
 from fracture_cli.types import Fragments
 
 log = logging.getLogger(__name__)
 
-STAGES = ("load", "cage", "tetra", "material", "modes", "pieces", "smooth", "fragments", "runtime", "export")
+STAGES = ("load", "repair", "cage", "tetra", "material", "modes", "pieces", "smooth", "fragments", "runtime",
+          "export")
 
 
 @dataclass(frozen=True)
@@ -106,6 +107,37 @@ def bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
     ------
     FractureError
         On bad input or a stage that cannot finish; no output is then written.
+        Every error names the input file (stage errors get its path), so a
+        batch log says which asset failed.
+    """
+    try:
+        return _bake(input_path, out_dir, recipe)
+    except FractureError as exc:
+        if exc.path is None:
+            exc.path = input_path
+        raise
+
+
+def _bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
+    """Run the whole pipeline on one asset and write its outputs (errors not yet labelled with the file).
+
+    Parameters
+    ----------
+    input_path : str
+        The asset (any format :func:`~fracture_cli.io.read.load_surface` reads).
+    out_dir : str
+        Output folder; created if missing.
+    recipe : Recipe
+        The destructible material: options of every stage.
+
+    Returns
+    -------
+    BakeResult
+
+    Raises
+    ------
+    FractureError
+        On bad input or a stage that cannot finish; no output is then written.
     """
     from fracture_cli.io.read import load_surface
     from fracture_cli.io.write import fragment_name, write_fragments_glb
@@ -116,6 +148,7 @@ def bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
     from fracture_cli.stages.material import material
     from fracture_cli.stages.modes import modes as solve_modes
     from fracture_cli.stages.pieces import pieces as atomic_pieces
+    from fracture_cli.stages.repair import repair
     from fracture_cli.stages.runtime import runtime as precompute_runtime
     from fracture_cli.stages.smooth import smooth
     from fracture_cli.stages.tetra import tetra
@@ -134,7 +167,10 @@ def bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
         log.info("bake %s: [%d/%d] %s done in %.2f s", stem, step[0], len(STAGES), name, seconds[name])
 
     with timed("load"):
-        surface = load_surface(input_path, recipe["load"])
+        loaded = load_surface(input_path, recipe["load"])
+    with timed("repair"):
+        # Cage and fragments both use the repaired solid, so they agree on what is inside.
+        surface = repair(loaded, recipe["repair"])
     with timed("cage"):
         cage_result = cage(surface, recipe["cage"])
     with timed("tetra"):
@@ -163,7 +199,7 @@ def bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
         "tool": "fracture",
         "version": __version__,
         "input": {"name": os.path.basename(input_path), "sha256": file_sha256(input_path),
-                  "triangles": surface.num_faces, "vertices": surface.num_vertices,
+                  "triangles": loaded.num_faces, "vertices": loaded.num_vertices,
                   "scale": surface.normalization.scale},
         "recipe": {"name": recipe.name, "chain": list(recipe.chain), "description": recipe.description,
                    "parameters": recipe.to_dict()},

@@ -277,6 +277,20 @@ def _stage_class(section: str):
     return options_class(section)
 
 
+@cli.command("repair")
+@stage_options(_stage_class("repair"))
+def repair_cmd(**kwargs):
+    """Make the surface a closed solid: weld, fix winding, close holes or thicken open sheets."""
+    options = build_options(_stage_class("repair"), kwargs)
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.stages.repair import repair
+
+        return dataclasses.replace(state, surface=repair(state.need("surface", "repair", "load PATH"), options))
+
+    return process
+
+
 @cli.command("cage")
 @stage_options(_stage_class("cage"))
 def cage_cmd(**kwargs):

@@ -10,15 +10,13 @@ dense linear constraints (M_T-orthogonality to the rigid translations and to the
 modes found so far, and ``c^T M_T u = 1``). This module holds that convex
 subproblem and two solvers for it:
 
-* :class:`CutSubproblemSolver` (``d = 1``, the default, exact): the LP is solved
-  by column generation. Every cut ``S`` (a set of tets) is a column ``1_S`` with
-  cost ``w(boundary of S)``; the master LP over the columns found so far is tiny
-  (one row per constraint) and HiGHS solves it exactly; its duals ``lambda``
-  define a supply ``s = M_T Y lambda`` per tet, and the most violated dual
-  constraint ``min_S w(boundary of S) - s(S)`` is a minimum s-t cut (max-flow).
-  When no cut is violated, ``lambda`` is a dual certificate and the master's
-  primal, a combination of exact cuts, is optimal and exactly piecewise
-  constant. Cuts found in earlier rounds and modes stay valid columns.
+* :class:`CutSubproblemSolver` (``d = 1``, the default, exact): a master LP
+  over a partition of the tets into cells (``u`` constant per cell) is solved
+  exactly by HiGHS; its duals ``lambda`` define a supply ``s = M_T Y lambda``
+  per tet, and the most violated dual constraint ``min_S w(boundary of S) -
+  s(S)`` over all tet sets is one minimum s-t cut (max-flow). A violated set
+  refines the partition; when none is left, ``lambda`` certifies that the
+  master's solution is optimal, and it is exactly piecewise constant.
 * :class:`ConicSubproblemSolver` (any ``d``, baseline): the whole problem handed
   to the interior-point solver Clarabel.
 
@@ -41,19 +39,24 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components, maxi
 
 log = logging.getLogger(__name__)
 
-# Integer capacities for scipy's max-flow are int32: the supply is scaled so that
-# its positive part sums to this (total flow stays well inside int32).
+# Max-flow capacities are integers: the supply is scaled so that its positive part
+# sums to this many units (int32 for scipy, int64 for OR-Tools); the total flow
+# stays well inside the integer range and arcs capped at the maximum never saturate.
 _FLOW_UNITS = float(2**29)
 _INT32_MAX = 2**31 - 1
 _FLOW_UNITS_64 = float(2**52)
-_HIGHS_SETTINGS = {"solver": "simplex", "simplex_strategy": 1, "primal_feasibility_tolerance": 1e-9,
-                   "dual_feasibility_tolerance": 1e-9, "threads": 1}
+# What ``max_flow="auto"`` means, process-wide: "auto" (OR-Tools if installed), "ortools" or "scipy".
+# For benchmarks and tests that compare the two; the pipeline leaves it alone.
+MAX_FLOW_BACKEND = "auto"
 
-try:  # HiGHS's own bindings allow warm starts; scipy's linprog (same solver) is the fallback
+try:  # HiGHS's own bindings allow warm starts; scipy's linprog (same HiGHS) is the fallback
     import highspy as _highspy
 except ImportError:
     _highspy = None
 # The master LP's duals are the pricing's supply: keep HiGHS's tolerances tight.
+# Serial dual simplex: deterministic.
+_HIGHS_SETTINGS = {"solver": "simplex", "simplex_strategy": 1, "primal_feasibility_tolerance": 1e-9,
+                   "dual_feasibility_tolerance": 1e-9, "threads": 1, "output_flag": False}
 _HIGHS_OPTIONS = (("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9}),
                   ("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9,
                                 "presolve": False}),
@@ -119,6 +122,39 @@ class SubproblemResult:
     stats: dict = field(default_factory=dict)
 
 
+_HIGHS_BANNER_SHOWN = False
+
+
+def lp_backend() -> str:
+    """'highspy' (warm-started HiGHS) or 'scipy' (HiGHS through scipy.optimize.linprog)."""
+    return "highspy" if _highspy is not None else "scipy"
+
+
+def _new_highs():
+    """A ``highspy.Highs`` whose one-time copyright banner does not reach our stdout.
+
+    HiGHS prints it from C++ on the first construction in a process, before any
+    option can be set; a library must not write to stdout (the CLI may stream data there).
+    """
+    global _HIGHS_BANNER_SHOWN
+    if _HIGHS_BANNER_SHOWN:
+        return _highspy.Highs()
+    import os
+    import sys
+
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 1)
+            highs = _highspy.Highs()
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+    _HIGHS_BANNER_SHOWN = True
+    return highs
+
+
 class _Constraints:
     """The dense constraint rows ``Y^T M_T u = b``, projected M_T-orthogonally to translations."""
 
@@ -155,6 +191,9 @@ class CutSubproblemSolver:
         Pricing rounds (max-flows) per solve before giving up.
     weight_scale : float, optional (default mean of weights)
         Internal unit of the weights.
+    max_flow : {"auto", "ortools", "scipy"}, optional (default "auto")
+        Max-flow implementation: OR-Tools' push-relabel if installed (several
+        times faster), else scipy's Dinic. Both give the same minimal minimum cut.
 
     Notes
     -----
@@ -163,9 +202,7 @@ class CutSubproblemSolver:
     graph with capacities ``w_f``. By max-flow/min-cut this holds iff
     ``s(S) <= w(boundary of S)`` for every tet set ``S``.
 
-    The solver keeps a partition of the tets into cells (refined monotonically
-    over all solves: cuts found for one mode stay useful for the next). The
-    master LP restricts ``u`` to be constant per cell, plus a multiple of the
+    The solver keeps a partition of the tets into cells. The master LP restricts ``u`` to be constant per cell, plus a multiple of the
     feasible start vector ``c`` (so it is always feasible); it is tiny and HiGHS
     solves it exactly. Its duals ``lambda`` are feasible for every union of cells;
     pricing checks all other sets with one s-t min cut (terminal capacities
@@ -177,13 +214,20 @@ class CutSubproblemSolver:
     Cells found while solving for one mode are kept across its ICCM rounds;
     when the number of fixed vectors changes (a new mode), the partition
     restarts from the pieces of the fixed vectors (cuts found with intermediate
-    duals would otherwise accumulate and slow the master down).
+    duals would otherwise accumulate and slow the master down). HiGHS is
+    warm-started: a new ``c`` on the same partition only edits one column of
+    the (dual) master; after a refinement the previous optimal basis is carried
+    over to the split cells.
+
+    Safeguards: the returned ``u`` must meet the constraints to 1e-7 (relative
+    to ``||y_j||_M ||u||_M``) and its energy must not exceed the master's
+    objective, else ``RuntimeError``.
     """
 
     name = "cut"
 
     def __init__(self, face_tets, weights, volumes, *, tol: float = 1e-9, max_iter: int = 1000,
-                 weight_scale: float | None = None):
+                 weight_scale: float | None = None, max_flow: str = "auto"):
         self.face_tets = np.asarray(face_tets, dtype=np.int64)
         weights = np.asarray(weights, dtype=np.float64)
         self.scale = float(weight_scale) if weight_scale else float(weights.mean()) if len(weights) else 1.0
@@ -194,8 +238,8 @@ class CutSubproblemSolver:
         self.max_iter = int(max_iter)
         self._constraints = _Constraints(self.vol)
         self._fa, self._fb = self.face_tets[:, 0], self.face_tets[:, 1]
-        t, f = self.t, len(self._fa)
-        self._max_flow = _MinCut(self.face_tets, self.omega, t)
+        t = self.t
+        self._max_flow = _MinCut(self.face_tets, self.omega, t, max_flow)
         self.cells = np.zeros(t, dtype=np.int64)
         self._partition_version = 0
         self._fixed_count = -1
@@ -203,8 +247,11 @@ class CutSubproblemSolver:
         self._lp = None
         self._lp_key = None
         self._lp_G = None
+        self._lp_basis = None
         self._cell_cache = None
-        self.counters = {"max_flows": 0, "certified_without_flow": 0, "master_lps": 0, "refinements": 0, "stalls": 0}
+        # "stalls": pricing found a violated set that is already a union of cells, i.e. the
+        # violation is within HiGHS's tolerance; the result stands, min_reduced_cost says by how much.
+        self.counters = {"max_flows": 0, "master_lps": 0, "refinements": 0, "stalls": 0}
 
     # ------------------------------------------------------------- partition
     def refine(self, members: np.ndarray) -> bool:
@@ -213,12 +260,6 @@ class CutSubproblemSolver:
         inside[members] = True
         fa, fb = self._fa, self._fb
         return self._refine_by((self.cells[fa] == self.cells[fb]) & (inside[fa] == inside[fb]))
-
-    def seed_labels(self, labels: np.ndarray) -> None:
-        """Refine the partition by a labelling (t,) int (e.g. pieces known in advance)."""
-        labels = np.asarray(labels, dtype=np.int64)
-        fa, fb = self._fa, self._fb
-        self._refine_by((self.cells[fa] == self.cells[fb]) & (labels[fa] == labels[fb]))
 
     @property
     def max_flow_backend(self) -> str:
@@ -331,106 +372,173 @@ class CutSubproblemSolver:
         if theta > 0.0:
             u = u + theta * v
         u = self._constraints.project(u)
+        # Safeguard: the master's solution must meet the constraints it was built from.
+        # Relative to ||y_j||_M ||u||_M (the M_T-cosine), the natural scale of y_j^T M_T u.
+        norms = np.sqrt(np.einsum("tj,tj->j", MY, Y) * float(u @ (self.vol * u)))
+        residual = float(np.max(np.abs(MY.T @ u - b) / np.maximum(norms, 1e-300)))
+        if not residual <= 1e-7:
+            raise RuntimeError(f"the master LP's solution violates the constraints by {residual:.2e} (relative)")
         energy = float(self.omega @ np.abs(u[self._fa] - u[self._fb]))
+        if energy > objective * (1 + 1e-7) + 1e-12:
+            raise RuntimeError(f"the recovered solution's energy {energy:.9g} exceeds the master's {objective:.9g}")
         stats = {key: self.counters[key] - before[key] for key in self.counters}
         stats.update(cells=int(self.cells.max()) + 1, min_reduced_cost=worst_rc * self.scale,
-                     uses_start_vector=bool(theta > 0.0))
+                     uses_start_vector=bool(theta > 0.0), constraint_residual=residual)
         return SubproblemResult(u=u[:, None], energy=energy * self.scale, lower_bound=objective * self.scale,
-                                iterations=stats["max_flows"] + stats["certified_without_flow"],
+                                iterations=stats["max_flows"],
                                 seconds=time.perf_counter() - start, stats=stats)
 
     def _master(self, Y, b, v_cost):
         """The LP restricted to cell-constant ``u`` plus ``theta`` times the start vector.
 
-        Variables ``x (n cells, free), p (E), q (E), theta >= 0``; rows
-        ``x_P - x_Q - p_e + q_e = 0`` per cell edge, the constraint rows
-        ``G x + g theta = b`` (scaled), and ``vol^T x = 0``. Returns ``x``,
-        ``theta``, the (unscaled) duals of the constraint rows and the objective.
+        Primal: ``min sum_e omega_e |x_P - x_Q| + cost(v) theta`` subject to
+        ``G x + g theta = b`` (the constraint rows, scaled) and ``vol^T x = 0``,
+        ``theta >= 0``. HiGHS solves its dual, which is smaller: edge flows
+        ``|z_e| <= omega_e``, ``lambda`` and ``mu`` free, one conservation row per
+        cell ``B^T z - G^T lambda - mu vol = 0`` and ``g^T lambda <= cost(v)``;
+        ``x`` and ``theta`` are that LP's row duals. Returns ``x``, ``theta``,
+        the (unscaled) ``lambda`` and the objective.
         """
         n, edges, edge_omega, indicator = self._cell_graph()
-        E = len(edges)
         m = Y.shape[1]
         G = np.asarray((indicator @ Y).T)  # (m, n): y_j^T M_T 1_P
-        # Row scaling for HiGHS (tet volumes are tiny in normalized units); duals are scaled back.
-        row_scale = 1.0 / np.maximum(self.vol @ np.abs(Y), 1e-300)
+        # Row scaling for HiGHS (tet volumes are tiny in normalized units); lambda is scaled back.
+        row_scale = 1.0 / np.maximum(np.einsum("t,tj->j", self.vol, np.abs(Y)), 1e-300)
         G = G * row_scale[:, None]
         G[np.abs(G) < 1e-12] = 0.0  # round-off of sums that cancel; keeps HiGHS's matrix clean
         b = b * row_scale
         self.counters["master_lps"] += 1
-        if _highspy is not None:
-            x, theta, duals, objective = self._master_highs(n, edges, edge_omega, indicator, G, b, row_scale, v_cost)
-        else:
-            x, theta, duals, objective = self._master_linprog(n, edges, edge_omega, indicator, G, b, row_scale,
-                                                              v_cost)
-        return x, theta, duals * row_scale, objective
+        x, theta, lam, objective = self._solve_master(n, edges, edge_omega, indicator, G, b, row_scale[-1], v_cost)
+        return x, theta, lam * row_scale, objective
 
-    def _master_matrix(self, n, edges, edge_omega, indicator, G, b, row_scale, v_cost):
+    def _master_dual_lp(self, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+        """Matrix (n + 1, E + m + 1), costs, column bounds and row bounds of the dual master LP."""
         E, m = len(edges), G.shape[0]
         eidx = np.arange(E)
         cell_vol = np.asarray(indicator.sum(axis=1)).reshape(-1)
         Gs = sp.coo_matrix(G)
-        rows = np.concatenate([eidx, eidx, eidx, eidx, E + Gs.row, np.full(n, E + m), [E + m - 1]])
-        cols = np.concatenate([edges[:, 0], edges[:, 1], n + eidx, n + E + eidx, Gs.col, np.arange(n), [n + 2 * E]])
-        vals = np.concatenate([np.ones(E), -np.ones(E), -np.ones(E), np.ones(E), Gs.data, cell_vol / cell_vol.sum(),
-                               [row_scale[-1]]])  # the start vector meets every constraint row exactly
-        A = sp.csc_matrix((vals, (rows, cols)), shape=(E + m + 1, n + 2 * E + 1))
-        cost = np.concatenate([np.zeros(n), edge_omega, edge_omega, [v_cost]])
-        lower = np.concatenate([np.full(n, -np.inf), np.zeros(2 * E + 1)])
-        upper = np.full(n + 2 * E + 1, np.inf)
-        rhs = np.concatenate([np.zeros(E), b, [0.0]])
-        return A, cost, lower, upper, rhs
+        rows = np.concatenate([edges[:, 0], edges[:, 1], Gs.col, np.arange(n), [n]])
+        cols = np.concatenate([eidx, eidx, E + Gs.row, np.full(n, E + m), [E + m - 1]])
+        vals = np.concatenate([np.ones(E), -np.ones(E), -Gs.data, -cell_vol / cell_vol.sum(), [g_c]])
+        A = sp.csc_matrix((vals, (rows, cols)), shape=(n + 1, E + m + 1))
+        cost = np.concatenate([np.zeros(E), -b, [0.0]])
+        col_lower = np.concatenate([-edge_omega, np.full(m + 1, -np.inf)])
+        col_upper = np.concatenate([edge_omega, np.full(m + 1, np.inf)])
+        row_lower = np.concatenate([np.zeros(n), [-np.inf]])
+        row_upper = np.concatenate([np.zeros(n), [v_cost]])
+        return A, cost, col_lower, col_upper, row_lower, row_upper
 
-    def _master_highs(self, n, edges, edge_omega, indicator, G, b, row_scale, v_cost):
+    def _solve_master(self, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
         E, m = len(edges), G.shape[0]
+        if _highspy is None:
+            return self._solve_master_linprog(n, edges, edge_omega, indicator, G, b, g_c, v_cost)
         key = (self._partition_version, m)
         h = self._lp
-        warm = h is not None and self._lp_key == key and np.array_equal(self._lp_G[:-1], G[:-1])
-        if warm:
-            # Same partition and fixed rows: only the c row changed; keep HiGHS's basis.
-            row = E + m - 1
-            changed = np.flatnonzero(self._lp_G[-1] != G[-1])
-            for P in changed:
-                h.changeCoeff(int(row), int(P), float(G[-1, P]))
-            h.changeCoeff(int(row), int(n + 2 * E), float(row_scale[-1]))
-            h.changeRowBounds(int(row), float(b[-1]), float(b[-1]))
-            h.changeColCost(int(n + 2 * E), float(v_cost))
+        if h is not None and self._lp_key == key and np.array_equal(self._lp_G[:-1], G[:-1]):
+            # Same partition and fixed rows: only c changed; HiGHS keeps its basis (warm start).
+            col = E + m - 1
+            for P in np.flatnonzero(self._lp_G[-1] != G[-1]):
+                h.changeCoeff(int(P), col, float(-G[-1, P]))
+            h.changeCoeff(n, col, float(g_c))
+            h.changeColCost(col, float(-b[-1]))
+            h.changeRowBounds(n, -_highspy.kHighsInf, float(v_cost))
         else:
-            A, cost, lower, upper, rhs = self._master_matrix(n, edges, edge_omega, indicator, G, b, row_scale, v_cost)
-            h = _highspy.Highs()
-            h.setOptionValue("output_flag", False)
+            A, cost, col_lower, col_upper, row_lower, row_upper = self._master_dual_lp(
+                n, edges, edge_omega, indicator, G, b, g_c, v_cost)
+            h = _new_highs()
             for name, value in _HIGHS_SETTINGS.items():
                 h.setOptionValue(name, value)
             lp = _highspy.HighsLp()
             lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
-            lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, lower, upper
-            lp.row_lower_, lp.row_upper_ = rhs, rhs
+            lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, col_lower, col_upper
+            lp.row_lower_, lp.row_upper_ = row_lower, row_upper
             lp.a_matrix_.format_ = _highspy.MatrixFormat.kColwise
-            lp.a_matrix_.start_ = A.indptr
-            lp.a_matrix_.index_ = A.indices
-            lp.a_matrix_.value_ = A.data
+            lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = A.indptr, A.indices, A.data
             h.passModel(lp)
+            basis = self._inherited_basis(n, edges, m)
+            if basis is not None:
+                h.setBasis(basis)
         self._lp, self._lp_key, self._lp_G = h, key, G
         h.run()
         if h.getModelStatus() != _highspy.HighsModelStatus.kOptimal:
-            # Rare numerical trouble: retry from scratch with scipy's HiGHS chain (no presolve, IPM).
-            self._lp = None
-            return self._master_linprog(n, edges, edge_omega, indicator, G, b, row_scale, v_cost)
+            self._lp = self._lp_basis = None  # rare numerical trouble: scipy's HiGHS chain (no presolve, IPM)
+            return self._solve_master_linprog(n, edges, edge_omega, indicator, G, b, g_c, v_cost)
+        basis = h.getBasis()
+        self._lp_basis = (self.cells, edges, m, np.array([int(v) for v in basis.col_status]),
+                          np.array([int(v) for v in basis.row_status]))
         solution = h.getSolution()
-        x = np.asarray(solution.col_value)
-        duals = np.asarray(solution.row_dual)[E:E + m]
-        return x[:n], float(x[-1]), duals, float(h.getInfo().objective_function_value)
+        lam = np.asarray(solution.col_value)[E:E + m]
+        row_dual = np.asarray(solution.row_dual)
+        return row_dual[:n], max(-float(row_dual[n]), 0.0), lam, -float(h.getInfo().objective_function_value)
 
-    def _master_linprog(self, n, edges, edge_omega, indicator, G, b, row_scale, v_cost):
+    def _inherited_basis(self, n, edges, m):
+        """A starting basis for the master after a refinement, from the previous optimal basis.
+
+        Every new cell is part of an old one: its row inherits the old row's status
+        (the first child) or is basic (the others: one new basic per new row); an
+        edge between new cells inherits the status of the old edge between their
+        parents (its reduced cost is unchanged while children share the parent's
+        ``x``), a new edge inside an old cell starts at its lower bound. The
+        ``lambda``, ``mu`` columns and the ``theta`` row keep theirs. None if the
+        partition is not a refinement of the previous one.
+        """
+        if self._lp_basis is None:
+            return None
+        old_cells, old_edges, old_m, col_status, row_status = self._lp_basis
+        if old_m != m:
+            return None
+        first = np.unique(self.cells, return_index=True)[1]
+        parent = old_cells[first]  # new cell -> old cell
+        if not np.array_equal(parent[self.cells], old_cells):
+            return None
+        n_old = int(old_cells.max()) + 1
+        E_old = len(old_edges)
+        new_rows = np.full(n, int(_highspy.HighsBasisStatus.kBasic))
+        child_first = np.zeros(n, dtype=bool)
+        child_first[np.unique(parent, return_index=True)[1]] = True
+        new_rows[child_first] = row_status[parent[child_first]]
+        rows = np.concatenate([new_rows, row_status[n_old:]])
+        pa, pb = parent[edges[:, 0]], parent[edges[:, 1]]
+        lo, hi = np.minimum(pa, pb), np.maximum(pa, pb)
+        old_key = old_edges[:, 0] * n_old + old_edges[:, 1]
+        position = np.searchsorted(old_key, lo * n_old + hi)
+        position = np.minimum(position, E_old - 1) if E_old else position
+        found = (pa != pb) & (E_old > 0)
+        if E_old:
+            found &= old_key[position] == lo * n_old + hi
+        edge_status = np.full(len(edges), int(_highspy.HighsBasisStatus.kLower))
+        basic = int(_highspy.HighsBasisStatus.kBasic)
+        inherited = col_status[position[found]]
+        # Only one child edge may stay basic per old edge; the others start at a bound.
+        inherited = np.where(inherited == basic, int(_highspy.HighsBasisStatus.kLower), inherited)
+        edge_status[found] = inherited
+        idx = np.flatnonzero(found)
+        first_child = idx[np.unique(position[found], return_index=True)[1]]
+        edge_status[first_child] = col_status[position[first_child]]
+        cols = np.concatenate([edge_status, col_status[E_old:]])
+        if np.count_nonzero(cols == basic) + np.count_nonzero(rows == basic) != n + 1:
+            return None
+        status = list(_highspy.HighsBasisStatus.__members__.values())
+        by_code = {int(v): v for v in status}
+        result = _highspy.HighsBasis()
+        result.col_status = [by_code[int(v)] for v in cols]
+        result.row_status = [by_code[int(v)] for v in rows]
+        result.valid = True
+        return result
+
+    def _solve_master_linprog(self, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
         E, m = len(edges), G.shape[0]
-        A, cost, lower, upper, rhs = self._master_matrix(n, edges, edge_omega, indicator, G, b, row_scale, v_cost)
-        bounds = np.column_stack([lower, upper])
+        A, cost, col_lower, col_upper, _, row_upper = self._master_dual_lp(n, edges, edge_omega, indicator, G, b,
+                                                                             g_c, v_cost)
+        A = A.tocsr()
         for method, options in _HIGHS_OPTIONS:  # dual simplex; without presolve or IPM + crossover if it fails
-            res = linprog(cost, A_eq=A, b_eq=rhs, bounds=bounds, method=method, options=options)
+            res = linprog(cost, A_ub=A[n:], b_ub=row_upper[n:], A_eq=A[:n], b_eq=np.zeros(n),
+                          bounds=np.column_stack([col_lower, col_upper]), method=method, options=options)
             if res.status == 0:
                 break
         else:
             raise RuntimeError(f"master LP failed: {res.message}")
-        return res.x[:n], float(res.x[-1]), res.eqlin.marginals[E:E + m], float(res.fun)
+        return res.eqlin.marginals, max(-float(res.ineqlin.marginals[0]), 0.0), res.x[E:E + m], -float(res.fun)
 
     def _price(self, supply: np.ndarray):
         """Tet set minimising ``w(boundary of S) - supply(S)``, and that value; (None, 0) if none is negative."""
@@ -453,7 +561,7 @@ class _MinCut:
     Both return the unique minimal source side of a minimum cut.
     """
 
-    def __init__(self, face_tets: np.ndarray, omega: np.ndarray, t: int):
+    def __init__(self, face_tets: np.ndarray, omega: np.ndarray, t: int, backend: str = "auto"):
         self.t = t
         self.omega = omega
         fa, fb = face_tets[:, 0], face_tets[:, 1]
@@ -461,10 +569,15 @@ class _MinCut:
         arange = np.arange(t)
         self.tails = np.concatenate([fa, fb, np.full(t, src), arange])
         self.heads = np.concatenate([fb, fa, arange, np.full(t, snk)])
-        try:
-            from ortools.graph.python import max_flow as ortools_max_flow
-        except ImportError:
-            ortools_max_flow = None
+        if backend == "auto":
+            backend = MAX_FLOW_BACKEND
+        ortools_max_flow = None
+        if backend != "scipy":
+            try:
+                from ortools.graph.python import max_flow as ortools_max_flow
+            except ImportError:
+                if backend == "ortools":
+                    raise
         self._ortools = ortools_max_flow
         self.backend = "ortools" if ortools_max_flow is not None else "scipy"
         if self._ortools is None:

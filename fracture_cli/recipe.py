@@ -34,6 +34,7 @@ from fracture_cli.options import check_value, option_fields
 # Section -> (module, options class). Order is the pipeline order.
 SECTIONS: dict[str, tuple[str, str]] = {
     "load": ("fracture_cli.io.read", "LoadOptions"),
+    "repair": ("fracture_cli.stages.repair", "RepairOptions"),
     "cage": ("fracture_cli.stages.cage", "CageOptions"),
     "tetra": ("fracture_cli.stages.tetra", "TetraOptions"),
     "material": ("fracture_cli.stages.material", "MaterialOptions"),

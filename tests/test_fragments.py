@@ -12,6 +12,7 @@ from fracture_cli.errors import StageError
 from fracture_cli.stages.checks import fragment_invariants
 from fracture_cli.stages.fragments import FragmentOptions, fragments
 from fracture_cli.stages.pieces import pieces
+from fracture_cli.stages.repair import RepairOptions, repair
 from fracture_cli.stages.smooth import SmoothOptions, smooth
 from fracture_cli.testing import grid_tetmesh
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Material, Modes, Normalization, SurfaceMesh, TetMesh
@@ -184,17 +185,18 @@ def test_seamed_box_keeps_materials_and_seams():
         assert f.uvs[outer].min() >= -1e-9 and f.uvs[outer].max() <= 1 + 1e-9
 
 
-def test_open_cylinder_is_closed_with_fans_or_refused(caplog):
+def test_open_input_is_refused_until_repaired():
     surf = open_cylinder()
     tm = cage_tets(4)
     R = smooth(tm, octant_pieces(tm), SmoothOptions(smoothing=0.0))
-    with pytest.raises(StageError, match="open"):
-        fragments(surf, R, FragmentOptions(hole_filling="error"))
-    with caplog.at_level(logging.WARNING):
-        frags = fragments(surf, R)
-    assert any("hole" in r.message for r in caplog.records)
+    with pytest.raises(StageError, match="repair"):
+        fragments(surf, R)
+    repaired = repair(surf, RepairOptions(open_surface="fill"))
+    frags = fragments(repaired, R)
+    # the interior slot repair added is reused, not duplicated
+    assert [m.name for m in frags.materials] == ["stone", INTERIOR_MATERIAL_NAME]
     closed = trimesh.creation.cylinder(radius=0.3, height=1.0, sections=24)
-    check_invariants(surf, frags, closed.volume / surf.normalization.scale ** 3)
+    check_invariants(repaired, frags, closed.volume / surf.normalization.scale ** 3)
 
 
 def test_overlapping_bodies_are_united():

@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import logging
 import time
-from collections import deque
 from dataclasses import dataclass
 
 import manifold3d
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from fracture_cli.errors import StageError
 from fracture_cli.options import option
@@ -153,11 +152,11 @@ def repair(surface: SurfaceMesh, options: RepairOptions = RepairOptions()) -> Su
 
     # 1. Weld.
     weld = weld_map(props[:, :3], F)
-    moved = weld != np.arange(len(V))
-    num_welded = int(moved.sum())
-    props[:, _POS] = props[weld, _POS]  # snap tolerance merges to one position
-    if num_welded:
-        did.append(f"welded {num_welded} vertices")
+    num_welded = int((weld != np.arange(len(V))).sum())
+    snapped = np.any(props[weld, _POS] != props[:, _POS], axis=1)
+    if snapped.any():
+        props[:, _POS] = props[weld, _POS]  # vertices merged within tolerance get one position
+        did.append(f"snapped {int(snapped.sum())} nearly coincident vertices together")
 
     # 2. Degenerate and duplicated faces.
     W = weld[F]
@@ -239,7 +238,7 @@ def repair(surface: SurfaceMesh, options: RepairOptions = RepairOptions()) -> Su
     F[flip] = F[flip][:, ::-1]
     W[flip] = W[flip][:, ::-1]
     num_normals = _fix_shading_normals(props, F)
-    if num_normals:
+    if num_normals and surface.normals is not None:
         did.append(f"flipped {num_normals} shading normals")
 
     # 5. Manifold check and union of overlapping bodies.
@@ -264,13 +263,14 @@ def repair(surface: SurfaceMesh, options: RepairOptions = RepairOptions()) -> Su
         raise StageError(f"the repaired mesh encloses no volume ({volume:.3g} of a unit-diagonal box); it needs a "
                          "closed, solid shape", stage=STAGE)
 
+    welded = f"welded {num_welded} seam vertices by position"
     if not did:
-        log.info("%s: %s is a closed solid; nothing to repair (%.2f s)", STAGE, surface.name,
-                 time.perf_counter() - t0)
+        log.info("%s: %s: %s; a closed solid, nothing to repair (volume %.6g, %.2f s)", STAGE, surface.name,
+                 welded, volume, time.perf_counter() - t0)
         return surface
     props, F = _compact(props, F)
-    log.info("%s: %s: %s; %d faces, volume %.6g (%.2f s)", STAGE, surface.name, ", ".join(did), len(F), volume,
-             time.perf_counter() - t0)
+    log.info("%s: %s: %s, %s; %d faces, volume %.6g (%.2f s)", STAGE, surface.name, welded, ", ".join(did), len(F),
+             volume, time.perf_counter() - t0)
     normals = props[:, _NORMAL]
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), 0.0)
@@ -332,10 +332,12 @@ def weld_map(V: np.ndarray, F: np.ndarray) -> np.ndarray:
         if np.array_equal(nxt, target):
             break
         target = nxt
-    # The smallest index of each group represents it (stable under input order).
-    smallest = np.full(n, n, dtype=np.int64)
-    np.minimum.at(smallest, target, np.arange(n))
-    return smallest[target]
+    # The smallest referenced index of each group represents it (stable under input order).
+    key = np.arange(n) + n
+    key[np.unique(F)] -= n
+    smallest = np.full(n, 2 * n, dtype=np.int64)
+    np.minimum.at(smallest, target, key)
+    return smallest[target] % n
 
 
 def surface_solid(surface: SurfaceMesh, *, stage: str):
@@ -402,15 +404,12 @@ def _unique_faces(W: np.ndarray):
     if counts.max() == 1:
         return np.ones(m, dtype=bool), 0, 0
     net = np.bincount(group, weights=np.where(positive, 1.0, -1.0))
-    order = np.argsort(group, kind="stable")
+    # Keep the first face of each group that has the group's majority orientation (none if balanced).
+    candidate = (net[group] != 0) & ((net[group] > 0) == positive)
+    first = np.full(len(counts), m, dtype=np.int64)
+    np.minimum.at(first, group[candidate], np.flatnonzero(candidate))
     keep = np.zeros(m, dtype=bool)
-    taken = np.zeros(len(counts), dtype=bool)
-    for f in order.tolist():  # first face of each group with the majority orientation
-        g = group[f]
-        if taken[g] or net[g] == 0 or (net[g] > 0) != positive[f]:
-            continue
-        keep[f] = True
-        taken[g] = True
+    keep[first[first < m]] = True
     pairs = int(np.minimum(np.bincount(group, weights=positive), np.bincount(group, weights=~positive)).sum())
     duplicates = m - int(keep.sum()) - 2 * pairs
     return keep, duplicates, pairs
@@ -430,7 +429,14 @@ def _nonmanifold_edges(W: np.ndarray) -> int:
 
 
 def _propagate_winding(W: np.ndarray):
-    """Flip mask (m,) making winding consistent across edges shared by two faces, and patch id (m,) per face."""
+    """Flip mask (m,) making winding consistent across edges shared by two faces, and patch id (m,) per face.
+
+    A breadth-first spanning forest of the faces (edges: shared manifold
+    edges) gives each face a path to its patch's root; the face is flipped when
+    an odd number of steps on that path join faces that run their shared edge
+    the same way. The parities are summed by pointer jumping (vectorized,
+    O(m log m)). Each patch then keeps the winding most of its faces had.
+    """
     m = len(W)
     directed, edge_id, face = _undirected_edges(W)
     counts = np.bincount(edge_id)
@@ -440,32 +446,34 @@ def _propagate_winding(W: np.ndarray):
     # Two faces agree when they run the shared edge in opposite directions.
     same = directed[pair[:, 0], 0] == directed[pair[:, 1], 0]
     graph = sp.coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(m, m)).tocsr()
-    graph = (graph + graph.T).tocsr()
-    relation = sp.coo_matrix((same.astype(np.float64) + 1.0, (fa, fb)), shape=(m, m)).tocsr()
-    relation = (relation + relation.T).tocsr()
     num_patches, patch = connected_components(graph, directed=False)
-    flip = np.zeros(m, dtype=bool)
-    seen = np.zeros(m, dtype=bool)
-    indptr, indices, data = relation.indptr, relation.indices, relation.data
-    for root in range(m):
-        if seen[root]:
-            continue
-        seen[root] = True
-        members = [root]
-        queue = deque([root])
-        while queue:
-            f = queue.popleft()
-            for k in range(indptr[f], indptr[f + 1]):
-                g = indices[k]
-                if not seen[g]:
-                    seen[g] = True
-                    flip[g] = flip[f] ^ (data[k] > 1.5)
-                    members.append(g)
-                    queue.append(g)
-        # Keep the winding most faces of the patch already have.
-        members = np.array(members)
-        if 2 * flip[members].sum() > len(members):
-            flip[members] = ~flip[members]
+    # A virtual root (node m) joined to the first face of every patch makes the forest one tree.
+    first_face = np.full(num_patches, m, dtype=np.int64)
+    np.minimum.at(first_face, patch, np.arange(m))
+    rows = np.concatenate([fa, fb, np.full(num_patches, m)])
+    cols = np.concatenate([fb, fa, first_face])
+    tree = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(m + 1, m + 1)).tocsr()
+    _, parent = breadth_first_order(tree, m, directed=True, return_predecessors=True)
+    parent = parent.astype(np.int64)
+    parent[m] = m
+    # Parity of each tree step (face, parent).
+    code = np.concatenate([fa * (m + 1) + fb, fb * (m + 1) + fa])
+    step_same = np.concatenate([same, same])
+    parity = np.zeros(m + 1, dtype=bool)
+    if len(code):
+        sorter = np.argsort(code, kind="stable")
+        wanted = np.arange(m) * (m + 1) + parent[:m]
+        at = np.minimum(np.searchsorted(code[sorter], wanted), len(code) - 1)
+        parity[:m] = (code[sorter[at]] == wanted) & step_same[sorter[at]]
+    jump = parent.copy()
+    while np.any(jump != m):
+        parity = parity ^ parity[jump]
+        jump = jump[jump]
+    flip = parity[:m]
+    # Keep the winding most faces of the patch already have.
+    flipped = np.bincount(patch, weights=flip, minlength=num_patches)
+    sizes = np.bincount(patch, minlength=num_patches)
+    flip = flip ^ (2 * flipped > sizes)[patch]
     return flip, patch
 
 
@@ -648,6 +656,15 @@ def _plane_uvs(P: np.ndarray, normal: np.ndarray) -> np.ndarray:
     return np.column_stack([P @ u, P @ v])
 
 
+def _axis_uvs(P: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """UVs (k, 2) projecting each point along its normal's dominant axis."""
+    axis = np.argmax(np.abs(normals), axis=1)
+    u_axis = np.array([1, 0, 0])[axis]
+    v_axis = np.array([2, 2, 1])[axis]
+    rows = np.arange(len(P))
+    return np.column_stack([P[rows, u_axis], P[rows, v_axis]])
+
+
 def _fill(props, F, W, material_ids, weld, loops, interior_material):
     """Close each loop with a fan around its centroid; cap vertices are copies welded to the loop's."""
     new_props, new_faces, new_weld = [], [], []
@@ -684,8 +701,9 @@ def _fill(props, F, W, material_ids, weld, loops, interior_material):
 
 def _free_distance(V: np.ndarray, F: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """Distance (k,) along each ray to the first face hit (inf if none)."""
-    import open3d as o3d
+    from fracture_cli._open3d import open3d as _import_open3d
 
+    o3d = _import_open3d()
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
     rays = np.hstack([origins, directions]).astype(np.float32)
@@ -732,8 +750,11 @@ def _shell(props, F, W, material_ids, weld, sheet, boundary, thickness, interior
     rep = weld[split_used]
     offset_props[:, _POS] = V[rep] - t[rep, None] * normal[rep]
     offset_props[:, _NORMAL] *= -1.0
-    # The copies weld to the copy of their representative (which is itself a sheet vertex).
-    offset_weld = offset_index[rep]
+    # Copies weld to the first copy made at their position.
+    _, first = np.unique(rep, return_index=True)
+    group_offset = np.full(n, -1, dtype=np.int64)
+    group_offset[rep[first]] = offset_index[split_used[first]]
+    offset_weld = group_offset[rep]
     offset_faces = offset_index[sheet_faces][:, ::-1]
 
     # Strip along the boundary: its own vertex copies (normals across the strip), welded to sheet and offset.
@@ -751,7 +772,7 @@ def _shell(props, F, W, material_ids, weld, sheet, boundary, thickness, interior
     sa, sb = strip_index[a], strip_index[b]
     oa, ob = strip_offset_index[a], strip_offset_index[b]
     strip_faces = np.concatenate([np.stack([sb, sa, oa], axis=1), np.stack([sb, oa, ob], axis=1)])
-    strip_weld = np.concatenate([ends, offset_index[ends]])
+    strip_weld = np.concatenate([ends, group_offset[ends]])
 
     props = np.vstack([props, offset_props, strip_props])
     P = props[:, _POS]
@@ -762,9 +783,7 @@ def _shell(props, F, W, material_ids, weld, sheet, boundary, thickness, interior
     strip_rows = slice(m0, len(props))
     props[strip_rows, _NORMAL] = acc[strip_rows] / np.maximum(np.linalg.norm(acc[strip_rows], axis=1,
                                                                              keepdims=True), 1e-300)
-    strip_normals = props[strip_rows, _NORMAL]
-    props[strip_rows, _UV] = _plane_uvs(props[strip_rows, _POS], np.array([0.0, 0.0, 1.0])) * 0 + np.column_stack(
-        [np.zeros(len(strip_normals)), np.zeros(len(strip_normals))])
+    props[strip_rows, _UV] = _axis_uvs(props[strip_rows, _POS], props[strip_rows, _NORMAL])
     weld = np.concatenate([weld, offset_weld, strip_weld])
     added = np.vstack([offset_faces, strip_faces])
     F = np.vstack([F, added])

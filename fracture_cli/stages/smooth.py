@@ -30,10 +30,18 @@ _FEASIBLE_TOL = 1e-12
 _SINGULAR_TOL = 1e-13
 # Connected parts of a region below this fraction of its volume are union artefacts.
 _SHELL_VOLUME = 1e-9
-# How far apart (unit bbox diagonal) the copies of a vertex where a region
-# touches itself are moved: above position-welding tolerances (1e-8), below the
-# 1e-6 that fragments' outer surfaces may deviate from the input.
+# Fallback (union) path only: how far apart (unit bbox diagonal) the copies of
+# a vertex where a region touches itself are moved.
 _PINCH_SEPARATION = 1e-7
+# Pieces with at least this margin below the best guaranteed value are never
+# candidates in a simplex (field values are O(1)).
+_CANDIDATE_TOL = 1e-12
+# Relative width of the spindle carved around an edge where a tet-aligned region
+# touches itself: its notches sit this fraction of the way from the edge's
+# midpoint to the opposite vertices (volume change eps^2 of the tets around it).
+_PINCH_SPINDLE = 0.02
+# Rounds of making tets tet-aligned where a region touches itself along a line.
+_MAX_REPAIRS = 12
 
 
 @dataclass(frozen=True)
@@ -41,7 +49,7 @@ class SmoothOptions:
     """Options of :func:`smooth`."""
 
     smoothing: float = option(
-        1e-3,
+        2.5e-4,
         "fault smoothing lambda in units of (bbox diagonal)^2; about the square of the smoothing radius; 0 = "
         "tet-aligned faults",
         min=0.0,
@@ -64,7 +72,7 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     pieces : Pieces
         Atomic pieces; ``pieces.tet_piece`` (t,) assigns every tet to a piece.
     options : SmoothOptions, optional
-        ``smoothing`` (lambda, default 1e-3) and ``vanish_fraction``
+        ``smoothing`` (lambda, default 2.5e-4) and ``vanish_fraction``
         (default 0.01).
 
     Returns
@@ -92,12 +100,22 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     length (1e-4 .. 1e-2).
 
     Inside a tet ``Z`` is linear, so the set where piece ``P`` wins is the tet
-    clipped by the half-spaces ``Z_P >= Z_Q``: a convex cell. A piece's region
-    is the union (manifold3d batch boolean) of its cells, which is closed and
-    edge-manifold by construction even where a piece touches itself along an
-    edge or at a vertex. ``lambda = 0`` skips the field entirely: averaging the
-    one-hot field onto vertices already rounds faults, so "no smoothing" means
-    each region is exactly the union of its piece's tets.
+    clipped by the half-spaces ``Z_P >= Z_Q``: a convex cell. The boundary of
+    every region is built directly (multi-label marching tetrahedra): each
+    output vertex is identified by the simplex it lies in and the pieces that
+    tie there, so neighbouring tets and neighbouring regions share vertices
+    bit for bit, and every fault polygon is triangulated once and used by
+    both of its sides. ``lambda = 0`` skips the field entirely: averaging the
+    one-hot field onto vertices already rounds faults, so "no smoothing"
+    means each region is exactly the union of its piece's tets.
+
+    Where a tet-aligned region would touch itself along a tet edge (pieces
+    alternating around the edge), importers that weld vertices by position
+    would see an edge with four faces. A thin spindle around such an edge
+    (width 2% of the surrounding tets) goes to the piece with the most volume
+    around it, so regions then touch themselves at isolated points at most.
+    A region that still fails the closed, edge-manifold check is rebuilt as a
+    union of its cells (manifold3d), with a warning.
 
     Smoothing never creates or removes a piece. A piece whose region would
     shrink below ``vanish_fraction`` of its own volume is reported in
@@ -112,18 +130,18 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     p = pieces.num_pieces
     lam = float(options.smoothing)
     V, T = tet_mesh.vertices, tet_mesh.tets
-    tet_volumes = np.abs(tet_mesh.tet_volumes)
+    topo = _Topology(T, tet_mesh.num_vertices)
 
     vanished: list[int] = []
+    Z = None
     if lam == 0.0:
-        cells = _CellList()
-        cells.add_tets(np.arange(t), tet_piece)
+        meshes, pinches, repaired = _repaired_regions(V, T, topo, None, np.ones(t, dtype=bool), tet_piece, p)
     else:
         Z = _smoothed_field(tet_mesh, tet_piece, p, lam)
         while True:
-            forced = np.isin(tet_piece, vanished)
-            cells = _field_cells(V, T, Z, forced, tet_piece, vanished)
-            won = np.bincount(cells.piece_array(), weights=cells.volume_array(tet_volumes), minlength=p)
+            forced, Zv = _forced_field(Z, tet_piece, vanished)
+            meshes, _, _ = _direct_regions(V, T, topo, Zv, forced, tet_piece, p, check=False)
+            won = np.array([_mesh_volume(*m) for m in meshes])
             gone = [P for P in range(p) if P not in vanished and won[P] <= options.vanish_fraction * pieces.volumes[P]]
             if not gone:
                 break
@@ -133,11 +151,68 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
                 STAGE, len(gone), lam, gone[0], won[gone[0]] / pieces.volumes[gone[0]],
             )
             vanished.extend(gone)
+        meshes, pinches, repaired = _repaired_regions(V, T, topo, Zv, forced, tet_piece, p)
 
-    meshes = cells.union_by_piece(V, T, p)
-    log.info("%s: %d regions, lambda=%g, %d cells (%d clipped), %d vanished",
-             STAGE, p, lam, cells.count, cells.clipped_count, len(vanished))
+    broken = [P for P in range(p) if _region_defects(*meshes[P])]
+    if broken:
+        log.warning("%s: %d region(s) were not closed and edge-manifold when built directly (e.g. piece %d); "
+                    "rebuilding them as unions of cells", STAGE, len(broken), broken[0])
+        rebuilt = _union_regions(V, T, Z, tet_piece, p, vanished, broken)
+        for P, mesh in zip(broken, rebuilt):
+            meshes[P] = mesh
+    log.info("%s: %d regions, lambda=%g, %d triangles, %d vanished, %d tet(s) made tet-aligned, %d pinched edge(s) "
+             "given a spindle", STAGE, p, lam, sum(len(f) for _, f in meshes), len(vanished), repaired, pinches)
     return Regions(meshes=tuple(meshes), smoothing=lam, vanished=tuple(sorted(vanished)))
+
+
+def _repaired_regions(V, T, topo, Zv, forced, tet_piece, p):
+    """Direct regions; where a region touches itself along a line, the tets there become tet-aligned (repeatedly).
+
+    Returns the meshes, the number of spindles carved and of tets made tet-aligned.
+    """
+    forced = forced.copy()
+    start = int(forced.sum())
+    for _ in range(_MAX_REPAIRS):
+        meshes, pinches, defects = _direct_regions(V, T, topo, Zv, forced, tet_piece, p)
+        if not defects or forced.all():
+            break
+        # A defect edge lies in the simplex spanned by its end points' simplices: the tets around that
+        # simplex's vertices keep their own pieces (whole stars, so that this converges in few rounds).
+        before = int(forced.sum())
+        corners = np.unique(np.concatenate([site[site >= 0] for site in defects]))
+        forced |= np.isin(T, corners).any(axis=1)
+        if int(forced.sum()) == before:
+            break
+    return meshes, pinches, int(forced.sum()) - start
+
+
+def _forced_field(Z: np.ndarray, tet_piece: np.ndarray, vanished: list[int]):
+    """Tets (t,) bool that vanished pieces keep, and the field with those pieces never winning."""
+    forced = np.isin(tet_piece, vanished)
+    Zv = Z.copy()
+    if vanished:
+        Zv[:, vanished] = -1.0
+    return forced, Zv
+
+
+def _mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def _union_regions(V: np.ndarray, T: np.ndarray, Z, tet_piece: np.ndarray, p: int, vanished: list[int],
+                   only: list[int]) -> list:
+    """Regions of the pieces ``only`` as manifold3d unions of their convex cells (slow, independent path).
+
+    ``Z`` (n, p) is the smoothed field, or None for tet-aligned regions.
+    """
+    if Z is None:
+        cells = _CellList()
+        cells.add_tets(np.arange(len(T)), tet_piece)
+    else:
+        forced, _ = _forced_field(Z, tet_piece, vanished)
+        cells = _field_cells(V, T, Z, forced, tet_piece, vanished)
+    return cells.union_by_piece(V, T, p, only)
 
 
 def _smoothed_field(tet_mesh: TetMesh, tet_piece: np.ndarray, p: int, lam: float) -> np.ndarray:
@@ -196,20 +271,20 @@ class _CellList:
         whole = tet_volumes[np.concatenate(self.tets)] if self.tets else np.zeros(0)
         return np.concatenate([whole, np.array(self.clipped_volumes, dtype=np.float64)])
 
-    def union_by_piece(self, V: np.ndarray, T: np.ndarray, p: int):
-        """Closed, edge-manifold meshes (vertices, faces) of the union of each piece's cells."""
+    def union_by_piece(self, V: np.ndarray, T: np.ndarray, p: int, only: list[int]):
+        """Closed, edge-manifold meshes (vertices, faces) of the union of the cells of each piece in ``only``."""
         parts: list[list] = [[] for _ in range(p)]
         tets = np.concatenate(self.tets) if self.tets else np.zeros(0, np.int64)
         owners = np.concatenate(self.tet_pieces) if self.tets else np.zeros(0, np.int64)
         order = np.argsort(owners, kind="stable")
         tets, owners = tets[order], owners[order]
         bounds = np.searchsorted(owners, np.arange(p + 1))
-        for P in range(p):
+        for P in only:
             parts[P].extend(_whole_tets_solids(V, T, tets[bounds[P]:bounds[P + 1]]))
         for _, P, hull in self.clipped:
             parts[P].append(hull)
         meshes = []
-        for P in range(p):
+        for P in only:
             if not parts[P]:
                 raise StageError(f"piece {P} has no cells; this is a bug in the smoothing stage", stage=STAGE)
             region = manifold3d.Manifold.batch_boolean(parts[P], manifold3d.OpType.Add)
@@ -372,7 +447,7 @@ def _snap(points: np.ndarray, tol: float = 1e-10) -> np.ndarray:
     return points[first[labels]]
 
 
-_COMBOS: dict[int, np.ndarray] = {}
+_COMBOS: dict = {}
 
 
 def _cell_corners(G: np.ndarray):
@@ -423,3 +498,547 @@ def _cell_corners(G: np.ndarray):
     b = np.clip(b, 0.0, None)
     b /= b.sum(axis=3, keepdims=True)
     return b, valid
+
+
+# ---------------------------------------------------------------------------
+# Direct construction: multi-label marching tetrahedra with combinatorial keys.
+# ---------------------------------------------------------------------------
+
+_EDGE_PAIRS = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.int64)
+_FACE_EDGE_PAIRS = np.array([[0, 1], [0, 2], [1, 2]], dtype=np.int64)
+
+
+class _Topology:
+    """Unique edges and faces of a tet mesh and their incidences (all arrays int64)."""
+
+    def __init__(self, T: np.ndarray, n: int):
+        t = len(T)
+        local = T[:, tetgeom.TET_FACES].reshape(-1, 3)  # (4t, 3) outward for positive tets
+        ordered = np.sort(local, axis=1)
+        face_key = (ordered[:, 0] * n + ordered[:, 1]) * n + ordered[:, 2]
+        _, first, inverse = np.unique(face_key, return_index=True, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        owner = np.repeat(np.arange(t), 4)
+        self.faces = ordered[first]  # (f, 3) sorted vertex ids
+        self.face_oriented = local[first]  # (f, 3) outward from face_tets[:, 0]
+        self.tet_faces = inverse.reshape(t, 4)
+        self.face_tets = np.full((len(first), 2), -1, dtype=np.int64)
+        self.face_tets[:, 0] = owner[first]
+        second = np.ones(len(local), dtype=bool)
+        second[first] = False
+        self.face_tets[inverse[second], 1] = owner[second]
+        edges = np.sort(T[:, _EDGE_PAIRS], axis=2).reshape(-1, 2)
+        edge_key = edges[:, 0] * n + edges[:, 1]
+        unique_keys, efirst, einverse = np.unique(edge_key, return_index=True, return_inverse=True)
+        self.edges = edges[efirst]  # (e, 2) sorted
+        self.tet_edges = einverse.reshape(t, 6)
+        fe = self.faces[:, _FACE_EDGE_PAIRS]  # (f, 3, 2)
+        self.face_edges = np.searchsorted(unique_keys, fe[..., 0] * n + fe[..., 1])  # (f, 3)
+        self.ties = None  # cache: (field, edge ties, face ties, tet ties)
+
+
+def _tie_points(V: np.ndarray, Zv: np.ndarray, S: np.ndarray):
+    """Points inside simplices where ``k + 1`` pieces tie for the maximum of the field.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    Zv : (n, p) float64
+        Field at the vertices.
+    S : (N, k + 1) int64
+        Simplices (edges, faces or tets), vertex ids sorted ascending.
+
+    Returns
+    -------
+    simplex : (r,) int64
+        Row of ``S`` each point lies strictly inside, ascending.
+    tie : (r, k + 1) int64
+        The tied pieces, ascending.
+    position : (r, 3) float64
+
+    Notes
+    -----
+    Every point is computed from its simplex's own vertex values only (in a
+    canonical vertex and piece order), so all tets that share the simplex see
+    a bit-identical point.
+    """
+    k1 = S.shape[1]
+    Zs = Zv[S]  # (N, k+1, p)
+    floor = Zs.min(axis=1).max(axis=1)
+    # Pieces that can win somewhere on the simplex (necessary test, with a margin for rounding).
+    cand = Zs.max(axis=1) >= floor[:, None] - _CANDIDATE_TOL
+    counts = cand.sum(axis=1)
+    out_s, out_tie, out_pos = [], [], []
+    for m in np.unique(counts).tolist():
+        if m < k1:
+            continue
+        group = np.flatnonzero(counts == m)
+        cidx = np.nonzero(cand[group])[1].reshape(-1, m)  # (N, m) sorted piece ids
+        G = np.take_along_axis(Zs[group], cidx[:, None, :], axis=2)  # (N, k+1, m)
+        combos = _combinations(m, k1)  # (C, k+1)
+        Gc = G[:, :, combos].transpose(0, 2, 3, 1)  # (N, C, k+1 pieces, k+1 corners)
+        A = np.empty(Gc.shape)
+        A[:, :, :-1, :] = Gc[:, :, :1, :] - Gc[:, :, 1:, :]
+        A[:, :, -1, :] = 1.0
+        rows = np.linalg.norm(A, axis=3).prod(axis=2)
+        ok = np.abs(np.linalg.det(A)) > _SINGULAR_TOL * rows
+        A[~ok] = np.eye(k1)
+        rhs = np.zeros(A.shape[:3] + (1,))
+        rhs[:, :, -1, 0] = 1.0
+        beta = np.linalg.solve(A, rhs)[..., 0]  # (N, C, k+1)
+        values = np.einsum("nkm,nck->ncm", G, beta)  # every candidate's value at every point
+        in_tie = np.zeros((len(combos), m), dtype=bool)
+        in_tie[np.arange(len(combos))[:, None], combos] = True
+        tie_value = np.where(in_tie, values, np.inf).min(axis=2)
+        other = np.where(in_tie, -np.inf, values).max(axis=2)
+        feasible = ok & (beta > 0.0).all(axis=2) & (tie_value >= other)
+        ni, ci = np.nonzero(feasible)
+        out_s.append(group[ni])
+        out_tie.append(np.take_along_axis(cidx[ni], combos[ci], axis=1))
+        out_pos.append(np.einsum("rk,rkd->rd", beta[ni, ci], V[S[group[ni]]]))
+    if not out_s:
+        return np.zeros(0, np.int64), np.zeros((0, k1), np.int64), np.zeros((0, 3))
+    simplex = np.concatenate(out_s)
+    order = np.argsort(simplex, kind="stable")
+    return simplex[order], np.concatenate(out_tie)[order], np.concatenate(out_pos)[order]
+
+
+def _combinations(m: int, k: int) -> np.ndarray:
+    key = (m, k)
+    if key not in _COMBOS:
+        _COMBOS[key] = np.array(list(itertools.combinations(range(m), k)), dtype=np.int64).reshape(-1, k)
+    return _COMBOS[key]
+
+
+def _join(owners: np.ndarray, point_simplex: np.ndarray):
+    """Pairs (owner row, point index) for every point whose simplex is ``owners[row]``.
+
+    ``owners`` (q,) simplex ids (any order, repeats allowed), ``point_simplex`` sorted.
+    """
+    lo = np.searchsorted(point_simplex, owners, side="left")
+    hi = np.searchsorted(point_simplex, owners, side="right")
+    count = hi - lo
+    rows = np.repeat(np.arange(len(owners)), count)
+    offsets = np.repeat(lo - (np.cumsum(count) - count), count)
+    return rows, np.arange(int(count.sum())) + offsets
+
+
+def _fan(poly: np.ndarray, keys: np.ndarray, normals: np.ndarray, positions: np.ndarray, centre_ids=None,
+         centre_pos=None):
+    """Triangulate convex polygons given as unordered vertex sets.
+
+    Parameters
+    ----------
+    poly : (r,) int64
+        Polygon id of each incidence row (ids 0..q-1).
+    keys : (r,) int64
+        Global vertex id of each row.
+    normals : (q, 3) float64
+        Orientation of each polygon: its vertices are ordered counter-clockwise
+        about it.
+    positions : (v, 3) float64
+        Global vertex positions.
+
+    Returns
+    -------
+    triangles : (s, 3) int64 global vertex ids
+    owner : (s,) int64 polygon of each triangle
+
+    Notes
+    -----
+    Each polygon is fanned from its smallest vertex id, so a polygon computed
+    once and emitted for both of its sides is triangulated identically.
+    Polygons with fewer than three vertices are dropped. With ``centre_ids``
+    (q,) and ``centre_pos`` (q, 3), polygons are star-shaped about their
+    centres (e.g. triangles with extra vertices on their edges) and are fanned
+    from them instead.
+    """
+    q = len(normals)
+    if len(poly) == 0:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    count = np.bincount(poly, minlength=q)
+    P = positions[keys]
+    centre = np.zeros((q, 3))
+    for d in range(3):
+        centre[:, d] = np.bincount(poly, weights=P[:, d], minlength=q)
+    centre /= np.maximum(count, 1)[:, None]
+    if centre_pos is not None:
+        centre = centre_pos
+    nrm = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    helper = np.where(np.abs(nrm[:, :1]) < 0.6, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(nrm, helper)
+    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+    w = np.cross(nrm, u)
+    d = P - centre[poly]
+    angle = np.arctan2(np.einsum("ij,ij->i", d, w[poly]), np.einsum("ij,ij->i", d, u[poly]))
+    order = np.lexsort((keys, angle, poly))
+    poly, keys = poly[order], keys[order]
+    start = np.cumsum(count) - count
+    # Rotate each cycle to start at its smallest vertex id.
+    local = np.arange(len(poly)) - start[poly]
+    smallest = np.full(q, np.iinfo(np.int64).max)
+    np.minimum.at(smallest, poly, keys)
+    first_local = np.zeros(q, np.int64)
+    is_min = keys == smallest[poly]
+    first_local[poly[is_min]] = local[is_min]
+    L = count
+    if centre_ids is not None:
+        tri_poly = poly
+        following = np.where(local + 1 < L[poly], np.arange(len(poly)) + 1, start[poly])
+        tri = np.stack([centre_ids[poly], keys, keys[following]], axis=1)
+        return tri, tri_poly
+    ntri = np.maximum(L - 2, 0)
+    tri_poly = np.repeat(np.arange(q), ntri)
+    j = np.arange(int(ntri.sum())) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1  # 1..L-2
+    base = start[tri_poly]
+    f0 = first_local[tri_poly]
+    Lp = L[tri_poly]
+    tri = np.stack([keys[base + f0], keys[base + (f0 + j) % Lp], keys[base + (f0 + j + 1) % Lp]], axis=1)
+    return tri, tri_poly
+
+
+def _direct_regions(V: np.ndarray, T: np.ndarray, topo: _Topology, Zv, forced: np.ndarray, tet_piece: np.ndarray,
+                    p: int, check: bool = True):
+    """Boundary meshes of every piece's region, built directly from keyed polygons.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    T : (t, 4) int64
+        Positively oriented tets.
+    topo : _Topology
+    Zv : (n, p) float64 or None
+        Field deciding the winner in the tets that are not ``forced``.
+    forced : (t,) bool
+        Tets that belong wholly to ``tet_piece`` (all of them when ``Zv`` is None).
+    tet_piece : (t,) int64
+    p : int
+
+    Returns
+    -------
+    meshes : list of (vertices (n_i, 3) float64, faces (m_i, 3) int64)
+    pinches : int
+        Edges where a tet-aligned region touched itself and a spindle was carved.
+
+    Notes
+    -----
+    Every output vertex has a combinatorial identity: a tet vertex; a tie of
+    two pieces on a tet edge, of three inside a face, of four inside a tet; a
+    notch or centre of a face at a pinch. Its position is computed once from
+    that simplex's data, so the polygons of neighbouring pieces share vertices
+    exactly. Region boundaries consist of cage-boundary polygons, of face
+    polygons where a forced tet meets another piece, and of the polygons
+    between cells of different pieces inside a tet; each fault polygon is
+    triangulated once and emitted for both sides with opposite orientation.
+    """
+    n = len(V)
+    blocks = [V]
+    sites = [np.column_stack([np.arange(n), np.full((n, 3), -1)])]  # tet vertices spanning each vertex's simplex
+    next_id = n
+    emitted_tris: list[np.ndarray] = []
+    emitted_piece: list[np.ndarray] = []
+
+    def emit(tris, pieces_, both=None):
+        """Triangles for ``pieces_`` and, reversed, for ``both`` (where >= 0)."""
+        emitted_tris.append(tris)
+        emitted_piece.append(pieces_)
+        if both is not None:
+            keep = both >= 0
+            emitted_tris.append(tris[keep][:, ::-1])
+            emitted_piece.append(both[keep])
+
+    face_tets = topo.face_tets
+    has2 = face_tets[:, 1] >= 0
+    side_forced = forced[face_tets]  # (f, 2); the value for a missing side is ignored
+    side_forced[~has2, 1] = True
+    field = ~forced
+    es = np.zeros(0, np.int64)
+    eid = np.zeros(0, np.int64)
+    if field.any():
+        win = np.argmax(Zv, axis=1)
+        ftets = np.flatnonzero(field)
+        # Tie points depend on the field only: computed once per field for all simplices, then selected.
+        if topo.ties is None or topo.ties[0] is not Zv:
+            topo.ties = (Zv, _tie_points(V, Zv, topo.edges), _tie_points(V, Zv, topo.faces),
+                         _tie_points(V, Zv, np.sort(T, axis=1)))
+        e_used = np.zeros(len(topo.edges), dtype=bool)
+        e_used[topo.tet_edges[ftets]] = True
+        f_used = np.zeros(len(topo.faces), dtype=bool)
+        f_used[topo.tet_faces[ftets]] = True
+        (es, etie, epos), (fs, ftie, fpos), (ts, ttie, tpos) = topo.ties[1:]
+        keep_e, keep_f, keep_t = e_used[es], f_used[fs], field[ts]
+        es, etie, epos = es[keep_e], etie[keep_e], epos[keep_e]
+        fs, ftie, fpos = fs[keep_f], ftie[keep_f], fpos[keep_f]
+        ts, ttie, tpos = ts[keep_t], ttie[keep_t], tpos[keep_t]
+        eid = next_id + np.arange(len(es))
+        fid = eid[-1] + 1 + np.arange(len(fs)) if len(es) else next_id + np.arange(len(fs))
+        next_id += len(es) + len(fs)
+        tid = next_id + np.arange(len(ts))
+        next_id += len(ts)
+        blocks += [epos, fpos, tpos]
+        sites += [np.pad(topo.edges[es], ((0, 0), (0, 2)), constant_values=-1),
+                  np.pad(topo.faces[fs], ((0, 0), (0, 1)), constant_values=-1), T[ts]]
+        positions = np.concatenate(blocks)
+
+        # Polygons between two pieces' cells inside a tet: all tie points with both pieces in the tie.
+        f_tet, f_P, f_Q, f_key = [], [], [], []
+        rows, idx = _join(topo.tet_edges[ftets].reshape(-1), es)
+        f_tet.append(np.repeat(ftets, 6)[rows]), f_P.append(etie[idx, 0]), f_Q.append(etie[idx, 1])
+        f_key.append(eid[idx])
+        rows, idx = _join(topo.tet_faces[ftets].reshape(-1), fs)
+        for a, b in ((0, 1), (0, 2), (1, 2)):
+            f_tet.append(np.repeat(ftets, 4)[rows]), f_P.append(ftie[idx, a]), f_Q.append(ftie[idx, b])
+            f_key.append(fid[idx])
+        for a, b in itertools.combinations(range(4), 2):
+            f_tet.append(ts), f_P.append(ttie[:, a]), f_Q.append(ttie[:, b]), f_key.append(tid)
+        f_tet, f_P, f_Q, f_key = map(np.concatenate, (f_tet, f_P, f_Q, f_key))
+        code = (f_tet * p + f_P) * p + f_Q
+        ucode, poly = np.unique(code, return_inverse=True)
+        u_tet, u_P, u_Q = ucode // (p * p), (ucode // p) % p, ucode % p
+        grads = tetgeom.barycentric_gradients(V, T[u_tet])  # (q, 4, 3)
+        dz = Zv[T[u_tet], u_Q[:, None]] - Zv[T[u_tet], u_P[:, None]]  # (q, 4)
+        normals = np.einsum("qi,qid->qd", dz, grads)  # out of P's cell
+        tri, owner = _fan(poly.reshape(-1), f_key, normals, positions)
+        emit(tri, u_P[owner], u_Q[owner])
+
+        # Face polygons of the field where the other side is the cage's outside or a forced tet.
+        on_field = ~side_forced[:, 0] | ~side_forced[:, 1]
+        shown = np.flatnonzero(on_field & (~has2 | side_forced[:, 0] | side_forced[:, 1]))
+        if len(shown):
+            field_side = np.where(side_forced[shown, 0], 1, 0)
+            other_tet = face_tets[shown, 1 - field_side]
+            other_piece = np.where(other_tet >= 0, tet_piece[np.maximum(other_tet, 0)], -1)
+            p_face, p_piece, p_key = [], [], []
+            corners = topo.faces[shown]
+            p_face.append(np.repeat(np.arange(len(shown)), 3)), p_piece.append(win[corners].reshape(-1))
+            p_key.append(corners.reshape(-1))
+            rows, idx = _join(topo.face_edges[shown].reshape(-1), es)
+            for a in range(2):
+                p_face.append(rows // 3), p_piece.append(etie[idx, a]), p_key.append(eid[idx])
+            rows, idx = _join(shown, fs)
+            for a in range(3):
+                p_face.append(rows), p_piece.append(ftie[idx, a]), p_key.append(fid[idx])
+            p_face, p_piece, p_key = map(np.concatenate, (p_face, p_piece, p_key))
+            code = p_face * p + p_piece
+            ucode, poly = np.unique(code, return_inverse=True)
+            u_face, u_piece = ucode // p, ucode % p
+            oriented = topo.face_oriented[shown[u_face]]
+            normals = np.cross(positions[oriented[:, 1]] - positions[oriented[:, 0]],
+                               positions[oriented[:, 2]] - positions[oriented[:, 0]])
+            normals[field_side[u_face] == 1] *= -1.0
+            tri, owner = _fan(poly.reshape(-1), p_key, normals, positions)
+            X = other_piece[u_face[owner]]
+            keep = X != u_piece[owner]
+            emit(tri[keep], u_piece[owner][keep], X[keep])
+
+    # Tet-aligned parts: faces whose sides are both forced (or forced and outside).
+    X1 = tet_piece[face_tets[:, 0]]
+    X2 = np.where(has2, tet_piece[np.maximum(face_tets[:, 1], 0)], -1)
+    aligned = side_forced[:, 0] & side_forced[:, 1]
+    pinched, spindle_owner = _aligned_pinches(V, T, topo, forced, tet_piece, p, aligned, X1, X2)
+    n_face, n_edge, n_pos = _notches(V, topo, pinched)
+    nid = next_id + np.arange(len(n_face))
+    blocks.append(n_pos)
+    sites.append(np.pad(topo.faces[n_face], ((0, 0), (0, 1)), constant_values=-1))
+    next_id += len(n_face)
+    shown = aligned & (X1 != X2)
+    # Faces with vertices on their edges (ties seen from field tets) or notches become polygons.
+    extra = np.zeros(len(topo.faces), dtype=bool)
+    if len(es):
+        on_edge = np.zeros(len(topo.edges), dtype=bool)
+        on_edge[es] = True
+        extra |= on_edge[topo.face_edges].any(axis=1)
+    extra[n_face] = True
+    plain = np.flatnonzero(shown & ~extra)
+    emit(topo.face_oriented[plain], X1[plain], X2[plain])
+    busy = np.flatnonzero(shown & extra)
+    if len(busy):
+        centre_pos = V[topo.faces[busy]].mean(axis=1)
+        centre_ids = next_id + np.arange(len(busy))
+        blocks.append(centre_pos)
+        sites.append(np.pad(topo.faces[busy], ((0, 0), (0, 1)), constant_values=-1))
+        next_id += len(busy)
+        positions = np.concatenate(blocks)
+        b_poly = [np.repeat(np.arange(len(busy)), 3)]
+        b_key = [topo.faces[busy].reshape(-1)]
+        rows, idx = _join(topo.face_edges[busy].reshape(-1), es)
+        b_poly.append(rows // 3), b_key.append(eid[idx])
+        mine = np.isin(n_face, busy)
+        b_poly.append(np.searchsorted(busy, n_face[mine])), b_key.append(nid[mine])
+        oriented = topo.face_oriented[busy]
+        normals = np.cross(V[oriented[:, 1]] - V[oriented[:, 0]], V[oriented[:, 2]] - V[oriented[:, 0]])
+        tri, owner = _fan(np.concatenate(b_poly), np.concatenate(b_key), normals, positions,
+                          centre_ids=centre_ids, centre_pos=centre_pos)
+        emit(tri, X1[busy][owner], X2[busy][owner])
+    if len(pinched):
+        tris, pcs, others = _spindle_faces(V, T, topo, tet_piece, pinched, spindle_owner, n_face, n_edge, nid, X2)
+        emit(tris, pcs, others)
+    positions = np.concatenate(blocks)
+
+    tris = np.concatenate(emitted_tris) if emitted_tris else np.zeros((0, 3), np.int64)
+    owner = np.concatenate(emitted_piece) if emitted_piece else np.zeros(0, np.int64)
+    order = np.argsort(owner, kind="stable")
+    tris, owner = tris[order], owner[order]
+    bounds = np.searchsorted(owner, np.arange(p + 1))
+    meshes = []
+    for P in range(p):
+        faces = tris[bounds[P]:bounds[P + 1]]
+        used, local = np.unique(faces, return_inverse=True)
+        meshes.append((positions[used], local.reshape(-1, 3).astype(np.int64)))
+    defects = _defect_edges(positions, tris, owner) if check else []
+    site_table = np.concatenate(sites)
+    return meshes, len(pinched), [site_table[list(edge)] for edge in defects]
+
+
+def _aligned_pinches(V, T, topo, forced, tet_piece, p, aligned, X1, X2):
+    """Edges, all of whose tets are forced, around which some piece's tets form two or more runs.
+
+    Returns the pinched edge ids (ascending) and the piece that gets each edge's spindle (the piece with
+    the most volume around the edge, lowest id on a tie).
+    """
+    E = len(topo.edges)
+    not_all_forced = np.zeros(E, dtype=bool)
+    not_all_forced[topo.tet_edges[~forced].reshape(-1)] = True
+    te = topo.tet_edges.reshape(-1)
+    tp = np.repeat(tet_piece, 6)
+    keep = ~not_all_forced[te]
+    code = te[keep] * p + tp[keep]
+    vol = np.repeat(np.abs(tetgeom.tet_volumes(V, T)), 6)[keep]
+    ucode, inverse, n_tets = np.unique(code, return_inverse=True, return_counts=True)
+    # Faces around an edge that glue two tets of the same piece join consecutive runs.
+    glued = np.flatnonzero(aligned & (X1 == X2))
+    ge = topo.face_edges[glued].reshape(-1)
+    gcode = ge * p + np.repeat(X1[glued], 3)
+    gcode = gcode[np.isin(gcode, ucode)]
+    n_glued = np.bincount(np.searchsorted(ucode, gcode), minlength=len(ucode))
+    runs = n_tets - n_glued
+    bad_edges = np.unique(ucode[runs >= 2] // p)
+    if len(bad_edges) == 0:
+        return bad_edges, bad_edges
+    ring_vol = np.bincount(inverse.reshape(-1), weights=vol, minlength=len(ucode))
+    edge_of = ucode // p
+    sel = np.isin(edge_of, bad_edges)
+    e_sel, piece_sel, vol_sel = edge_of[sel], ucode[sel] % p, ring_vol[sel]
+    order = np.lexsort((piece_sel, -vol_sel, e_sel))  # per edge: largest volume, then lowest id
+    e_sorted = e_sel[order]
+    first = np.r_[True, e_sorted[1:] != e_sorted[:-1]]
+    return e_sorted[first], piece_sel[order][first]
+
+
+def _notches(V: np.ndarray, topo: _Topology, pinched: np.ndarray):
+    """Notch vertices in every face next to a pinched edge.
+
+    Returns, per notch, its face (ascending), its edge and its position
+    ``m + eps (w - m)``: ``m`` the edge's midpoint, ``w`` the face's third
+    vertex, computed from that face's vertices only.
+    """
+    face, local = np.nonzero(np.isin(topo.face_edges, pinched))
+    edge = topo.face_edges[face, local]
+    pair = _FACE_EDGE_PAIRS[local]
+    verts = topo.faces[face]
+    u = np.take_along_axis(verts, pair[:, :1], axis=1)[:, 0]
+    v = np.take_along_axis(verts, pair[:, 1:], axis=1)[:, 0]
+    w = verts.sum(axis=1) - u - v
+    mid = (V[u] + V[v]) / 2.0
+    return face, edge, mid + _PINCH_SPINDLE * (V[w] - mid)
+
+
+def _spindle_faces(V, T, topo, tet_piece, pinched, owner, n_face, n_edge, nid, X2):
+    """Triangles of the spindles carved around pinched tet-aligned edges.
+
+    Around a pinched edge ``(a, b)`` each tet ``(a, b, c, d)`` loses the
+    sliver tet ``(a, b, n_c, n_d)`` (``n_c``, ``n_d`` the notches of its two
+    faces at the edge) to the edge's spindle piece. The spindle meets the rest
+    of the mesh only at ``a`` and ``b``, so pieces that touched each other
+    along the edge now touch at points at most, and the spindle's piece
+    surrounds the edge. Volumes change by ``eps^2`` of the tets around the
+    edge.
+
+    Returns triangles (s, 3), their pieces (s,) and the pieces of their back
+    sides (s,) (-1: none).
+    """
+    notch = {(f, e): i for f, e, i in zip(n_face.tolist(), n_edge.tolist(), nid.tolist())}
+    npos = {i: x for i, x in zip(nid.tolist(), _notches(V, topo, pinched)[2])}
+    rows: list[tuple] = []
+    for f, e, i in zip(n_face.tolist(), n_edge.tolist(), nid.tolist()):
+        if X2[f] < 0:  # the sliver's face on the cage boundary, oriented like the face
+            u, v = [x for x in topo.face_oriented[f].tolist() if x in topo.edges[e]]
+            oriented = topo.face_oriented[f].tolist()
+            if (oriented.index(u) + 1) % 3 != oriented.index(v):
+                u, v = v, u
+            rows.append((u, v, i, int(owner[np.searchsorted(pinched, e)]), -1))
+    for e, Q in zip(pinched.tolist(), owner.tolist()):
+        a, b = topo.edges[e].tolist()
+        for t in np.flatnonzero((topo.tet_edges == e).any(axis=1)).tolist():
+            X = int(tet_piece[t])
+            if X == Q:
+                continue
+            c, d = [int(x) for x in T[t] if x != a and x != b]
+            nc, nd = notch[(_face_id(topo, t, (a, b, c)), e)], notch[(_face_id(topo, t, (a, b, d)), e)]
+            xa, xb = V[a], V[b]
+            if np.linalg.det(np.stack([xb - xa, npos[nc] - xa, npos[nd] - xa])) > 0:
+                rows += [(b, nc, nd, Q, X), (a, nd, nc, Q, X)]
+            else:
+                rows += [(b, nd, nc, Q, X), (a, nc, nd, Q, X)]
+    out = np.array(rows, dtype=np.int64).reshape(-1, 5)
+    return out[:, :3], out[:, 3], out[:, 4]
+
+
+def _local_edge(face: np.ndarray, u: int, v: int) -> int:
+    """Index (into _FACE_EDGE_PAIRS) of edge (u, v) of a sorted face."""
+    i, j = sorted((int(np.flatnonzero(face == u)[0]), int(np.flatnonzero(face == v)[0])))
+    return {(0, 1): 0, (0, 2): 1, (1, 2): 2}[(i, j)]
+
+
+def _face_id(topo, t: int, vertices) -> int:
+    target = sorted(vertices)
+    for f in topo.tet_faces[t].tolist():
+        if topo.faces[f].tolist() == target:
+            return f
+    raise StageError("internal error: a tet does not contain its face", stage=STAGE)
+
+
+def _defect_edges(positions: np.ndarray, tris: np.ndarray, owner: np.ndarray) -> list:
+    """Global vertex pairs of region edges not shared by exactly two oppositely oriented faces.
+
+    Checked per region (``owner`` (s,) piece of each triangle), by vertex id and by position.
+    """
+    found = set()
+    if len(tris) == 0:
+        return []
+    _, weld = np.unique(positions, axis=0, return_inverse=True)
+    weld = weld.reshape(-1)
+    N = len(positions)
+    original = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    piece = np.tile(owner, 3)
+    for ids in (original, weld[original]):
+        lo, hi = ids.min(axis=1), ids.max(axis=1)
+        code = (piece * N + lo) * N + hi
+        forward = ids[:, 0] < ids[:, 1]
+        _, inverse, counts = np.unique(code, return_inverse=True, return_counts=True)
+        inverse = inverse.reshape(-1)
+        n_forward = np.bincount(inverse, weights=forward, minlength=len(counts))
+        bad = ((counts != 2) | (2 * n_forward != counts))[inverse] | (ids[:, 0] == ids[:, 1])
+        for row in np.flatnonzero(bad).tolist():
+            found.add(tuple(sorted(original[row].tolist())))
+    return sorted(found)
+
+
+def _region_defects(vertices: np.ndarray, faces: np.ndarray) -> int:
+    """Edges of a mesh that are not shared by exactly two oppositely oriented faces (by index or position)."""
+    if len(faces) == 0:
+        return 1
+    worst = 0
+    _, weld = np.unique(vertices, axis=0, return_inverse=True)
+    for F in (faces, weld.reshape(-1)[faces]):
+        directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+        m = int(directed.max()) + 1
+        code = directed[:, 0] * m + directed[:, 1]
+        reverse = directed[:, 1] * m + directed[:, 0]
+        ucode, counts = np.unique(code, return_counts=True)
+        pos = np.searchsorted(ucode, reverse)
+        pos = np.minimum(pos, len(ucode) - 1)
+        matched = ucode[pos] == reverse
+        bad = int((counts > 1).sum()) + int((~matched).sum()) + int((directed[:, 0] == directed[:, 1]).sum())
+        worst = max(worst, bad)
+    return worst

@@ -1,0 +1,204 @@
+"""Cheap checks of a mesh file before it is decoded: container sanity and triangle count.
+
+:func:`probe_triangles` reads only headers (GLB/glTF JSON, binary STL count,
+PLY and OFF headers) or scans bytes (OBJ ``f`` lines, ASCII STL facets), so an
+input over the triangle limit, truncated, or not of its extension's format is
+refused before memory is spent on its buffers.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+
+from fracture_cli.errors import InputError
+
+_GLB_MAGIC = b"glTF"
+_GLB_JSON = 0x4E4F534A
+_STL_HEADER = 84
+_STL_RECORD = 50
+_CHUNK = 1 << 24
+# glTF primitive modes: points, lines, line loop, line strip, triangles, strip, fan.
+_TRIANGLE_MODES = {4: "list", 5: "strip", 6: "fan"}
+
+
+def probe_triangles(path: str, file_type: str) -> int | None:
+    """Triangles a file declares (int), or None when the format has no cheap count.
+
+    Parameters
+    ----------
+    path : str
+        An existing, non-empty file.
+    file_type : str
+        One of ``obj``, ``ply``, ``stl``, ``off``, ``glb``, ``gltf``.
+
+    Returns
+    -------
+    int or None
+        For OBJ, the number of face lines (a lower bound: polygons give more
+        triangles); for the others the count in the file's header.
+
+    Raises
+    ------
+    InputError
+        Truncated GLB, a file that is not of its extension's format (GLB
+        without its magic, binary STL whose size does not match its count,
+        a PLY or OFF without its header), or a glTF whose external buffer is
+        missing.
+    """
+    probe = {"glb": _probe_glb, "gltf": _probe_gltf, "stl": _probe_stl, "obj": _probe_obj, "ply": _probe_ply,
+             "off": _probe_off}[file_type]
+    return probe(path)
+
+
+def _gltf_triangles(doc: dict) -> int:
+    """Triangles drawn by a glTF document's node hierarchy (every mesh instance counts)."""
+    accessors = doc.get("accessors", [])
+    meshes = doc.get("meshes", [])
+
+    def count(index) -> int:
+        try:
+            return int(accessors[index].get("count", 0))
+        except (IndexError, TypeError, AttributeError):
+            return 0
+
+    def mesh_triangles(m) -> int:
+        total = 0
+        try:
+            primitives = meshes[m].get("primitives", [])
+        except (IndexError, TypeError, AttributeError):
+            return 0
+        for prim in primitives:
+            mode = prim.get("mode", 4)
+            if mode not in _TRIANGLE_MODES:
+                continue
+            n = count(prim["indices"]) if "indices" in prim else count(prim.get("attributes", {}).get("POSITION"))
+            total += n // 3 if mode == 4 else max(n - 2, 0)
+        return total
+
+    nodes = [n for n in doc.get("nodes", []) if isinstance(n, dict) and "mesh" in n]
+    if nodes:
+        return sum(mesh_triangles(n["mesh"]) for n in nodes)
+    return sum(mesh_triangles(m) for m in range(len(meshes)))
+
+
+def _probe_glb(path: str) -> int:
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        head = fh.read(20)
+        if len(head) < 12 or head[:4] != _GLB_MAGIC:
+            raise InputError("is not a binary glTF (GLB) file: it does not start with 'glTF'", path=path)
+        version, length = struct.unpack_from("<II", head, 4)
+        if version != 2:
+            raise InputError(f"is a glTF {version}.x binary; only glTF 2.0 is supported", path=path)
+        if length > size:
+            raise InputError(f"is truncated: its header says {length:,} bytes, the file has {size:,}", path=path)
+        if len(head) < 20:
+            raise InputError("is truncated: no JSON chunk after the GLB header", path=path)
+        chunk_length, chunk_type = struct.unpack_from("<II", head, 12)
+        if chunk_type != _GLB_JSON or 20 + chunk_length > size:
+            raise InputError("is truncated or corrupt: its first chunk is not a complete JSON chunk", path=path)
+        try:
+            doc = json.loads(fh.read(chunk_length))
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise InputError(f"has a corrupt JSON chunk ({exc})", path=path) from exc
+    if not isinstance(doc, dict):
+        raise InputError("has a corrupt JSON chunk (not an object)", path=path)
+    binary = size - (20 + chunk_length + (-chunk_length % 4))
+    needed = sum(int(b.get("byteLength", 0)) for b in doc.get("buffers", [])[:1] if "uri" not in b)
+    if needed and binary - 8 < needed:
+        raise InputError(f"is truncated: its binary chunk needs {needed:,} bytes, the file has {max(binary - 8, 0):,} "
+                         "after the JSON", path=path)
+    return _gltf_triangles(doc)
+
+
+def _probe_gltf(path: str) -> int:
+    try:
+        with open(path, "rb") as fh:
+            doc = json.loads(fh.read())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"is not valid glTF JSON ({str(exc)[:120]})", path=path) from exc
+    if not isinstance(doc, dict):
+        raise InputError("is not valid glTF JSON (not an object)", path=path)
+    folder = os.path.dirname(os.path.abspath(path))
+    for buffer in doc.get("buffers", []):
+        uri = buffer.get("uri", "") if isinstance(buffer, dict) else ""
+        if uri and not uri.startswith("data:"):
+            from urllib.parse import unquote
+
+            if not os.path.isfile(os.path.join(folder, unquote(uri))):
+                raise InputError(f"references the buffer file '{uri}', which is missing (keep it beside the .gltf, "
+                                 "or export a single .glb)", path=path)
+    return _gltf_triangles(doc)
+
+
+def _probe_stl(path: str) -> int:
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        head = fh.read(_STL_HEADER)
+    if len(head) == _STL_HEADER:
+        declared = struct.unpack_from("<I", head, 80)[0]
+        if size == _STL_HEADER + _STL_RECORD * declared:
+            return declared  # binary, even when its header starts with 'solid'
+    else:
+        declared = None
+    if head.lstrip()[:5].lower() == b"solid":
+        return _count_bytes(path, b"endfacet")
+    expected = f" ({_STL_HEADER + _STL_RECORD * declared:,} bytes)" if declared is not None else ""
+    raise InputError(
+        f"is not a valid STL file: it does not start with 'solid' (ASCII STL), and its size ({size:,} bytes) does "
+        "not match the triangle count in its binary header"
+        + (f" ({declared:,} triangles{expected})" if declared is not None else ""), path=path)
+
+
+def _count_bytes(path: str, needle: bytes, line_start: bool = False) -> int:
+    """Occurrences of ``needle`` in the file (at line starts only if ``line_start``), read in 16 MB chunks."""
+    total = 0
+    pattern = b"\n" + needle if line_start else needle
+    carry = b"\n" if line_start else b""
+    with open(path, "rb") as fh:
+        while True:
+            block = fh.read(_CHUNK)
+            if not block:
+                break
+            data = carry + block
+            total += data.count(pattern)
+            carry = data[-(len(pattern) - 1):] if len(pattern) > 1 else b""
+    return total
+
+
+def _probe_obj(path: str) -> int:
+    return _count_bytes(path, b"f ", line_start=True)
+
+
+def _header_lines(path: str, limit: int = 64 * 1024) -> list[str]:
+    with open(path, "rb") as fh:
+        head = fh.read(limit)
+    return head.decode("latin-1").splitlines()
+
+
+def _probe_ply(path: str) -> int:
+    lines = _header_lines(path)
+    if not lines or lines[0].strip() != "ply":
+        raise InputError("is not a PLY file: it does not start with 'ply'", path=path)
+    for line in lines[1:]:
+        words = line.split()
+        if words[:2] == ["element", "face"] and len(words) == 3 and words[2].isdigit():
+            return int(words[2])
+        if words[:1] == ["end_header"]:
+            break
+    return 0
+
+
+def _probe_off(path: str) -> int:
+    words = []
+    for line in _header_lines(path):
+        words += line.split("#", 1)[0].split()
+        if len(words) >= 4:
+            break
+    if not words or not words[0].endswith("OFF"):
+        raise InputError("is not an OFF file: it does not start with 'OFF'", path=path)
+    if len(words) >= 3 and words[2].isdigit():
+        return int(words[2])
+    return 0

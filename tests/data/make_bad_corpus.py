@@ -1,0 +1,330 @@
+"""Write the malformed and awkward input corpus in tests/data/bad/ (run from anywhere).
+
+Each file is small (a few KB) and deterministic; ``expected.toml`` beside them
+says what ``fracture bake`` must do with each: bake it into valid fragments, or
+exit with code 1 and a one-line message containing a given substring.
+
+    python tests/data/make_bad_corpus.py
+
+The files are committed; re-run this script after changing it and commit the
+result. tests/test_bad_inputs.py checks every entry of the manifest.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import sys
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+OUT = os.path.join(HERE, "bad")
+sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
+
+from fracture_cli.io.gltf import Primitive, glb_bytes  # noqa: E402
+from fracture_cli.types import Material  # noqa: E402
+
+# ----------------------------------------------------------------------------
+# Shapes (world units, outward winding)
+
+
+def box(extents=(1.0, 1.0, 1.0), centre=(0.0, 0.0, 0.0)):
+    """8 vertices, 12 outward triangles."""
+    e = np.asarray(extents, dtype=np.float64) / 2
+    c = np.asarray(centre, dtype=np.float64)
+    V = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.float64) * e + c
+    F = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], dtype=np.int64)
+    return V, F
+
+
+def seamed_box(extents=(1.0, 1.0, 1.0), centre=(0.0, 0.0, 0.0)):
+    """24 vertices (4 per side, split at every edge like a UV-unwrapped cube), UVs, normals."""
+    V8, _ = box(extents, centre)
+    sides = [  # corner ids (counter-clockwise seen from outside), outward normal
+        ([0, 1, 3, 2], (-1, 0, 0)), ([4, 6, 7, 5], (1, 0, 0)), ([0, 4, 5, 1], (0, -1, 0)),
+        ([2, 3, 7, 6], (0, 1, 0)), ([0, 2, 6, 4], (0, 0, -1)), ([1, 5, 7, 3], (0, 0, 1)),
+    ]
+    V, N, UV, F = [], [], [], []
+    for k, (quad, normal) in enumerate(sides):
+        base = 4 * k
+        V.extend(V8[quad])
+        N.extend([normal] * 4)
+        u0 = (k % 3) / 3.0
+        v0 = (k // 3) / 2.0
+        UV.extend([[u0, v0], [u0 + 1 / 3, v0], [u0 + 1 / 3, v0 + 0.5], [u0, v0 + 0.5]])
+        F.extend([[base, base + 1, base + 2], [base, base + 2, base + 3]])
+    return np.array(V), np.array(F), np.array(UV, dtype=np.float64), np.array(N, dtype=np.float64)
+
+
+def icosphere(subdivisions=2, radius=1.0, centre=(0.0, 0.0, 0.0)):
+    import trimesh
+
+    s = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    return np.asarray(s.vertices) + np.asarray(centre), np.asarray(s.faces, dtype=np.int64)
+
+
+def concat(*parts):
+    V, F, n = [], [], 0
+    for v, f in parts:
+        V.append(v)
+        F.append(f + n)
+        n += len(v)
+    return np.vstack(V), np.vstack(F)
+
+
+# ----------------------------------------------------------------------------
+# Writers (hand-rolled so the bytes are exactly what we mean)
+
+
+def fmt(x: float) -> str:
+    if not np.isfinite(x):
+        return "nan" if np.isnan(x) else ("inf" if x > 0 else "-inf")
+    return repr(float(x))
+
+
+def obj_text(V, F, uvs=None, normals=None, header="") -> str:
+    lines = [f"# {header}"] if header else []
+    lines += ["v " + " ".join(fmt(c) for c in v) for v in V]
+    if uvs is not None:
+        lines += ["vt " + " ".join(fmt(c) for c in t) for t in uvs]
+    if normals is not None:
+        lines += ["vn " + " ".join(fmt(c) for c in n) for n in normals]
+    for f in np.asarray(F) + 1:
+        if uvs is not None and normals is not None:
+            lines.append("f " + " ".join(f"{i}/{i}/{i}" for i in f))
+        elif uvs is not None:
+            lines.append("f " + " ".join(f"{i}/{i}" for i in f))
+        else:
+            lines.append("f " + " ".join(str(i) for i in f))
+    return "\n".join(lines) + "\n"
+
+
+def ply_text(V, F=None, header="") -> str:
+    F = np.zeros((0, 3), dtype=np.int64) if F is None else F
+    lines = ["ply", "format ascii 1.0"] + ([f"comment {header}"] if header else []) + [
+        f"element vertex {len(V)}", "property float x", "property float y", "property float z"]
+    if len(F):
+        lines += [f"element face {len(F)}", "property list uchar int vertex_indices"]
+    lines.append("end_header")
+    lines += [" ".join(fmt(c) for c in v) for v in V]
+    lines += ["3 " + " ".join(str(i) for i in f) for f in F]
+    return "\n".join(lines) + "\n"
+
+
+def off_text(V, F) -> str:
+    lines = ["OFF", f"{len(V)} {len(F)} 0"]
+    lines += [" ".join(fmt(c) for c in v) for v in V]
+    lines += ["3 " + " ".join(str(i) for i in f) for f in F]
+    return "\n".join(lines) + "\n"
+
+
+def stl_binary(V, F, count=None) -> bytes:
+    tris = np.asarray(V, dtype=np.float64)[np.asarray(F)]
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    rec = np.zeros(len(F), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+    rec["n"] = n
+    rec["v"] = tris
+    header = b"fracture bad-input corpus".ljust(80, b" ")
+    return header + struct.pack("<I", len(F) if count is None else count) + rec.tobytes()
+
+
+def glb(primitive_sets, materials) -> bytes:
+    """primitive_sets: list of (node name, [(V, F, normals or None, uvs or None, material)])."""
+    meshes = []
+    for name, prims in primitive_sets:
+        out = []
+        for V, F, N, UV, mat in prims:
+            if N is None:
+                import trimesh
+
+                N = np.asarray(trimesh.Trimesh(V, F, process=False).vertex_normals)
+            out.append(Primitive(positions=np.asarray(V, dtype=np.float64), normals=np.asarray(N, dtype=np.float64),
+                                 uvs=UV, indices=np.asarray(F, dtype=np.int64), material=mat))
+        meshes.append((name, out))
+    return glb_bytes(meshes, tuple(materials))
+
+
+# ----------------------------------------------------------------------------
+# The corpus
+
+CASES: list[dict] = []
+
+
+def case(file: str, data, *, outcome: str, why: str, message: str | None = None, volume: float | None = None,
+         overrides: tuple[str, ...] = ()):
+    """Register one corpus file: its bytes (or text) and what a bake must do with it."""
+    CASES.append(dict(file=file, data=data, outcome=outcome, why=why, message=message, volume=volume,
+                      overrides=list(overrides)))
+
+
+def build() -> None:
+    V, F = box()
+    SV, SF = icosphere(2)
+    sphere_volume = None  # measured from the mesh (an icosphere is smaller than the sphere)
+    import trimesh
+
+    sphere_volume = float(trimesh.Trimesh(SV, SF, process=False).volume)
+
+    # --- unreadable files ---------------------------------------------------
+    case("empty.obj", b"", outcome="error", message="file is empty", why="0-byte OBJ")
+    case("zero_byte.glb", b"", outcome="error", message="file is empty", why="0-byte GLB")
+    whole = glb([("box", [(V, F, None, None, 0)])], [Material("stone")])
+    case("truncated.glb", whole[: len(whole) * 2 // 3], outcome="error", message="truncated",
+         why="GLB cut off part-way through its binary chunk")
+    case("not_a_mesh.stl", "This is a README that was renamed to .stl by mistake.\nIt has no triangles.\n",
+         outcome="error", message="could not be read", why="text file with a mesh extension")
+    case("text_as.glb", "{\"hello\": \"this is JSON, not a binary glTF\"}\n", outcome="error",
+         message="not a binary glTF", why="text file with a .glb extension")
+    case("point_cloud.ply", ply_text(V), outcome="error", message="no triangles", why="vertices only, no faces")
+    case("bad_index.obj", obj_text(V, np.vstack([F, [[0, 1, 40]]])), outcome="error",
+         message="missing vertices", why="a face references vertex 41 of 8")
+    case("missing_buffer.gltf", json.dumps({
+        "asset": {"version": "2.0"},
+        "buffers": [{"uri": "missing_buffer.bin", "byteLength": 132}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 96},
+                        {"buffer": 0, "byteOffset": 96, "byteLength": 36}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 8, "type": "VEC3",
+                       "min": [-1, -1, -1], "max": [1, 1, 1]},
+                      {"bufferView": 1, "componentType": 5125, "count": 9, "type": "SCALAR"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "nodes": [{"mesh": 0}], "scenes": [{"nodes": [0]}], "scene": 0,
+    }), outcome="error", message="missing_buffer.bin", why="glTF whose .bin buffer file is missing")
+    case("stl_count_lies.stl", stl_binary(V, F, count=2_000_000_000), outcome="error",
+         message="more than the limit", why="binary STL header claims 2e9 triangles (refused before reading)")
+    case("too_many_triangles.obj", obj_text(SV, SF), outcome="error", message="more than the limit",
+         overrides=("load.max_triangles=100",), why="320 triangles with load.max_triangles=100")
+
+    # --- coordinates ----------------------------------------------------------
+    Vn = V.copy()
+    Vn[3, 1] = np.nan
+    case("nan_coords.obj", obj_text(Vn, F), outcome="error", message="non-finite", why="one NaN coordinate")
+    Vi = V.copy()
+    Vi[5, 2] = np.inf
+    case("inf_coords.ply", ply_text(Vi, F), outcome="error", message="non-finite", why="one inf coordinate")
+
+    # --- no inside ------------------------------------------------------------
+    case("single_triangle.obj", obj_text(V[[0, 1, 3]], [[0, 1, 2]]), outcome="error", message="flat",
+         why="one triangle has no inside")
+    case("flat_quad.obj", obj_text(V[[0, 1, 3, 2]], [[0, 1, 2], [0, 2, 3]]), outcome="error", message="flat",
+         why="a zero-volume quad has no inside")
+    case("all_degenerate.obj", obj_text(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0.0]]),
+                                        [[0, 1, 2], [0, 0, 3], [1, 2, 0]]),
+         outcome="error", message="no faces are left", why="every triangle has zero area")
+
+    # --- repairable -----------------------------------------------------------
+    case("duplicated_faces.obj", obj_text(V, np.vstack([F, F[:5], F[2:4]])), outcome="ok", volume=1.0,
+         why="7 faces stored twice")
+    Vd = np.vstack([V, [[0.5, 0.5, 0.5], [0.5, 0.5, 0.5]]])
+    Fd = np.vstack([F, [[0, 0, 1], [8, 9, 8], [2, 2, 2]]])
+    case("degenerate_triangles.obj", obj_text(Vd, Fd), outcome="ok", volume=1.0,
+         why="zero-area triangles (repeated corners) mixed into a closed box")
+    case("inverted_normals.obj", obj_text(SV, SF[:, ::-1]), outcome="ok", volume=sphere_volume,
+         why="every triangle wound inwards")
+    Fo = F[2:]  # the -x side removed
+    case("open_box_side.obj", obj_text(V, Fo), outcome="ok",
+         why="box with one side missing (large hole: auto shells it into a thin-walled cup)")
+    keep = np.ones(len(SF), dtype=bool)
+    keep[0] = False
+    case("sphere_small_hole.obj", obj_text(SV, SF[keep]), outcome="ok", volume=sphere_volume,
+         why="sphere with one triangle missing (small hole: auto fills it)")
+    BV, BF, BUV, BN = seamed_box((2.0, 1.0, 0.5))
+    case("uv_seams.obj", obj_text(BV, BF, BUV, BN), outcome="ok", volume=1.0,
+         why="box split at UV seams (24 vertices, 8 positions)")
+    case("uv_no_normals.obj", obj_text(BV, BF, BUV), outcome="ok", volume=1.0,
+         why="OBJ with UVs but no normals")
+    A = box((1, 1, 1))
+    B = box((1, 1, 1), (0.5, 0.25, 0.0))
+    case("interpenetrating_boxes.obj", obj_text(*concat(A, B)), outcome="ok", volume=2 - 0.5 * 0.75,
+         why="two closed boxes overlapping (self-intersecting as one mesh)")
+    shells = concat(box((1, 1, 1)), box((1, 1, 1), (3, 0, 0)), icosphere(1, 0.5, (0, 3, 0)))
+    shell_volume = 2.0 + float(trimesh.Trimesh(*icosphere(1, 0.5), process=False).volume)
+    case("disconnected_shells.obj", obj_text(*shells), outcome="ok", volume=shell_volume,
+         why="three separate closed bodies")
+    inner = box((1, 1, 1))
+    case("nested_cavity.obj", obj_text(*concat(box((2, 2, 2)), (inner[0], inner[1][:, ::-1]))), outcome="ok",
+         volume=7.0, why="closed box with an inward-wound box inside: a cavity")
+    case("nested_solid.obj", obj_text(*concat(box((2, 2, 2)), inner)), outcome="ok", volume=8.0,
+         why="closed box with an outward-wound box inside (internal geometry, same winding): solid")
+    quad = np.array([[-0.4, -0.4, 0.1], [0.4, -0.4, 0.1], [0.4, 0.4, 0.1], [-0.4, 0.4, 0.1]])
+    case("internal_faces.obj", obj_text(*concat((V, F), (quad, np.array([[0, 1, 2], [0, 2, 3]])))),
+         outcome="ok", volume=1.0, why="closed box with a loose quad floating inside it")
+    # Two unit cells side by side sharing their middle wall: the wall's edges have three faces.
+    P = np.array([[x, y, z] for x in (0, 1, 2) for y in (0, 1) for z in (0, 1)], dtype=np.float64)
+
+    def vid(x, y, z):
+        return x * 4 + y * 2 + z
+
+    def quad_faces(a, b, c, d):
+        return [[a, b, c], [a, c, d]]
+
+    walls = []
+    walls += quad_faces(vid(0, 0, 0), vid(0, 0, 1), vid(0, 1, 1), vid(0, 1, 0))  # -x
+    walls += quad_faces(vid(2, 0, 0), vid(2, 1, 0), vid(2, 1, 1), vid(2, 0, 1))  # +x
+    walls += quad_faces(vid(1, 0, 0), vid(1, 1, 0), vid(1, 1, 1), vid(1, 0, 1))  # middle wall
+    for x in (0, 1):
+        walls += quad_faces(vid(x, 0, 0), vid(x + 1, 0, 0), vid(x + 1, 0, 1), vid(x, 0, 1))  # -y
+        walls += quad_faces(vid(x, 1, 0), vid(x, 1, 1), vid(x + 1, 1, 1), vid(x + 1, 1, 0))  # +y
+        walls += quad_faces(vid(x, 0, 0), vid(x, 1, 0), vid(x + 1, 1, 0), vid(x + 1, 0, 0))  # -z
+        walls += quad_faces(vid(x, 0, 1), vid(x + 1, 0, 1), vid(x + 1, 1, 1), vid(x, 1, 1))  # +z
+    case("internal_wall.obj", obj_text(P, np.array(walls)), outcome="ok", volume=2.0,
+         why="two cells sharing an internal wall (its edges have three faces), as voxel/CAD exports do")
+    C = box((1, 1, 1), (1, 1, 0))
+    case("nonmanifold_edge4.obj", obj_text(*concat((V, F), C)), outcome="ok", volume=2.0,
+         why="two closed boxes touching along one edge: welded, that edge has four triangles")
+    case("millimetres.stl", stl_binary(*icosphere(2, 250.0, (1200.0, -800.0, 40.0))), outcome="ok",
+         volume=sphere_volume * 250.0**3, why="binary STL in millimetres (coordinates around 1e3)")
+    case("micro.off", off_text(V * 2e-3 + 1e-3, F), outcome="ok", volume=8e-9,
+         why="OFF around 1e-3 units")
+    OV, OF = icosphere(2, 2.0)
+    case("offset_1e6.glb", glb([("far", [(OV + np.array([1.0e6, -2.0e6, 0.5e6]), OF, None, None, 0)])],
+                               [Material("stone")]),
+         outcome="ok", why="float32 GLB 1e6 from the origin: positions quantized to 1/16 .. 1/8 unit")
+    TV, TF = icosphere(1, 0.5, (0, 0, 0))
+    top = TV[:, 2] >= 0
+    face_top = top[TF].all(axis=1)
+    case("two_materials.glb", glb([("jar", [(TV, TF[face_top], None, None, 0),
+                                           (TV, TF[~face_top], None, None, 1)])],
+                                  [Material("lid", (0.8, 0.2, 0.2, 1.0)), Material("body", (0.2, 0.2, 0.8, 1.0))]),
+         outcome="ok", volume=float(trimesh.Trimesh(TV, TF, process=False).volume),
+         why="one mesh, two primitives with two materials (the primitives' vertices are split)")
+
+
+def write_toml(cases: list[dict]) -> str:
+    lines = ["# Expected outcome of `fracture bake` on each file (written by make_bad_corpus.py).",
+             "# outcome = \"ok\": bakes into closed fragments; volume (input units) when known.",
+             "# outcome = \"error\": exit code 1, one line naming the file and containing `message`.", ""]
+    for c in cases:
+        lines.append("[[case]]")
+        lines.append(f"file = {json.dumps(c['file'])}")
+        lines.append(f"outcome = {json.dumps(c['outcome'])}")
+        if c["message"]:
+            lines.append(f"message = {json.dumps(c['message'])}")
+        if c["volume"] is not None:
+            lines.append(f"volume = {c['volume']!r}")
+        if c["overrides"]:
+            lines.append("overrides = [" + ", ".join(json.dumps(o) for o in c["overrides"]) + "]")
+        lines.append(f"why = {json.dumps(c['why'])}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    build()
+    os.makedirs(OUT, exist_ok=True)
+    total = 0
+    for c in CASES:
+        data = c["data"].encode() if isinstance(c["data"], str) else c["data"]
+        with open(os.path.join(OUT, c["file"]), "wb") as fh:
+            fh.write(data)
+        total += len(data)
+    with open(os.path.join(OUT, "expected.toml"), "w") as fh:
+        fh.write(write_toml(CASES))
+    print(f"wrote {len(CASES)} files ({total / 1024:.1f} KiB) and expected.toml to {OUT}")
+
+
+if __name__ == "__main__":
+    main()

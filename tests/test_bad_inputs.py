@@ -1,0 +1,146 @@
+"""Every file of the malformed-input corpus (tests/data/bad/) gets its expected outcome.
+
+``expected.toml`` lists, per file, either a successful bake whose fragments
+are valid (checked here independently of the bake's own report: closed,
+volumes summing to the input's, outer faces on the input surface), or exit
+code 1 with one error line that names the file and says what is wrong. No
+input may crash with a traceback or leave files behind.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fracture_cli.cli import cli
+from fracture_cli.io.gltf import read_glb
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+CORPUS = os.path.join(HERE, "data", "bad")
+with open(os.path.join(CORPUS, "expected.toml"), "rb") as _fh:
+    CASES = tomllib.load(_fh)["case"]
+SMALL = ["--set", "cage.target_faces=500", "--set", "modes.num_modes=3"]
+
+
+def bake(path: str, out: str, overrides=()):
+    args = ["bake", path, "-o", out, *SMALL]
+    for o in overrides:
+        args += ["--set", o]
+    return CliRunner().invoke(cli, args)
+
+
+def files_under(folder: str) -> list[str]:
+    if not os.path.exists(folder):
+        return []
+    return [os.path.join(d, f) for d, _, fs in os.walk(folder) for f in fs]
+
+
+def raw_triangles(path: str) -> np.ndarray:
+    """The input's triangles (k, 3, 3) in its own units, read with trimesh (not our loader)."""
+    import trimesh
+
+    scene = trimesh.load_scene(path, process=False)
+    tris = [g.triangles for g in scene.dump()]
+    return np.concatenate(tris).astype(np.float64)
+
+
+def distance_to_triangles(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    from fracture_cli._open3d import open3d
+
+    o3d = open3d()
+    origin = tris.reshape(-1, 3).mean(axis=0)  # float32 ray scene: stay near the origin
+    scene = o3d.t.geometry.RaycastingScene()
+    V = (tris.reshape(-1, 3) - origin).astype(np.float32)
+    scene.add_triangles(o3d.core.Tensor(V), o3d.core.Tensor(np.arange(len(V), dtype=np.uint32).reshape(-1, 3)))
+    q = o3d.core.Tensor((points - origin).astype(np.float32))
+    return scene.compute_distance(q).numpy().astype(np.float64)
+
+
+def closed_and_volume(V: np.ndarray, F: np.ndarray) -> tuple[bool, float]:
+    """Closed when welded by position (every edge used equally often in both directions); signed volume."""
+    _, pos = np.unique(V, axis=0, return_inverse=True)
+    W = pos.reshape(-1)[F]
+    directed = np.concatenate([W[:, [0, 1]], W[:, [1, 2]], W[:, [2, 0]]])
+    key = np.sort(directed, axis=1)
+    forward = directed[:, 0] < directed[:, 1]
+    _, eid = np.unique(key, axis=0, return_inverse=True)
+    eid = eid.reshape(-1)
+    balance = np.bincount(eid, weights=np.where(forward, 1.0, -1.0))
+    c = V.mean(axis=0)
+    a, b, d = V[F[:, 0]] - c, V[F[:, 1]] - c, V[F[:, 2]] - c
+    return bool(np.all(balance == 0)), float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum() / 6.0)
+
+
+def test_corpus_is_complete_and_small():
+    names = {c["file"] for c in CASES}
+    assert len(CASES) >= 20 and len(names) == len(CASES)
+    on_disk = set(os.listdir(CORPUS)) - {"expected.toml"}
+    assert names <= on_disk, names - on_disk
+    assert sum(os.path.getsize(os.path.join(CORPUS, f)) for f in names) < 2 * 1024 * 1024
+    assert {c["outcome"] for c in CASES} == {"ok", "error"}
+
+
+@pytest.mark.parametrize("entry", CASES, ids=[c["file"] for c in CASES])
+def test_corpus_outcome(entry, tmp_path):
+    path = os.path.join(CORPUS, entry["file"])
+    out = str(tmp_path / "out")
+    result = bake(path, out, entry.get("overrides", ()))
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    output = result.output + (result.stderr if result.stderr_bytes is not None else "")
+    assert "Traceback" not in output
+    assert "internal error" not in output, output
+    stem = os.path.splitext(entry["file"])[0]
+
+    if entry["outcome"] == "error":
+        assert result.exit_code == 1, output
+        errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+        assert len(errors) == 1, result.stderr
+        assert entry["file"] in errors[0], errors[0]  # names the file
+        assert entry["message"] in errors[0], errors[0]
+        assert files_under(out) == [], "a failed bake left files behind"
+        return
+
+    assert result.exit_code == 0, output
+    for suffix in (".glb", ".fracture.json", ".fracture.bin", ".report.json"):
+        assert os.path.exists(os.path.join(out, stem + suffix))
+    assert sorted(os.path.basename(f) for f in files_under(out)) == sorted(
+        stem + s for s in (".glb", ".fracture.json", ".fracture.bin", ".report.json"))
+    import json
+
+    with open(os.path.join(out, stem + ".report.json")) as fh:
+        report = json.load(fh)
+    checks = report["checks"]
+    assert checks["watertight"], checks
+    assert checks["volume_error"] < 1e-3, checks
+    assert checks["max_outer_distance"] < 1e-4, checks
+
+    # Independent checks on the written GLB (float32, input units).
+    meshes, material_names = read_glb(os.path.join(out, stem + ".glb"))
+    assert len(meshes) == report["counts"]["fragments"] >= 1
+    interior = material_names.index("interior")
+    tris = raw_triangles(path)
+    diagonal = float(np.linalg.norm(tris.reshape(-1, 3).max(axis=0) - tris.reshape(-1, 3).min(axis=0)))
+    total = 0.0
+    outer_points = []
+    for mesh in meshes:
+        V = np.concatenate([p.positions for p in mesh.primitives])
+        offsets = np.cumsum([0] + [len(p.positions) for p in mesh.primitives])
+        F = np.concatenate([p.indices + o for p, o in zip(mesh.primitives, offsets)])
+        closed, volume = closed_and_volume(V, F)
+        assert closed, f"{mesh.name} is not closed"
+        assert volume > 0
+        total += volume
+        outer_points += [p.positions for p in mesh.primitives if p.material != interior]
+    expected_volume = entry.get("volume", report["checks"]["input_volume"])
+    # float32 output positions: volumes good to ~1e-6 relative near the origin.
+    tolerance = 1e-3 if entry["file"] != "offset_1e6.glb" else 5e-2
+    assert total == pytest.approx(expected_volume, rel=tolerance)
+    assert checks["input_volume"] == pytest.approx(expected_volume, rel=tolerance)
+    if outer_points:
+        d = distance_to_triangles(np.concatenate(outer_points), tris)
+        limit = 1e-5 if entry["file"] != "offset_1e6.glb" else 2e-2
+        assert d.max() / diagonal < limit, d.max() / diagonal
