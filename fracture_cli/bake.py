@@ -87,7 +87,7 @@ def _staging_dir(out_dir: str, stem: str):
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
+def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = None) -> BakeResult:
     """Run the whole pipeline on one asset and write its outputs.
 
     Parameters
@@ -98,6 +98,9 @@ def bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
         Output folder; created if missing.
     recipe : Recipe
         The destructible material: options of every stage.
+    cache_dir : str, optional (default None)
+        Folder of a :class:`~fracture_cli.cache.StageCache`: the cage, tets and
+        modes are reused when nothing they depend on changed.
 
     Returns
     -------
@@ -111,14 +114,14 @@ def bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
         batch log says which asset failed.
     """
     try:
-        return _bake(input_path, out_dir, recipe)
+        return _bake(input_path, out_dir, recipe, cache_dir)
     except FractureError as exc:
         if exc.path is None:
             exc.path = input_path
         raise
 
 
-def _bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
+def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) -> BakeResult:
     """Run the whole pipeline on one asset and write its outputs (errors not yet labelled with the file).
 
     Parameters
@@ -129,6 +132,9 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
         Output folder; created if missing.
     recipe : Recipe
         The destructible material: options of every stage.
+    cache_dir : str, optional (default None)
+        Folder of a :class:`~fracture_cli.cache.StageCache`: the cage, tets and
+        modes are reused when nothing they depend on changed.
 
     Returns
     -------
@@ -171,14 +177,29 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
     with timed("repair"):
         # Cage and fragments both use the repaired solid, so they agree on what is inside.
         surface = repair(loaded, recipe["repair"])
+    stage_cache = None
+    if cache_dir is not None:
+        from fracture_cli.cache import StageCache, cache_key
+
+        stage_cache = StageCache(cache_dir)
+        input_hash = file_sha256(input_path)
+        cage_key = cache_key("cage", input_hash, recipe["load"], recipe["repair"], recipe["cage"], recipe["tetra"])
+        modes_key = cache_key("modes", cage_key, recipe["material"], recipe["modes"])
+    cached = stage_cache.get_cage(cage_key, surface.normalization) if stage_cache else None
     with timed("cage"):
-        cage_result = cage(surface, recipe["cage"])
+        cage_result = cached[0] if cached else cage(surface, recipe["cage"])
     with timed("tetra"):
-        tet_mesh = tetra(cage_result, recipe["tetra"])
+        tet_mesh = cached[1] if cached else tetra(cage_result, recipe["tetra"])
+    if stage_cache and not cached:
+        stage_cache.put_cage(cage_key, cage_result, tet_mesh)
     with timed("material"):
         eta = material(tet_mesh, surface, recipe["material"])
     with timed("modes"):
-        modes = solve_modes(tet_mesh, recipe["modes"], eta=eta)
+        modes = stage_cache.get_modes(modes_key) if stage_cache else None
+        if modes is None:
+            modes = solve_modes(tet_mesh, recipe["modes"], eta=eta)
+            if stage_cache:
+                stage_cache.put_modes(modes_key, modes)
     with timed("pieces"):
         pieces = atomic_pieces(tet_mesh, modes, recipe["pieces"])
     with timed("smooth"):
@@ -223,6 +244,8 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe) -> BakeResult:
         write_fragments_glb(os.path.join(staging, f"{stem}.glb"), frags)
         write_runtime(runtime_data, os.path.join(staging, f"{stem}.fracture.json"))
         report["seconds"] = dict(seconds)
+        if stage_cache:
+            report["cache"] = dict(stage_cache.events)
         with open(os.path.join(staging, f"{stem}.report.json"), "w") as fh:
             json.dump(report, fh, indent=2, sort_keys=True)
             fh.write("\n")

@@ -482,10 +482,12 @@ def export_cmd(out_dir, **kwargs):
               help="Override one recipe parameter, e.g. --set modes.num_modes=16 (repeatable).")
 @click.option("--json", "as_json", is_flag=True, help="Print the bake report(s) as JSON on stdout.")
 @click.option("--preview", is_flag=True, help="Also write <stem>.preview.png (input, fragments, modes, an impact).")
+@click.option("--cache", "cache_dir", type=click.Path(file_okay=False, path_type=str), default=None,
+              help="Reuse cage, tets and modes from this folder when nothing they depend on changed.")
 @click.option("-q", "--quiet", is_flag=True, help="Print only errors.")
 @click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
 @click.pass_context
-def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, quiet, debug):
+def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, cache_dir, quiet, debug):
     """Run the whole pipeline on INPUTS with a recipe, writing into OUT.
 
     For each input <stem>: <stem>.glb (fragments), <stem>.fracture.json/.bin
@@ -505,7 +507,7 @@ def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, qui
         recipe = load_recipe(recipe_name, overrides)
         reports = []
         for path in inputs:
-            result = bake(path, out_dir, recipe)
+            result = bake(path, out_dir, recipe, cache_dir=cache_dir)
             reports.append(result.report)
             if preview:
                 import os

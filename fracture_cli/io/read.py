@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli.errors import InputError
+from fracture_cli.io.probe import probe_triangles
 from fracture_cli.options import option
 from fracture_cli.types import Material, Normalization, SurfaceMesh
 
@@ -56,6 +57,28 @@ def _material_from_trimesh(visual, fallback_name: str) -> Material:
     else:
         rgba = (0.8, 0.8, 0.8, 1.0)
     return Material(name=str(name), base_color=rgba, source=mat)
+
+
+# Warn when 32-bit coordinates are coarser than this fraction of the model's bounding-box diagonal.
+_PRECISION_WARNING = 1e-5
+
+
+def _float32_precision(v: np.ndarray) -> tuple[float, float, float]:
+    """(step / bbox diagonal, step, largest |coordinate|) if all of ``v`` are float32 values, else zeros.
+
+    Positions far from the origin in a 32-bit file (GLB, binary STL, or text
+    written from float32) keep only 24 bits: at 1e6 the step is 1/16 unit.
+    The loader works in float64 from here on, but cannot restore what the
+    file lost.
+    """
+    if len(v) == 0:
+        return (0.0, 0.0, 0.0)
+    largest = float(np.abs(v).max())
+    if largest == 0.0 or not np.array_equal(v.astype(np.float32).astype(np.float64), v):
+        return (0.0, 0.0, 0.0)
+    step = float(np.spacing(np.float32(largest)))
+    diagonal = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+    return (step / diagonal if diagonal > 0 else np.inf, step, largest)
 
 
 def smooth_normals_welded(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -118,10 +141,20 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
     if os.path.getsize(path) == 0:
         raise InputError("file is empty (0 bytes)", path=path)
 
+    # Refuse what is over the limit, truncated or mislabelled before decoding anything.
+    declared = probe_triangles(path, READERS[ext])
+    if declared is not None and declared > options.max_triangles:
+        raise InputError(
+            f"has {declared:,} {'face lines' if ext == '.obj' else 'triangles'}, more than the limit of "
+            f"{options.max_triangles:,} (raise it with --max-triangles or --set load.max_triangles=N, or decimate "
+            "the asset first)", path=path)
+
     try:
         scene = trimesh.load_scene(path, file_type=READERS[ext], process=False)
     except Exception as exc:  # trimesh raises many types; all mean "unreadable"
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if isinstance(exc, IndexError):
+            raise InputError(f"has faces that reference missing vertices ({reason[:200]})", path=path) from exc
         raise InputError(f"could not be read as {READERS[ext].upper()}: {reason[:200]}", path=path) from exc
 
     parts = []
@@ -137,7 +170,7 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
     if total > options.max_triangles:
         raise InputError(
             f"has {total:,} triangles, more than the limit of {options.max_triangles:,} "
-            "(raise it with --max-triangles, or decimate the asset first)",
+            "(raise it with --max-triangles or --set load.max_triangles=N, or decimate the asset first)",
             path=path,
         )
 
@@ -148,10 +181,12 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
     any_normals = all("vertex_normals" in g._cache.cache for _, _, g in parts)
     any_colors = any(getattr(g.visual, "kind", None) == "vertex" for _, _, g in parts)
     offset = 0
+    worst_precision = (0.0, 0.0, 0.0)  # (relative step, step, largest coordinate)
     for node, transform, geom in parts:
         v = np.asarray(geom.vertices, dtype=np.float64)
         if not np.all(np.isfinite(v)):
             raise InputError("has non-finite vertex coordinates (NaN or inf)", path=path)
+        worst_precision = max(worst_precision, _float32_precision(v))
         f = np.asarray(geom.faces, dtype=np.int64)
         if f.min() < 0 or f.max() >= len(v):
             raise InputError("has faces that reference missing vertices", path=path)
@@ -180,6 +215,12 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
             materials.append(material)
         mat_ids.append(np.full(len(f), mat_index[material.name], dtype=np.int32))
 
+    if worst_precision[0] > _PRECISION_WARNING:
+        relative, step, largest = worst_precision
+        log.warning("load: %s: coordinates reach %.3g from the origin and are stored as 32-bit floats, so positions "
+                    "are only precise to %.3g (%.2g of the model's size): small features are distorted and may be "
+                    "merged by repair; export the mesh centred on its origin and place it with a node transform",
+                    path, largest, step, relative)
     V = np.concatenate(vertices)
     F = np.concatenate(faces)
     used = np.unique(F)

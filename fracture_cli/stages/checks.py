@@ -6,8 +6,9 @@ import logging
 
 import manifold3d
 import numpy as np
+from scipy.spatial import cKDTree
 
-from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, SurfaceMesh
+from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, Regions, SurfaceMesh
 
 log = logging.getLogger(__name__)
 
@@ -68,44 +69,162 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
     }
 
 
-def fault_roughness(vertices: np.ndarray, faces: np.ndarray, mask: np.ndarray) -> float:
-    """Mean turning of a surface patch: sum over its inner edges of length x dihedral angle, per unit area.
+# Degenerate-triangle threshold for fault_roughness: a triangle whose area is below
+# this fraction of its longest edge squared has a normal dominated by rounding
+# (marching-tet corners that land almost on a tet vertex); it is ignored with its edges.
+_SLIVER = 1e-8
+# Vertices closer than this (unit bbox diagonal) are one vertex for fault_roughness.
+_WELD = 1e-9
+
+
+def fault_roughness(vertices: np.ndarray, faces: np.ndarray, fault: np.ndarray) -> tuple[float, float]:
+    """Turning of fault surfaces: sum over edges inside one fault of length x dihedral angle, and their area.
 
     Parameters
     ----------
     vertices : (n, 3) float
+        Normalized coordinates (unit bounding-box diagonal).
     faces : (m, 3) int
-    mask : (m,) bool
-        The faces of the patch (e.g. a fragment's interior faces).
+    fault : (m,) int
+        Which fault each face belongs to (e.g. an id of the pair of pieces it
+        separates); -1 for faces that are on no fault (the outer surface).
 
     Returns
     -------
-    float
-        ``sum(edge_length * angle_between_normals) / patch_area`` over edges
-        shared by two patch faces (vertices welded by position); 1/length
-        units, 0 for a flat patch, independent of how flat parts are
-        triangulated.
+    turning : float
+        ``sum(edge_length * angle_between_normals)`` over the edges shared by
+        exactly two faces of the same fault (vertices welded by position).
+    area : float
+        Total area of the fault faces that were measured.
+
+    Notes
+    -----
+    ``turning / area`` (units 1/diagonal) is the mean absolute bending of the
+    faults: 0 for flat faults, about ``2 / R`` for faults curved with radius
+    ``R``, and about ``c / h`` for stair-stepped faults that follow tets of edge
+    ``h``. It is robust to triangulation: how a flat polygon is fanned does not
+    matter (coplanar faces contribute 0), edges on a fault's boundary (where it
+    meets the outer surface or other faults at a junction) are not counted,
+    since the corner there is the fracture's shape, not its roughness, and
+    degenerate faces (area below 1e-8 of their longest edge squared), whose
+    normals are rounding noise, are ignored. Use :func:`region_fault_roughness`
+    or :func:`fragment_fault_roughness` to label the faults.
     """
-    _, pos = np.unique(vertices, axis=0, return_inverse=True)
-    F = pos.reshape(-1)[faces[mask]]
-    P = vertices[faces[mask]]
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    fault = np.asarray(fault, dtype=np.int64)
+    on_fault = fault >= 0
+    faces, fault = faces[on_fault], fault[on_fault]
+    if len(faces) == 0:
+        return 0.0, 0.0
+    _, weld = np.unique(np.round(vertices / _WELD), axis=0, return_inverse=True)
+    F = weld.reshape(-1)[faces]
+    P = vertices[faces]
     normal = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
     area2 = np.linalg.norm(normal, axis=1)
-    keep = area2 > 1e-300
-    F, P, normal, area2 = F[keep], P[keep], normal[keep], area2[keep]
+    longest2 = np.max([np.sum((P[:, a] - P[:, b]) ** 2, axis=1) for a, b in ((0, 1), (1, 2), (2, 0))], axis=0)
+    good = (area2 > 2 * _SLIVER * longest2) & (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])
+    F, P, normal, area2, fault = F[good], P[good], normal[good], area2[good], fault[good]
+    if len(F) == 0:
+        return 0.0, 0.0
     normal = normal / area2[:, None]
-    edges = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    lengths = np.concatenate([np.linalg.norm(P[:, 1] - P[:, 0], axis=1), np.linalg.norm(P[:, 2] - P[:, 1], axis=1),
-                              np.linalg.norm(P[:, 0] - P[:, 2], axis=1)])
+    ends = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    lengths = np.concatenate([np.linalg.norm(P[:, b] - P[:, a], axis=1) for a, b in ((0, 1), (1, 2), (2, 0))])
     face = np.tile(np.arange(len(F)), 3)
-    key = np.sort(edges, axis=1)
-    order = np.lexsort((key[:, 1], key[:, 0]))
+    key = np.column_stack([np.repeat(fault, 1)[face], np.sort(ends, axis=1)])
+    order = np.lexsort((key[:, 2], key[:, 1], key[:, 0]))
     key, face, lengths = key[order], face[order], lengths[order]
+    # Edges of one fault with exactly two faces: a run of length 2 in the sorted keys.
     same = np.all(key[1:] == key[:-1], axis=1)
-    first = np.flatnonzero(same)
+    start = np.r_[True, ~same]
+    run_id = np.cumsum(start) - 1
+    run_len = np.bincount(run_id)
+    first = np.flatnonzero(start[:-1] & same & (run_len[run_id[:-1]] == 2))
     cosine = np.clip(np.einsum("ij,ij->i", normal[face[first]], normal[face[first + 1]]), -1.0, 1.0)
-    total_area = area2.sum() / 2.0
-    return float((lengths[first] * np.arccos(cosine)).sum() / total_area) if total_area > 0 else 0.0
+    # The two faces of a consistently oriented surface cross the edge with normals that agree; angles
+    # near pi would mean a fold back onto itself, which is still turning.
+    turning = float((lengths[first] * np.arccos(cosine)).sum())
+    return turning, float(area2.sum() / 2.0)
+
+
+def region_fault_roughness(regions: Regions) -> float:
+    """Mean bending of the faults between piece regions (1/diagonal; 0 = flat), see :func:`fault_roughness`.
+
+    A fault is the surface between two pieces' regions: the triangles that
+    both regions have (with opposite orientation; the smoothing stage emits
+    each fault triangle once per side with shared vertices). Each fault is
+    measured once; the result is the area-weighted mean over all faults,
+    ``sum(turning) / sum(area)``.
+    """
+    keys, owners, tris = [], [], []
+    offset = 0
+    all_vertices = []
+    for P, (V, F) in enumerate(regions.meshes):
+        all_vertices.append(V)
+        tris.append(F + offset)
+        owners.append(np.full(len(F), P, dtype=np.int64))
+        offset += len(V)
+    if not tris:
+        return 0.0
+    V = np.concatenate(all_vertices)
+    F = np.concatenate(tris)
+    owner = np.concatenate(owners)
+    _, weld = np.unique(np.round(V / _WELD), axis=0, return_inverse=True)
+    W = np.sort(weld.reshape(-1)[F], axis=1)
+    _, inverse, counts = np.unique(W, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    # Per triangle (by welded corners): the lowest and highest owner; a fault triangle has two.
+    lo = np.full(len(counts), np.iinfo(np.int64).max)
+    hi = np.full(len(counts), -1)
+    np.minimum.at(lo, inverse, owner)
+    np.maximum.at(hi, inverse, owner)
+    shared = (counts == 2) & (lo != hi)
+    p = len(regions.meshes)
+    # Measure every fault once: the copy owned by the lower piece.
+    keep = shared[inverse] & (owner == lo[inverse])
+    fault = np.where(keep, lo[inverse] * p + hi[inverse], -1)
+    turning, area = fault_roughness(V, F, fault)
+    return turning / area if area > 0 else 0.0
+
+
+def fragment_fault_roughness(fragments: Fragments) -> float:
+    """Mean bending of the fragments' interior faces (1/diagonal; 0 = flat), see :func:`fault_roughness`.
+
+    The interior faces of fragment ``i`` are grouped into faults by the
+    fragment on their other side (the fragment owning the nearest interior
+    face centroid); the result is the area-weighted mean over all faults,
+    ``sum(turning) / sum(area)``, counting each side of a fault.
+    """
+    interior = [i for i, m in enumerate(fragments.materials) if m.name == INTERIOR_MATERIAL_NAME]
+    interior_id = interior[-1] if interior else -1
+    centres, owners = [], []
+    for j, frag in enumerate(fragments.fragments):
+        inner = frag.faces[frag.material_ids == interior_id]
+        centres.append(frag.vertices[inner].mean(axis=1))
+        owners.append(np.full(len(inner), j, dtype=np.int64))
+    if not centres or sum(len(c) for c in centres) == 0:
+        return 0.0
+    centres_all, owner_all = np.concatenate(centres), np.concatenate(owners)
+    tree = cKDTree(centres_all)
+    q = len(fragments.fragments)
+    turning = area = 0.0
+    for j, frag in enumerate(fragments.fragments):
+        mask = frag.material_ids == interior_id
+        if not mask.any():
+            continue
+        k = min(len(centres_all), 16)
+        _, idx = tree.query(centres[j], k=k)
+        idx = idx.reshape(len(centres[j]), k)
+        other = owner_all[idx]
+        hit = other != j
+        first = np.argmax(hit, axis=1)
+        neighbour = np.where(hit.any(axis=1), other[np.arange(len(other)), first], -1)
+        fault = np.full(len(frag.faces), -1, dtype=np.int64)
+        fault[mask] = np.where(neighbour >= 0, j * q + neighbour, -1)
+        t, a = fault_roughness(frag.vertices, frag.faces, fault)
+        turning += t
+        area += a
+    return turning / area if area > 0 else 0.0
 
 
 def _closed_by_position(vertices: np.ndarray, faces: np.ndarray):

@@ -175,12 +175,16 @@ def repair(surface: SurfaceMesh, options: RepairOptions = RepairOptions()) -> Su
         raise StageError("no faces are left after removing degenerate and duplicated faces: "
                          + ("flat: all vertices lie in one plane, so it has no inside; " + FLAT_HINT if flat
                             else "the mesh encloses nothing"), stage=STAGE)
-    nonmanifold = _nonmanifold_edges(W)
-    if nonmanifold:
-        raise StageError(
-            f"{nonmanifold} edges are shared by more than two faces after welding vertices by position, so the "
-            "mesh has no well-defined inside there; separate the touching parts in your modelling tool (or give "
-            "each part its own vertices)", stage=STAGE)
+    if _nonmanifold_edges(W):
+        props, F, material_ids, weld, leftover, note = _split_nonmanifold(props, F, W, material_ids, weld)
+        W = weld[F]
+        did.append(note)
+        if leftover:
+            raise StageError(
+                f"{leftover} edges are shared by more than two faces after welding vertices by position, and the "
+                "faces around them do not split into closed bodies (two bodies touching along an edge, or cells "
+                "sharing an internal wall, are handled), so the mesh has no well-defined inside there; separate the "
+                "touching parts in your modelling tool", stage=STAGE)
 
     # 3a. Consistent winding within each edge-connected patch.
     flip, patch = _propagate_winding(W)
@@ -189,8 +193,16 @@ def repair(surface: SurfaceMesh, options: RepairOptions = RepairOptions()) -> Su
     F[flip] = F[flip][:, ::-1]
     W[flip] = W[flip][:, ::-1]
 
-    # 4. Close what is open.
+    # 4. Close what is open; open sheets entirely inside a closed body are internal faces and go first.
     boundary = _boundary_edges(W)
+    if len(boundary):
+        inside = _internal_open_faces(props[:, _POS], W, weld)
+        if inside.any():
+            did.append(f"removed {int(inside.sum())} internal faces (open sheets inside the solid)")
+            F, W, material_ids, patch = F[~inside], W[~inside], material_ids[~inside], patch[~inside]
+            _, patch = np.unique(patch, return_inverse=True)
+            patch = patch.reshape(-1)
+            boundary = _boundary_edges(W)
     interior_material = None
     if len(boundary):
         loops = _boundary_loops(boundary)
@@ -367,7 +379,13 @@ def surface_solid(surface: SurfaceMesh, *, stage: str):
     props = vertex_properties(surface, SOLID_COLUMNS)
     F = np.asarray(surface.faces, dtype=np.int64)
     weld = weld_map(props[:, :3], F)
-    solid, id_to_material = _manifold(props, F, np.asarray(surface.material_ids), weld, len(surface.materials))
+    material_ids = np.asarray(surface.material_ids)
+    if _nonmanifold_edges(weld[F]):
+        # Bodies touching along an edge (a union result): weld each only within itself.
+        patch = _manifold_patches(weld[F])[0]
+        bodies = [np.flatnonzero(patch == p) for p in range(int(patch.max()) + 1)]
+        props, F, material_ids, weld = _split_bodies(props, F, material_ids, weld, bodies)
+    solid, id_to_material = _manifold(props, F, material_ids, weld, len(surface.materials))
     if solid.status() != manifold3d.Error.NoError:
         W = weld[F]
         boundary = len(_boundary_edges(W))
@@ -426,6 +444,114 @@ def _undirected_edges(W: np.ndarray):
 def _nonmanifold_edges(W: np.ndarray) -> int:
     _, edge_id, _ = _undirected_edges(W)
     return int((np.bincount(edge_id) > 2).sum())
+
+
+def _manifold_patches(W: np.ndarray):
+    """Patch id (m,) of each face (faces joined across edges with exactly two faces), and edge data."""
+    m = len(W)
+    directed, edge_id, face = _undirected_edges(W)
+    counts = np.bincount(edge_id)
+    order = np.argsort(edge_id, kind="stable")
+    pair = order[counts[edge_id[order]] == 2].reshape(-1, 2)
+    graph = sp.coo_matrix((np.ones(len(pair)), (face[pair[:, 0]], face[pair[:, 1]])), shape=(m, m)).tocsr()
+    _, patch = connected_components(graph, directed=False)
+    return patch, edge_id, face, counts
+
+
+def _split_bodies(props: np.ndarray, F: np.ndarray, material_ids: np.ndarray, weld: np.ndarray,
+                  bodies: list[np.ndarray]):
+    """Copy each body (an array of face indices) with its own vertices, welded only within the body.
+
+    A face may belong to several bodies (it is copied); vertices of different
+    bodies are never welded, so bodies that touch along an edge stay separate.
+    """
+    new_props, new_faces, new_ids, new_weld = [], [], [], []
+    n = 0
+    for faces in bodies:
+        corners = F[faces]
+        used, local = np.unique(corners, return_inverse=True)
+        _, first, group = np.unique(weld[used], return_index=True, return_inverse=True)
+        new_props.append(props[used])
+        new_faces.append(n + local.reshape(-1, 3))
+        new_weld.append(n + first[group.reshape(-1)])
+        new_ids.append(material_ids[faces])
+        n += len(used)
+    return (np.vstack(new_props), np.vstack(new_faces), np.concatenate(new_ids).astype(np.int32),
+            np.concatenate(new_weld))
+
+
+def _split_nonmanifold(props, F, W, material_ids, weld):
+    """Split edge fans of more than two faces into closed bodies that are united later.
+
+    Faces are grouped into patches joined across two-face edges. A patch in
+    which every edge has two of its faces is a closed body (two boxes touching
+    along an edge). Open patches whose boundary runs only along edges of more
+    than two faces, and which share that boundary exactly, close each other
+    in consecutive pairs (cells sharing an internal wall: left + wall, wall +
+    right). Returns the new props, faces, material ids and weld map, the
+    number of many-face edges left touching unclosed patches, and a log note.
+    """
+    patch, edge_id, face, counts = _manifold_patches(W)
+    num_patches = int(patch.max()) + 1
+    many = counts > 2
+    # Faces of each (patch, edge): 2 everywhere means the patch is closed.
+    key = patch[face] * len(counts) + edge_id
+    uniq, per = np.unique(key, return_counts=True)
+    key_patch, key_edge = uniq // len(counts), uniq % len(counts)
+    boundary_of = [[] for _ in range(num_patches)]
+    for p, e in zip(key_patch[per == 1].tolist(), key_edge[per == 1].tolist()):
+        boundary_of[p].append(e)
+    odd = np.zeros(num_patches, dtype=bool)
+    odd[key_patch[(per != 2)]] = True
+    bodies, groups, leftover_patches = [], {}, []
+    for p in range(num_patches):
+        faces_p = np.flatnonzero(patch == p)
+        if not odd[p]:
+            bodies.append(faces_p)
+        elif boundary_of[p] and all(many[e] for e in boundary_of[p]) and np.all(np.isin(
+                key_edge[(key_patch == p) & (per != 2)], boundary_of[p])):
+            groups.setdefault(tuple(sorted(boundary_of[p])), []).append(p)
+        else:
+            leftover_patches.append(p)
+    paired = 0
+    for members in groups.values():
+        if len(members) < 2:
+            leftover_patches += members
+            continue
+        for a, b in zip(members[:-1], members[1:]):
+            bodies.append(np.concatenate([np.flatnonzero(patch == a), np.flatnonzero(patch == b)]))
+            paired += 1
+    touched = set()
+    for p in leftover_patches:
+        bodies.append(np.flatnonzero(patch == p))
+        touched.update(e for e in key_edge[key_patch == p].tolist() if many[e])
+    props, F, material_ids, weld = _split_bodies(props, F, material_ids, weld, bodies)
+    note = (f"split {int(many.sum())} edges shared by more than two faces into {len(bodies)} bodies"
+            + (f" ({paired} closed by pairing open patches along internal walls)" if paired else ""))
+    return props, F, material_ids, weld, len(touched), note
+
+
+def _internal_open_faces(V: np.ndarray, W: np.ndarray, weld: np.ndarray) -> np.ndarray:
+    """Mask (m,) of faces of open components lying entirely inside a closed component (internal faces)."""
+    m = len(W)
+    component = _components(W, len(weld))
+    num = int(component.max()) + 1
+    directed, edge_id, face = _undirected_edges(W)
+    open_face = np.bincount(edge_id)[edge_id] == 1
+    is_open = np.zeros(num, dtype=bool)
+    is_open[component[face[open_face]]] = True
+    closed = np.flatnonzero(~is_open)
+    inside = np.zeros(m, dtype=bool)
+    if not len(closed):
+        return inside
+    for c in np.flatnonzero(is_open).tolist():
+        verts = np.unique(W[component == c])
+        samples = V[verts[np.linspace(0, len(verts) - 1, min(_NESTING_SAMPLES, len(verts))).astype(int)]]
+        for k in closed.tolist():
+            if np.all(np.abs(_winding_numbers(samples, V, W[component == k])) > 0.5):
+                inside[component == c] = True
+                break
+    return inside
 
 
 def _propagate_winding(W: np.ndarray):
@@ -593,6 +719,7 @@ def _component_orientation(V: np.ndarray, F: np.ndarray, component: np.ndarray) 
     num = int(component.max()) + 1
     volume = np.bincount(component, weights=_tet_volumes(V, F), minlength=num)
     depth = np.zeros(num, dtype=np.int64)
+    container = np.full(num, -1, dtype=np.int64)  # the smallest component containing each
     if num > 1:
         lo = np.full((num, 3), np.inf)
         hi = np.full((num, 3), -np.inf)
@@ -611,8 +738,18 @@ def _component_orientation(V: np.ndarray, F: np.ndarray, component: np.ndarray) 
                 w = _winding_numbers(samples, V, F[component == j])
                 if np.all(np.abs(w) > 0.5):
                     depth[i] += 1
-    want_positive = depth % 2 == 0
-    return (volume > 0) != want_positive
+                    if container[i] < 0 or abs(volume[j]) < abs(volume[container[i]]):
+                        container[i] = j
+    # A nested component wound against its container (as given) is a cavity; wound like it, it is
+    # internal geometry of the same solid (the union absorbs it). Outermost components are positive.
+    order = np.argsort(depth, kind="stable")
+    positive = np.ones(num, dtype=bool)
+    for i in order.tolist():
+        if container[i] >= 0:
+            j = container[i]
+            same = (volume[i] > 0) == (volume[j] > 0)
+            positive[i] = positive[j] if same else not positive[j]
+    return (volume > 0) != positive
 
 
 def _fix_shading_normals(props: np.ndarray, F: np.ndarray) -> int:

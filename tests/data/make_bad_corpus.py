@@ -176,9 +176,10 @@ def build() -> None:
     case("truncated.glb", whole[: len(whole) * 2 // 3], outcome="error", message="truncated",
          why="GLB cut off part-way through its binary chunk")
     case("not_a_mesh.stl", "This is a README that was renamed to .stl by mistake.\nIt has no triangles.\n",
-         outcome="error", message="could not be read", why="text file with a mesh extension")
+         outcome="error", message="not a valid STL", why="text file with a mesh extension")
     case("text_as.glb", "{\"hello\": \"this is JSON, not a binary glTF\"}\n", outcome="error",
-         message="not a binary glTF", why="text file with a .glb extension")
+         message="does not start with 'glTF'",
+         why="text file with a .glb extension")
     case("point_cloud.ply", ply_text(V), outcome="error", message="no triangles", why="vertices only, no faces")
     case("bad_index.obj", obj_text(V, np.vstack([F, [[0, 1, 40]]])), outcome="error",
          message="missing vertices", why="a face references vertex 41 of 8")
@@ -194,7 +195,13 @@ def build() -> None:
         "nodes": [{"mesh": 0}], "scenes": [{"nodes": [0]}], "scene": 0,
     }), outcome="error", message="missing_buffer.bin", why="glTF whose .bin buffer file is missing")
     case("stl_count_lies.stl", stl_binary(V, F, count=2_000_000_000), outcome="error",
-         message="more than the limit", why="binary STL header claims 2e9 triangles (refused before reading)")
+         message="does not match the triangle count", why="binary STL whose header claims 2e9 triangles")
+    case("limit.stl", stl_binary(V, F), outcome="error", message="has 12 triangles, more than the limit",
+         overrides=("load.max_triangles=10",), why="binary STL over load.max_triangles (refused from its header)")
+    case("limit.glb", glb([("box", [(V, F, None, None, 0)]), ("copy", [(V + 3, F, None, None, 0)])],
+                          [Material("stone")]),
+         outcome="error", message="has 24 triangles, more than the limit", overrides=("load.max_triangles=20",),
+         why="GLB over load.max_triangles (counted from its JSON chunk before decoding buffers)")
     case("too_many_triangles.obj", obj_text(SV, SF), outcome="error", message="more than the limit",
          overrides=("load.max_triangles=100",), why="320 triangles with load.max_triangles=100")
 
@@ -211,7 +218,7 @@ def build() -> None:
          why="one triangle has no inside")
     case("flat_quad.obj", obj_text(V[[0, 1, 3, 2]], [[0, 1, 2], [0, 2, 3]]), outcome="error", message="flat",
          why="a zero-volume quad has no inside")
-    case("all_degenerate.obj", obj_text(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0.0]]),
+    case("all_degenerate.obj", obj_text(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 1.0]]),
                                         [[0, 1, 2], [0, 0, 3], [1, 2, 0]]),
          outcome="error", message="no faces are left", why="every triangle has zero area")
 
@@ -279,10 +286,11 @@ def build() -> None:
          volume=sphere_volume * 250.0**3, why="binary STL in millimetres (coordinates around 1e3)")
     case("micro.off", off_text(V * 2e-3 + 1e-3, F), outcome="ok", volume=8e-9,
          why="OFF around 1e-3 units")
-    OV, OF = icosphere(2, 2.0)
+    OV, OF = icosphere(2, 10.0)
     case("offset_1e6.glb", glb([("far", [(OV + np.array([1.0e6, -2.0e6, 0.5e6]), OF, None, None, 0)])],
                                [Material("stone")]),
-         outcome="ok", why="float32 GLB 1e6 from the origin: positions quantized to 1/16 .. 1/8 unit")
+         outcome="ok", why="float32 GLB of a 20-unit sphere 1e6..2e6 from the origin: positions quantized to 1/16..1/4 unit "
+             "(loads with a precision warning)")
     TV, TF = icosphere(1, 0.5, (0, 0, 0))
     top = TV[:, 2] >= 0
     face_top = top[TF].all(axis=1)
