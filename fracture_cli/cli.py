@@ -129,7 +129,8 @@ def build_options(options_cls, kwargs: dict, base=None):
                 value = int(value)
             problem = check_value(options_cls, f.name, value)
             if problem:
-                raise UsageError(problem)
+                flag = "--" + f.name.replace("_", "-")
+                raise UsageError(problem.replace(f"{f.name} = ", f"{flag} ", 1))
             changes[f.name] = value
     return dataclasses.replace(base, **changes)
 
@@ -216,8 +217,10 @@ class TerminalCommand(click.Command):
 def cli(ctx, debug, quiet, verbose):
     """Prefracture game assets with fracture modes (Sellan et al. 2023).
 
-    Chain stages left to right (load, cage, tetra, modes, pieces, smooth,
-    fragments, export), or run everything from a recipe with 'bake'.
+    Chain stages left to right (load, repair, cage, tetra, material, modes,
+    pieces, smooth, fragments, export), or run everything from a recipe with
+    'bake'. Stage options default to the library's defaults; 'bake' takes
+    them from a recipe.
     """
     ctx.meta["fracture.debug"] = debug
     ctx.meta["fracture.quiet"] = quiet
