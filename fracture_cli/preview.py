@@ -90,8 +90,32 @@ def _camera():
     return right, up, forward
 
 
+def cluster_triangles(tris: np.ndarray, colors: np.ndarray, cell: float):
+    """Vertex-clustering simplification of a triangle soup for drawing.
+
+    Every corner snaps to the centre of its grid cell of size ``cell``; triangles
+    whose corners share a cell vanish. Corners shared between triangles snap to
+    the same point, so the surface stays closed; below a pixel the change is
+    invisible, and drawing gets much cheaper for dense meshes.
+
+    Returns
+    -------
+    tris : (q, 3, 3) float
+    colors : (q, 3) float
+    keep : (m,) bool
+        Which input triangles survive.
+    """
+    if cell <= 0 or len(tris) == 0:
+        return tris, colors, np.ones(len(tris), dtype=bool)
+    keys = np.floor(tris / cell).astype(np.int64)  # (m, 3, 3)
+    same = (np.all(keys[:, 0] == keys[:, 1], axis=1) | np.all(keys[:, 1] == keys[:, 2], axis=1)
+            | np.all(keys[:, 0] == keys[:, 2], axis=1))
+    keep = ~same
+    return (keys[keep] + 0.5) * cell, colors[keep], keep
+
+
 def draw_triangles(ax, tris: np.ndarray, colors: np.ndarray, *, center: np.ndarray, extent: float,
-                   edge_alpha: float = 0.0) -> None:
+                   edge_alpha: float = 0.0, pixels: int = 0) -> None:
     """Draw triangles with flat shading, back-face culling and painter's order.
 
     Parameters
@@ -105,6 +129,9 @@ def draw_triangles(ax, tris: np.ndarray, colors: np.ndarray, *, center: np.ndarr
         World point at the middle of the panel.
     extent : float
         Half-size of the visible square, world units.
+    pixels : int, optional (default 0)
+        Panel size in pixels; when given, detail below about a pixel is
+        clustered away first (:func:`cluster_triangles`).
     """
     from matplotlib.collections import PolyCollection
 
@@ -115,7 +142,11 @@ def draw_triangles(ax, tris: np.ndarray, colors: np.ndarray, *, center: np.ndarr
     if len(tris) == 0:
         return
     right, up, forward = _camera()
+    # Shade and cull with the true normals: snapped geometry has noisy ones.
     normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    if pixels:
+        tris, colors, kept = cluster_triangles(tris, colors, 2.0 * extent / pixels)  # ~1 px cells
+        normals = normals[kept]
     length = np.linalg.norm(normals, axis=1)
     keep = (normals @ forward < 0) & (length > 0)  # facing the camera
     tris, normals, length, colors = tris[keep], normals[keep], length[keep], colors[keep]
@@ -126,9 +157,8 @@ def draw_triangles(ax, tris: np.ndarray, colors: np.ndarray, *, center: np.ndarr
     order = np.argsort(-depth, kind="stable")  # far first
     shade = 0.35 + 0.65 * np.clip(normals @ LIGHT, 0.0, 1.0)
     rgb = np.clip(colors * shade[:, None], 0.0, 1.0)
-    coll = PolyCollection(xy[order], facecolors=rgb[order], edgecolors=rgb[order] * 0.85,
-                          linewidths=0.15 if edge_alpha == 0 else 0.3, antialiased=False)
-    ax.add_collection(coll)
+    coll = PolyCollection(xy[order], facecolors=rgb[order], edgecolors="none", linewidths=0.0, antialiased=False)
+    ax.add_collection(coll, autolim=False)  # limits are set above; autolim costs seconds
 
 
 def project(points: np.ndarray, center: np.ndarray) -> np.ndarray:
@@ -235,7 +265,8 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
     # (a) the asset as it looks (outer faces only, its own materials)
     ax = fig.add_subplot(grid[0, 0])
     tris = np.concatenate([f.outer for f in frags])
-    draw_triangles(ax, tris, np.concatenate([f.outer_colors for f in frags]), center=center, extent=radius * 1.05)
+    draw_triangles(ax, tris, np.concatenate([f.outer_colors for f in frags]), center=center, extent=radius * 1.05,
+                   pixels=height // 2)
     ax.set_title("input", fontsize=11)
 
     # (b) exploded fragments, interior faces tinted
@@ -245,7 +276,8 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
     for j, f in enumerate(frags):
         tris += [f.outer + push[j], f.inner + push[j]]
         cols += [np.repeat(colors[j][None], len(f.outer), 0), np.repeat((colors[j] * 0.55)[None], len(f.inner), 0)]
-    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.7)
+    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.7,
+                   pixels=height // 2)
     ax.set_title(f"{len(frags)} fragments (exploded; darker = interior faces)", fontsize=11)
 
     # (d) example impact
@@ -262,7 +294,8 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
     gpush = (gcent - center) * 0.35 if len(group_ids) > 1 else np.zeros_like(gcent)
     tris = [np.concatenate([f.outer, f.inner]) + gpush[group_of[j]] for j, f in enumerate(frags)]
     cols = [np.repeat(gcol[group_of[j]][None], len(tris[j]), 0) for j in range(len(frags))]
-    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.35)
+    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.35,
+                   pixels=height // 2)
     p2 = project(point[None], center)[0]
     tail = project((point - impulse / max(np.linalg.norm(impulse), 1e-12) * radius * 0.6)[None], center)[0]
     ax.annotate("", xy=p2, xytext=tail, arrowprops=dict(arrowstyle="-|>", color="crimson", lw=2.5))
@@ -281,7 +314,8 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
         fc = cmap(0.5 + 0.5 * w / scale)[:, :3]
         tris = [np.concatenate([f.outer, f.inner]) for f in frags]
         cols = [np.repeat(fc[j][None], len(tris[j]), 0) for j in range(len(frags))]
-        draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.05)
+        draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.05,
+                       pixels=width // max(k, 1))
         ax.set_title(f"mode {i + 1}", fontsize=10)
 
     counts = report.get("counts", {})

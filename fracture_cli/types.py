@@ -333,8 +333,9 @@ class Pieces:
     edge_normals : (e, 3) float64
         Area-weighted unit normal of each interface, pointing from P to Q.
     max_deviation : float
-        Worst deviation of any mode from its piece mean, relative to the mode's
-        largest magnitude (a check that modes are piecewise constant).
+        Worst deviation of any mode from its atomic piece's mean (before tiny
+        pieces are merged), relative to the mode's largest magnitude (a check
+        that modes are piecewise constant).
     """
 
     tet_piece: np.ndarray

@@ -86,6 +86,16 @@ def test_corpus_is_complete_and_small():
 
 @pytest.mark.parametrize("entry", CASES, ids=[c["file"] for c in CASES])
 def test_corpus_outcome(entry, tmp_path):
+    if not entry.get("known_issue"):
+        check_outcome(entry, tmp_path)
+        return
+    try:
+        check_outcome(entry, tmp_path)
+    except AssertionError:
+        pytest.xfail(entry["known_issue"])
+
+
+def check_outcome(entry, tmp_path):
     path = os.path.join(CORPUS, entry["file"])
     out = str(tmp_path / "out")
     result = bake(path, out, entry.get("overrides", ()))

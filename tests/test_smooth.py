@@ -7,10 +7,11 @@ import manifold3d
 import numpy as np
 import pytest
 
+from fracture_cli.stages.checks import fault_roughness, region_fault_roughness
 from fracture_cli.stages.pieces import pieces
 from fracture_cli.stages.smooth import SmoothOptions, _smoothed_field, _union_regions, smooth
 from fracture_cli.testing import grid_tetmesh
-from fracture_cli.types import Modes, TetMesh
+from fracture_cli.types import Modes, Regions, TetMesh
 
 
 def jittered_grid(n=6, seed=0):
@@ -201,3 +202,54 @@ def test_deterministic():
     A, B = smooth(tm, P), smooth(tm, P)
     for (va, fa), (vb, fb) in zip(A.meshes, B.meshes):
         assert va.tobytes() == vb.tobytes() and fa.tobytes() == fb.tobytes()
+
+
+def slanted_pieces(tm):
+    """Four pieces from two planes at slanted angles: staircases when tet-aligned."""
+    c = tm.tet_centroids
+    lab = (c @ [0.8, 0.5, 0.3] > 0.05).astype(int) + 2 * (c @ [-0.3, 0.7, -0.6] > -0.08)
+    return pieces(tm, label_modes(tm, lab))
+
+
+def test_fault_roughness_ignores_flat_triangulation_and_fault_boundaries():
+    # A flat square fanned two ways, with a near-degenerate sliver: no turning.
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 1e-12, 0], [0.5, 0.5, 0]], float)
+    F = np.array([[0, 4, 5], [4, 1, 5], [1, 2, 5], [2, 3, 5], [3, 0, 5], [0, 1, 4]])
+    turning, area = fault_roughness(V, F, np.zeros(len(F), int))
+    assert turning == pytest.approx(0.0, abs=1e-12) and area == pytest.approx(1.0)
+    # A fold of 90 degrees along an edge of length 1 inside one fault: turning pi/2.
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1]], float)
+    F = np.array([[0, 1, 2], [0, 2, 3], [1, 0, 4], [1, 4, 5]])
+    turning, area = fault_roughness(V, F, np.zeros(4, int))
+    assert turning == pytest.approx(np.pi / 2) and area == pytest.approx(2.0)
+    # The same fold where two faults meet (a junction): not roughness.
+    turning, area = fault_roughness(V, F, np.array([0, 0, 1, 1]))
+    assert turning == pytest.approx(0.0) and area == pytest.approx(2.0)
+    # Faces on no fault are ignored.
+    assert fault_roughness(V, F, np.array([0, 0, -1, -1])) == (pytest.approx(0.0), pytest.approx(1.0))
+
+
+def test_region_fault_roughness_of_planar_faults_is_zero():
+    tm = grid_tetmesh((4, 4, 4), spacing=0.25, origin=(-0.5, -0.5, -0.5))
+    c = tm.tet_centroids
+    P = pieces(tm, label_modes(tm, (c[:, 0] > 0).astype(int) + 2 * (c[:, 1] > 0)))
+    R = smooth(tm, P, SmoothOptions(smoothing=0.0))
+    assert region_fault_roughness(R) == pytest.approx(0.0, abs=1e-9)
+    # Each region's fault copy is measured once, whichever side.
+    assert region_fault_roughness(Regions(meshes=R.meshes[::-1])) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_smoothing_makes_slanted_faults_smoother():
+    tm = jittered_grid(7)
+    P = slanted_pieces(tm)
+    R0 = smooth(tm, P, SmoothOptions(smoothing=0.0))
+    R1 = smooth(tm, P, SmoothOptions())
+    assert R1.vanished == ()
+    check_partition(tm, R1, 1e-7)
+    rough0, rough1 = region_fault_roughness(R0), region_fault_roughness(R1)
+    print(f"fault roughness (1/diagonal): lambda=0 {rough0:.2f}, default lambda {rough1:.2f}")
+    assert rough0 > 5.0  # tet-aligned slanted faults are stair-stepped
+    assert rough1 < 0.5 * rough0
+    # More smoothing, smoother faults (until pieces start to shrink away).
+    R2 = smooth(tm, P, SmoothOptions(smoothing=4 * SmoothOptions().smoothing))
+    assert region_fault_roughness(R2) < rough1

@@ -68,12 +68,13 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
     Notes
     -----
     ALGORITHM.md section 3. Each mode is constant on an atomic piece up to the
-    solver's tolerance: ``W`` stores the volume-weighted mean and
-    ``max_deviation`` the worst deviation of any tet from it, relative to the
-    mode's largest magnitude (a warning is logged above
+    solver's tolerance: ``max_deviation`` is the worst deviation of any tet
+    from its atomic piece's volume-weighted mean, relative to the mode's
+    largest magnitude, measured before any merging (a warning is logged above
     ``deviation_warning``). Merging tiny pieces (``min_volume_fraction > 0``)
-    trades that guarantee for fewer slivers: a merged piece's modes are no
-    longer constant, which ``max_deviation`` then reports.
+    trades piecewise-constant modes for fewer slivers: a merged piece moves as
+    one, and its ``W`` is the volume-weighted mean of the modes over all its
+    tets (equivalently, of its atomic pieces' ``W`` weighted by their volumes).
     """
     t = tet_mesh.num_tets
     face_tets = tet_mesh.interior_face_tets
@@ -91,6 +92,18 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
     glued = ~cut.any(axis=0)
     tet_piece = _components(t, face_tets[glued])
     volumes_t = np.abs(tet_mesh.tet_volumes)
+    k = U.shape[0]
+
+    # The modes are piecewise constant on the atomic pieces (up to the solver's tolerance); check that before
+    # merging, which makes them non-constant on merged pieces by design.
+    atomic = int(tet_piece.max()) + 1 if t else 0
+    _, max_deviation = _piece_means(U, tet_piece, volumes_t, atomic)
+    if max_deviation > options.deviation_warning:
+        log.warning(
+            "%s: a mode deviates from its atomic piece's mean by %.3g of its largest value (> %.3g): the modes are "
+            "not piecewise constant on the atomic pieces; the modes' solver tolerance or cut threshold may be too "
+            "loose", STAGE, max_deviation, options.deviation_warning,
+        )
 
     if options.min_volume_fraction > 0:
         tet_piece = _merge_small(tet_piece, face_tets, tet_mesh.interior_face_areas, volumes_t,
@@ -103,28 +116,17 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
         axis=1,
     ) / volumes[:, None]
 
-    # Volume-weighted mean per piece: W[i, P] = sum_{t in P} vol_t U[i, t] / vol_P.
-    average = sp.csr_matrix((volumes_t / volumes[tet_piece], (tet_piece, np.arange(t))), shape=(p, t))
-    k, _, d = U.shape
-    W = (average @ U.transpose(1, 0, 2).reshape(t, k * d)).reshape(p, k, d).transpose(1, 0, 2)
-    W = np.ascontiguousarray(W)
-
-    max_deviation = 0.0
-    for i in range(k):
-        scale = float(np.abs(U[i]).max()) if U[i].size else 0.0
-        if scale > 0:
-            dev = float(np.linalg.norm(U[i] - W[i][tet_piece], axis=1).max()) / scale
-            max_deviation = max(max_deviation, dev)
-    if max_deviation > options.deviation_warning:
-        log.warning(
-            "%s: a mode deviates from its piece mean by %.3g of its largest value (> %.3g): the modes are not "
-            "piecewise constant on the atomic pieces; the modes' solver tolerance or cut threshold may be too loose",
-            STAGE, max_deviation, options.deviation_warning,
-        )
+    # Merged pieces take the volume-weighted mean of their atomic pieces' modes.
+    W, merged_deviation = _piece_means(U, tet_piece, volumes_t, p)
+    if p < atomic:
+        log.info("%s: merged %d small atomic pieces; the modes deviate from the merged pieces' means by up to "
+                 "%.3g of their largest value (expected: merged pieces move as one)", STAGE, atomic - p,
+                 merged_deviation)
 
     edges, edge_areas, edge_centroids, edge_normals = _piece_graph(tet_mesh, tet_piece, centroids)
-    log.info("%s: %d atomic pieces from %d modes, %d graph edges, volumes %.3g..%.3g, max deviation %.2g",
-             STAGE, p, k, len(edges), volumes.min() if p else 0.0, volumes.max() if p else 0.0, max_deviation)
+    log.info("%s: %d pieces (%d atomic) from %d modes, %d graph edges, volumes %.3g..%.3g, max deviation %.2g",
+             STAGE, p, atomic, k, len(edges), volumes.min() if p else 0.0, volumes.max() if p else 0.0,
+             max_deviation)
     return Pieces(
         tet_piece=tet_piece.astype(np.int32),
         W=W,
@@ -136,6 +138,26 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
         edge_normals=edge_normals,
         max_deviation=max_deviation,
     )
+
+
+def _piece_means(U: np.ndarray, tet_piece: np.ndarray, volumes_t: np.ndarray, p: int):
+    """Volume-weighted mean of every mode per piece, ``W`` (k, p, d), and the worst relative deviation from it.
+
+    ``W[i, P] = sum_{t in P} vol_t U[i, t] / vol_P``; the deviation is the
+    largest ``||U[i, t] - W[i, P(t)]||`` relative to mode ``i``'s largest
+    magnitude.
+    """
+    k, t, d = U.shape
+    volumes = np.bincount(tet_piece, weights=volumes_t, minlength=p)
+    average = sp.csr_matrix((volumes_t / volumes[tet_piece], (tet_piece, np.arange(t))), shape=(p, t))
+    W = (average @ U.transpose(1, 0, 2).reshape(t, k * d)).reshape(p, k, d).transpose(1, 0, 2)
+    W = np.ascontiguousarray(W)
+    deviation = 0.0
+    for i in range(k):
+        scale = float(np.abs(U[i]).max()) if U[i].size else 0.0
+        if scale > 0:
+            deviation = max(deviation, float(np.linalg.norm(U[i] - W[i][tet_piece], axis=1).max()) / scale)
+    return W, deviation
 
 
 def _components(t: int, pairs: np.ndarray) -> np.ndarray:

