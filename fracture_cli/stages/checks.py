@@ -131,7 +131,7 @@ def fault_roughness(vertices: np.ndarray, faces: np.ndarray, fault: np.ndarray) 
     ends = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     lengths = np.concatenate([np.linalg.norm(P[:, b] - P[:, a], axis=1) for a, b in ((0, 1), (1, 2), (2, 0))])
     face = np.tile(np.arange(len(F)), 3)
-    key = np.column_stack([np.repeat(fault, 1)[face], np.sort(ends, axis=1)])
+    key = np.column_stack([fault[face], np.sort(ends, axis=1)])
     order = np.lexsort((key[:, 2], key[:, 1], key[:, 0]))
     key, face, lengths = key[order], face[order], lengths[order]
     # Edges of one fault with exactly two faces: a run of length 2 in the sorted keys.
@@ -141,8 +141,6 @@ def fault_roughness(vertices: np.ndarray, faces: np.ndarray, fault: np.ndarray) 
     run_len = np.bincount(run_id)
     first = np.flatnonzero(start[:-1] & same & (run_len[run_id[:-1]] == 2))
     cosine = np.clip(np.einsum("ij,ij->i", normal[face[first]], normal[face[first + 1]]), -1.0, 1.0)
-    # The two faces of a consistently oriented surface cross the edge with normals that agree; angles
-    # near pi would mean a fold back onto itself, which is still turning.
     turning = float((lengths[first] * np.arccos(cosine)).sum())
     return turning, float(area2.sum() / 2.0)
 
