@@ -487,10 +487,12 @@ def export_cmd(out_dir, **kwargs):
 @click.option("--preview", is_flag=True, help="Also write <stem>.preview.png (input, fragments, modes, an impact).")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False, path_type=str), default=None,
               help="Reuse cage, tets and modes from this folder when nothing they depend on changed.")
+@click.option("-k", "--keep-going", is_flag=True,
+              help="With several inputs, bake the others when one fails (exit code 1 at the end).")
 @click.option("-q", "--quiet", is_flag=True, help="Print only errors.")
 @click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
 @click.pass_context
-def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, cache_dir, quiet, debug):
+def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, cache_dir, keep_going, quiet, debug):
     """Run the whole pipeline on INPUTS with a recipe, writing into OUT.
 
     For each input <stem>: <stem>.glb (fragments), <stem>.fracture.json/.bin
@@ -507,14 +509,29 @@ def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, cac
         from fracture_cli.bake import bake
         from fracture_cli.recipe import load_recipe
 
-        recipe = load_recipe(recipe_name, overrides)
-        reports = []
+        import os
+
+        stems: dict[str, str] = {}
         for path in inputs:
-            result = bake(path, out_dir, recipe, cache_dir=cache_dir)
+            stem = os.path.splitext(os.path.basename(path))[0]
+            if stem in stems:
+                raise UsageError(f"{stems[stem]} and {path} would both write {stem}.* into {out_dir}; "
+                                 "bake them into different folders")
+            stems[stem] = path
+        recipe = load_recipe(recipe_name, overrides)
+        reports, failures = [], []
+        for path in inputs:
+            try:
+                result = bake(path, out_dir, recipe, cache_dir=cache_dir)
+            except FractureError as exc:
+                if not keep_going or len(inputs) == 1:
+                    raise
+                click.echo(f"error: {exc}", err=True)
+                failures.append(path)
+                reports.append({"input": {"name": os.path.basename(path)}, "error": str(exc)})
+                continue
             reports.append(result.report)
             if preview:
-                import os
-
                 from fracture_cli.preview import render_preview
 
                 stem = os.path.splitext(os.path.basename(path))[0]
@@ -531,6 +548,8 @@ def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, cac
                 )
         if as_json:
             click.echo(_json.dumps(reports[0] if len(reports) == 1 else reports, indent=2, sort_keys=True))
+        if failures:
+            raise FractureError(f"{len(failures)} of {len(inputs)} inputs failed: {', '.join(failures)}")
         return state
 
     return process

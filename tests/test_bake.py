@@ -185,3 +185,26 @@ def test_stage_cache_reuses_modes_and_gives_identical_output(tmp_path):
         entry.write_bytes(b"garbage")
     r5 = bake(CHAIR, "-o", str(third), *FAST, "--cache", str(cache), "--json")
     assert r5.exit_code == 0 and json.loads(r5.stdout)["cache"] == {"cage": "miss", "modes": "miss"}
+
+
+def test_keep_going_bakes_the_others_and_fails_at_the_end(tmp_path):
+    bad = tmp_path / "broken.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")  # a single triangle: no inside
+    out = tmp_path / "out"
+    result = bake(str(bad), CHAIR, "-o", str(out), *FAST, "--keep-going", "--quiet")
+    assert result.exit_code == 1
+    assert "broken.obj" in result.output and "1 of 2 inputs failed" in result.output
+    assert (out / "chair.glb").is_file() and not (out / "broken.glb").exists()
+    # Without --keep-going the first failure stops the bake.
+    result = bake(str(bad), CHAIR, "-o", str(tmp_path / "out2"), *FAST, "--quiet")
+    assert result.exit_code == 1 and not (tmp_path / "out2" / "chair.glb").exists()
+
+
+def test_inputs_with_the_same_stem_are_refused(tmp_path):
+    other = tmp_path / "sub"
+    other.mkdir()
+    import shutil
+
+    shutil.copy(CHAIR, other / "chair.glb")
+    result = bake(CHAIR, str(other / "chair.glb"), "-o", str(tmp_path / "out"))
+    assert result.exit_code == 2 and "both write chair.*" in result.output
