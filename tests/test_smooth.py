@@ -2,6 +2,7 @@
 
 import itertools
 import logging
+from pathlib import Path
 
 import manifold3d
 import numpy as np
@@ -9,9 +10,15 @@ import pytest
 
 from fracture_cli.stages.checks import fault_roughness, region_fault_roughness
 from fracture_cli.stages.pieces import pieces
-from fracture_cli.stages.smooth import SmoothOptions, _smoothed_field, _union_regions, smooth
+from fracture_cli import tetgeom
+from fracture_cli.stages.smooth import (SmoothOptions, _smoothed_field, _smoothed_vertices, _Topology, _union_regions,
+                                        smooth)
 from fracture_cli.testing import grid_tetmesh
 from fracture_cli.types import Modes, Regions, TetMesh
+
+
+# The field method at the strength it was tuned for (the stage's default is the geometric method).
+FIELD = SmoothOptions(smoothing=2.5e-4, method="field")
 
 
 def jittered_grid(n=6, seed=0):
@@ -134,7 +141,7 @@ def test_direct_regions_match_cell_unions():
     P = plane_pieces(tm)
     tet_piece = P.tet_piece.astype(np.int64)
     lam = 2e-3
-    R = smooth(tm, P, SmoothOptions(smoothing=lam))
+    R = smooth(tm, P, SmoothOptions(smoothing=lam, method="field"))
     Z = _smoothed_field(tm, tet_piece, P.num_pieces, lam)
     unions = _union_regions(tm.vertices, tm.tets, Z, tet_piece, P.num_pieces, list(R.vanished),
                             list(range(P.num_pieces)))
@@ -158,7 +165,7 @@ def test_vanished_piece_between_others_stays_closed_by_position():
     for k, tet in enumerate(rng.choice(tm.num_tets, 12, replace=False)):
         lab[tet] = 2 + k
     P = pieces(tm, label_modes(tm, lab))
-    R = smooth(tm, P, SmoothOptions(smoothing=5e-3))
+    R = smooth(tm, P, SmoothOptions(smoothing=5e-3, method="field"))
     assert len(R.vanished) > 0
     check_partition(tm, R, 1e-7)
     for V, F in R.meshes:
@@ -169,8 +176,8 @@ def test_smoothing_partitions_and_rounds_faults():
     tm = jittered_grid(7)
     P = plane_pieces(tm)
     R0 = smooth(tm, P, SmoothOptions(smoothing=0.0))
-    R1 = smooth(tm, P, SmoothOptions())
-    assert R1.smoothing == SmoothOptions().smoothing
+    R1 = smooth(tm, P, FIELD)
+    assert R1.smoothing == FIELD.smoothing
     volumes = check_partition(tm, R1, 1e-7)
     assert len(volumes) == P.num_pieces
     for V, F in R1.meshes:
@@ -189,7 +196,7 @@ def test_vanishing_piece_keeps_its_tets(caplog):
     P = pieces(tm, label_modes(tm, lab))
     lonely_piece = int(P.tet_piece[lonely])
     with caplog.at_level(logging.WARNING):
-        R = smooth(tm, P, SmoothOptions(smoothing=1e-2))
+        R = smooth(tm, P, SmoothOptions(smoothing=1e-2, method="field"))
     assert lonely_piece in R.vanished
     assert any("vanish" in r.message for r in caplog.records)
     volumes = check_partition(tm, R, 1e-7)
@@ -199,7 +206,7 @@ def test_vanishing_piece_keeps_its_tets(caplog):
 def test_deterministic():
     tm = jittered_grid(5)
     P = plane_pieces(tm)
-    A, B = smooth(tm, P), smooth(tm, P)
+    A, B = smooth(tm, P, FIELD), smooth(tm, P, FIELD)
     for (va, fa), (vb, fb) in zip(A.meshes, B.meshes):
         assert va.tobytes() == vb.tobytes() and fa.tobytes() == fb.tobytes()
 
@@ -243,7 +250,7 @@ def test_smoothing_makes_slanted_faults_smoother():
     tm = jittered_grid(7)
     P = slanted_pieces(tm)
     R0 = smooth(tm, P, SmoothOptions(smoothing=0.0))
-    R1 = smooth(tm, P, SmoothOptions())
+    R1 = smooth(tm, P, FIELD)
     assert R1.vanished == ()
     check_partition(tm, R1, 1e-7)
     rough0, rough1 = region_fault_roughness(R0), region_fault_roughness(R1)
@@ -251,5 +258,85 @@ def test_smoothing_makes_slanted_faults_smoother():
     assert rough0 > 5.0  # tet-aligned slanted faults are stair-stepped
     assert rough1 < 0.5 * rough0
     # More smoothing, smoother faults (until pieces start to shrink away).
-    R2 = smooth(tm, P, SmoothOptions(smoothing=4 * SmoothOptions().smoothing))
+    R2 = smooth(tm, P, SmoothOptions(smoothing=4 * FIELD.smoothing, method="field"))
     assert region_fault_roughness(R2) < rough1
+
+
+# ---------------------------------------------------------------------------
+# Geometric method (the default): tet vertices move, pieces keep their tets.
+# ---------------------------------------------------------------------------
+
+
+def geometric_vertices(tm, P, lam):
+    tet_piece = P.tet_piece.astype(np.int64)
+    return _smoothed_vertices(tm, _Topology(tm.tets, tm.num_vertices), tet_piece, P.num_pieces, lam)[0]
+
+
+def check_geometric(tm, P, R, X):
+    """Exact partition of the (unchanged) cage by the deformed tets; tets valid; boundary unmoved."""
+    assert len(R.meshes) == P.num_pieces and R.vanished == ()
+    volumes = check_partition(tm, R, 1e-9)
+    deformed = tetgeom.tet_volumes(X, tm.tets)
+    assert np.all(deformed > 0.0)
+    per_piece = np.bincount(P.tet_piece, weights=deformed, minlength=P.num_pieces)
+    # Spindles at pinched edges move eps^2 of the tets around them between pieces.
+    np.testing.assert_allclose(volumes, per_piece, rtol=1e-3)
+    b = tm.boundary_vertices
+    assert X[b].tobytes() == tm.vertices[b].tobytes()
+    for V, F in R.meshes:
+        assert edge_manifold_by_index(F) and closed_by_position(V, F)
+
+
+def test_geometric_smooths_faults_and_partitions_exactly():
+    tm = jittered_grid(7)
+    P = slanted_pieces(tm)
+    default = SmoothOptions()
+    assert default.method == "geometric"
+    R0 = smooth(tm, P, SmoothOptions(smoothing=0.0))
+    R1 = smooth(tm, P, default)
+    R2 = smooth(tm, P, SmoothOptions(smoothing=1e-2))
+    check_geometric(tm, P, R1, geometric_vertices(tm, P, default.smoothing))
+    check_geometric(tm, P, R2, geometric_vertices(tm, P, 1e-2))
+    rough0, rough1, rough2 = (region_fault_roughness(R) for R in (R0, R1, R2))
+    print(f"geometric fault roughness: lambda=0 {rough0:.2f}, default {rough1:.2f}, 1e-2 {rough2:.2f}")
+    # This grid is coarse (tet edge 1/7 of the diagonal-ish): the default barely reaches across a tet.
+    assert rough1 < rough0
+    assert rough2 < 0.9 * rough0
+
+
+def test_geometric_keeps_tets_valid_under_strong_smoothing():
+    # Strong smoothing of a thin piece squeezed between others must not invert or flatten tets.
+    tm = jittered_grid(6, seed=2)
+    c = tm.tet_centroids
+    lab = (c[:, 0] + 0.3 * np.sin(9 * c[:, 1]) > 0.0).astype(int) + 2 * (np.abs(c[:, 2] - 0.1) < 0.12)
+    P = pieces(tm, label_modes(tm, lab))
+    X = geometric_vertices(tm, P, 0.2)
+    ratio = tetgeom.tet_volumes(X, tm.tets) / tm.tet_volumes
+    assert ratio.min() >= 0.05 - 1e-12
+    check_geometric(tm, P, smooth(tm, P, SmoothOptions(smoothing=0.2)), X)
+
+
+def test_geometric_deterministic():
+    tm = jittered_grid(6)
+    P = slanted_pieces(tm)
+    A, B = smooth(tm, P), smooth(tm, P)
+    for (va, fa), (vb, fb) in zip(A.meshes, B.meshes):
+        assert va.tobytes() == vb.tobytes() and fa.tobytes() == fb.tobytes()
+
+
+def test_geometric_smooths_faults_of_a_sample_asset():
+    from fracture_cli.io.read import load_surface
+    from fracture_cli.stages.cage import CageOptions, cage
+    from fracture_cli.stages.modes import ModesOptions, modes
+    from fracture_cli.stages.repair import repair
+    from fracture_cli.stages.tetra import tetra
+
+    path = Path(__file__).resolve().parents[1] / "sample_assets" / "chair.glb"
+    tm = tetra(cage(repair(load_surface(path)), CageOptions(target_faces=600)))
+    P = pieces(tm, modes(tm, ModesOptions(num_modes=4)))
+    R0 = smooth(tm, P, SmoothOptions(smoothing=0.0))
+    R1 = smooth(tm, P)
+    check_geometric(tm, P, R1, geometric_vertices(tm, P, SmoothOptions().smoothing))
+    rough0, rough1 = region_fault_roughness(R0), region_fault_roughness(R1)
+    print(f"chair (600-face cage) fault roughness: lambda=0 {rough0:.2f}, default {rough1:.2f}")
+    assert rough1 < rough0

@@ -42,6 +42,16 @@ _CANDIDATE_TOL = 1e-12
 _PINCH_SPINDLE = 0.02
 # Rounds of making tets tet-aligned where a region touches itself along a line.
 _MAX_REPAIRS = 12
+# Geometric method: weight of a fault-sheet edge in the surface Laplacian, the cotangent weight of an
+# equilateral triangulation, so that (M_f + lambda L_f) approximates the continuous operator and lambda
+# keeps units of length^2 (uniform weights are an M-matrix: no overshoot on stair-stepped faults).
+_SHEET_WEIGHT = 1.0 / np.sqrt(3.0)
+# Geometric method: a tet may shrink to this fraction of its volume (never invert or flatten).
+_MIN_VOLUME_RATIO = 0.05
+# Geometric method: rounds of freezing fault vertices of flattened tets, then halvings of the displacement.
+_MAX_FREEZE_ROUNDS = 12
+_MIN_DAMPING = 1.0 / 8.0
+_MIN_ALPHA = 1.0 / 64.0
 
 
 @dataclass(frozen=True)
@@ -49,14 +59,21 @@ class SmoothOptions:
     """Options of :func:`smooth`."""
 
     smoothing: float = option(
-        2.5e-4,
-        "fault smoothing lambda in units of (bbox diagonal)^2; about the square of the smoothing radius; 0 = "
-        "tet-aligned faults",
+        1e-3,
+        "fault smoothing lambda in units of (bbox diagonal)^2, about the square of the radius over which faults "
+        "are rounded; 0 = faults follow tet faces",
         min=0.0,
+    )
+    method: str = option(
+        "geometric",
+        "geometric: move the tet vertices so the tet-aligned faults become smooth surfaces (pieces keep their "
+        "tets); field: smooth the piece membership field and cut tets along its level sets",
+        choices=("geometric", "field"),
     )
     vanish_fraction: float = option(
         0.01,
-        "a piece whose smoothed region is below this fraction of its own volume keeps its own tets instead",
+        "field method: a piece whose smoothed region is below this fraction of its own volume keeps its own "
+        "tets instead",
         min=0.0,
         max=1.0,
     )
@@ -72,8 +89,9 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     pieces : Pieces
         Atomic pieces; ``pieces.tet_piece`` (t,) assigns every tet to a piece.
     options : SmoothOptions, optional
-        ``smoothing`` (lambda, default 2.5e-4) and ``vanish_fraction``
-        (default 0.01).
+        ``smoothing`` (lambda, default 1e-3), ``method`` (default
+        ``"geometric"``) and ``vanish_fraction`` (default 0.01, field method
+        only).
 
     Returns
     -------
@@ -90,14 +108,39 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
 
     Notes
     -----
-    ALGORITHM.md section 5. The one-hot piece field is averaged onto vertices
+    ALGORITHM.md section 5. ``lambda`` has units of length^2 in normalized
+    coordinates (unit bounding-box diagonal) for both methods: ``sqrt(lambda)``
+    is roughly the radius over which faults are rounded, so the same value
+    gives the same shapes at any asset scale. ``lambda = 0`` gives tet-aligned
+    faults with either method.
+
+    Geometric method (default): every piece keeps exactly its own tets, so no
+    piece can vanish and the regions partition the cage by construction; the
+    tet vertices move so that the faults (interior faces between tets of
+    different pieces) become smooth. Junction curves (fault edges where three
+    or more pieces meet) are smoothed first as 1-D curves, ``(M_c + lambda
+    L_c) X = M_c X`` (linear-element stiffness, lumped lengths, curve ends
+    fixed); then the fault sheets, ``(M_f + lambda L_f) X = M_f X`` (uniform
+    edge weights 1/sqrt(3), the cotangent weight of an equilateral mesh, and
+    lumped fault areas), with the curves, the cage boundary and points where
+    fault sheets touch as Dirichlet data. Cage-boundary vertices never move, so
+    the cage still contains the input. The other interior vertices follow by
+    harmonic extension (``K d = 0``). A tet may not shrink below 5% of its
+    volume: the free fault vertices of offending tets are held at half their
+    displacement (repeatedly, then at none) and everything is solved again;
+    as a last resort the whole displacement is scaled down, with a warning.
+    The regions are then the unions of each piece's deformed tets, built as
+    for ``lambda = 0``. Faults can only be as smooth as the vertices that may
+    move allow: where pieces are one or two tets thick, most fault vertices
+    lie on the cage boundary and stay where they are.
+
+    Field method: the one-hot piece field is averaged onto vertices
     (lumped-mass weighted) and smoothed by one implicit diffusion step
     ``Z <- (M_V + lambda K)^-1 M_V Z`` (one sparse factorization, ``p``
-    right-hand sides). ``lambda`` has units of length^2 in normalized
-    coordinates (unit bounding-box diagonal): ``sqrt(lambda)`` is roughly the
-    radius over which faults are rounded, so the same value gives the same
-    shapes at any asset scale; useful values are around the squared tet edge
-    length (1e-4 .. 1e-2).
+    right-hand sides); useful values are around the squared tet edge length
+    (1e-4 .. 1e-2). On coarse tet meshes (pieces a few tets across) the
+    per-tet gradients of ``Z`` zigzag and faults can get rougher, not
+    smoother.
 
     Inside a tet ``Z`` is linear, so the set where piece ``P`` wins is the tet
     clipped by the half-spaces ``Z_P >= Z_Q``: a convex cell. The boundary of
@@ -117,7 +160,7 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     A region that still fails the closed, edge-manifold check is rebuilt as a
     union of its cells (manifold3d), with a warning.
 
-    Smoothing never creates or removes a piece. A piece whose region would
+    Smoothing never creates or removes a piece. Field method: a piece whose region would
     shrink below ``vanish_fraction`` of its own volume is reported in
     ``Regions.vanished`` and keeps exactly its own tets; the field of that piece
     is then ignored everywhere and its tets are claimed by no other piece, so
@@ -134,7 +177,12 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
 
     vanished: list[int] = []
     Z = None
-    if lam == 0.0:
+    if lam == 0.0 or options.method == "geometric":
+        if lam > 0.0:
+            V, moves = _smoothed_vertices(tet_mesh, topo, tet_piece, p, lam)
+            log.info("%s: geometric smoothing moved %d fault vertices (%d on junction curves), %d held back in %d "
+                     "round(s) to keep tets from flattening, displacement scale %g", STAGE, moves["moved"],
+                     moves["curve"], moves["frozen"], moves["rounds"], moves["alpha"])
         meshes, pinches, repaired = _repaired_regions(V, T, topo, None, np.ones(t, dtype=bool), tet_piece, p)
     else:
         Z = _smoothed_field(tet_mesh, tet_piece, p, lam)
@@ -232,6 +280,196 @@ def _smoothed_field(tet_mesh: TetMesh, tet_piece: np.ndarray, p: int, lam: float
                          stage=STAGE) from exc
     Z = np.column_stack([solve(mass_onehot[:, P]) for P in range(p)]) if p else np.zeros((n, 0))
     return Z
+
+
+# ---------------------------------------------------------------------------
+# Geometric method: move tet vertices so that tet-aligned faults become smooth.
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _FaultGraph:
+    """Fault faces of a tet-aligned partition and how each vertex may move.
+
+    All vertex masks are (n,) bool; edge arrays are (e_i, 2) int64 vertex ids.
+    """
+
+    fault_vertex: np.ndarray  # on a fault face
+    curve_free: np.ndarray  # interior point of a junction curve (degree 2, off the cage boundary)
+    sheet_free: np.ndarray  # inside one fault sheet (one piece pair, a disc of faces, off junctions)
+    curve_edges: np.ndarray  # junction edges: 3+ fault faces around them
+    sheet_edges: np.ndarray  # fault edges with exactly 2 fault faces
+    sheet_mass: np.ndarray  # (n,) lumped fault area
+    curve_mass: np.ndarray  # (n,) lumped junction-curve length
+
+
+def _fault_graph(tet_mesh: TetMesh, topo: _Topology, tet_piece: np.ndarray, p: int) -> _FaultGraph:
+    """Classify the vertices of the faults (interior faces between tets of different pieces)."""
+    V, n = tet_mesh.vertices, tet_mesh.num_vertices
+    ft = topo.face_tets
+    inner = ft[:, 1] >= 0
+    pa = tet_piece[ft[:, 0]]
+    pb = np.where(inner, tet_piece[np.maximum(ft[:, 1], 0)], -1)
+    fault = np.flatnonzero(inner & (pa != pb))
+    fault_faces = topo.faces[fault]  # (k, 3) sorted vertex ids
+    boundary = np.zeros(n, dtype=bool)
+    boundary[tet_mesh.boundary_vertices] = True
+    fault_vertex = np.zeros(n, dtype=bool)
+    fault_vertex[fault_faces.reshape(-1)] = True
+
+    fe = topo.face_edges[fault]  # (k, 3); edge j of a face joins its corners _FACE_EDGE_PAIRS[j]
+    edge_count = np.bincount(fe.reshape(-1), minlength=len(topo.edges))
+    # Around an interior edge the tets form a cycle, so a fault edge has 2 fault faces inside a sheet and
+    # 3+ where three pieces meet or a piece touches itself (a junction).
+    curve_edges = topo.edges[edge_count >= 3]
+    sheet_edges = topo.edges[edge_count == 2]
+    on_curve = np.zeros(n, dtype=bool)
+    on_curve[curve_edges.reshape(-1)] = True
+    curve_degree = np.bincount(curve_edges.reshape(-1), minlength=n)
+    curve_free = on_curve & ~boundary & (curve_degree == 2)
+
+    # A sheet vertex must see one piece pair and one disc of fault faces (not two sheets touching at a point).
+    pair = np.minimum(pa, pb)[fault] * p + np.maximum(pa, pb)[fault]
+    corner_vertex = fault_faces.reshape(-1)
+    corner_pair = np.repeat(pair, 3)
+    lo = np.full(n, np.iinfo(np.int64).max)
+    hi = np.full(n, -1, dtype=np.int64)
+    np.minimum.at(lo, corner_vertex, corner_pair)
+    np.maximum.at(hi, corner_vertex, corner_pair)
+    k = len(fault)
+    rows = np.repeat(np.arange(k), 3)
+    local = np.tile(np.arange(3), k)
+    edge = fe.reshape(-1)
+    order = np.lexsort((rows, edge))
+    edge, rows, local = edge[order], rows[order], local[order]
+    twice = np.flatnonzero((edge[1:] == edge[:-1]) & (edge_count[edge[:-1]] == 2))
+    a, b = twice, twice + 1
+    # Corners (face, local corner) that see the same vertex across a sheet edge are linked.
+    links = []
+    for end in range(2):
+        ca = 3 * rows[a] + _FACE_EDGE_PAIRS[local[a], end]
+        cb = 3 * rows[b] + _FACE_EDGE_PAIRS[local[b], end]
+        links.append(np.column_stack([ca, cb]))
+    links = np.concatenate(links) if links else np.zeros((0, 2), np.int64)
+    graph = sp.coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(3 * k, 3 * k))
+    _, component = connected_components(graph, directed=False)
+    vertex_component = np.unique(np.column_stack([corner_vertex, component]), axis=0)
+    discs = np.bincount(vertex_component[:, 0], minlength=n)
+    sheet_free = fault_vertex & ~boundary & ~on_curve & (lo == hi) & (discs == 1)
+
+    areas = tetgeom.triangle_areas(V, fault_faces)
+    sheet_mass = np.bincount(corner_vertex, weights=np.repeat(areas / 3.0, 3), minlength=n)
+    lengths = np.linalg.norm(V[curve_edges[:, 1]] - V[curve_edges[:, 0]], axis=1)
+    curve_mass = np.bincount(curve_edges.reshape(-1), weights=np.repeat(lengths / 2.0, 2), minlength=n)
+    return _FaultGraph(fault_vertex, curve_free, sheet_free, curve_edges, sheet_edges, sheet_mass, curve_mass)
+
+
+def _implicit_smooth(X: np.ndarray, edges: np.ndarray, weights: np.ndarray, mass: np.ndarray, free: np.ndarray,
+                     lam: float) -> np.ndarray:
+    """One implicit Laplacian step ``(M + lam L) X_free = M X_free`` with the other vertices as Dirichlet data.
+
+    ``L`` is the graph Laplacian of ``edges`` (e, 2) with positive ``weights`` (e,) (PSD, an M-matrix), ``M``
+    the diagonal ``mass`` (n,). Returns a copy of ``X`` (n, 3) with the rows ``free`` (n,) bool replaced.
+    """
+    out = X.copy()
+    idx = np.flatnonzero(free)
+    if len(idx) == 0 or len(edges) == 0:
+        return out
+    n = len(X)
+    i, j = edges[:, 0], edges[:, 1]
+    W = sp.coo_matrix((np.r_[weights, weights], (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
+    L = (sp.diags(np.asarray(W.sum(axis=1)).reshape(-1)) - W).tocsr()
+    known = np.flatnonzero(~free)
+    L_rows = L[idx]
+    system = (sp.diags(mass[idx]) + lam * L_rows[:, idx]).tocsc()
+    rhs = mass[idx, None] * X[idx] - lam * (L_rows[:, known] @ X[known])
+    out[idx] = spla.splu(system).solve(np.ascontiguousarray(rhs))
+    return out
+
+
+def _harmonic_extension(tet_mesh: TetMesh, displacement: np.ndarray, known: np.ndarray, solver=None):
+    """Displacements (n, 3) of the vertices not ``known`` (n,) bool with ``K d = 0`` there.
+
+    Returns the full displacement field and the (reusable) factorization of ``K`` on the unknown vertices.
+    """
+    out = displacement.copy()
+    idx = np.flatnonzero(~known)
+    if len(idx) == 0:
+        return out, solver
+    K = tet_mesh.stiffness.tocsr()
+    rows = K[idx]
+    if solver is None:
+        solver = spla.splu(rows[:, idx].tocsc())
+    rhs = -(rows[:, np.flatnonzero(known)] @ displacement[known])
+    out[idx] = solver.solve(np.ascontiguousarray(rhs))
+    return out, solver
+
+
+def _smoothed_vertices(tet_mesh: TetMesh, topo: _Topology, tet_piece: np.ndarray, p: int, lam: float):
+    """Tet vertex positions (n, 3) with smoothed faults, and counts for the log.
+
+    Junction curves are smoothed first (1-D, their ends fixed), then the fault
+    sheets with the curves, the cage boundary and the non-manifold fault points
+    as Dirichlet data; the other interior vertices follow harmonically. Where a
+    tet would flatten (volume below ``_MIN_VOLUME_RATIO`` of its own), the free
+    fault vertices of the offending tets are frozen and everything is solved
+    again; if freezing does not help, the displacement is scaled down.
+    """
+    V, T = tet_mesh.vertices, tet_mesh.tets
+    n = len(V)
+    graph = _fault_graph(tet_mesh, topo, tet_piece, p)
+    stats = {"moved": 0, "curve": 0, "frozen": 0, "rounds": 0, "alpha": 1.0}
+    if not graph.fault_vertex.any():
+        return V.copy(), stats
+    boundary = np.zeros(n, dtype=bool)
+    boundary[tet_mesh.boundary_vertices] = True
+    known = graph.fault_vertex | boundary  # Dirichlet data of the harmonic extension
+    curve_lengths = np.linalg.norm(V[graph.curve_edges[:, 1]] - V[graph.curve_edges[:, 0]], axis=1)
+    curve_weights = 1.0 / curve_lengths  # 1-D linear-element stiffness: units match lambda * length^-1
+    sheet_weights = np.full(len(graph.sheet_edges), _SHEET_WEIGHT)
+    volume0 = tet_mesh.tet_volumes
+    # Vertices of flattened tets are held at a fraction ``damping`` of their first-round displacement (halved
+    # each round they are still to blame) and become Dirichlet data for the next round.
+    damping = np.ones(n)
+    target = V
+    solver = None
+    for round_ in range(_MAX_FREEZE_ROUNDS + 1):
+        held = damping < 1.0
+        curve_free = graph.curve_free & ~held
+        sheet_free = graph.sheet_free & ~held
+        start = V + damping[:, None] * (target - V)
+        X = _implicit_smooth(start, graph.curve_edges, curve_weights, graph.curve_mass, curve_free, lam)
+        X = _implicit_smooth(X, graph.sheet_edges, sheet_weights, graph.sheet_mass, sheet_free, lam)
+        if round_ == 0:
+            target = X
+        D, solver = _harmonic_extension(tet_mesh, X - V, known, solver)
+        bad = tetgeom.tet_volumes(V + D, T) < _MIN_VOLUME_RATIO * volume0
+        stats["rounds"] = round_
+        if not bad.any():
+            break
+        movable = (graph.curve_free | graph.sheet_free) & (damping > 0.0)
+        culprits = np.unique(T[bad])
+        culprits = culprits[movable[culprits]]
+        if len(culprits) == 0:
+            # The extension itself flattens the tets: hold the fault vertices around them.
+            ring = np.unique(T[np.isin(T, T[bad]).any(axis=1)])
+            culprits = ring[movable[ring]]
+        if len(culprits) == 0 or round_ == _MAX_FREEZE_ROUNDS:
+            break
+        damping[culprits] = np.where(damping[culprits] > _MIN_DAMPING, damping[culprits] / 2.0, 0.0)
+    frozen = damping < 1.0
+    alpha = 1.0
+    while bad.any() and alpha > _MIN_ALPHA:
+        alpha /= 2.0
+        bad = tetgeom.tet_volumes(V + alpha * D, T) < _MIN_VOLUME_RATIO * volume0
+    if bad.any():
+        alpha = 0.0
+    if alpha < 1.0:
+        log.warning("%s: smoothed faults would flatten %d tet(s); the fault displacement is scaled by %g", STAGE,
+                    int((tetgeom.tet_volumes(V + D, T) < _MIN_VOLUME_RATIO * volume0).sum()), alpha)
+    stats.update(moved=int(((graph.curve_free | graph.sheet_free) & (damping > 0.0)).sum()),
+                 curve=int((graph.curve_free & (damping > 0.0)).sum()), frozen=int(frozen.sum()), alpha=alpha)
+    return V + alpha * D, stats
 
 
 class _CellList:
