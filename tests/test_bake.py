@@ -208,3 +208,23 @@ def test_inputs_with_the_same_stem_are_refused(tmp_path):
     shutil.copy(CHAIR, other / "chair.glb")
     result = bake(CHAIR, str(other / "chair.glb"), "-o", str(tmp_path / "out"))
     assert result.exit_code == 2 and "both write chair.*" in result.output
+
+
+def test_hits_at_different_places_break_different_fragments(chair_bake):
+    from fracture_cli.runtime.format import load_runtime
+    from fracture_cli.runtime.impact import project_impact
+
+    out, _ = chair_bake
+    data = load_runtime(str(out / "chair.fracture.json"))
+    sites = np.asarray(data.sites, dtype=np.float64)
+    top = sites[np.argmax(sites[:, 1])]  # top of the back rest
+    low = sites[np.argmin(sites[:, 1])]  # bottom of a leg
+    partitions = []
+    for point in (top, low):
+        for magnitude in np.geomspace(0.5, 512, 11):
+            result = project_impact(data, point, (0.0, -magnitude, 0.0))
+            if len(np.unique(result.groups)) > 1:
+                break
+        assert len(np.unique(result.groups)) > 1
+        partitions.append(tuple(result.groups))
+    assert partitions[0] != partitions[1]
