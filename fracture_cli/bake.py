@@ -122,29 +122,7 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
 
 
 def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) -> BakeResult:
-    """Run the whole pipeline on one asset and write its outputs (errors not yet labelled with the file).
-
-    Parameters
-    ----------
-    input_path : str
-        The asset (any format :func:`~fracture_cli.io.read.load_surface` reads).
-    out_dir : str
-        Output folder; created if missing.
-    recipe : Recipe
-        The destructible material: options of every stage.
-    cache_dir : str, optional (default None)
-        Folder of a :class:`~fracture_cli.cache.StageCache`: the cage, tets and
-        modes are reused when nothing they depend on changed.
-
-    Returns
-    -------
-    BakeResult
-
-    Raises
-    ------
-    FractureError
-        On bad input or a stage that cannot finish; no output is then written.
-    """
+    """The body of :func:`bake`; errors are labelled with the input file by the caller."""
     from fracture_cli.io.read import load_surface
     from fracture_cli.io.write import fragment_name, write_fragments_glb
     from fracture_cli.runtime.format import write_runtime

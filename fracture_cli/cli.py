@@ -280,147 +280,104 @@ def _stage_class(section: str):
     return options_class(section)
 
 
-@cli.command("repair")
-@stage_options(_stage_class("repair"))
-def repair_cmd(**kwargs):
-    """Make the surface a closed solid: weld, fix winding, close holes or thicken open sheets."""
-    options = build_options(_stage_class("repair"), kwargs)
+def _stage_command(name: str, section: str, doc: str, run, short: dict[str, str] | None = None) -> None:
+    """Register a chained command for one stage: flags from its options, ``run(state, options)`` does the work."""
+    options_cls = _stage_class(section)
 
-    def process(state: PipelineState) -> PipelineState:
-        from fracture_cli.stages.repair import repair
+    @stage_options(options_cls, short=short)
+    def command(**kwargs):
+        options = build_options(options_cls, kwargs)
+        return lambda state: run(state, options)
 
-        return dataclasses.replace(state, surface=repair(state.need("surface", "repair", "load PATH"), options))
-
-    return process
+    cli.command(name, help=doc)(command)
 
 
-@cli.command("cage")
-@stage_options(_stage_class("cage"))
-def cage_cmd(**kwargs):
-    """Build the nested cage: a coarse closed surface around the input."""
-    options = build_options(_stage_class("cage"), kwargs)
+def _file_command(name: str, doc: str, run) -> None:
+    """Register a chained command taking one PATH argument; ``run(state, path)`` does the work."""
 
-    def process(state: PipelineState) -> PipelineState:
-        from fracture_cli.stages.cage import cage
+    @click.argument("path", type=click.Path(dir_okay=False, path_type=str))
+    def command(path):
+        return lambda state: run(state, path)
 
-        return dataclasses.replace(state, cage=cage(state.need("surface", "cage", "load PATH"), options))
-
-    return process
+    cli.command(name, help=doc)(command)
 
 
-@cli.command("save-cage")
-@click.argument("path", type=click.Path(dir_okay=False, path_type=str))
-def save_cage_cmd(path):
-    """Write the cage surface (OBJ, PLY, STL, OFF) for inspection."""
+def _run_repair(state: PipelineState, options) -> PipelineState:
+    from fracture_cli.stages.repair import repair
 
-    def process(state: PipelineState) -> PipelineState:
-        from fracture_cli.io.cage_io import save_cage
-
-        save_cage(path, state.need("cage", "save-cage", "cage"))
-        return state
-
-    return process
+    return dataclasses.replace(state, surface=repair(state.need("surface", "repair", "load PATH"), options))
 
 
-@cli.command("tetra")
-@stage_options(_stage_class("tetra"))
-def tetra_cmd(**kwargs):
-    """Tetrahedralize the cage (TetGen), keeping its surface."""
-    options = build_options(_stage_class("tetra"), kwargs)
+def _run_cage(state: PipelineState, options) -> PipelineState:
+    from fracture_cli.stages.cage import cage
 
-    def process(state: PipelineState) -> PipelineState:
-        from fracture_cli.stages.tetra import tetra
-
-        return dataclasses.replace(state, tet_mesh=tetra(state.need("cage", "tetra", "cage"), options))
-
-    return process
+    return dataclasses.replace(state, cage=cage(state.need("surface", "cage", "load PATH"), options))
 
 
-@cli.command("save-tets")
-@click.argument("path", type=click.Path(dir_okay=False, path_type=str))
-def save_tets_cmd(path):
-    """Write the tet mesh as .npz (vertices, tets, normalization)."""
+def _run_tetra(state: PipelineState, options) -> PipelineState:
+    from fracture_cli.stages.tetra import tetra
 
-    def process(state: PipelineState) -> PipelineState:
-        from fracture_cli.io.cage_io import save_tetmesh
-
-        save_tetmesh(path, state.need("tet_mesh", "save-tets", "tetra"))
-        return state
-
-    return process
+    return dataclasses.replace(state, tet_mesh=tetra(state.need("cage", "tetra", "cage"), options))
 
 
-@cli.command("load-tets")
-@click.argument("path", type=click.Path(dir_okay=False, path_type=str))
-def load_tets_cmd(path):
-    """Read a tet mesh saved by save-tets (to resume a chain from it)."""
+def _run_material(state: PipelineState, options) -> PipelineState:
+    from fracture_cli.stages.material import material
 
-    def process(state: PipelineState) -> PipelineState:
-        from fracture_cli.io.cage_io import load_tetmesh
-
-        return dataclasses.replace(state, tet_mesh=load_tetmesh(path))
-
-    return process
+    return dataclasses.replace(state, eta=material(state.need("tet_mesh", "material", "tetra"), state.surface, options))
 
 
-@cli.command("material")
-@stage_options(_stage_class("material"))
-def material_cmd(**kwargs):
-    """Set material weights (grain, painted strength) on the tet faces."""
-    options = build_options(_stage_class("material"), kwargs)
+def _run_modes(state: PipelineState, options) -> PipelineState:
+    from fracture_cli.stages.modes import modes
 
-    def process(state: PipelineState) -> PipelineState:
-        from fracture_cli.stages.material import material
-
-        eta = material(state.need("tet_mesh", "material", "tetra"), state.surface, options)
-        return dataclasses.replace(state, eta=eta)
-
-    return process
+    return dataclasses.replace(state, modes=modes(state.need("tet_mesh", "modes", "tetra"), options, eta=state.eta))
 
 
-@cli.command("modes")
-@stage_options(_stage_class("modes"), short={"num_modes": "-k"})
-def modes_cmd(**kwargs):
-    """Compute the fracture modes of the tet mesh."""
-    options = build_options(_stage_class("modes"), kwargs)
+def _run_pieces(state: PipelineState, options) -> PipelineState:
+    from fracture_cli.stages.pieces import pieces
 
-    def process(state: PipelineState) -> PipelineState:
-        from fracture_cli.stages.modes import modes
-
-        result = modes(state.need("tet_mesh", "modes", "tetra"), options, eta=state.eta)
-        return dataclasses.replace(state, modes=result)
-
-    return process
+    result = pieces(state.need("tet_mesh", "pieces", "tetra"), state.need("modes", "pieces", "modes"), options)
+    return dataclasses.replace(state, pieces=result)
 
 
-@cli.command("pieces")
-@stage_options(_stage_class("pieces"))
-def pieces_cmd(**kwargs):
-    """Split the tet mesh into atomic pieces and build the piece graph."""
-    options = build_options(_stage_class("pieces"), kwargs)
+def _run_smooth(state: PipelineState, options) -> PipelineState:
+    from fracture_cli.stages.smooth import smooth
 
-    def process(state: PipelineState) -> PipelineState:
-        from fracture_cli.stages.pieces import pieces
-
-        result = pieces(state.need("tet_mesh", "pieces", "tetra"), state.need("modes", "pieces", "modes"), options)
-        return dataclasses.replace(state, pieces=result)
-
-    return process
+    regions = smooth(state.need("tet_mesh", "smooth", "tetra"), state.need("pieces", "smooth", "pieces"), options)
+    return dataclasses.replace(state, regions=regions)
 
 
-@cli.command("smooth")
-@stage_options(_stage_class("smooth"))
-def smooth_cmd(**kwargs):
-    """Smooth the fault surfaces between pieces (Laplacian smoothing)."""
-    options = build_options(_stage_class("smooth"), kwargs)
+def _save_cage(state: PipelineState, path: str) -> PipelineState:
+    from fracture_cli.io.cage_io import save_cage
 
-    def process(state: PipelineState) -> PipelineState:
-        from fracture_cli.stages.smooth import smooth
+    save_cage(path, state.need("cage", "save-cage", "cage"))
+    return state
 
-        regions = smooth(state.need("tet_mesh", "smooth", "tetra"), state.need("pieces", "smooth", "pieces"), options)
-        return dataclasses.replace(state, regions=regions)
 
-    return process
+def _save_tets(state: PipelineState, path: str) -> PipelineState:
+    from fracture_cli.io.cage_io import save_tetmesh
+
+    save_tetmesh(path, state.need("tet_mesh", "save-tets", "tetra"))
+    return state
+
+
+def _load_tets(state: PipelineState, path: str) -> PipelineState:
+    from fracture_cli.io.cage_io import load_tetmesh
+
+    return dataclasses.replace(state, tet_mesh=load_tetmesh(path))
+
+
+_stage_command("repair", "repair", "Make the surface a closed solid: weld, fix winding, close holes or thicken "
+               "open sheets.", _run_repair)
+_stage_command("cage", "cage", "Build the nested cage: a coarse closed surface around the input.", _run_cage)
+_file_command("save-cage", "Write the cage surface (OBJ, PLY, STL, OFF) for inspection.", _save_cage)
+_stage_command("tetra", "tetra", "Tetrahedralize the cage (TetGen), keeping its surface.", _run_tetra)
+_file_command("save-tets", "Write the tet mesh as .npz (vertices, tets, normalization).", _save_tets)
+_file_command("load-tets", "Read a tet mesh saved by save-tets (to resume a chain from it).", _load_tets)
+_stage_command("material", "material", "Set material weights (grain, painted strength) on the tet faces.",
+               _run_material)
+_stage_command("modes", "modes", "Compute the fracture modes of the tet mesh.", _run_modes, short={"num_modes": "-k"})
+_stage_command("pieces", "pieces", "Split the tet mesh into atomic pieces and build the piece graph.", _run_pieces)
+_stage_command("smooth", "smooth", "Smooth the fault surfaces between pieces (Laplacian smoothing).", _run_smooth)
 
 
 @cli.command("fragments")
