@@ -170,6 +170,17 @@ class _Constraints:
         return y - mean
 
 
+def _scaled_problem(face_tets, weights, volumes, weight_scale):
+    """Arrays of a subproblem with the face weights divided by their mean (or ``weight_scale``).
+
+    Raw weights (face areas, ~1e-5 on a unit-diagonal asset) leave solvers far
+    from the optimum; scaled to mean 1 they do not (the energy just scales).
+    """
+    weights = np.asarray(weights, dtype=np.float64)
+    scale = float(weight_scale) if weight_scale else float(weights.mean()) if len(weights) else 1.0
+    return np.asarray(face_tets, dtype=np.int64), scale, weights / scale, np.asarray(volumes, dtype=np.float64)
+
+
 class CutSubproblemSolver:
     """Exact solver of the ``d = 1`` subproblem: a partition-refining master LP priced by min cuts.
 
@@ -228,11 +239,7 @@ class CutSubproblemSolver:
 
     def __init__(self, face_tets, weights, volumes, *, tol: float = 1e-9, max_iter: int = 1000,
                  weight_scale: float | None = None, max_flow: str = "auto"):
-        self.face_tets = np.asarray(face_tets, dtype=np.int64)
-        weights = np.asarray(weights, dtype=np.float64)
-        self.scale = float(weight_scale) if weight_scale else float(weights.mean()) if len(weights) else 1.0
-        self.omega = weights / self.scale
-        self.vol = np.asarray(volumes, dtype=np.float64)
+        self.face_tets, self.scale, self.omega, self.vol = _scaled_problem(face_tets, weights, volumes, weight_scale)
         self.t = len(self.vol)
         self.tol = float(tol)
         self.max_iter = int(max_iter)
@@ -654,11 +661,7 @@ class ConicSubproblemSolver:
         import clarabel  # the baseline only; the default solver does not need it
 
         self._clarabel = clarabel
-        self.face_tets = np.asarray(face_tets, dtype=np.int64)
-        weights = np.asarray(weights, dtype=np.float64)
-        self.scale = float(weight_scale) if weight_scale else float(weights.mean()) if len(weights) else 1.0
-        self.omega = weights / self.scale
-        self.vol = np.asarray(volumes, dtype=np.float64)
+        self.face_tets, self.scale, self.omega, self.vol = _scaled_problem(face_tets, weights, volumes, weight_scale)
         self.t = len(self.vol)
         self.eta = np.asarray(eta, dtype=np.float64)
         self.d = self.eta.shape[1]
