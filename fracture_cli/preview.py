@@ -312,7 +312,9 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
         w = W[i, :, 0] if data.dim == 1 else np.linalg.norm(W[i], axis=1) * np.sign(W[i, :, 0] + 1e-30)
         scale = max(np.abs(w).max(), 1e-30)
         fc = cmap(0.5 + 0.5 * w / scale)[:, :3]
-        tris = [np.concatenate([f.outer, f.inner]) for f in frags]
+        # Outer faces only: inner faces lie inside the assembled object and, with
+        # painter's ordering, would speckle through its surface.
+        tris = [f.outer for f in frags]
         cols = [np.repeat(fc[j][None], len(tris[j]), 0) for j in range(len(frags))]
         draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.05,
                        pixels=width // max(k, 1))
