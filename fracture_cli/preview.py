@@ -115,7 +115,7 @@ def cluster_triangles(tris: np.ndarray, colors: np.ndarray, cell: float):
 
 
 def draw_triangles(ax, tris: np.ndarray, colors: np.ndarray, *, center: np.ndarray, extent: float,
-                   edge_alpha: float = 0.0, pixels: int = 0) -> None:
+                   pixels: int = 0, depth_bias: np.ndarray | None = None) -> None:
     """Draw triangles with flat shading, back-face culling and painter's order.
 
     Parameters
@@ -132,6 +132,9 @@ def draw_triangles(ax, tris: np.ndarray, colors: np.ndarray, *, center: np.ndarr
     pixels : int, optional (default 0)
         Panel size in pixels; when given, detail below about a pixel is
         clustered away first (:func:`cluster_triangles`).
+    depth_bias : (m,) float, optional
+        Added to each triangle's depth for ordering: a positive bias draws
+        interior faces before the outer faces they sit just behind.
     """
     from matplotlib.collections import PolyCollection
 
@@ -144,16 +147,17 @@ def draw_triangles(ax, tris: np.ndarray, colors: np.ndarray, *, center: np.ndarr
     right, up, forward = _camera()
     # Shade and cull with the true normals: snapped geometry has noisy ones.
     normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    bias = np.zeros(len(tris)) if depth_bias is None else np.asarray(depth_bias, dtype=np.float64)
     if pixels:
         tris, colors, kept = cluster_triangles(tris, colors, 2.0 * extent / pixels)  # ~1 px cells
-        normals = normals[kept]
+        normals, bias = normals[kept], bias[kept]
     length = np.linalg.norm(normals, axis=1)
     keep = (normals @ forward < 0) & (length > 0)  # facing the camera
-    tris, normals, length, colors = tris[keep], normals[keep], length[keep], colors[keep]
+    tris, normals, length, colors, bias = tris[keep], normals[keep], length[keep], colors[keep], bias[keep]
     normals = normals / length[:, None]
     rel = tris - center
     xy = np.stack([rel @ right, rel @ up], axis=-1)  # (m, 3, 2)
-    depth = (rel @ forward).mean(axis=1)
+    depth = (rel @ forward).mean(axis=1) + bias
     order = np.argsort(-depth, kind="stable")  # far first
     shade = 0.35 + 0.65 * np.clip(normals @ LIGHT, 0.0, 1.0)
     rgb = np.clip(colors * shade[:, None], 0.0, 1.0)
@@ -294,8 +298,9 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
     gpush = (gcent - center) * 0.35 if len(group_ids) > 1 else np.zeros_like(gcent)
     tris = [np.concatenate([f.outer, f.inner]) + gpush[group_of[j]] for j, f in enumerate(frags)]
     cols = [np.repeat(gcol[group_of[j]][None], len(tris[j]), 0) for j in range(len(frags))]
+    bias = [np.r_[np.zeros(len(f.outer)), np.full(len(f.inner), 0.02 * radius)] for f in frags]
     draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.35,
-                   pixels=height // 2)
+                   pixels=height // 2, depth_bias=np.concatenate(bias))
     p2 = project(point[None], center)[0]
     tail = project((point - impulse / max(np.linalg.norm(impulse), 1e-12) * radius * 0.6)[None], center)[0]
     ax.annotate("", xy=p2, xytext=tail, arrowprops=dict(arrowstyle="-|>", color="crimson", lw=2.5))
