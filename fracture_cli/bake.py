@@ -181,7 +181,7 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) 
     with timed("pieces"):
         pieces = atomic_pieces(tet_mesh, modes, recipe["pieces"])
     with timed("smooth"):
-        regions = smooth(tet_mesh, pieces, recipe["smooth"])
+        regions = smooth(tet_mesh, pieces, recipe["smooth"], surface=surface)
     with timed("fragments"):
         frags = cut_fragments(surface, regions, recipe["fragments"])
         checks = fragment_invariants(surface, frags)

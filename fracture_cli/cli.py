@@ -342,7 +342,8 @@ def _run_pieces(state: PipelineState, options) -> PipelineState:
 def _run_smooth(state: PipelineState, options) -> PipelineState:
     from fracture_cli.stages.smooth import smooth
 
-    regions = smooth(state.need("tet_mesh", "smooth", "tetra"), state.need("pieces", "smooth", "pieces"), options)
+    regions = smooth(state.need("tet_mesh", "smooth", "tetra"), state.need("pieces", "smooth", "pieces"), options,
+                     surface=state.surface)
     return dataclasses.replace(state, regions=regions)
 
 

@@ -8,7 +8,7 @@ import manifold3d
 import numpy as np
 import pytest
 
-from fracture_cli.stages.checks import fault_roughness, region_fault_roughness
+from fracture_cli.stages.checks import fault_roughness, point_triangle_distance, region_fault_roughness
 from fracture_cli.stages.pieces import pieces
 from fracture_cli import tetgeom
 from fracture_cli.stages.smooth import (SmoothOptions, _smoothed_field, _smoothed_vertices, _Topology, _union_regions,
@@ -267,22 +267,24 @@ def test_smoothing_makes_slanted_faults_smoother():
 # ---------------------------------------------------------------------------
 
 
-def geometric_vertices(tm, P, lam):
+def geometric_vertices(tm, P, lam, surface=None):
     tet_piece = P.tet_piece.astype(np.int64)
-    return _smoothed_vertices(tm, _Topology(tm.tets, tm.num_vertices), tet_piece, P.num_pieces, lam)[0]
+    return _smoothed_vertices(tm, _Topology(tm.tets, tm.num_vertices), tet_piece, P.num_pieces, lam, surface)[0]
 
 
-def check_geometric(tm, P, R, X):
-    """Exact partition of the (unchanged) cage by the deformed tets; tets valid; boundary unmoved."""
+def check_geometric(tm, P, R, X, slid=False):
+    """Exact partition of the (deformed) cage by the deformed tets; tets valid; boundary unmoved unless ``slid``."""
     assert len(R.meshes) == P.num_pieces and R.vanished == ()
-    volumes = check_partition(tm, R, 1e-9)
+    # Every tet is in exactly one region, so the regions partition the cage as deformed.
+    volumes = check_partition(TetMesh(vertices=X, tets=tm.tets), R, 1e-9)
     deformed = tetgeom.tet_volumes(X, tm.tets)
     assert np.all(deformed > 0.0)
     per_piece = np.bincount(P.tet_piece, weights=deformed, minlength=P.num_pieces)
     # Spindles at pinched edges move eps^2 of the tets around them between pieces.
     np.testing.assert_allclose(volumes, per_piece, rtol=1e-3)
     b = tm.boundary_vertices
-    assert X[b].tobytes() == tm.vertices[b].tobytes()
+    if not slid:
+        assert X[b].tobytes() == tm.vertices[b].tobytes()
     for V, F in R.meshes:
         assert edge_manifold_by_index(F) and closed_by_position(V, F)
 
@@ -324,7 +326,9 @@ def test_geometric_deterministic():
         assert va.tobytes() == vb.tobytes() and fa.tobytes() == fb.tobytes()
 
 
-def test_geometric_smooths_faults_of_a_sample_asset():
+@pytest.fixture(scope="module")
+def chair_case():
+    """The chair sample asset (repaired), a 600-face cage's tet mesh and its atomic pieces."""
     from fracture_cli.io.read import load_surface
     from fracture_cli.stages.cage import CageOptions, cage
     from fracture_cli.stages.modes import ModesOptions, modes
@@ -332,11 +336,131 @@ def test_geometric_smooths_faults_of_a_sample_asset():
     from fracture_cli.stages.tetra import tetra
 
     path = Path(__file__).resolve().parents[1] / "sample_assets" / "chair.glb"
-    tm = tetra(cage(repair(load_surface(path)), CageOptions(target_faces=600)))
-    P = pieces(tm, modes(tm, ModesOptions(num_modes=4)))
+    surface = repair(load_surface(path))
+    tm = tetra(cage(surface, CageOptions(target_faces=600)))
+    return surface, tm, pieces(tm, modes(tm, ModesOptions(num_modes=4)))
+
+
+def test_geometric_smooths_faults_of_a_sample_asset(chair_case):
+    _, tm, P = chair_case
     R0 = smooth(tm, P, SmoothOptions(smoothing=0.0))
     R1 = smooth(tm, P)
     check_geometric(tm, P, R1, geometric_vertices(tm, P, SmoothOptions().smoothing))
     rough0, rough1 = region_fault_roughness(R0), region_fault_roughness(R1)
     print(f"chair (600-face cage) fault roughness: lambda=0 {rough0:.2f}, default {rough1:.2f}")
     assert rough1 < rough0
+
+
+# ---------------------------------------------------------------------------
+# Geometric method with the input given: boundary fault curves slide along the cage.
+# ---------------------------------------------------------------------------
+
+
+def box_surface(lo, hi):
+    """A closed box SurfaceMesh from corner ``lo`` to ``hi`` (already in normalized coordinates)."""
+    import trimesh
+
+    from fracture_cli.types import Material, Normalization, SurfaceMesh
+
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    box = trimesh.creation.box(extents=hi - lo)
+    box.apply_translation((lo + hi) / 2.0)
+    return SurfaceMesh(vertices=np.asarray(box.vertices, dtype=np.float64),
+                       faces=np.asarray(box.faces, dtype=np.int64), uvs=None, normals=None, colors=None,
+                       material_ids=np.zeros(len(box.faces), np.int32), materials=(Material("m"),),
+                       normalization=Normalization.identity(), name="box")
+
+
+def distance_to_triangles(points, V, F):
+    """Brute-force distance (k,) from ``points`` to the triangles ``F`` over ``V`` (independent of smooth.py)."""
+    k, m = len(points), len(F)
+    d = point_triangle_distance(np.repeat(points, m, axis=0), np.tile(V[F], (k, 1, 1)))
+    return d.reshape(k, m).min(axis=1)
+
+
+def check_slid(tm, X, surface, clearance=1e-4):
+    """Moved cage vertices stay on the original cage; the moved cage strictly contains ``surface``."""
+    b = tm.boundary_vertices
+    F = tm.boundary_faces
+    moved = b[np.any(X[b] != tm.vertices[b], axis=1)]
+    if len(moved):
+        assert distance_to_triangles(X[moved], tm.vertices, F).max() < 1e-9
+    # Containment, checked with manifold3d: nothing of the input outside the moved cage, and the input's
+    # vertices keep a clearance from the moved cage.
+    used, local = np.unique(F, return_inverse=True)
+    cage_solid = solid(X[used], local.reshape(-1, 3))
+    # Weld the input by position (attribute seams split its vertices).
+    welded, weld = np.unique(surface.vertices, axis=0, return_inverse=True)
+    input_solid = solid(welded, weld.reshape(-1)[surface.faces])
+    assert cage_solid.status() == manifold3d.Error.NoError and input_solid.volume() > 0.0
+    assert (input_solid - cage_solid).volume() < 1e-12 * input_solid.volume()
+    assert distance_to_triangles(surface.vertices, X, F).min() > clearance
+    return moved
+
+
+def test_sliding_moves_boundary_along_the_cage_and_keeps_the_input_inside():
+    tm = jittered_grid(7)
+    P = slanted_pieces(tm)
+    surface = box_surface((-0.4, -0.4, -0.4), (0.4, 0.4, 0.4))
+    lam = SmoothOptions().smoothing
+    X = geometric_vertices(tm, P, lam, surface)
+    moved = check_slid(tm, X, surface)
+    assert len(moved) > 10
+    R = smooth(tm, P, surface=surface)
+    check_geometric(tm, P, R, X, slid=True)
+    X0 = geometric_vertices(tm, P, lam)
+    rough0 = region_fault_roughness(smooth(tm, P, SmoothOptions(smoothing=0.0)))
+    rough_fixed = region_fault_roughness(smooth(tm, P))
+    rough_slid = region_fault_roughness(R)
+    print(f"grid fault roughness: lambda=0 {rough0:.2f}, fixed cage {rough_fixed:.2f}, sliding {rough_slid:.2f}")
+    assert rough_slid < rough_fixed < rough0
+    assert not np.array_equal(X, X0)
+
+
+def test_sliding_stops_where_the_input_is_too_close():
+    # The input nearly touches the cage face x = 0.5: no cage triangle near it may move there.
+    tm = jittered_grid(7)
+    P = slanted_pieces(tm)
+    surface = box_surface((-0.4, -0.4, -0.4), (0.4997, 0.4, 0.4))
+    X = geometric_vertices(tm, P, SmoothOptions().smoothing, surface)
+    moved = check_slid(tm, X, surface, clearance=2e-4)
+    assert len(moved) > 5  # the other faces still slide
+    F = tm.boundary_faces
+    # Every cage triangle at a moved vertex keeps its clearance: no vertex of the face x = 0.5 moved.
+    near = np.unique(F[np.all(tm.vertices[F][:, :, 0] > 0.5 - 1e-9, axis=1)])
+    assert not np.isin(moved, near).any()
+    # Without the input that close, some of them would have slid.
+    free = geometric_vertices(tm, P, SmoothOptions().smoothing, box_surface((-0.4,) * 3, (0.4,) * 3))
+    assert np.any(free[near] != tm.vertices[near])
+
+
+def test_sliding_deterministic():
+    tm = jittered_grid(6)
+    P = slanted_pieces(tm)
+    surface = box_surface((-0.4, -0.4, -0.4), (0.4, 0.4, 0.4))
+    A, B = smooth(tm, P, surface=surface), smooth(tm, P, surface=surface)
+    for (va, fa), (vb, fb) in zip(A.meshes, B.meshes):
+        assert va.tobytes() == vb.tobytes() and fa.tobytes() == fb.tobytes()
+
+
+def test_sliding_on_a_sample_asset(chair_case):
+    from fracture_cli.recipe import load_recipe
+    from fracture_cli.stages.checks import fragment_invariants
+    from fracture_cli.stages.fragments import fragments
+
+    surface, tm, P = chair_case
+    lam = SmoothOptions().smoothing
+    X = geometric_vertices(tm, P, lam, surface)
+    check_slid(tm, X, surface)
+    R = smooth(tm, P, surface=surface)
+    check_geometric(tm, P, R, X, slid=True)
+    rough0 = region_fault_roughness(smooth(tm, P, SmoothOptions(smoothing=0.0)))
+    rough_fixed = region_fault_roughness(smooth(tm, P))
+    rough_slid = region_fault_roughness(R)
+    print(f"chair (600-face cage) fault roughness: lambda=0 {rough0:.2f}, fixed cage {rough_fixed:.2f}, "
+          f"sliding {rough_slid:.2f}")
+    assert rough0 - rough_slid > rough0 - rough_fixed
+    # The fragments still hold the whole input.
+    frags = fragments(surface, R, load_recipe("default")["fragments"])
+    invariants = fragment_invariants(surface, frags)
+    assert invariants["volume_error"] < 1e-6

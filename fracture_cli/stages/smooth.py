@@ -13,11 +13,11 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from fracture_cli import tetgeom
+from fracture_cli import tetgeom, trigeom
 from fracture_cli.errors import StageError
 from fracture_cli.options import option
 from fracture_cli.stages._solids import shell_mask
-from fracture_cli.types import Pieces, Regions, TetMesh
+from fracture_cli.types import Pieces, Regions, SurfaceMesh, TetMesh
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +52,13 @@ _MIN_VOLUME_RATIO = 0.05
 _MAX_FREEZE_ROUNDS = 12
 _MIN_DAMPING = 1.0 / 8.0
 _MIN_ALPHA = 1.0 / 64.0
+# Sliding (geometric method with the input given): the boundary fault curves take the implicit step in this
+# many sub-steps of lambda / _SLIDE_STEPS, each followed by a projection onto the original cage surface, so a
+# curve flows along the cage instead of cutting through it.
+_SLIDE_STEPS = 4
+# Sliding: a cage triangle next to a slid vertex must stay this far (unit bbox diagonal) from the input; the
+# triangle test is conservative (a separating-axis gap), so the true distance is at least this.
+_SLIDE_CLEARANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -79,7 +86,8 @@ class SmoothOptions:
     )
 
 
-def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOptions()) -> Regions:
+def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOptions(),
+           surface: SurfaceMesh | None = None) -> Regions:
     """Closed regions of space, one per atomic piece, with smoothed faults.
 
     Parameters
@@ -92,6 +100,11 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
         ``smoothing`` (lambda, default 1e-3), ``method`` (default
         ``"geometric"``) and ``vanish_fraction`` (default 0.01, field method
         only).
+    surface : SurfaceMesh, optional (default None)
+        The (repaired) input the cage contains, in the same normalized
+        coordinates. Geometric method only: when given, fault vertices on the
+        cage boundary may slide along the cage wherever the moved cage still
+        strictly contains it; without it cage-boundary vertices never move.
 
     Returns
     -------
@@ -123,9 +136,20 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     fixed); then the fault sheets, ``(M_f + lambda L_f) X = M_f X`` (uniform
     edge weights 1/sqrt(3), the cotangent weight of an equilateral mesh, and
     lumped fault areas), with the curves, the cage boundary and points where
-    fault sheets touch as Dirichlet data. Cage-boundary vertices never move, so
-    the cage still contains the input. The other interior vertices follow by
-    harmonic extension (``K d = 0``). A tet may not shrink below 5% of its
+    fault sheets touch as Dirichlet data. Without ``surface``, cage-boundary
+    vertices never move, so the cage still contains the input. With it, the
+    curves where a fault sheet meets the cage boundary are smoothed first, as
+    1-D curves (same system, ends at boundary junctions fixed) in
+    ``_SLIDE_STEPS`` sub-steps of ``lambda / 4``, each moved vertex projected
+    back onto the closest point of the original cage surface, so the cage
+    shape barely changes while the faults meet it along smooth curves. The
+    moved cage is then checked against the input: a cage triangle next to a
+    slid vertex that comes within ``_SLIDE_CLEARANCE`` (1e-3) of an input
+    triangle or crosses another cage triangle, and an input vertex near a slid
+    vertex that is no longer inside the moved cage (winding number), send the
+    slid vertices involved back to where they were, and everything is solved
+    again; if that does not settle, no vertex slides (with a warning). The
+    other interior vertices follow by harmonic extension (``K d = 0``). A tet may not shrink below 5% of its
     volume: the free fault vertices of offending tets are held at half their
     displacement (repeatedly, then at none) and everything is solved again;
     as a last resort the whole displacement is scaled down, with a warning.
@@ -179,10 +203,11 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     Z = None
     if lam == 0.0 or options.method == "geometric":
         if lam > 0.0:
-            V, moves = _smoothed_vertices(tet_mesh, topo, tet_piece, p, lam)
-            log.info("%s: geometric smoothing moved %d fault vertices (%d on junction curves), %d held back in %d "
-                     "round(s) to keep tets from flattening, displacement scale %g", STAGE, moves["moved"],
-                     moves["curve"], moves["frozen"], moves["rounds"], moves["alpha"])
+            V, moves = _smoothed_vertices(tet_mesh, topo, tet_piece, p, lam, surface)
+            log.info("%s: geometric smoothing moved %d fault vertices (%d on junction curves, %d slid along the cage, "
+                     "%d sent back to keep the cage around the input), %d held back in %d round(s) to keep tets from "
+                     "flattening, displacement scale %g", STAGE, moves["moved"], moves["curve"], moves["slid"],
+                     moves["reverted"], moves["frozen"], moves["rounds"], moves["alpha"])
         meshes, pinches, repaired = _repaired_regions(V, T, topo, None, np.ones(t, dtype=bool), tet_piece, p)
     else:
         Z = _smoothed_field(tet_mesh, tet_piece, p, lam)
@@ -301,6 +326,9 @@ class _FaultGraph:
     sheet_edges: np.ndarray  # fault edges with exactly 2 fault faces
     sheet_mass: np.ndarray  # (n,) lumped fault area
     curve_mass: np.ndarray  # (n,) lumped junction-curve length
+    slide_free: np.ndarray  # cage-boundary vertex inside one boundary fault curve (may slide along the cage)
+    slide_edges: np.ndarray  # boundary fault curves: cage-boundary edges with exactly 1 fault face
+    slide_mass: np.ndarray  # (n,) lumped boundary-fault-curve length
 
 
 def _fault_graph(tet_mesh: TetMesh, topo: _Topology, tet_piece: np.ndarray, p: int) -> _FaultGraph:
@@ -355,13 +383,29 @@ def _fault_graph(tet_mesh: TetMesh, topo: _Topology, tet_piece: np.ndarray, p: i
     _, component = connected_components(graph, directed=False)
     vertex_component = np.unique(np.column_stack([corner_vertex, component]), axis=0)
     discs = np.bincount(vertex_component[:, 0], minlength=n)
-    sheet_free = fault_vertex & ~boundary & ~on_curve & (lo == hi) & (discs == 1)
+
+    single_sheet = fault_vertex & ~on_curve & (lo == hi) & (discs == 1)
+    sheet_free = single_sheet & ~boundary
+
+    # Where a sheet meets the cage boundary: around a boundary edge the tets form an open fan, so one fault
+    # face means the two boundary faces at the edge belong to different pieces (a boundary fault curve), two
+    # or more mean a junction on the boundary.
+    on_cage = np.zeros(len(topo.edges), dtype=bool)
+    on_cage[topo.face_edges[ft[:, 1] < 0].reshape(-1)] = True
+    slide_edges = topo.edges[on_cage & (edge_count == 1)]
+    cage_junction = np.zeros(n, dtype=bool)
+    cage_junction[topo.edges[on_cage & (edge_count >= 2)].reshape(-1)] = True
+    slide_degree = np.bincount(slide_edges.reshape(-1), minlength=n)
+    slide_free = single_sheet & boundary & ~cage_junction & (slide_degree == 2)
 
     areas = tetgeom.triangle_areas(V, fault_faces)
     sheet_mass = np.bincount(corner_vertex, weights=np.repeat(areas / 3.0, 3), minlength=n)
-    lengths = np.linalg.norm(V[curve_edges[:, 1]] - V[curve_edges[:, 0]], axis=1)
-    curve_mass = np.bincount(curve_edges.reshape(-1), weights=np.repeat(lengths / 2.0, 2), minlength=n)
-    return _FaultGraph(fault_vertex, curve_free, sheet_free, curve_edges, sheet_edges, sheet_mass, curve_mass)
+    mass = []
+    for E in (curve_edges, slide_edges):
+        lengths = np.linalg.norm(V[E[:, 1]] - V[E[:, 0]], axis=1)
+        mass.append(np.bincount(E.reshape(-1), weights=np.repeat(lengths / 2.0, 2), minlength=n))
+    return _FaultGraph(fault_vertex, curve_free, sheet_free, curve_edges, sheet_edges, sheet_mass, mass[0],
+                       slide_free, slide_edges, mass[1])
 
 
 def _implicit_smooth(X: np.ndarray, edges: np.ndarray, weights: np.ndarray, mass: np.ndarray, free: np.ndarray,
@@ -405,59 +449,105 @@ def _harmonic_extension(tet_mesh: TetMesh, displacement: np.ndarray, known: np.n
     return out, solver
 
 
-def _smoothed_vertices(tet_mesh: TetMesh, topo: _Topology, tet_piece: np.ndarray, p: int, lam: float):
+def _smoothed_vertices(tet_mesh: TetMesh, topo: _Topology, tet_piece: np.ndarray, p: int, lam: float,
+                       surface: SurfaceMesh | None = None):
     """Tet vertex positions (n, 3) with smoothed faults, and counts for the log.
 
-    Junction curves are smoothed first (1-D, their ends fixed), then the fault
-    sheets with the curves, the cage boundary and the non-manifold fault points
-    as Dirichlet data; the other interior vertices follow harmonically. Where a
-    tet would flatten (volume below ``_MIN_VOLUME_RATIO`` of its own), the free
-    fault vertices of the offending tets are frozen and everything is solved
-    again; if freezing does not help, the displacement is scaled down.
+    With ``surface`` (the input inside the cage) the boundary fault curves slide along the cage (see
+    :func:`_deform`); if the moved cage cannot be made to contain the input that way, nothing slides.
+    """
+    graph = _fault_graph(tet_mesh, topo, tet_piece, p)
+    n = tet_mesh.num_vertices
+    if not graph.fault_vertex.any():
+        return tet_mesh.vertices.copy(), {"moved": 0, "curve": 0, "slid": 0, "reverted": 0, "frozen": 0,
+                                          "rounds": 0, "alpha": 1.0}
+    if surface is not None and graph.slide_free.any():
+        cage = _CageSurface(tet_mesh.vertices, tet_mesh.boundary_faces)
+        guard = _Containment(surface, tet_mesh.vertices, tet_mesh.boundary_faces)
+        X, stats = _deform(tet_mesh, graph, lam, graph.slide_free, cage, guard)
+        if X is not None:
+            return X, stats
+        log.warning("%s: sliding the faults along the cage kept flattening tets or bringing the cage too close to "
+                    "the input after %d rounds; cage-boundary vertices stay where they are", STAGE, stats["rounds"])
+    return _deform(tet_mesh, graph, lam, np.zeros(n, dtype=bool), None, None)
+
+
+def _deform(tet_mesh: TetMesh, graph: _FaultGraph, lam: float, slide: np.ndarray, cage, guard):
+    """Smoothed tet vertex positions (n, 3) (None if sliding did not settle) and counts for the log.
+
+    Boundary fault curves (vertices ``slide`` (n,) bool) are smoothed first, along the cage (``cage`` a
+    :class:`_CageSurface`); then junction curves (1-D, their ends fixed), then the fault sheets with the curves,
+    the cage boundary and the non-manifold fault points as Dirichlet data; the other interior vertices follow
+    harmonically. Where a tet would flatten (volume below ``_MIN_VOLUME_RATIO`` of its own), the free fault
+    vertices of the offending tets are held back and everything is solved again; a slid vertex that ``guard``
+    (a :class:`_Containment`) blames for the cage no longer containing the input goes back where it was. Without
+    sliding, if holding back does not help, the displacement is scaled down.
     """
     V, T = tet_mesh.vertices, tet_mesh.tets
     n = len(V)
-    graph = _fault_graph(tet_mesh, topo, tet_piece, p)
-    stats = {"moved": 0, "curve": 0, "frozen": 0, "rounds": 0, "alpha": 1.0}
-    if not graph.fault_vertex.any():
-        return V.copy(), stats
+    stats = {"moved": 0, "curve": 0, "slid": 0, "reverted": 0, "frozen": 0, "rounds": 0, "alpha": 1.0}
+    sliding = bool(slide.any())
     boundary = np.zeros(n, dtype=bool)
     boundary[tet_mesh.boundary_vertices] = True
     known = graph.fault_vertex | boundary  # Dirichlet data of the harmonic extension
     curve_lengths = np.linalg.norm(V[graph.curve_edges[:, 1]] - V[graph.curve_edges[:, 0]], axis=1)
     curve_weights = 1.0 / curve_lengths  # 1-D linear-element stiffness: units match lambda * length^-1
+    slide_lengths = np.linalg.norm(V[graph.slide_edges[:, 1]] - V[graph.slide_edges[:, 0]], axis=1)
+    slide_weights = 1.0 / slide_lengths
     sheet_weights = np.full(len(graph.sheet_edges), _SHEET_WEIGHT)
     volume0 = tet_mesh.tet_volumes
+    movable = graph.curve_free | graph.sheet_free | slide
     # Vertices of flattened tets are held at a fraction ``damping`` of their first-round displacement (halved
     # each round they are still to blame) and become Dirichlet data for the next round.
     damping = np.ones(n)
+    reverted = np.zeros(n, dtype=bool)
     target = V
     solver = None
+    settled = False
     for round_ in range(_MAX_FREEZE_ROUNDS + 1):
         held = damping < 1.0
-        curve_free = graph.curve_free & ~held
-        sheet_free = graph.sheet_free & ~held
         start = V + damping[:, None] * (target - V)
-        X = _implicit_smooth(start, graph.curve_edges, curve_weights, graph.curve_mass, curve_free, lam)
-        X = _implicit_smooth(X, graph.sheet_edges, sheet_weights, graph.sheet_mass, sheet_free, lam)
+        # A slid vertex held part of the way is put back onto the cage (a vertex sent back is exactly on it).
+        partway = np.flatnonzero(slide & held & (damping > 0.0))
+        if len(partway):
+            start[partway] = cage.project(start[partway])
+        X = start
+        if sliding:
+            X = _slide_smooth(X, graph.slide_edges, slide_weights, graph.slide_mass, slide & ~held, lam, cage)
+        X = _implicit_smooth(X, graph.curve_edges, curve_weights, graph.curve_mass, graph.curve_free & ~held, lam)
+        X = _implicit_smooth(X, graph.sheet_edges, sheet_weights, graph.sheet_mass, graph.sheet_free & ~held, lam)
         if round_ == 0:
             target = X
         D, solver = _harmonic_extension(tet_mesh, X - V, known, solver)
         bad = tetgeom.tet_volumes(V + D, T) < _MIN_VOLUME_RATIO * volume0
         stats["rounds"] = round_
-        if not bad.any():
+        offenders = np.zeros(0, dtype=np.int64)
+        if sliding:
+            moved = slide & np.any(D != 0.0, axis=1)
+            offenders = guard.offenders(V + D, moved)
+        if not bad.any() and len(offenders) == 0:
+            settled = True
             break
-        movable = (graph.curve_free | graph.sheet_free) & (damping > 0.0)
-        culprits = np.unique(T[bad])
-        culprits = culprits[movable[culprits]]
-        if len(culprits) == 0:
-            # The extension itself flattens the tets: hold the fault vertices around them.
-            ring = np.unique(T[np.isin(T, T[bad]).any(axis=1)])
-            culprits = ring[movable[ring]]
-        if len(culprits) == 0 or round_ == _MAX_FREEZE_ROUNDS:
+        if round_ == _MAX_FREEZE_ROUNDS:
             break
-        damping[culprits] = np.where(damping[culprits] > _MIN_DAMPING, damping[culprits] / 2.0, 0.0)
-    frozen = damping < 1.0
+        damping[offenders] = 0.0
+        reverted[offenders] = True
+        if bad.any():
+            culprits = np.unique(T[bad])
+            culprits = culprits[(movable & (damping > 0.0))[culprits]]
+            if len(culprits) == 0:
+                # The extension itself flattens the tets: hold the fault vertices around them.
+                ring = np.unique(T[np.isin(T, T[bad]).any(axis=1)])
+                culprits = ring[(movable & (damping > 0.0))[ring]]
+            if len(culprits) == 0 and len(offenders) == 0:
+                break
+            damping[culprits] = np.where(damping[culprits] > _MIN_DAMPING, damping[culprits] / 2.0, 0.0)
+    stats.update(moved=int((movable & (damping > 0.0)).sum()), curve=int((graph.curve_free & (damping > 0.0)).sum()),
+                 slid=int((slide & np.any(D != 0.0, axis=1)).sum()), reverted=int(reverted.sum()),
+                 frozen=int((damping < 1.0).sum()))
+    if sliding:
+        # Scaling a displacement along the cage would take slid vertices off it: no partial answers here.
+        return (V + D if settled else None), stats
     alpha = 1.0
     while bad.any() and alpha > _MIN_ALPHA:
         alpha /= 2.0
@@ -467,9 +557,135 @@ def _smoothed_vertices(tet_mesh: TetMesh, topo: _Topology, tet_piece: np.ndarray
     if alpha < 1.0:
         log.warning("%s: smoothed faults would flatten %d tet(s); the fault displacement is scaled by %g", STAGE,
                     int((tetgeom.tet_volumes(V + D, T) < _MIN_VOLUME_RATIO * volume0).sum()), alpha)
-    stats.update(moved=int(((graph.curve_free | graph.sheet_free) & (damping > 0.0)).sum()),
-                 curve=int((graph.curve_free & (damping > 0.0)).sum()), frozen=int(frozen.sum()), alpha=alpha)
+    stats["alpha"] = alpha
     return V + alpha * D, stats
+
+
+def _slide_smooth(X: np.ndarray, edges: np.ndarray, weights: np.ndarray, mass: np.ndarray, free: np.ndarray,
+                  lam: float, cage) -> np.ndarray:
+    """Boundary fault curves smoothed along the cage: implicit sub-steps, each followed by a projection onto it."""
+    idx = np.flatnonzero(free)
+    for _ in range(_SLIDE_STEPS):
+        X = _implicit_smooth(X, edges, weights, mass, free, lam / _SLIDE_STEPS)
+        X[idx] = cage.project(X[idx])
+    return X
+
+
+def _closest_points(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Closest points (k, 3) to ``p`` on triangles ``(a, b, c)`` (each (k, 3)), by Voronoi regions (Ericson)."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = np.einsum("ij,ij->i", ab, ap), np.einsum("ij,ij->i", ac, ap)
+    bp, cp = p - b, p - c
+    d3, d4 = np.einsum("ij,ij->i", ab, bp), np.einsum("ij,ij->i", ac, bp)
+    d5, d6 = np.einsum("ij,ij->i", ab, cp), np.einsum("ij,ij->i", ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        denom = va + vb + vc
+        out = a + ab * (vb / denom)[:, None] + ac * (vc / denom)[:, None]
+        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        t_ac = d2 / (d2 - d6)
+        t_ab = d1 / (d1 - d3)
+    # Later regions override earlier ones (vertex regions last); degenerate triangles fall back to a corner.
+    out = np.where(np.isfinite(out), out, a)
+    out = np.where(((va <= 0) & (d4 >= d3) & (d5 >= d6))[:, None], b + (c - b) * t_bc[:, None], out)
+    out = np.where(((vb <= 0) & (d2 >= 0) & (d6 <= 0))[:, None], a + ac * t_ac[:, None], out)
+    out = np.where(((vc <= 0) & (d1 >= 0) & (d3 <= 0))[:, None], a + ab * t_ab[:, None], out)
+    out = np.where(((d6 >= 0) & (d5 <= d6))[:, None], c, out)
+    out = np.where(((d3 >= 0) & (d4 <= d3))[:, None], b, out)
+    out = np.where(((d1 <= 0) & (d2 <= 0))[:, None], a, out)
+    return out
+
+
+class _CageSurface:
+    """Closest points on the original cage surface (triangles ``F`` (b, 3) over ``V`` (n, 3))."""
+
+    def __init__(self, V: np.ndarray, F: np.ndarray):
+        self.V = V
+        self.F = np.asarray(F, dtype=np.int64)
+        self.tree = cKDTree(V[np.unique(self.F)])
+        boxes = trigeom.triangle_boxes(V, self.F)
+        self.grid = trigeom.BoxGrid(boxes, trigeom.default_cell(boxes))
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Closest points (k, 3) on the cage to ``points`` (k, 3) (lowest face id on ties)."""
+        if len(points) == 0:
+            return points.copy()
+        # The closest point is no farther than the nearest cage vertex: only triangles whose boxes come that
+        # near can hold it.
+        d0, _ = self.tree.query(points)
+        reach = d0 * (1.0 + 1e-9) + 1e-12
+        row, face = self.grid.query(np.stack([points - reach[:, None], points + reach[:, None]], axis=1))
+        tri = self.V[self.F[face]]
+        closest = _closest_points(points[row], tri[:, 0], tri[:, 1], tri[:, 2])
+        dist = np.sum((closest - points[row]) ** 2, axis=1)
+        best = np.lexsort((face, dist, row))
+        first = best[np.r_[True, row[best][1:] != row[best][:-1]]]
+        return closest[first]
+
+
+def _solid_angles(points: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Sums (k,) over triangles ``(A, B, C)`` (each (m, 3)) of their signed solid angles at ``points`` / 4 pi.
+
+    For a closed, outward mesh this is the generalized winding number (Van Oosterom and Strackee).
+    """
+    out = np.zeros(len(points))
+    chunk = max(1, 2_000_000 // max(len(A), 1))
+    for s in range(0, len(points), chunk):
+        q = points[s:s + chunk, None, :]
+        a, b, c = A[None] - q, B[None] - q, C[None] - q
+        la, lb, lc = (np.sqrt(np.sum(x * x, axis=2)) for x in (a, b, c))
+        det = np.sum(a * np.cross(b, c), axis=2)
+        dot = (la * lb * lc + np.sum(a * b, axis=2) * lc + np.sum(b * c, axis=2) * la
+               + np.sum(c * a, axis=2) * lb)
+        out[s:s + chunk] = np.arctan2(det, dot).sum(axis=1) / (2.0 * np.pi)
+    return out
+
+
+class _Containment:
+    """Checks that a moved cage (same triangles ``F`` (b, 3), outward) still strictly contains ``surface``."""
+
+    def __init__(self, surface: SurfaceMesh, V0: np.ndarray, F: np.ndarray):
+        self.SV = np.asarray(surface.vertices, dtype=np.float64)
+        self.SF = np.asarray(surface.faces, dtype=np.int64)
+        boxes = trigeom.triangle_boxes(self.SV, self.SF)
+        self.grid = trigeom.BoxGrid(boxes, trigeom.default_cell(boxes))
+        self.V0 = V0
+        self.F = np.asarray(F, dtype=np.int64)
+
+    def offenders(self, X: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """Moved vertices (ascending ids) to send back: the cage over ``X`` (n, 3) near ``moved`` (n,) is unsafe.
+
+        Unsafe: a cage triangle at a moved vertex within ``_SLIDE_CLEARANCE`` of an input triangle (which also
+        catches crossings) or crossing another cage triangle; an input vertex near a moved vertex that the
+        moved cage no longer encloses (its triangles swept past it).
+        """
+        blame = np.zeros(len(X), dtype=bool)
+        touched = moved[self.F].any(axis=1)
+        if not touched.any():
+            return np.zeros(0, dtype=np.int64)
+        faces = self.F[touched]
+        qi, j = self.grid.query(trigeom.triangle_boxes(X, faces), pad=_SLIDE_CLEARANCE)
+        hit = trigeom.triangles_intersect(X[faces[qi]], self.SV[self.SF[j]], eps=_SLIDE_CLEARANCE)
+        blame[faces[np.unique(qi[hit])].reshape(-1)] = True
+        pairs = trigeom.self_intersections(X, self.F)
+        crossing = pairs[touched[pairs].any(axis=1)]
+        blame[self.F[crossing.reshape(-1)].reshape(-1)] = True
+        # Moving each touched triangle straight from its old to its new corners, the cage sweeps over a point
+        # (changing its winding number) only inside the box of some triangle's old and new corners.
+        swept = np.concatenate([self.V0[faces], X[faces]], axis=1)
+        boxes = np.stack([swept.min(axis=1), swept.max(axis=1)], axis=1)
+        grid = trigeom.BoxGrid(boxes, trigeom.default_cell(boxes))
+        qi, box = grid.query(np.stack([self.SV, self.SV], axis=1))
+        points = np.unique(qi)
+        if len(points):
+            # The input is strictly inside the original cage (winding number 1) and only the touched
+            # triangles changed: the winding number w.r.t. the moved cage is 1 plus their change.
+            P = self.SV[points]
+            change = (_solid_angles(P, X[faces[:, 0]], X[faces[:, 1]], X[faces[:, 2]])
+                      - _solid_angles(P, self.V0[faces[:, 0]], self.V0[faces[:, 1]], self.V0[faces[:, 2]]))
+            outside = points[1.0 + change < 0.5]
+            blame[faces[box[np.isin(qi, outside)]].reshape(-1)] = True
+        return np.flatnonzero(blame & moved)
 
 
 class _CellList:
