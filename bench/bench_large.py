@@ -34,7 +34,7 @@ def bumpy_sphere(path: str, count: int) -> int:
     import numpy as np
     import trimesh
 
-    n = max(int(np.sqrt(count / 2.0)), 8)
+    n = max(int(np.sqrt(count / 4.0)), 8)  # a UV sphere of n x n segments has ~4 n^2 triangles
     sphere = trimesh.creation.uv_sphere(radius=1.0, count=[n, n])
     V = np.asarray(sphere.vertices)
     bumps = 1.0 + 0.08 * np.sin(7 * V[:, 0]) * np.sin(5 * V[:, 1]) * np.sin(6 * V[:, 2] + 1.0)

@@ -88,7 +88,8 @@ def _probe_glb(path: str) -> int:
     with open(path, "rb") as fh:
         head = fh.read(20)
         if len(head) < 12 or head[:4] != _GLB_MAGIC:
-            raise InputError("is not a binary glTF (GLB) file: it does not start with 'glTF'", path=path)
+            raise InputError("could not be read as GLB: it does not start with 'glTF' (not a binary glTF file)",
+                             path=path)
         version, length = struct.unpack_from("<II", head, 4)
         if version != 2:
             raise InputError(f"is a glTF {version}.x binary; only glTF 2.0 is supported", path=path)
@@ -147,7 +148,7 @@ def _probe_stl(path: str) -> int:
         return _count_bytes(path, b"endfacet")
     expected = f" ({_STL_HEADER + _STL_RECORD * declared:,} bytes)" if declared is not None else ""
     raise InputError(
-        f"is not a valid STL file: it does not start with 'solid' (ASCII STL), and its size ({size:,} bytes) does "
+        f"could not be read as STL: not a valid STL file: it does not start with 'solid' (ASCII STL), and its size ({size:,} bytes) does "
         "not match the triangle count in its binary header"
         + (f" ({declared:,} triangles{expected})" if declared is not None else ""), path=path)
 

@@ -437,7 +437,10 @@ def _undirected_edges(W: np.ndarray):
     """Per corner edge (3m, 2) directed, its undirected id (3m,), and the face (3m,) it belongs to."""
     directed = np.concatenate([W[:, [0, 1]], W[:, [1, 2]], W[:, [2, 0]]])
     face = np.tile(np.arange(len(W)), 3)
-    _, edge_id = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True)
+    # One int64 key per undirected edge: 1-d unique is ~10x faster than unique over rows, same order.
+    n = int(W.max()) + 1 if len(W) else 1
+    key = np.minimum(directed[:, 0], directed[:, 1]) * n + np.maximum(directed[:, 0], directed[:, 1])
+    _, edge_id = np.unique(key, return_inverse=True)
     return directed, edge_id.reshape(-1), face
 
 
