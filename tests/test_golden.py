@@ -39,7 +39,8 @@ def summarize(out_dir: str, stem: str) -> dict:
     digest = hashlib.sha256()
     for node in sorted(scene.graph.nodes_geometry):
         transform, geom = scene.graph[node]
-        verts = np.round(np.asarray(scene.geometry[geom].vertices), 4)
+        world = np.asarray(scene.geometry[geom].vertices) @ transform[:3, :3].T + transform[:3, 3]
+        verts = np.round(world, 4)
         digest.update(node.encode() + np.ascontiguousarray(verts[np.lexsort(verts.T[::-1])]).tobytes())
     counts = {k: v for k, v in report["counts"].items() if k != "cage_offset"}
     return {

@@ -81,8 +81,9 @@ def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Materi
 
     Parameters
     ----------
-    meshes : list of (name, list of Primitive)
-        Node/mesh names and their primitives, in output order.
+    meshes : list of (name, list of Primitive[, translation (3,)])
+        Node/mesh names, their primitives and optionally the node's
+        translation (positions are relative to it), in output order.
     materials : tuple of Material
         Material slots referenced by ``Primitive.material``.
 
@@ -129,7 +130,8 @@ def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Materi
         material_json.append(_material_json(material, tex))
 
     gl_meshes, nodes = [], []
-    for name, primitives in meshes:
+    for name, primitives, *rest in meshes:
+        translation = rest[0] if rest else None
         prims = []
         for prim in primitives:
             if len(prim.indices) == 0:
@@ -148,7 +150,10 @@ def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Materi
             indices = add_accessor(idx, "SCALAR", _UINT32, _ELEMENT_ARRAY_BUFFER)
             prims.append({"attributes": attributes, "indices": indices, "material": int(prim.material), "mode": 4})
         gl_meshes.append({"name": name, "primitives": prims})
-        nodes.append({"name": name, "mesh": len(gl_meshes) - 1})
+        node = {"name": name, "mesh": len(gl_meshes) - 1}
+        if translation is not None and np.any(np.asarray(translation) != 0):
+            node["translation"] = [float(x) for x in translation]
+        nodes.append(node)
 
     while len(binary) % 4:
         binary.append(0)
@@ -189,7 +194,8 @@ def read_glb(path: str) -> tuple[list[GlbMesh], list[str]]:
     """Read the meshes of a GLB file as written by :func:`glb_bytes`.
 
     A deliberately small reader (float32 positions/normals/UVs, uint32 or uint16
-    indices, node transforms ignored) for previews and tests of our own output.
+    indices, node translations applied; no rotation, scale or hierarchy, which
+    our writer never emits) for previews and tests of our own output.
 
     Returns
     -------
@@ -219,10 +225,11 @@ def read_glb(path: str) -> tuple[list[GlbMesh], list[str]]:
     for node in doc.get("nodes", []):
         if "mesh" not in node:
             continue
+        offset = np.asarray(node.get("translation", (0.0, 0.0, 0.0)), dtype=np.float64)
         prims = []
         for prim in doc["meshes"][node["mesh"]]["primitives"]:
             attrs = prim["attributes"]
-            pos = accessor(attrs["POSITION"]).astype(np.float64)
+            pos = accessor(attrs["POSITION"]).astype(np.float64) + offset
             nrm = accessor(attrs["NORMAL"]).astype(np.float64) if "NORMAL" in attrs else np.zeros_like(pos)
             uv = None
             if "TEXCOORD_0" in attrs:

@@ -17,7 +17,8 @@ log = logging.getLogger(__name__)
 WRITERS = (".glb", ".obj", ".ply", ".stl", ".off")
 
 
-def split_by_material(vertices, faces, normals, uvs, material_ids, normalization: Normalization) -> list[Primitive]:
+def split_by_material(vertices, faces, normals, uvs, material_ids, normalization: Normalization,
+                      origin=None) -> list[Primitive]:
     """Split a mesh into one primitive per material, in world units.
 
     Parameters
@@ -30,6 +31,10 @@ def split_by_material(vertices, faces, normals, uvs, material_ids, normalization
     material_ids : (m,) int
     normalization : Normalization
         Maps positions back to the input's units.
+    origin : (3,) float, optional (default 0)
+        Subtracted from the world positions (the node's translation), in float64
+        before the float32 conversion, so assets far from the origin keep their
+        precision.
 
     Returns
     -------
@@ -38,6 +43,8 @@ def split_by_material(vertices, faces, normals, uvs, material_ids, normalization
         increasing id order, so output is deterministic).
     """
     world = normalization.to_world(vertices)
+    if origin is not None:
+        world = world - np.asarray(origin, dtype=np.float64)
     prims = []
     for mat in np.unique(material_ids):
         sel = faces[material_ids == mat]
@@ -74,10 +81,11 @@ def save_surface(path: str | os.PathLike, surface: SurfaceMesh) -> None:
         raise InputError(f"cannot write '{ext or '(none)'}'; pick one of {', '.join(WRITERS)}", path=path)
     normals = surface.normals if surface.normals is not None else np.zeros_like(surface.vertices)
     if ext == ".glb":
+        origin = node_origin(surface.normalization.to_world(surface.vertices))
         prims = split_by_material(surface.vertices, surface.faces, normals, surface.uvs, surface.material_ids,
-                                  surface.normalization)
+                                  surface.normalization, origin)
         name = os.path.splitext(surface.name)[0] or "mesh"
-        write_bytes_atomic(path, glb_bytes([(name, prims)], surface.materials))
+        write_bytes_atomic(path, glb_bytes([(name, prims, origin)], surface.materials))
         return
     import trimesh
 
@@ -95,15 +103,28 @@ def fragment_name(index: int) -> str:
     return f"fragment_{index:03d}"
 
 
+def node_origin(world_points: np.ndarray) -> np.ndarray:
+    """A node's pivot: the bounding-box centre of its points (3,), in input units.
+
+    Game engines rotate a rigid body about its node's origin, so each fragment
+    gets its own centre as pivot; positions are stored relative to it, which
+    also keeps float32 precision for assets far from the origin.
+    """
+    return (world_points.min(axis=0) + world_points.max(axis=0)) / 2.0
+
+
 def write_fragments_glb(path: str | os.PathLike, fragments: Fragments) -> None:
     """Write all fragments to one GLB: one node and mesh per fragment, named ``fragment_###``.
 
     Each mesh has one primitive per material it uses (the input's materials and
-    the interior material), in the input's units and placement.
+    the interior material). Each node is translated to its fragment's centre
+    (its pivot) and the positions are relative to it, so the fragments sit in
+    the input's units and placement.
     """
     meshes = []
     for i, frag in enumerate(fragments.fragments):
+        origin = node_origin(fragments.normalization.to_world(frag.vertices))
         prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids,
-                                  fragments.normalization)
-        meshes.append((fragment_name(i), prims))
+                                  fragments.normalization, origin)
+        meshes.append((fragment_name(i), prims, origin))
     write_bytes_atomic(path, glb_bytes(meshes, fragments.materials))

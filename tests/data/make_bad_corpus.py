@@ -254,9 +254,7 @@ def build() -> None:
     shells = concat(box((1, 1, 1)), box((1, 1, 1), (3, 0, 0)), icosphere(1, 0.5, (0, 3, 0)))
     shell_volume = 2.0 + float(trimesh.Trimesh(*icosphere(1, 0.5), process=False).volume)
     case("disconnected_shells.obj", obj_text(*shells), outcome="ok", volume=shell_volume,
-         why="three separate closed bodies",
-         known_issue="modes: with cage.target_faces=500, modes.num_modes=3 the ICCM subproblem check fails "
-                     "(energy 6e-11 > master -0: an absolute comparison of near-zero energies)")
+         why="three separate closed bodies")
     inner = box((1, 1, 1))
     case("nested_cavity.obj", obj_text(*concat(box((2, 2, 2)), (inner[0], inner[1][:, ::-1]))), outcome="ok",
          volume=7.0, why="closed box with an inward-wound box inside: a cavity")
@@ -295,8 +293,7 @@ def build() -> None:
     OV, OF = icosphere(2, 10.0)
     case("offset_1e6.glb", glb([("far", [(OV + np.array([1.0e6, -2.0e6, 0.5e6]), OF, None, None, 0)])],
                                [Material("stone")]),
-         outcome="ok", known_issue="io/write.py writes fragment positions in world units as float32: at 1e6 "
-                                   "they are re-quantized and the written fragments are no longer closed",
+         outcome="ok",
          why="float32 GLB of a 20-unit sphere 1e6..2e6 from the origin: positions quantized to 1/16..1/4 unit "
              "(loads with a precision warning)")
     TV, TF = icosphere(1, 0.5, (0, 0, 0))
