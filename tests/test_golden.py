@@ -15,9 +15,9 @@ import tomllib
 
 import numpy as np
 import pytest
-import trimesh
 
 from fracture_cli.bake import bake
+from fracture_cli.io.gltf import read_glb
 from fracture_cli.recipe import load_recipe
 
 from conftest import REPO, SAMPLE_ASSETS
@@ -35,13 +35,13 @@ def summarize(out_dir: str, stem: str) -> dict:
     """The reviewable summary of a bake: counts, rounded volumes and boxes, a geometry hash."""
     with open(os.path.join(out_dir, f"{stem}.report.json")) as fh:
         report = json.load(fh)
-    scene = trimesh.load_scene(os.path.join(out_dir, f"{stem}.glb"))
+    # Our own reader: node names exactly as written (trimesh adds random suffixes).
+    meshes, _ = read_glb(os.path.join(out_dir, f"{stem}.glb"))
     digest = hashlib.sha256()
-    for node in sorted(scene.graph.nodes_geometry):
-        transform, geom = scene.graph[node]
-        world = np.asarray(scene.geometry[geom].vertices) @ transform[:3, :3].T + transform[:3, 3]
-        verts = np.round(world, 4)
-        digest.update(node.encode() + np.ascontiguousarray(verts[np.lexsort(verts.T[::-1])]).tobytes())
+    for mesh in meshes:
+        for prim in mesh.primitives:
+            verts = np.round(prim.positions, 4)
+            digest.update(mesh.name.encode() + np.ascontiguousarray(verts[np.lexsort(verts.T[::-1])]).tobytes())
     counts = {k: v for k, v in report["counts"].items() if k != "cage_offset"}
     return {
         "asset": report["input"]["name"],
