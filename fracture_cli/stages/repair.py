@@ -258,15 +258,9 @@ def repair(surface: SurfaceMesh, options: RepairOptions = RepairOptions()) -> Su
     if solid.status() != manifold3d.Error.NoError:
         raise StageError(f"the repaired mesh is not a valid manifold ({solid.status().name}); fix the mesh in "
                          "your modelling tool", stage=STAGE)
-    parts = solid.decompose()
-    positive = [p for p in parts if p.volume() > 0]
-    if len(positive) > 1:
-        cavities = [_reversed(p) for p in parts if p.volume() < 0]
-        solid = manifold3d.Manifold.batch_boolean(positive, manifold3d.OpType.Add)
-        if cavities:
-            solid = solid - manifold3d.Manifold.batch_boolean(cavities, manifold3d.OpType.Add)
-        did.append(f"unioned {len(positive)} overlapping bodies" + (f" minus {len(cavities)} cavities"
-                                                                   if cavities else ""))
+    solid, bodies, cavities = _union_bodies(solid)
+    if bodies > 1:
+        did.append(f"unioned {bodies} overlapping bodies" + (f" minus {cavities} cavities" if cavities else ""))
         props, F, material_ids = _from_manifold(solid, id_to_material)
     volume = float(solid.volume())
     if volume <= _MIN_VOLUME:
@@ -393,15 +387,36 @@ def surface_solid(surface: SurfaceMesh, *, stage: str):
             f"the surface is not a closed solid ({solid.status().name}"
             + (f", {boundary} open edges" if boundary else "") + "); run the 'repair' stage on it first "
             "(e.g. 'fracture load IN repair cage ...'); 'bake' does this itself", stage=stage)
+    solid, bodies, _ = _union_bodies(solid)
+    if bodies > 1:
+        log.info("%s: the surface has %d overlapping bodies; using their union", stage, bodies)
+    return solid, id_to_material
+
+
+def _union_bodies(solid):
+    """Union the positive bodies of ``solid`` and subtract its cavities (negative-volume shells).
+
+    Overlapping closed bodies stored as one mesh are resolved this way;
+    manifold3d does not resolve them inside a single Manifold.
+
+    Returns
+    -------
+    solid : manifold3d.Manifold
+        Unchanged when it has at most one positive body.
+    bodies : int
+        How many positive bodies it had.
+    cavities : int
+        How many cavities were subtracted (0 when there was nothing to union).
+    """
     parts = solid.decompose()
     positive = [p for p in parts if p.volume() > 0]
-    if len(positive) > 1:
-        cavities = [_reversed(p) for p in parts if p.volume() < 0]
-        solid = manifold3d.Manifold.batch_boolean(positive, manifold3d.OpType.Add)
-        if cavities:
-            solid = solid - manifold3d.Manifold.batch_boolean(cavities, manifold3d.OpType.Add)
-        log.info("%s: the surface has %d overlapping bodies; using their union", stage, len(positive))
-    return solid, id_to_material
+    if len(positive) <= 1:
+        return solid, len(positive), 0
+    cavities = [_reversed(p) for p in parts if p.volume() < 0]
+    solid = manifold3d.Manifold.batch_boolean(positive, manifold3d.OpType.Add)
+    if cavities:
+        solid = solid - manifold3d.Manifold.batch_boolean(cavities, manifold3d.OpType.Add)
+    return solid, len(positive), len(cavities)
 
 
 # ----------------------------------------------------------------------------
