@@ -53,6 +53,14 @@ def check_value(options_cls, name: str, value: Any) -> str | None:
     if isinstance(default, list):
         if not isinstance(value, list):
             return f"{name} = {value!r} must be a list"
+        if default and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in default):
+            # A fixed-size vector of numbers (e.g. a colour): same length, each in range.
+            if len(value) != len(default) or not all(
+                    isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
+                return f"{name} = {value!r} must be a list of {len(default)} numbers"
+            lo, hi = meta["min"], meta["max"]
+            if any((lo is not None and x < lo) or (hi is not None and x > hi) for x in value):
+                return f"{name} = {value!r} has values out of range [{lo}, {hi}]"
         return None
     if isinstance(default, bool):
         if not isinstance(value, bool):

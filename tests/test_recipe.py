@@ -106,3 +106,12 @@ def test_cli_bake_rejects_bad_set_before_work(tmp_path):
     assert result.exit_code == 1
     assert "modes.num_modes = -1" in result.output
     assert not (tmp_path / "out").exists()
+
+
+def test_interior_colour_is_a_validated_vector():
+    recipe = load_recipe("default", ["fragments.interior_color=[0.2, 0.1, 0.1, 1.0]"])
+    assert recipe["fragments"].interior_color == [0.2, 0.1, 0.1, 1.0]
+    with pytest.raises(RecipeError, match="4 numbers"):
+        load_recipe("default", ["fragments.interior_color=[0.2, 0.1]"])
+    with pytest.raises(RecipeError, match="out of range"):
+        load_recipe("default", ["fragments.interior_color=[2, 0, 0, 1]"])

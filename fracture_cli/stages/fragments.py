@@ -39,6 +39,12 @@ class FragmentOptions:
         min=0.0,
         min_exclusive=True,
     )
+    interior_color: list = option(
+        [0.55, 0.5, 0.45, 1.0],
+        "RGBA (0..1) base colour of the 'interior' material on the new fault faces",
+        min=0.0,
+        max=1.0,
+    )
 
 
 def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions = FragmentOptions()) -> Fragments:
@@ -92,13 +98,16 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     input_volume = float(solid.volume())
     if input_volume <= 0:
         raise StageError("the input encloses no volume; fragments need a solid (closed) mesh", stage=STAGE)
-    # The repair stage may already have given the surface an interior slot (faces closing its holes).
-    materials = tuple(surface.materials)
-    names = [m.name for m in materials]
-    if INTERIOR_MATERIAL_NAME not in names:
-        materials += (Material(INTERIOR_MATERIAL_NAME, base_color=(0.55, 0.5, 0.45, 1.0)),)
-        names.append(INTERIOR_MATERIAL_NAME)
-    interior_index = names.index(INTERIOR_MATERIAL_NAME)
+    # The repair stage may already have given the surface an interior slot (faces closing its holes):
+    # reuse it, with the recipe's colour, so the asset has one interior material.
+    interior = Material(INTERIOR_MATERIAL_NAME, base_color=tuple(float(c) for c in options.interior_color))
+    names = [m.name for m in surface.materials]
+    if INTERIOR_MATERIAL_NAME in names:
+        interior_index = names.index(INTERIOR_MATERIAL_NAME)
+        materials = tuple(interior if i == interior_index else m for i, m in enumerate(surface.materials))
+    else:
+        interior_index = len(names)
+        materials = tuple(surface.materials) + (interior,)
     region_id = manifold3d.Manifold.reserve_ids(1)
     id_to_material = dict(id_to_material)
     id_to_material[region_id] = interior_index
