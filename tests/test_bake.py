@@ -228,3 +228,18 @@ def test_hits_at_different_places_break_different_fragments(chair_bake):
         assert len(np.unique(result.groups)) > 1
         partitions.append(tuple(result.groups))
     assert partitions[0] != partitions[1]
+
+
+def test_two_bakes_into_different_folders_run_in_parallel(tmp_path):
+    """Separate processes (as `make -j2 assets` runs them) do not disturb each other."""
+    import subprocess
+    import sys
+
+    procs = [subprocess.Popen([sys.executable, "-m", "fracture_cli", "bake", CHAIR, "-o", str(tmp_path / name),
+                               *FAST, "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+             for name in ("a", "b")]
+    for proc in procs:
+        _, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, err.decode()
+    for name in ("chair.glb", "chair.fracture.bin"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
