@@ -641,6 +641,39 @@ def _solid_angles(points: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarra
     return out
 
 
+def _pair_solid_angles(P: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Signed solid angle / 4 pi (k,) of triangle ``(A[i], B[i], C[i])`` seen from ``P[i]`` (all (k, 3))."""
+    a, b, c = A - P, B - P, C - P
+    la, lb, lc = (np.sqrt(np.sum(x * x, axis=1)) for x in (a, b, c))
+    det = np.einsum("ij,ij->i", a, np.cross(b, c))
+    dot = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la
+           + np.einsum("ij,ij->i", c, a) * lb)
+    return np.arctan2(det, dot) / (2.0 * np.pi)
+
+
+def _prism_winding(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Winding numbers (k,) of points ``P`` (k, 3) w.r.t. the prisms swept by triangles ``faces`` (k, 3).
+
+    Each triangle moves from ``V0`` to ``X``; its prism is the new triangle, the old one reversed and one
+    side quad per edge. Each quad is split along the diagonal from the edge's lower vertex id (old) to its
+    higher one (new), so the two triangles sharing an edge build the same wall with opposite orientations
+    and their walls cancel exactly in a sum.
+    """
+    total = _pair_solid_angles(P, X[faces[:, 0]], X[faces[:, 1]], X[faces[:, 2]])
+    total -= _pair_solid_angles(P, V0[faces[:, 0]], V0[faces[:, 1]], V0[faces[:, 2]])
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        p, q = faces[:, i], faces[:, j]
+        p0, q0, p1, q1 = V0[p], V0[q], X[p], X[q]
+        low_first = (p < q)[:, None]
+        # Quad (p0, q0, q1, p1), outward for a counter-clockwise triangle moving along its normal.
+        # Diagonal p0-q1 when p < q, else q0-p1.
+        t1 = (p0, q0, np.where(low_first, q1, p1))
+        t2 = (np.where(low_first, p0, q0), np.where(low_first, q1, q1), p1)
+        total += _pair_solid_angles(P, *t1)
+        total += _pair_solid_angles(P, *t2)
+    return total
+
+
 class _Containment:
     """Checks that a moved cage (same triangles ``F`` (b, 3), outward) still strictly contains ``surface``."""
 
@@ -676,14 +709,15 @@ class _Containment:
         boxes = np.stack([swept.min(axis=1), swept.max(axis=1)], axis=1)
         grid = trigeom.BoxGrid(boxes, trigeom.default_cell(boxes))
         qi, box = grid.query(np.stack([self.SV, self.SV], axis=1))
-        points = np.unique(qi)
-        if len(points):
+        if len(qi):
             # The input is strictly inside the original cage (winding number 1) and only the touched
-            # triangles changed: the winding number w.r.t. the moved cage is 1 plus their change.
-            P = self.SV[points]
-            change = (_solid_angles(P, X[faces[:, 0]], X[faces[:, 1]], X[faces[:, 2]])
-                      - _solid_angles(P, self.V0[faces[:, 0]], self.V0[faces[:, 1]], self.V0[faces[:, 2]]))
-            outside = points[1.0 + change < 0.5]
+            # triangles changed: the winding number w.r.t. the moved cage is 1 plus the winding numbers of
+            # the prisms the touched triangles swept (their side walls cancel between neighbours), and a
+            # prism's winding number is 0 outside its box: only (point, box) pairs contribute.
+            change = np.bincount(qi, weights=_prism_winding(self.SV[qi], self.V0, X, faces[box]),
+                                 minlength=len(self.SV))
+            points = np.unique(qi)
+            outside = points[1.0 + change[points] < 0.5]
             blame[faces[box[np.isin(qi, outside)]].reshape(-1)] = True
         return np.flatnonzero(blame & moved)
 
