@@ -18,7 +18,6 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from fracture_cli.bake import bake
-from fracture_cli.errors import StageError
 from fracture_cli.recipe import load_recipe
 
 primitive = st.tuples(
@@ -45,16 +44,8 @@ def write_obj(path, V, F):
         fh.writelines(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F)
 
 
-# Failures of stages owned elsewhere (cage, tetra, modes) on a generated shape: recorded and reported as an
-# expected failure naming the shapes, so the invariants of every shape that does bake are still checked.
-KNOWN_STAGE_FAILURES: list[str] = []
-
-
 def test_bake_invariants_on_random_solids():
-    KNOWN_STAGE_FAILURES.clear()
     bake_invariants()
-    if KNOWN_STAGE_FAILURES:
-        pytest.xfail("; ".join(KNOWN_STAGE_FAILURES))
 
 
 @settings(max_examples=5, deadline=None, derandomize=True, database=None, phases=[Phase.explicit, Phase.generate],
@@ -69,7 +60,6 @@ def bake_invariants(parts, log_scale, offset):
 
 def check_shape(parts, log_scale, offset, folder):
     solid = shape(parts)
-    components = solid.decompose()
     mesh = solid.to_mesh64()
     scale = 10.0**log_scale
     V = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3] * scale + np.asarray(offset) * scale
@@ -77,14 +67,7 @@ def check_shape(parts, log_scale, offset, folder):
     path = os.path.join(folder, "shape.obj")
     write_obj(path, V, F)
     recipe = load_recipe("default", ["cage.target_faces=400", "modes.num_modes=3"])
-    try:
-        result = bake(path, os.path.join(folder, "out"), recipe)
-    except StageError as exc:
-        if exc.stage in ("cage", "tetra", "modes"):
-            KNOWN_STAGE_FAILURES.append(f"{exc.stage} fails on parts={parts!r} scale=1e{log_scale:g} "
-                                        f"offset={offset!r} ({len(components)} bodies): {exc.message}")
-            return
-        raise
+    result = bake(path, os.path.join(folder, "out"), recipe)  # any stage error fails the test
     checks = result.report["checks"]
     assert checks["watertight"], checks
     assert checks["volume_error"] < 1e-3, checks

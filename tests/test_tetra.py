@@ -143,3 +143,30 @@ def test_save_cage_in_world_units(tmp_path, sphere_cage, ext):
 def test_save_cage_rejects_unknown_format(tmp_path, sphere_cage):
     with pytest.raises(InputError, match="pick one of"):
         save_cage(tmp_path / "cage.xyz", sphere_cage)
+
+
+def test_cage_with_a_needle_face_still_tetrahedralizes(caplog):
+    """A box whose 400-face cage has a needle triangle: TetGen puts a point on it. The boundary is then a
+    refinement of the cage (same area, same volume), which is accepted; anything else is refused."""
+    import logging
+
+    import trimesh
+
+    from fracture_cli.io.read import surface_from_trimesh
+    from fracture_cli.stages.cage import CageOptions, cage
+    from fracture_cli.stages.tetra import TetraOptions, tetra
+
+    box = trimesh.creation.box(extents=(0.5773, 0.3, 0.3))
+    box.apply_translation((0.6868, 0.0, 0.5345))
+    cage_result = cage(surface_from_trimesh(box), CageOptions(target_faces=400))
+    with caplog.at_level(logging.INFO, logger="fracture_cli"):
+        mesh = tetra(cage_result, TetraOptions())
+    assert np.all(mesh.tet_volumes > 0)
+    V, F = cage_result.vertices, cage_result.faces
+    cage_volume = np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() / 6.0
+    assert mesh.tet_volumes.sum() == pytest.approx(cage_volume, rel=1e-9)
+    B = mesh.boundary_faces
+    area = 0.5 * np.linalg.norm(np.cross(mesh.vertices[B[:, 1]] - mesh.vertices[B[:, 0]],
+                                         mesh.vertices[B[:, 2]] - mesh.vertices[B[:, 0]]), axis=1).sum()
+    cage_area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+    assert area == pytest.approx(cage_area, rel=1e-9)

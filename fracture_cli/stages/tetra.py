@@ -43,6 +43,38 @@ def tetgen_switches(options: TetraOptions, cage_volume: float) -> str:
     return switches + f"O{options.optimization}Q"
 
 
+def _run_tetgen(vertices: np.ndarray, faces: np.ndarray, switches: str, timeout: float):
+    """One TetGen run and its checks: ``(problem or None, nodes, tets, volumes)``."""
+    try:
+        nodes, tets = _tetgen.tetrahedralize(vertices, faces, switches, timeout=timeout)
+    except _tetgen.TetGenFailure as failure:
+        return failure.reason, None, None, None
+    tets = tetgeom.orient_positive(nodes, tets)
+    volumes = tetgeom.tet_volumes(nodes, tets)
+    if np.any(volumes <= 0):
+        return f"TetGen returned {int(np.sum(volumes <= 0))} flat tetrahedra", None, None, None
+    if len(nodes) < len(vertices) or not np.array_equal(nodes[:len(vertices)], vertices):
+        return "TetGen moved or dropped cage vertices", None, None, None
+    _, _, boundary, _ = tetgeom.tet_faces(tets)
+    if not _same_triangles(boundary, faces):
+        # TetGen may split a near-degenerate cage face with a Steiner point on it: the boundary is then
+        # a refinement of the cage, the same surface. Accept only that: same enclosed volume, same area.
+        cage_area = tetgeom.triangle_areas(vertices, faces).sum()
+        cage_volume = np.einsum("ij,ij->i", vertices[faces[:, 0]],
+                                np.cross(vertices[faces[:, 1]], vertices[faces[:, 2]])).sum() / 6.0
+        same_area = abs(tetgeom.triangle_areas(nodes, boundary).sum() - cage_area) <= 1e-9 * cage_area
+        same_volume = abs(volumes.sum() - cage_volume) <= 1e-9 * cage_volume
+        if not (same_area and same_volume):
+            return "the tet mesh boundary differs from the cage surface (TetGen changed it)", None, None, None
+        log.info("tetra: TetGen refined %d cage faces with points on them (same surface)",
+                 len(_face_set(faces) - _face_set(boundary)))
+    return None, nodes, tets, volumes
+
+
+def _face_set(F: np.ndarray) -> set:
+    return set(map(tuple, np.sort(np.asarray(F), axis=1).tolist()))
+
+
 def tetra(cage: Cage, options: TetraOptions = TetraOptions()) -> TetMesh:
     """Tetrahedralize the inside of a cage, keeping the cage surface as the boundary.
 
@@ -86,22 +118,20 @@ def tetra(cage: Cage, options: TetraOptions = TetraOptions()) -> TetMesh:
     if cage_volume <= 0:
         raise StageError("the cage encloses no volume (inside-out or open); rebuild it with the cage stage",
                          stage=STAGE)
-    switches = tetgen_switches(options, cage_volume)
     started = time.perf_counter()
-    try:
-        nodes, tets = _tetgen.tetrahedralize(vertices, faces, switches, timeout=options.timeout)
-    except _tetgen.TetGenFailure as failure:
-        raise StageError(f"{failure.reason} (switches {switches}); try a looser --radius-edge-ratio "
-                         "or --min-dihedral, or rebuild the cage with a larger offset", stage=STAGE) from None
-    tets = tetgeom.orient_positive(nodes, tets)
-    volumes = tetgeom.tet_volumes(nodes, tets)
-    if np.any(volumes <= 0):
-        raise StageError(f"TetGen returned {int(np.sum(volumes <= 0))} flat tetrahedra", stage=STAGE)
-    if len(nodes) < len(vertices) or not np.array_equal(nodes[:len(vertices)], vertices):
-        raise StageError("TetGen moved or dropped cage vertices", stage=STAGE)
-    _, _, boundary, _ = tetgeom.tet_faces(tets)
-    if not _same_triangles(boundary, faces):
-        raise StageError("the tet mesh boundary differs from the cage surface (TetGen changed it)", stage=STAGE)
+    # The quality run first; if TetGen fails or alters the boundary on it (rare: seen on box-like cages),
+    # a plain boundary-preserving run that also keeps coplanar cage faces apart (M: no facet merging).
+    attempts = [tetgen_switches(options, cage_volume), "pYMO0Q"]
+    for attempt, switches in enumerate(attempts):
+        problem, nodes, tets, volumes = _run_tetgen(vertices, faces, switches, options.timeout)
+        if problem is None:
+            break
+        if attempt + 1 < len(attempts):
+            log.warning("tetra: %s with switches %s; retrying without quality refinement (%s)", problem, switches,
+                        attempts[attempt + 1])
+    else:
+        raise StageError(f"{problem} (switches {', '.join(attempts)}); try a looser --radius-edge-ratio or "
+                         "--min-dihedral, or rebuild the cage with a larger offset", stage=STAGE)
     # Shape measure: volume / longest edge^3 (0.118 for a regular tet). Flat
     # tets can remain where four cage vertices are nearly coplanar, because the
     # boundary may not be split; report the worst so later stages can be judged.
