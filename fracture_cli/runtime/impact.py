@@ -99,8 +99,8 @@ def components(p: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     -----
     Vectorized hook-and-compress union-find (Shiloach-Vishkin style): every
     round, each component root with an edge to a smaller root is hooked onto
-    the smallest such root, then pointers are jumped ``ceil(log2 p)`` times,
-    which flattens any tree of depth < p. Labels only ever decrease and a root
+    the smallest such root, then pointers are jumped until nothing changes (at
+    most ``ceil(log2 p)`` times, which flattens any tree of depth < p). Labels only ever decrease and a root
     points at itself, so the final root is the component's minimum.
     """
     labels = np.arange(p, dtype=np.int64)
@@ -113,8 +113,13 @@ def components(p: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         la, lb = la[differ], lb[differ]
         a, b = a[differ], b[differ]  # edges inside one component stay inside it
         np.minimum.at(labels, np.maximum(la, lb), np.minimum(la, lb))
+        # Jump pointers until every vertex points at a root; hooking keeps trees shallow, so this
+        # usually takes one or two jumps (at most ceil(log2 p), the depth bound).
         for _ in range(jumps):
-            labels = labels[labels]
+            jumped = labels[labels]
+            if np.array_equal(jumped, labels):
+                break
+            labels = jumped
     return labels
 
 
