@@ -155,12 +155,12 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) 
     with timed("repair"):
         # Cage and fragments both use the repaired solid, so they agree on what is inside.
         surface = repair(loaded, recipe["repair"])
+    input_hash = file_sha256(input_path)
     stage_cache = None
     if cache_dir is not None:
         from fracture_cli.cache import StageCache, cache_key
 
         stage_cache = StageCache(cache_dir)
-        input_hash = file_sha256(input_path)
         cage_key = cache_key("cage", input_hash, recipe["load"], recipe["repair"], recipe["cage"], recipe["tetra"])
         modes_key = cache_key("modes", cage_key, recipe["material"], recipe["modes"])
     cached = stage_cache.get_cage(cage_key, surface.normalization) if stage_cache else None
@@ -197,7 +197,7 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) 
     report = {
         "tool": "fracture",
         "version": __version__,
-        "input": {"name": os.path.basename(input_path), "sha256": file_sha256(input_path),
+        "input": {"name": os.path.basename(input_path), "sha256": input_hash,
                   "triangles": loaded.num_faces, "vertices": loaded.num_vertices,
                   "scale": surface.normalization.scale},
         "recipe": {"name": recipe.name, "chain": list(recipe.chain), "description": recipe.description,

@@ -410,7 +410,6 @@ class CutSubproblemSolver:
         the (unscaled) ``lambda`` and the objective.
         """
         n, edges, edge_omega, indicator = self._cell_graph()
-        m = Y.shape[1]
         G = np.asarray((indicator @ Y).T)  # (m, n): y_j^T M_T 1_P
         # Row scaling for HiGHS (tet volumes are tiny in normalized units); lambda is scaled back.
         row_scale = 1.0 / np.maximum(np.einsum("t,tj->j", self.vol, np.abs(Y)), 1e-300)

@@ -51,15 +51,11 @@ class FragmentGeometry:
 
 def load_fragments(glb_path: str) -> list[FragmentGeometry]:
     """Read the fragments of a baked GLB for drawing."""
-    from fracture_cli.io.gltf import read_glb
+    from fracture_cli.io.gltf import glb_meshes, read_glb_chunks
 
-    meshes, material_names = read_glb(glb_path)
-    with open(glb_path, "rb") as fh:
-        import struct
-
-        data = fh.read()
-        json_len = struct.unpack_from("<I", data, 12)[0]
-        doc = json.loads(data[20:20 + json_len])
+    doc, binary = read_glb_chunks(glb_path)
+    meshes = glb_meshes(doc, binary)
+    material_names = [m.get("name", "") for m in doc.get("materials", [])]
     base_colors = [m.get("pbrMetallicRoughness", {}).get("baseColorFactor", [0.8, 0.8, 0.8, 1]) for m in
                    doc.get("materials", [])]
     out = []

@@ -67,3 +67,24 @@ def two_boxes_with_neck(n: int = 4) -> TetMesh:
     mask[n + 1 :] = True
     mask[n, n // 2, n // 2] = True
     return grid_tetmesh(mask.shape, mask=mask, spacing=1.0 / (2 * n + 1))
+
+
+def jittered_grid_tetmesh(n: int, half_extent: float, jitter: float, seed: int = 0) -> TetMesh:
+    """A cube grid tet mesh centred at 0 whose interior vertices are jittered (generic faults).
+
+    Parameters
+    ----------
+    n : int
+        Voxels per side.
+    half_extent : float
+        Half the cube's side; the boundary vertices stay on the cube.
+    jitter : float
+        Largest displacement of an interior vertex per axis, in the mesh's units.
+    seed : int, optional (default 0)
+    """
+    spacing = 2.0 * half_extent / n
+    g = grid_tetmesh((n, n, n), spacing=spacing, origin=(-half_extent,) * 3)
+    V = g.vertices.copy()
+    inside = np.all(np.abs(V) < half_extent - 1e-9, axis=1)
+    V[inside] += np.random.default_rng(seed).uniform(-jitter, jitter, (inside.sum(), 3))
+    return TetMesh(vertices=V, tets=g.tets)

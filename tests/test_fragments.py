@@ -14,8 +14,8 @@ from fracture_cli.stages.fragments import FragmentOptions, fragments
 from fracture_cli.stages.pieces import pieces
 from fracture_cli.stages.repair import RepairOptions, repair
 from fracture_cli.stages.smooth import SmoothOptions, smooth
-from fracture_cli.testing import grid_tetmesh
-from fracture_cli.types import INTERIOR_MATERIAL_NAME, Material, Modes, Normalization, SurfaceMesh, TetMesh
+from fracture_cli.testing import jittered_grid_tetmesh
+from fracture_cli.types import INTERIOR_MATERIAL_NAME, Material, Modes, Normalization, SurfaceMesh
 
 
 def surface(V, F, uvs=None, normals=None, material_ids=None, materials=(Material("stone"),), scale=1.0):
@@ -57,11 +57,7 @@ def open_cylinder():
 
 def cage_tets(n=6, seed=0):
     """Jittered grid covering the normalized input's bbox (unit diagonal) with a margin."""
-    g = grid_tetmesh((n, n, n), spacing=0.8 / n, origin=(-0.4, -0.4, -0.4))
-    V = g.vertices.copy()
-    inside = np.all(np.abs(V) < 0.4 - 1e-9, axis=1)
-    V[inside] += np.random.default_rng(seed).uniform(-0.08 / n, 0.08 / n, (inside.sum(), 3))
-    return TetMesh(vertices=V, tets=g.tets)
+    return jittered_grid_tetmesh(n, 0.4, 0.08 / n, seed)
 
 
 def octant_pieces(tm):

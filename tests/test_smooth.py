@@ -13,7 +13,7 @@ from fracture_cli.stages.pieces import pieces
 from fracture_cli import tetgeom
 from fracture_cli.stages.smooth import (SmoothOptions, _smoothed_field, _smoothed_vertices, _Topology, _union_regions,
                                         smooth)
-from fracture_cli.testing import grid_tetmesh
+from fracture_cli.testing import grid_tetmesh, jittered_grid_tetmesh
 from fracture_cli.types import Modes, Regions, TetMesh
 
 
@@ -23,11 +23,7 @@ FIELD = SmoothOptions(smoothing=2.5e-4, method="field")
 
 def jittered_grid(n=6, seed=0):
     """Unit cube centred at 0, interior vertices jittered (generic faults), boundary kept flat."""
-    g = grid_tetmesh((n, n, n), spacing=1 / n, origin=(-0.5, -0.5, -0.5))
-    V = g.vertices.copy()
-    inside = np.all(np.abs(V) < 0.5 - 1e-9, axis=1)
-    V[inside] += np.random.default_rng(seed).uniform(-0.1 / n, 0.1 / n, (inside.sum(), 3))
-    return TetMesh(vertices=V, tets=g.tets)
+    return jittered_grid_tetmesh(n, 0.5, 0.1 / n, seed)
 
 
 def label_modes(tm, labels):

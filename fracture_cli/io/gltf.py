@@ -16,8 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli import __version__
+from fracture_cli.errors import InputError
 from fracture_cli.types import Material
 
+_GLB_MAGIC = b"glTF"
+_CHUNK_JSON = 0x4E4F534A
+_CHUNK_BIN = 0x004E4942
 _FLOAT = 5126
 _UINT32 = 5125
 _ARRAY_BUFFER = 34962
@@ -172,14 +176,52 @@ def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Materi
         doc["images"] = images
         doc["textures"] = textures
         doc["samplers"] = samplers
-    js = json.dumps(doc, separators=(",", ":"), sort_keys=False).encode("utf-8")
-    js += b" " * ((4 - len(js) % 4) % 4)
-    total = 12 + 8 + len(js) + 8 + len(binary)
-    out = bytearray()
-    out += struct.pack("<4sII", b"glTF", 2, total)
-    out += struct.pack("<I4s", len(js), b"JSON") + js
-    out += struct.pack("<I4s", len(binary), b"BIN\x00") + bytes(binary)
-    return bytes(out)
+    return pack_glb(doc, bytes(binary))
+
+
+def pack_glb(doc: dict, binary: bytes | None) -> bytes:
+    """A GLB container: the JSON chunk (space-padded) and the binary chunk (zero-padded), if any."""
+    text = json.dumps(doc, separators=(",", ":"), sort_keys=False).encode("utf-8")
+    text += b" " * ((4 - len(text) % 4) % 4)
+    chunks = struct.pack("<II", len(text), _CHUNK_JSON) + text
+    if binary is not None:
+        binary = binary + b"\0" * ((4 - len(binary) % 4) % 4)
+        chunks += struct.pack("<II", len(binary), _CHUNK_BIN) + binary
+    return struct.pack("<4sII", _GLB_MAGIC, 2, 12 + len(chunks)) + chunks
+
+
+def read_glb_chunks(path: str) -> tuple[dict, bytes | None]:
+    """The JSON document and binary chunk of a GLB file.
+
+    Raises
+    ------
+    InputError
+        Missing file, not a GLB, unsupported version, truncated, no JSON chunk.
+    """
+    try:
+        with open(path, "rb") as handle:
+            raw = handle.read()
+    except FileNotFoundError:
+        raise InputError("no such file", path=path) from None
+    if len(raw) < 20 or raw[:4] != _GLB_MAGIC:
+        raise InputError("not a binary glTF (.glb) file", path=path)
+    _, version, total = struct.unpack_from("<4sII", raw, 0)
+    if version != 2 or total > len(raw):
+        raise InputError(f"unsupported or truncated GLB (version {version}, {len(raw)} of {total} bytes)", path=path)
+    offset, doc, binary = 12, None, None
+    while offset + 8 <= total:
+        length, kind = struct.unpack_from("<II", raw, offset)
+        chunk = raw[offset + 8: offset + 8 + length]
+        if len(chunk) != length:
+            raise InputError("truncated GLB chunk", path=path)
+        if kind == _CHUNK_JSON and doc is None:
+            doc = json.loads(chunk.decode("utf-8"))
+        elif kind == _CHUNK_BIN and binary is None:
+            binary = chunk
+        offset += 8 + length
+    if doc is None:
+        raise InputError("GLB has no JSON chunk", path=path)
+    return doc, binary
 
 
 @dataclass(frozen=True)
@@ -193,24 +235,24 @@ class GlbMesh:
 def read_glb(path: str) -> tuple[list[GlbMesh], list[str]]:
     """Read the meshes of a GLB file as written by :func:`glb_bytes`.
 
-    A deliberately small reader (float32 positions/normals/UVs, uint32 or uint16
-    indices, node translations applied; no rotation, scale or hierarchy, which
-    our writer never emits) for previews and tests of our own output.
-
     Returns
     -------
     meshes : list of GlbMesh
         One per node with a mesh, in node order.
     material_names : list of str
     """
-    with open(path, "rb") as fh:
-        data = fh.read()
-    if len(data) < 20 or data[:4] != b"glTF":
-        raise ValueError("not a binary glTF (GLB) file")
-    json_len = struct.unpack_from("<I", data, 12)[0]
-    doc = json.loads(data[20:20 + json_len])
-    bin_start = 20 + json_len + 8
-    binary = data[bin_start:]
+    doc, binary = read_glb_chunks(path)
+    return glb_meshes(doc, binary), [m.get("name", "") for m in doc.get("materials", [])]
+
+
+def glb_meshes(doc: dict, binary: bytes | None) -> list[GlbMesh]:
+    """The meshes of a GLB document, one per node with a mesh, in node order.
+
+    A deliberately small reader (float32 positions/normals/UVs, uint32 or uint16
+    indices, node translations applied; no rotation, scale or hierarchy, which
+    our writer never emits) for previews and tests of our own output.
+    """
+    binary = binary or b""
 
     def accessor(index: int) -> np.ndarray:
         acc = doc["accessors"][index]
@@ -238,4 +280,4 @@ def read_glb(path: str) -> tuple[list[GlbMesh], list[str]]:
             idx = accessor(prim["indices"]).astype(np.int64).reshape(-1, 3)
             prims.append(Primitive(pos, nrm, uv, idx, int(prim.get("material", 0))))
         meshes.append(GlbMesh(node.get("name", ""), tuple(prims)))
-    return meshes, [m.get("name", "") for m in doc.get("materials", [])]
+    return meshes

@@ -9,56 +9,15 @@ deterministic.
 
 from __future__ import annotations
 
-import json
 import os
-import struct
 
 import numpy as np
 
 from fracture_cli.errors import InputError
 from fracture_cli.io.atomic import write_bytes_atomic
+from fracture_cli.io.gltf import pack_glb, read_glb_chunks
 
-_GLB_MAGIC = b"glTF"
-_CHUNK_JSON = 0x4E4F534A
-_CHUNK_BIN = 0x004E4942
 _TRANSFORM_KEYS = ("matrix", "translation", "rotation", "scale")
-
-
-def _read_glb(path: str) -> tuple[dict, bytes | None]:
-    try:
-        with open(path, "rb") as handle:
-            raw = handle.read()
-    except FileNotFoundError:
-        raise InputError("fragments file not found", path=path) from None
-    if len(raw) < 20 or raw[:4] != _GLB_MAGIC:
-        raise InputError("not a binary glTF (.glb) file", path=path)
-    _, version, total = struct.unpack_from("<4sII", raw, 0)
-    if version != 2 or total > len(raw):
-        raise InputError(f"unsupported or truncated GLB (version {version}, {len(raw)} of {total} bytes)", path=path)
-    offset, doc, binary = 12, None, None
-    while offset + 8 <= total:
-        length, kind = struct.unpack_from("<II", raw, offset)
-        chunk = raw[offset + 8: offset + 8 + length]
-        if len(chunk) != length:
-            raise InputError("truncated GLB chunk", path=path)
-        if kind == _CHUNK_JSON and doc is None:
-            doc = json.loads(chunk.decode("utf-8"))
-        elif kind == _CHUNK_BIN and binary is None:
-            binary = chunk
-        offset += 8 + length
-    if doc is None:
-        raise InputError("GLB has no JSON chunk", path=path)
-    return doc, binary
-
-
-def _glb_bytes(doc: dict, binary: bytes | None) -> bytes:
-    text = json.dumps(doc, separators=(",", ":"), sort_keys=False).encode("utf-8")
-    text += b" " * ((4 - len(text) % 4) % 4)
-    chunks = struct.pack("<II", len(text), _CHUNK_JSON) + text
-    if binary is not None:
-        binary = binary + b"\0" * ((4 - len(binary) % 4) % 4)
-        chunks += struct.pack("<II", len(binary), _CHUNK_BIN) + binary
-    return struct.pack("<4sII", _GLB_MAGIC, 2, 12 + len(chunks)) + chunks
 
 
 def group_name(group: int) -> str:
@@ -100,7 +59,7 @@ def write_groups_glb(fragments_glb_path: str | os.PathLike, groups, out_path: st
         fragment_names = tuple(f"fragment_{j:03d}" for j in range(p))
     if len(fragment_names) != p:
         raise InputError(f"{len(fragment_names)} fragment names for {p} groups entries", path=path)
-    doc, binary = _read_glb(path)
+    doc, binary = read_glb_chunks(path)
     nodes = doc.get("nodes", [])
     by_name = {node.get("name"): index for index, node in enumerate(nodes) if "name" in node}
     missing = [name for name in fragment_names if name not in by_name]
@@ -140,5 +99,5 @@ def write_groups_glb(fragments_glb_path: str | os.PathLike, groups, out_path: st
     group_nodes = [i for i, node in enumerate(new_nodes) if node.get("name") in set(names)]
     out["scenes"] = [{"nodes": group_nodes}]
     out["scene"] = 0
-    write_bytes_atomic(out_path, _glb_bytes(out, binary))
+    write_bytes_atomic(out_path, pack_glb(out, binary))
     return names

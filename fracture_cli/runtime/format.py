@@ -115,7 +115,7 @@ class RuntimeData:
 
 def check_runtime(data: RuntimeData) -> str | None:
     """Return why ``data`` is inconsistent, or None if it is usable."""
-    W, B = np.asarray(data.W), np.asarray(data.B)
+    W = np.asarray(data.W)
     if W.ndim != 3 or W.shape[2] not in (1, 3):
         return f"W must have shape (k, p, d) with d = 1 or 3, got {W.shape}"
     k, p, d = W.shape

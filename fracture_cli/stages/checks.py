@@ -154,7 +154,7 @@ def region_fault_roughness(regions: Regions) -> float:
     measured once; the result is the area-weighted mean over all faults,
     ``sum(turning) / sum(area)``.
     """
-    keys, owners, tris = [], [], []
+    owners, tris = [], []
     offset = 0
     all_vertices = []
     for P, (V, F) in enumerate(regions.meshes):
