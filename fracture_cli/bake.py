@@ -127,7 +127,7 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) 
     from fracture_cli.io.write import fragment_name, write_fragments_glb
     from fracture_cli.runtime.format import write_runtime
     from fracture_cli.stages.cage import cage
-    from fracture_cli.stages.checks import fragment_invariants
+    from fracture_cli.stages.checks import fragment_fault_shape, fragment_invariants
     from fracture_cli.stages.fragments import fragments as cut_fragments
     from fracture_cli.stages.material import material
     from fracture_cli.stages.modes import modes as solve_modes
@@ -186,6 +186,10 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) 
         frags = cut_fragments(surface, regions, recipe["fragments"])
         checks = fragment_invariants(surface, frags)
         checks["input_volume"] = float(frags.input_volume * surface.normalization.scale**3)
+        # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
+        shape = fragment_fault_shape(frags)
+        checks["fault_mean_dihedral_degrees"] = round(shape["mean_dihedral_degrees"], 6)
+        checks["fault_crease_density"] = round(shape["crease_density"], 6)
     if not frags.fragments:
         raise StageError("no fragment intersects the input; is the asset empty?", stage="fragments", path=input_path)
     with timed("runtime"):

@@ -152,3 +152,56 @@ def orient_positive(V: np.ndarray, T: np.ndarray) -> np.ndarray:
     neg = tet_volumes(V, T) < 0
     T[neg, 2], T[neg, 3] = T[neg, 3].copy(), T[neg, 2].copy()
     return T
+
+
+def refine_red(V: np.ndarray, T: np.ndarray):
+    """One level of regular (1:8) refinement: every tet split at its edge midpoints.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+        Vertex positions.
+    T : (t, 4) int64
+        Positively oriented tets.
+
+    Returns
+    -------
+    V2 : (n + e, 3) float64
+        The old vertices followed by one midpoint per unique edge (sorted by edge).
+    T2 : (8 t, 4) int64
+        Positively oriented child tets; children of tet ``i`` are rows ``8 i .. 8 i + 7``.
+    parent : (8 t,) int64
+        The tet each child came from.
+
+    Notes
+    -----
+    Four children are the corner tets; the inner octahedron is split along its
+    shortest diagonal, which keeps the children's shapes from degrading level
+    after level (Bey's rule picks a fixed diagonal; the shortest one is the usual
+    quality choice). The refinement is conforming whatever diagonal each tet
+    picks: faces shared by two tets are split the same way from both sides.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    T = np.asarray(T, dtype=np.int64)
+    n, t = len(V), len(T)
+    pairs = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
+    E = np.sort(T[:, pairs].reshape(-1, 2), axis=1)
+    edges, inverse = np.unique(E, axis=0, return_inverse=True)
+    mid = n + inverse.reshape(t, 6)
+    V2 = np.vstack([V, 0.5 * (V[edges[:, 0]] + V[edges[:, 1]])])
+    a, b, c, d = T.T
+    ab, ac, ad, bc, bd, cd = mid.T
+    corners = [np.stack(x, axis=1) for x in ((a, ab, ac, ad), (ab, b, bc, bd), (ac, bc, c, cd), (ad, bd, cd, d))]
+    # The octahedron's three diagonals join opposite midpoints: (ab, cd), (ac, bd), (ad, bc).
+    diagonals = np.stack([np.stack([ab, cd], 1), np.stack([ac, bd], 1), np.stack([ad, bc], 1)], axis=1)
+    lengths = np.linalg.norm(V2[diagonals[:, :, 0]] - V2[diagonals[:, :, 1]], axis=2)
+    k = np.argmin(lengths, axis=1)
+    rows = np.arange(t)
+    m1, m2 = diagonals[rows, k, 0], diagonals[rows, k, 1]
+    # The equator around diagonal k is the other two opposite pairs (p1, q1), (p2, q2): cycle p1 p2 q1 q2.
+    other = np.array([[1, 2], [0, 2], [0, 1]])[k]
+    p1, q1 = diagonals[rows, other[:, 0], 0], diagonals[rows, other[:, 0], 1]
+    p2, q2 = diagonals[rows, other[:, 1], 0], diagonals[rows, other[:, 1], 1]
+    inner = [np.stack(x, axis=1) for x in ((m1, m2, p1, p2), (m1, m2, p2, q1), (m1, m2, q1, q2), (m1, m2, q2, p1))]
+    T2 = np.stack(corners + inner, axis=1).reshape(-1, 4)
+    return V2, orient_positive(V2, T2), np.repeat(np.arange(t), 8)

@@ -29,6 +29,7 @@ with open(os.path.join(SAMPLE_ASSETS, "manifest.toml"), "rb") as _fh:
 # Tolerances: counts exact, volumes and boxes relative to the asset's size.
 VOLUME_RTOL = 1e-4
 BBOX_ATOL_REL = 1e-5  # of the bounding-box diagonal
+FAULT_RTOL = 1e-3  # fault shape (mean dihedral angle, crease density): what the smoothing makes of the faults
 
 
 def summarize(out_dir: str, stem: str) -> dict:
@@ -49,6 +50,7 @@ def summarize(out_dir: str, stem: str) -> dict:
         "counts": counts,
         "cage_offset": round(report["counts"]["cage_offset"], 6),
         "input_volume": report["checks"]["input_volume"],
+        "faults": {k: report["checks"][k] for k in ("fault_mean_dihedral_degrees", "fault_crease_density")},
         "fragments": [
             {"name": f["name"], "volume": f["volume"], "bbox_min": f["bbox_min"], "bbox_max": f["bbox_max"]}
             for f in report["fragments"]
@@ -67,6 +69,9 @@ def compare(expected: dict, got: dict, asset: str) -> list[str]:
         return problems + [f"{asset}: fragment count: expected {len(expected['fragments'])}, got {len(got['fragments'])}"]
     if not np.isclose(expected["input_volume"], got["input_volume"], rtol=VOLUME_RTOL):
         problems.append(f"{asset}: input_volume: expected {expected['input_volume']}, got {got['input_volume']}")
+    for key, value in expected.get("faults", {}).items():
+        if not np.isclose(value, got["faults"][key], rtol=FAULT_RTOL):
+            problems.append(f"{asset}: faults.{key}: expected {value:.6g}, got {got['faults'][key]:.6g}")
     for e, g in zip(expected["fragments"], got["fragments"]):
         if not np.isclose(e["volume"], g["volume"], rtol=VOLUME_RTOL, atol=1e-12):
             problems.append(f"{asset}: {e['name']}.volume: expected {e['volume']:.6g}, got {g['volume']:.6g}")

@@ -460,3 +460,69 @@ def test_sliding_on_a_sample_asset(chair_case):
     frags = fragments(surface, R, load_recipe("default")["fragments"])
     invariants = fragment_invariants(surface, frags)
     assert invariants["volume_error"] < 1e-6
+
+
+# ---------------------------------------------------------------------------
+# Field method on a refined mesh (regular 1:8 refinement of the cage tets).
+# ---------------------------------------------------------------------------
+
+
+def test_red_refinement_is_a_conforming_positive_split():
+    tm = jittered_grid(3, seed=4)
+    V2, T2, parent = tetgeom.refine_red(tm.vertices, tm.tets)
+    assert T2.shape == (8 * tm.num_tets, 4) and np.array_equal(parent, np.repeat(np.arange(tm.num_tets), 8))
+    child = tetgeom.tet_volumes(V2, T2)
+    assert np.all(child > 0)
+    # every parent is split exactly: children volumes add up to it
+    np.testing.assert_allclose(child.reshape(-1, 8).sum(axis=1), tm.tet_volumes, rtol=1e-12)
+    # conforming: every child face is shared by two children or lies on the boundary, which is the old
+    # boundary split into 4
+    fine = TetMesh(V2, T2)
+    assert len(fine.boundary_faces) == 4 * len(tm.boundary_faces)
+    faces = np.sort(np.concatenate([T2[:, [1, 2, 3]], T2[:, [0, 2, 3]], T2[:, [0, 1, 3]], T2[:, [0, 1, 2]]]), axis=1)
+    _, counts = np.unique(faces, axis=0, return_counts=True)
+    assert counts.max() == 2 and (counts == 1).sum() == len(fine.boundary_faces)
+    # the old vertices keep their positions and numbers
+    np.testing.assert_array_equal(V2[: tm.num_vertices], tm.vertices)
+
+
+def test_refined_field_partitions_the_cage_and_flattens_creases():
+    from fracture_cli.stages.checks import fault_shape, region_faults
+
+    tm = jittered_grid(5, seed=2)
+    P = plane_pieces(tm)
+    R0 = smooth(tm, P, SmoothOptions(smoothing=0.0))
+    R = smooth(tm, P, SmoothOptions(smoothing=4e-3, method="field", refine=2))
+    assert len(R.meshes) == P.num_pieces and not R.vanished
+    for V, F in R.meshes:
+        assert closed_by_position(V, F)
+    check_partition(tm, R, 1e-9)
+    shape0, shape = fault_shape(*region_faults(R0)), fault_shape(*region_faults(R))
+    print(f"refined field: mean dihedral {shape0['mean_dihedral_degrees']:.1f} -> {shape['mean_dihedral_degrees']:.1f}, "
+          f"creases {shape0['crease_density']:.2f} -> {shape['crease_density']:.2f}")
+    assert shape["mean_dihedral_degrees"] < 0.5 * shape0["mean_dihedral_degrees"]
+    assert shape["crease_density"] < 0.5 * shape0["crease_density"]
+
+
+def test_refinement_respects_the_tet_budget(caplog):
+    tm = jittered_grid(3, seed=1)
+    P = plane_pieces(tm)
+    with caplog.at_level(logging.INFO, logger="fracture_cli.stages.smooth"):
+        smooth(tm, P, SmoothOptions(smoothing=4e-3, method="field", refine=3, max_refined_tets=8 * tm.num_tets))
+    assert "1 of 3 refinement level(s)" in caplog.text
+
+
+def test_fault_shape_counts_creases_not_fans():
+    from fracture_cli.stages.checks import fault_shape
+
+    # A flat square fanned into 4 triangles: no dihedral, no crease.
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0]], float)
+    F = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    shape = fault_shape(V, F, np.zeros(4, int))
+    assert shape["mean_dihedral_degrees"] == 0.0 and shape["crease_density"] == 0.0 and shape["area"] == 1.0
+    # Fold the square along its diagonal by 90 degrees: one crease of length sqrt(2).
+    V2 = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0.5, 0.5, np.sqrt(0.5)]], float)
+    F2 = np.array([[0, 1, 2], [0, 2, 3]])
+    shape = fault_shape(V2, F2, np.zeros(2, int))
+    assert shape["mean_dihedral_degrees"] == pytest.approx(90.0, abs=1e-6)
+    assert shape["crease_density"] == pytest.approx(np.sqrt(2) / shape["area"])

@@ -77,6 +77,18 @@ class SmoothOptions:
         "tets); field: smooth the piece membership field and cut tets along its level sets",
         choices=("geometric", "field"),
     )
+    refine: int = option(
+        2,
+        "field method: levels of regular 1:8 tet refinement before smoothing, so faults are cut along a finer "
+        "mesh than the cage tets (fewer levels when the refined mesh would exceed max_refined_tets)",
+        min=0,
+        max=3,
+    )
+    max_refined_tets: int = option(
+        400_000,
+        "field method: the most tets refinement may create (memory and time grow with it)",
+        min=1,
+    )
     vanish_fraction: float = option(
         0.01,
         "field method: a piece whose smoothed region is below this fraction of its own volume keeps its own "
@@ -196,6 +208,9 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
         raise StageError(f"pieces cover {tet_piece.shape[0]} tets but the tet mesh has {t}", stage=STAGE)
     p = pieces.num_pieces
     lam = float(options.smoothing)
+    if lam > 0.0 and options.method == "field":
+        tet_mesh, tet_piece = _refined(tet_mesh, tet_piece, options.refine, options.max_refined_tets)
+        t = tet_mesh.num_tets
     V, T = tet_mesh.vertices, tet_mesh.tets
     topo = _Topology(T, tet_mesh.num_vertices)
 
@@ -236,6 +251,25 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     log.info("%s: %d regions, lambda=%g, %d triangles, %d vanished, %d tet(s) made tet-aligned, %d pinched edge(s) "
              "given a spindle", STAGE, p, lam, sum(len(f) for _, f in meshes), len(vanished), repaired, pinches)
     return Regions(meshes=tuple(meshes), smoothing=lam, vanished=tuple(sorted(vanished)))
+
+
+def _refined(tet_mesh: TetMesh, tet_piece: np.ndarray, levels: int, max_tets: int):
+    """The tet mesh after up to ``levels`` regular refinements (at most ``max_tets`` tets) and its pieces.
+
+    Children keep their parent's piece, so the tet-aligned regions do not
+    change; only the field gets a finer mesh to be cut along.
+    """
+    done = 0
+    while done < levels and 8 * tet_mesh.num_tets <= max_tets:
+        V, T, parent = tetgeom.refine_red(tet_mesh.vertices, tet_mesh.tets)
+        tet_mesh = TetMesh(vertices=V, tets=T, normalization=tet_mesh.normalization)
+        tet_piece = tet_piece[parent]
+        done += 1
+    if done < levels:
+        log.info("%s: %d of %d refinement level(s): one more would exceed %d tets", STAGE, done, levels, max_tets)
+    elif done:
+        log.info("%s: %d refinement level(s): %d tets", STAGE, done, tet_mesh.num_tets)
+    return tet_mesh, tet_piece
 
 
 def _repaired_regions(V, T, topo, Zv, forced, tet_piece, p):
