@@ -5,12 +5,13 @@
 Two tables. (1) Synthetic: the tet mesh is a jittered grid over the input's
 bounding box and the pieces are the Voronoi cells of 30 seeded sites (synthetic
 modes), so the timings isolate these three stages from the cage and modes
-stages. (2) Sample assets through the default recipe (repair, cage, tetra,
-modes, pieces), smoothed with lambda = 0 and with the recipe's lambda.
-Roughness is :func:`fracture_cli.stages.checks.region_fault_roughness` /
-:func:`~fracture_cli.stages.checks.fragment_fault_roughness`: mean bending of
-each fault surface over edges inside it, area-weighted (1/diagonal; lower is
-smoother).
+stages. (2) Sample assets through their manifest recipes (repair, cage, tetra,
+modes, pieces), smoothed with lambda = 0 and with the recipe's lambda by both
+methods.
+Fault shape is :func:`fracture_cli.stages.checks.fragment_fault_shape`: the
+mean dihedral angle of bent edges inside each fault (degrees) and the crease
+density (edges bending more than 30 degrees per unit fault area, 1/diagonal);
+lower is smoother.
 """
 
 from __future__ import annotations
@@ -24,11 +25,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from fracture_cli.stages.checks import (  # noqa: E402
-    fragment_fault_roughness,
-    fragment_invariants,
-    region_fault_roughness,
-)
+from fracture_cli.stages.checks import fragment_fault_shape, fragment_invariants  # noqa: E402
 from fracture_cli.stages.fragments import fragments  # noqa: E402
 from fracture_cli.stages.pieces import pieces  # noqa: E402
 from fracture_cli.stages.smooth import SmoothOptions, smooth  # noqa: E402
@@ -110,20 +107,31 @@ def _row(name, surface, tets, sites, quick):
         F = fragments(surface, R)
         t_frag = time.perf_counter() - t0
         inv = fragment_invariants(surface, F, max_pairs=200 if quick else 2000)
-        rough = fragment_fault_roughness(F)
+        rough = fragment_fault_shape(F)
         cells.append((lam, t_smooth, t_frag, len(F.fragments), inv, rough))
     rows = []
     for lam, t_smooth, t_frag, count, inv, rough in cells:
         rows.append(
             f"| {name} | {surface.num_faces} | {tm.num_tets} | {P.num_pieces} | {lam:g} | {t_pieces:.3f} | "
             f"{t_smooth:.2f} | {t_frag:.2f} | {count} | {inv['watertight']} | {inv['volume_error']:.1e} | "
-            f"{inv['max_overlap']:.1e} | {inv['max_outer_distance']:.1e} | {rough:.1f} |"
+            f"{inv['max_overlap']:.1e} | {inv['max_outer_distance']:.1e} | {rough['mean_dihedral_degrees']:.1f} | "
+            f"{rough['crease_density']:.1f} |"
         )
     return rows
 
 
+def _manifest() -> list[tuple[str, str]]:
+    import tomllib
+
+    with open(os.path.join(SAMPLE_ASSETS, "manifest.toml"), "rb") as fh:
+        return sorted(tomllib.load(fh)["assets"].items())
+
+
 def _smoothing_table(load_surface) -> list[str]:
-    """Rows: each sample asset through the default recipe, smoothed with lambda = 0 and the recipe's lambda."""
+    """Rows: each sample asset through its manifest recipe, smoothed with lambda = 0, then with the recipe's
+    lambda by both methods (the recipe's own first)."""
+    import dataclasses
+
     from fracture_cli.recipe import load_recipe
     from fracture_cli.stages.cage import cage
     from fracture_cli.stages.material import material
@@ -131,41 +139,47 @@ def _smoothing_table(load_surface) -> list[str]:
     from fracture_cli.stages.repair import repair
     from fracture_cli.stages.tetra import tetra
 
-    recipe = load_recipe("default")
-    lam = recipe["smooth"].smoothing
     lines = [
-        "### Fault smoothing on the sample assets (default recipe)",
+        "### Fault smoothing on the sample assets (manifest recipes)",
         "",
-        f"Default recipe (lambda = {lam:g}, pieces below {recipe['pieces'].min_volume_fraction:g} of the volume "
-        "merged first). `h` = mean tet edge (diagonal units); `r/h` = sqrt(lambda) / h. Vanished pieces keep "
-        "their own tets.",
+        "Each asset through its recipe; smoothed with lambda = 0, then with the recipe's lambda by its own method "
+        "(first) and by the other one. `h` = mean cage-tet edge (diagonal units); `r/h` = sqrt(lambda) / h. "
+        "Fault shape of the fragments' interior faces: mean dihedral angle of bent edges (degrees) and crease "
+        "density (length of edges bending > 30 degrees per unit area, 1/diagonal); lower is smoother. "
+        "Vanished pieces keep their own tets.",
         "",
-        "| asset | tets | h | pieces | lambda | r/h | smooth s | vanished | region roughness | "
-        "fragment roughness | fragments s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| asset | recipe | tets | h | pieces | method | lambda | r/h | smooth s | vanished | mean dihedral | "
+        "creases | fragments s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for name in SAMPLE_FILES:
+    for name, recipe_name in _manifest():
         path = os.path.join(SAMPLE_ASSETS, name)
         if load_surface is None or not os.path.exists(path):
             continue
         try:
+            recipe = load_recipe(recipe_name)
             surface = repair(load_surface(path), recipe["repair"])
             tm = tetra(cage(surface, recipe["cage"]), recipe["tetra"])
             P = pieces(tm, modes(tm, recipe["modes"], eta=material(tm, surface, recipe["material"])),
                        recipe["pieces"])
             E = tm.vertices[tm.tets[:, [0, 0, 0, 1, 1, 2]]] - tm.vertices[tm.tets[:, [1, 2, 3, 2, 3, 3]]]
             h = float(np.linalg.norm(E, axis=2).mean())
-            for value in (0.0, lam):
+            own = recipe["smooth"]
+            other = "field" if own.method == "geometric" else "geometric"
+            for options in (dataclasses.replace(own, smoothing=0.0), own, dataclasses.replace(own, method=other)):
                 t0 = time.perf_counter()
-                R = smooth(tm, P, SmoothOptions(smoothing=value))
+                R = smooth(tm, P, options, surface=surface)
                 t_smooth = time.perf_counter() - t0
                 t0 = time.perf_counter()
                 F = fragments(surface, R, recipe["fragments"])
                 t_frag = time.perf_counter() - t0
+                shape = fragment_fault_shape(F)
+                lam = options.smoothing
                 lines.append(
-                    f"| {name} | {tm.num_tets} | {h:.3f} | {P.num_pieces} | {value:g} | {np.sqrt(value) / h:.2f} | "
-                    f"{t_smooth:.2f} | {len(R.vanished)} | {region_fault_roughness(R):.1f} | "
-                    f"{fragment_fault_roughness(F):.1f} | {t_frag:.2f} |"
+                    f"| {name} | {recipe_name} | {tm.num_tets} | {h:.3f} | {P.num_pieces} | "
+                    f"{options.method if lam else '-'} | {lam:g} | {np.sqrt(lam) / h:.2f} | {t_smooth:.2f} | "
+                    f"{len(R.vanished)} | {shape['mean_dihedral_degrees']:.1f} | {shape['crease_density']:.1f} | "
+                    f"{t_frag:.2f} |"
                 )
         except Exception as exc:  # a benchmark row, not a test: report and go on
             lines.append(f"| {name} | failed: {str(exc)[:120]} |")
@@ -177,12 +191,12 @@ def run(quick: bool = False) -> str:
         "## Pieces, fault smoothing and fragment booleans",
         "",
         "Synthetic pieces (Voronoi cells of 30 sites) on a jittered grid tet mesh over the input's bbox; "
-        "seconds on this machine. Roughness = fault bending of the fragments' interior faces "
-        "(1/diagonal, see the module docstring); lower is smoother.",
+        "seconds on this machine (default smoothing options). Fault shape of the fragments' interior faces: mean "
+        "dihedral angle (degrees) and crease density (1/diagonal), see the module docstring; lower is smoother.",
         "",
         "| input | triangles | tets | pieces | lambda | pieces s | smooth s | fragments s | fragments | "
-        "watertight | volume error | max overlap | max outer dist | roughness |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "watertight | volume error | max overlap | max outer dist | mean dihedral | creases |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     if quick:
         lines += _row("bumpy sphere", bumpy_sphere(40, 60), 1500, 12, quick)

@@ -86,16 +86,21 @@ def closest_distance(p, tris):
     ab, ac, ap = b - a, c - a, p - a
     n = np.cross(ab, ac)
     n2 = np.einsum("ij,ij->i", n, n)
+    flat = n2 <= 0  # degenerate triangles: only their edges count
+    n2 = np.where(flat, 1.0, n2)
     # inside the prism over the triangle: distance to the plane
     w_c = np.einsum("ij,ij->i", np.cross(ab, ap), n) / n2
     w_b = np.einsum("ij,ij->i", np.cross(ap, ac), n) / n2
-    inside = (w_b >= 0) & (w_c >= 0) & (w_b + w_c <= 1)
+    inside = ~flat & (w_b >= 0) & (w_c >= 0) & (w_b + w_c <= 1)
     plane = np.abs(np.einsum("ij,ij->i", ap, n)) / np.sqrt(n2)
+
     # otherwise: distance to the nearest of the three edges
     def segment(u, v):
         d = v - u
-        t = np.clip(np.einsum("ij,ij->i", p - u, d) / np.einsum("ij,ij->i", d, d), 0.0, 1.0)
+        dd = np.einsum("ij,ij->i", d, d)
+        t = np.clip(np.einsum("ij,ij->i", p - u, d) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
         return np.linalg.norm(p - (u + t[:, None] * d), axis=1)
+
     edges = np.minimum(np.minimum(segment(a, b), segment(b, c)), segment(c, a))
     return float(np.where(inside, np.minimum(plane, edges), edges).min())
 

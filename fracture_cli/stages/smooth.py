@@ -80,7 +80,8 @@ class SmoothOptions:
     refine: int = option(
         2,
         "field method: levels of regular 1:8 tet refinement before smoothing, so faults are cut along a finer "
-        "mesh than the cage tets (fewer levels when the refined mesh would exceed max_refined_tets)",
+        "mesh than the cage tets (fewer levels when the refined mesh would exceed max_refined_tets); it pays off "
+        "when sqrt(smoothing) is at least about the refined tet edge, else the faults zigzag at the fine scale",
         min=0,
         max=3,
     )
@@ -267,8 +268,11 @@ def _refined(tet_mesh: TetMesh, tet_piece: np.ndarray, levels: int, max_tets: in
         done += 1
     if done < levels:
         log.info("%s: %d of %d refinement level(s): one more would exceed %d tets", STAGE, done, levels, max_tets)
-    elif done:
-        log.info("%s: %d refinement level(s): %d tets", STAGE, done, tet_mesh.num_tets)
+    if done:
+        V, T = tet_mesh.vertices, tet_mesh.tets
+        edge = float(np.linalg.norm(V[T[:, [0, 0, 0, 1, 1, 2]]] - V[T[:, [1, 2, 3, 2, 3, 3]]], axis=2).mean())
+        log.info("%s: %d refinement level(s): %d tets, mean edge %.3g (diagonal units)", STAGE, done,
+                 tet_mesh.num_tets, edge)
     return tet_mesh, tet_piece
 
 
