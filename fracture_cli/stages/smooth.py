@@ -111,8 +111,9 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
         Atomic pieces; ``pieces.tet_piece`` (t,) assigns every tet to a piece.
     options : SmoothOptions, optional
         ``smoothing`` (lambda, default 1e-3), ``method`` (default
-        ``"geometric"``) and ``vanish_fraction`` (default 0.01, field method
-        only).
+        ``"geometric"``); field method only: ``refine`` (default 2),
+        ``max_refined_tets`` (default 400000) and ``vanish_fraction``
+        (default 0.01).
     surface : SurfaceMesh, optional (default None)
         The (repaired) input the cage contains, in the same normalized
         coordinates. Geometric method only: when given, fault vertices on the
@@ -171,13 +172,19 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     move allow: where pieces are one or two tets thick, most fault vertices
     lie on the cage boundary and stay where they are.
 
-    Field method: the one-hot piece field is averaged onto vertices
+    Field method: the tet mesh is first refined ``refine`` times by regular
+    1:8 refinement (:func:`~fracture_cli.tetgeom.refine_red`; fewer levels if
+    the result would exceed ``max_refined_tets``), every child keeping its
+    parent's piece, so the tet-aligned starting point is unchanged and the
+    level sets below are cut along a mesh fine enough to follow the smoothed
+    field. Then the one-hot piece field is averaged onto vertices
     (lumped-mass weighted) and smoothed by one implicit diffusion step
     ``Z <- (M_V + lambda K)^-1 M_V Z`` (one sparse factorization, ``p``
-    right-hand sides); useful values are around the squared tet edge length
-    (1e-4 .. 1e-2). On coarse tet meshes (pieces a few tets across) the
-    per-tet gradients of ``Z`` zigzag and faults can get rougher, not
-    smoother.
+    right-hand sides); useful values are around the squared cage-tet edge
+    length (1e-4 .. 1e-2). Without refinement, on coarse tet meshes (pieces a
+    few tets across), the per-tet gradients of ``Z`` zigzag and faults can get
+    rougher, not smoother; refinement pays off when ``sqrt(lambda)`` is at
+    least about the refined edge.
 
     Inside a tet ``Z`` is linear, so the set where piece ``P`` wins is the tet
     clipped by the half-spaces ``Z_P >= Z_Q``: a convex cell. The boundary of
