@@ -221,9 +221,16 @@ def _to_fragment(part, piece: int, id_to_material: dict, interior_index: int, su
     )
 
 
+# Normal components (unit normals) closer than this count as a tie in the box projection.
+_UV_AXIS_TIE = 1e-9
+
+
 def _box_uvs(world: np.ndarray, normals: np.ndarray, uv_scale: float) -> np.ndarray:
     """Box (tri-planar) projection UVs (n, 2) of world positions along each normal's dominant axis."""
-    axis = np.argmax(np.abs(normals), axis=1)
+    magnitude = np.abs(normals)
+    # Near-ties (45-degree faces) go to the lowest axis, so rounding noise (e.g. the same shape at another
+    # scale) cannot flip a face to another projection.
+    axis = np.argmax(magnitude >= magnitude.max(axis=1, keepdims=True) - _UV_AXIS_TIE, axis=1)
     sign = np.sign(normals[np.arange(len(normals)), axis])
     sign[sign == 0] = 1.0
     # (u, v) axes per dominant axis; u flips with the normal's sign so textures are not mirrored.
