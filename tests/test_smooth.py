@@ -12,7 +12,7 @@ from fracture_cli.stages.checks import fault_roughness, point_triangle_distance,
 from fracture_cli.stages.pieces import pieces
 from fracture_cli import tetgeom
 from fracture_cli.stages.smooth import (SmoothOptions, _smoothed_field, _smoothed_vertices, _Topology, _union_regions,
-                                        smooth)
+                                        _winning_field, smooth)
 from fracture_cli.testing import grid_tetmesh, jittered_grid_tetmesh
 from fracture_cli.types import Modes, Regions, TetMesh
 
@@ -139,13 +139,14 @@ def test_direct_regions_match_cell_unions():
     tet_piece = P.tet_piece.astype(np.int64)
     lam = 2e-3
     R = smooth(tm, P, SmoothOptions(smoothing=lam, method="field", refine=0))
-    Z = _smoothed_field(tm, tet_piece, P.num_pieces, lam)
+    Z, vanished = _winning_field(tm, _Topology(tm.tets, tm.num_vertices), tet_piece, P, lam, 0.01)
+    assert list(R.vanished) == vanished
     unions = _union_regions(tm.vertices, tm.tets, Z, tet_piece, P.num_pieces, list(R.vanished),
                             list(range(P.num_pieces)))
     direct = np.array([signed_volume(V, F) for V, F in R.meshes])
     union = np.array([signed_volume(V, F) for V, F in unions])
-    # The union path snaps cell corners (1e-10), so agreement is limited to ~1e-9 of the cage volume.
-    np.testing.assert_allclose(direct, union, rtol=0, atol=2e-9)
+    # The union path snaps cell corners (1e-10), so agreement is limited to a few 1e-9 of the cage volume.
+    np.testing.assert_allclose(direct, union, rtol=0, atol=1e-8)
     # lambda = 0: tet unions, up to the spindles carved at pinched edges (eps^2 = 4e-4 of their tets).
     R0 = smooth(tm, P, SmoothOptions(smoothing=0.0))
     direct0 = np.array([signed_volume(V, F) for V, F in R0.meshes])
@@ -184,14 +185,36 @@ def test_smoothing_partitions_and_rounds_faults():
     assert rough1 < 0.8 * rough0
 
 
-def test_vanishing_piece_keeps_its_tets(caplog):
+def lonely_piece_case():
     tm = jittered_grid(5)
     c = tm.tet_centroids
     lab = (c[:, 0] > 0.0).astype(int)
     lonely = int(np.argmin(np.linalg.norm(c - [-0.2, 0.1, 0.1], axis=1)))
     lab[lonely] = 2
     P = pieces(tm, label_modes(tm, lab))
-    lonely_piece = int(P.tet_piece[lonely])
+    return tm, P, lonely, int(P.tet_piece[lonely])
+
+
+def test_vanishing_piece_is_raised_to_about_its_volume():
+    tm, P, lonely, lonely_piece = lonely_piece_case()
+    # Plain smoothing swallows the one-tet piece ...
+    Z = _smoothed_field(tm, P.tet_piece.astype(np.int64), P.num_pieces, 1e-2)
+    assert not np.any(Z[tm.tets[lonely]].argmax(axis=1) == lonely_piece)
+    # ... so its field is raised: it keeps a smooth region of about its volume, not its tet.
+    R = smooth(tm, P, SmoothOptions(smoothing=1e-2, method="field", refine=0))
+    assert lonely_piece not in R.vanished
+    volumes = check_partition(tm, R, 1e-7)
+    assert 0.3 < volumes[lonely_piece] / abs(tm.tet_volumes[lonely]) < 3.0
+    V, F = R.meshes[lonely_piece]
+    assert closed_by_position(V, F)
+
+
+def test_vanishing_piece_keeps_its_tets(caplog, monkeypatch):
+    import fracture_cli.stages.smooth as smooth_module
+
+    tm, P, lonely, lonely_piece = lonely_piece_case()
+    # When no raise within bounds brings the piece back (here: no raise allowed), it keeps its tet.
+    monkeypatch.setattr(smooth_module, "_MAX_BIAS", 0.0)
     with caplog.at_level(logging.WARNING):
         R = smooth(tm, P, SmoothOptions(smoothing=1e-2, method="field", refine=0))
     assert lonely_piece in R.vanished

@@ -36,6 +36,8 @@ _PINCH_SEPARATION = 1e-7
 # Pieces with at least this margin below the best guaranteed value are never
 # candidates in a simplex (field values are O(1)).
 _CANDIDATE_TOL = 1e-12
+# Field method: the most a vanishing piece's field (values in [0, 1]) may be raised to keep its volume.
+_MAX_BIAS = 0.5
 # Relative width of the spindle carved around an edge where a tet-aligned region
 # touches itself: its notches sit this fraction of the way from the edge's
 # midpoint to the opposite vertices (volume change eps^2 of the tets around it).
@@ -92,8 +94,8 @@ class SmoothOptions:
     )
     vanish_fraction: float = option(
         0.01,
-        "field method: a piece whose smoothed region is below this fraction of its own volume keeps its own "
-        "tets instead",
+        "field method: a piece whose smoothed region is below this fraction of its own volume gets its field "
+        "raised to keep about its volume, and if that fails keeps its own tets",
         min=0.0,
         max=1.0,
     )
@@ -205,7 +207,10 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     union of its cells (manifold3d), with a warning.
 
     Smoothing never creates or removes a piece. Field method: a piece whose region would
-    shrink below ``vanish_fraction`` of its own volume is reported in
+    shrink below ``vanish_fraction`` of its own volume first gets its field
+    raised by the constant that gives its region about its own volume
+    (estimated per tet, bisection, at most 0.5), so small pieces stay smooth
+    blobs instead of disappearing. If it still vanishes, it is reported in
     ``Regions.vanished`` and keeps exactly its own tets; the field of that piece
     is then ignored everywhere and its tets are claimed by no other piece, so
     the regions still partition the cage. This repeats until no piece vanishes.
@@ -233,20 +238,8 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
                      moves["reverted"], moves["frozen"], moves["rounds"], moves["alpha"])
         meshes, pinches, repaired = _repaired_regions(V, T, topo, None, np.ones(t, dtype=bool), tet_piece, p)
     else:
-        Z = _smoothed_field(tet_mesh, tet_piece, p, lam)
-        while True:
-            forced, Zv = _forced_field(Z, tet_piece, vanished)
-            meshes, _, _ = _direct_regions(V, T, topo, Zv, forced, tet_piece, p, check=False)
-            won = np.array([_mesh_volume(*m) for m in meshes])
-            gone = [P for P in range(p) if P not in vanished and won[P] <= options.vanish_fraction * pieces.volumes[P]]
-            if not gone:
-                break
-            log.warning(
-                "%s: %d piece(s) would (almost) vanish under smoothing lambda=%g (e.g. piece %d keeps %.2g of its "
-                "volume); they keep their own tets. A smaller lambda avoids this.",
-                STAGE, len(gone), lam, gone[0], won[gone[0]] / pieces.volumes[gone[0]],
-            )
-            vanished.extend(gone)
+        Z, vanished = _winning_field(tet_mesh, topo, tet_piece, pieces, lam, options.vanish_fraction)
+        forced, Zv = _forced_field(Z, tet_piece, vanished)
         meshes, pinches, repaired = _repaired_regions(V, T, topo, Zv, forced, tet_piece, p)
 
     broken = [P for P in range(p) if _region_defects(*meshes[P])]
@@ -302,6 +295,65 @@ def _repaired_regions(V, T, topo, Zv, forced, tet_piece, p):
         if int(forced.sum()) == before:
             break
     return meshes, pinches, int(forced.sum()) - start
+
+
+def _winning_field(tet_mesh: TetMesh, topo, tet_piece: np.ndarray, pieces: Pieces, lam: float,
+                   vanish_fraction: float):
+    """Field method: the smoothed field ``Z`` (n, p), raised for pieces that would vanish, and the pieces that
+    vanish anyway (they keep their own tets)."""
+    V, T, p = tet_mesh.vertices, tet_mesh.tets, pieces.num_pieces
+    Z = _smoothed_field(tet_mesh, tet_piece, p, lam)
+    vanished: list[int] = []
+    raised: list[int] = []
+    while True:
+        forced, Zv = _forced_field(Z, tet_piece, vanished)
+        meshes, _, _ = _direct_regions(V, T, topo, Zv, forced, tet_piece, p, check=False)
+        won = np.array([_mesh_volume(*m) for m in meshes])
+        gone = [P for P in range(p) if P not in vanished and won[P] <= vanish_fraction * pieces.volumes[P]]
+        if not gone:
+            break
+        fresh = [P for P in gone if P not in raised]
+        if fresh:
+            # First try to keep the piece smooth: raise its field until its region has about its volume.
+            for P in fresh:
+                Z[:, P] += _rescue_bias(tet_mesh, Zv, P, pieces.volumes[P])
+            raised.extend(fresh)
+            log.info("%s: %d piece(s) would (almost) vanish under smoothing lambda=%g; their fields are raised "
+                     "to keep about their volume", STAGE, len(fresh), lam)
+            continue
+        log.warning(
+            "%s: %d piece(s) would (almost) vanish under smoothing lambda=%g (e.g. piece %d keeps %.2g of its "
+            "volume); they keep their own tets. A smaller lambda avoids this.",
+            STAGE, len(gone), lam, gone[0], won[gone[0]] / pieces.volumes[gone[0]],
+        )
+        vanished.extend(gone)
+    return Z, vanished
+
+
+def _rescue_bias(tet_mesh: TetMesh, Z: np.ndarray, P: int, target: float) -> float:
+    """The raise ``b`` of piece ``P``'s field (n, p) whose winning region has about ``target`` volume.
+
+    The region's volume is estimated per tet from where ``Z_P + b`` wins at the
+    four corners and the centroid (the exact regions are built afterwards).
+    That estimate is a step function of ``b``, stepping where ``Z_P + b`` ties
+    with another piece at a sample point; ``b`` is taken halfway between the
+    step that reaches ``target`` and the next one, so that no corner of the
+    mesh lies on the raised piece's fault (a tie exactly at a vertex would give
+    degenerate, zero-area fault triangles). At most ``_MAX_BIAS``.
+    """
+    others = np.delete(Z, P, axis=1).max(axis=1) if Z.shape[1] > 1 else np.full(len(Z), -np.inf)
+    margin = (Z[:, P] - others)[tet_mesh.tets]  # (t, 4): where P wins by how much, at the corners
+    near = margin.max(axis=1) + _MAX_BIAS >= 0
+    # The raise each sample point needs to be won by P, with the volume it stands for.
+    need = -np.column_stack([margin[near], margin[near].mean(axis=1)]).reshape(-1)
+    weight = np.repeat(np.abs(tet_mesh.tet_volumes[near]) / 5.0, 5)
+    steps, inverse = np.unique(need, return_inverse=True)
+    reached = np.cumsum(np.bincount(inverse.reshape(-1), weights=weight, minlength=len(steps)))
+    k = int(np.searchsorted(reached, target))
+    if k >= len(steps) or steps[k] >= _MAX_BIAS:
+        return _MAX_BIAS
+    following = steps[k + 1] if k + 1 < len(steps) else steps[k] + 1e-3
+    return float(np.clip(0.5 * (steps[k] + min(following, _MAX_BIAS)), 0.0, _MAX_BIAS))
 
 
 def _forced_field(Z: np.ndarray, tet_piece: np.ndarray, vanished: list[int]):
