@@ -37,6 +37,11 @@ log = logging.getLogger(__name__)
 STAGE = "modes"
 
 
+# ARPACK iterations before the eigensolver tries again differently (shift-invert converges in a few when it can).
+_ARPACK_MAXITER = 1000
+# Largest vertex count for the dense eigensolver fallback (n^2 doubles of memory, n^3 time: ~4 s at 4000).
+_DENSE_EIGEN_MAX = 4000
+
 @dataclass(frozen=True)
 class ModesOptions:
     """Options of :func:`modes`."""
@@ -220,13 +225,45 @@ def _scalar_start_vectors(tet_mesh: TetMesh, count: int, seed: int) -> np.ndarra
     shift = -1e-6 * float(K.diagonal().sum() / M.diagonal().sum())
     v0 = np.random.default_rng(seed).standard_normal(n)
     try:
-        values, vectors = eigsh(K, k=want, M=M, sigma=shift, which="LM", v0=v0)
-    except Exception as error:  # ARPACK raises several types; report one message
+        values, vectors = _lowest_eigenpairs(K, M, want, shift, v0)
+    except Exception as error:  # ARPACK and LAPACK raise several types; report one message
         raise StageError(f"the Laplacian eigensolver failed ({error}); is the tet mesh connected and valid?",
                          stage=STAGE) from error
     order = np.argsort(values, kind="stable")
-    vectors = vectors[:, order[1:]]  # the first is the constant
+    vectors = vectors[:, order[1:want]]  # the first is the constant
     return np.asarray((tet_mesh.tet_from_vertex @ vectors).T)
+
+
+def _lowest_eigenpairs(K, M, want: int, shift: float, v0: np.ndarray):
+    """The ``want`` (or a few more) lowest generalized eigenpairs of ``(K, M)``.
+
+    ARPACK (shift-invert just below 0) first. When it does not converge (a
+    near-flat tet puts the shift far below the spectrum; or ``want`` cuts
+    through a cluster of repeated eigenvalues of a symmetric shape), it is
+    asked for a few more pairs at shift -1 with a larger Krylov space, and as a
+    last resort (small meshes only) LAPACK solves the dense problem.
+    """
+    from scipy.sparse.linalg import ArpackNoConvergence
+
+    n = K.shape[0]
+    try:
+        return eigsh(K, k=want, M=M, sigma=shift, which="LM", v0=v0, maxiter=_ARPACK_MAXITER)
+    except ArpackNoConvergence as first:
+        log.info("%s: ARPACK did not converge for %d eigenpairs (%s); retrying with more", STAGE, want, first)
+    # A near-flat tet inflates the stiffness trace, and with it the first shift, far below the spectrum,
+    # where shift-invert separates nothing; the bounding-box diagonal is 1, so the smallest non-zero
+    # eigenvalues are O(1) to O(100) and -1 sits just below them.
+    more = min(want + 6, n - 1)
+    try:
+        return eigsh(K, k=more, M=M, sigma=-1.0, which="LM", v0=v0, ncv=min(n, 2 * more + 20),
+                     maxiter=_ARPACK_MAXITER)
+    except ArpackNoConvergence as second:
+        if n > _DENSE_EIGEN_MAX:
+            raise
+        log.info("%s: ARPACK did not converge again (%s); solving the dense problem (%d vertices)", STAGE, second, n)
+    import scipy.linalg
+
+    return scipy.linalg.eigh(K.toarray(), M.toarray(), subset_by_index=[0, want - 1])
 
 
 class _MInner:
