@@ -104,10 +104,22 @@ def interior_face_normals(V: np.ndarray, T: np.ndarray, faces: np.ndarray, face_
 
 
 def barycentric_gradients(V: np.ndarray, T: np.ndarray) -> np.ndarray:
-    """Gradients (t, 4, 3) of the four barycentric (hat) functions in each tet."""
+    """Gradients (t, 4, 3) of the four barycentric (hat) functions in each tet.
+
+    A tet flat to rounding (``|det| <= 1e-14 * longest_edge^3``, e.g. a child
+    of a near-flat tet after refinement) has no usable gradients: they are
+    returned as zeros, so it adds nothing to a stiffness matrix (its volume is
+    zero too).
+    """
     x0 = V[T[:, 0]]
     E = np.stack([V[T[:, 1]] - x0, V[T[:, 2]] - x0, V[T[:, 3]] - x0], axis=1)  # (t, 3, 3) rows = edges
+    scale = np.abs(E).max(axis=(1, 2)) ** 3
+    flat = np.abs(np.linalg.det(E)) <= 1e-14 * scale
+    if flat.any():
+        E = E.copy()
+        E[flat] = np.eye(3)
     Einv = np.linalg.inv(E)  # columns = gradients of lambda_1..3
+    Einv[flat] = 0.0
     G123 = np.transpose(Einv, (0, 2, 1))  # (t, 3, 3) rows = gradients
     G0 = -G123.sum(axis=1, keepdims=True)
     return np.concatenate([G0, G123], axis=1)

@@ -170,3 +170,27 @@ def test_cage_with_a_needle_face_still_tetrahedralizes(caplog):
                                          mesh.vertices[B[:, 2]] - mesh.vertices[B[:, 0]]), axis=1).sum()
     cage_area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
     assert area == pytest.approx(cage_area, rel=1e-9)
+
+
+def test_flat_tets_on_the_cage_surface_are_removed(caplog):
+    import logging
+
+    from fracture_cli.io.read import load_surface
+    from fracture_cli.stages.repair import repair
+
+    # A cube's 800-face cage: TetGen joins four coplanar points of a flat side into a flat tet.
+    path = os.path.join(os.path.dirname(__file__), "data", "bad", "micro.off")
+    cage_ = cage(repair(load_surface(path)), CageOptions(target_faces=800))
+    with caplog.at_level(logging.INFO, logger="fracture_cli.stages.tetra"):
+        mesh = tetra(cage_, TetraOptions())
+    assert "removed 1 flat tet" in caplog.text
+    edges = mesh.vertices[mesh.tets[:, [0, 0, 0, 1, 1, 2]]] - mesh.vertices[mesh.tets[:, [1, 2, 3, 2, 3, 3]]]
+    shape = mesh.tet_volumes / np.linalg.norm(edges, axis=2).max(axis=1) ** 3
+    assert shape.min() > 1e-9
+    # The boundary is a different triangulation of the same surface: closed, same area, same volume.
+    boundary = trimesh.Trimesh(mesh.vertices, mesh.boundary_faces, process=False)
+    surface = trimesh.Trimesh(cage_.vertices, cage_.faces, process=False)
+    assert boundary.is_watertight and boundary.is_winding_consistent
+    assert np.isclose(boundary.area, surface.area, rtol=1e-12)
+    assert np.isclose(mesh.tet_volumes.sum(), surface.volume, rtol=1e-9)
+    assert len(np.unique(mesh.tets)) == mesh.num_vertices

@@ -36,6 +36,8 @@ _PINCH_SEPARATION = 1e-7
 # Pieces with at least this margin below the best guaranteed value are never
 # candidates in a simplex (field values are O(1)).
 _CANDIDATE_TOL = 1e-12
+# Field method: smallest weight of a tet (fraction of the mean tet volume) in the lumped mass of the smoothing.
+_MIN_TET_WEIGHT = 1e-12
 # Field method: the most a vanishing piece's field (values in [0, 1]) may be raised to keep its volume.
 _MAX_BIAS = 0.5
 # Relative width of the spindle carved around an edge where a tet-aligned region
@@ -389,12 +391,16 @@ def _smoothed_field(tet_mesh: TetMesh, tet_piece: np.ndarray, p: int, lam: float
     """Smoothed piece membership ``Z`` (n, p) at the vertices."""
     n = tet_mesh.num_vertices
     vol = np.abs(tet_mesh.tet_volumes)
+    # Tets flat to rounding (a flat cage tet refined) still weigh a little, so that a vertex only they touch
+    # has a mass and the value of their piece instead of making the system singular.
+    vol = np.maximum(vol, _MIN_TET_WEIGHT * vol.mean()) if len(vol) else vol
     # M_V Z0 with Z0 the lumped-mass average of the one-hot tet field: each tet
     # gives a quarter of its volume to each of its vertices, in its piece's column.
     mass_onehot = sp.coo_matrix(
         (np.repeat(vol / 4.0, 4), (tet_mesh.tets.reshape(-1), np.repeat(tet_piece, 4))), shape=(n, p)
     ).toarray()
-    system = (tet_mesh.vertex_mass + lam * tet_mesh.stiffness).tocsc()
+    mass = sp.diags(np.bincount(tet_mesh.tets.reshape(-1), weights=np.repeat(vol / 4.0, 4), minlength=n))
+    system = (mass + lam * tet_mesh.stiffness).tocsc()
     try:
         solve = spla.factorized(system)
     except RuntimeError as exc:  # singular: degenerate tets

@@ -17,6 +17,8 @@ from fracture_cli.types import Cage, TetMesh
 log = logging.getLogger(__name__)
 
 STAGE = "tetra"
+# Tets at or below this shape (volume / longest edge^3; 0.118 for a regular tet) are flat to rounding.
+_FLAT_SHAPE = 1e-12
 
 
 @dataclass(frozen=True)
@@ -135,12 +137,59 @@ def tetra(cage: Cage, options: TetraOptions = TetraOptions()) -> TetMesh:
     # Shape measure: volume / longest edge^3 (0.118 for a regular tet). Flat
     # tets can remain where four cage vertices are nearly coplanar, because the
     # boundary may not be split; report the worst so later stages can be judged.
-    edges = nodes[tets[:, [0, 0, 0, 1, 1, 2]]] - nodes[tets[:, [1, 2, 3, 2, 3, 3]]]
-    shape = volumes / np.linalg.norm(edges, axis=2).max(axis=1) ** 3
+    tets, peeled = _peel_flat_boundary_tets(nodes, tets)
+    volumes = tetgeom.tet_volumes(nodes, tets)
+    if peeled:
+        log.info("tetra: removed %d flat tet(s) lying on the cage surface (the surface keeps its shape)", peeled)
+    shape = _shape(nodes, tets)
     log.info("tetra: %d tets, %d vertices (%d inside) in %.2f s, switches %s, worst shape %.2e (%d below 1e-6)",
              len(tets), len(nodes), len(nodes) - len(vertices), time.perf_counter() - started, switches,
              float(shape.min()), int(np.sum(shape < 1e-6)))
     return TetMesh(vertices=nodes, tets=tets, normalization=cage.normalization)
+
+
+def _shape(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Volume / longest edge^3 of every tet (0.118 for a regular tet, 0 for a flat one)."""
+    edges = nodes[tets[:, [0, 0, 0, 1, 1, 2]]] - nodes[tets[:, [1, 2, 3, 2, 3, 3]]]
+    return tetgeom.tet_volumes(nodes, tets) / np.linalg.norm(edges, axis=2).max(axis=1) ** 3
+
+
+def _peel_flat_boundary_tets(nodes: np.ndarray, tets: np.ndarray):
+    """Remove tets flat to rounding (shape <= _FLAT_SHAPE) that have a face on the boundary.
+
+    Four coplanar cage vertices can form such a tet (TetGen ``Y`` may not split
+    the boundary). Removing it swaps its boundary faces for its other faces,
+    which lie in the same plane: the surface keeps its shape, the enclosed
+    volume does not change, and every later stage gets tets with usable
+    gradients. One at a time (flattest first), each only if the boundary stays
+    edge-manifold and no vertex is left without a tet.
+
+    Returns the remaining tets (t', 4) and how many were removed.
+    """
+    removed = 0
+    blocked: set[int] = set()
+    while True:
+        shape = _shape(nodes, tets)
+        boundary_tets = set(TetMesh(vertices=nodes, tets=tets).boundary_face_tets.tolist())
+        candidates = [int(i) for i in np.argsort(shape, kind="stable")
+                      if shape[i] <= _FLAT_SHAPE and int(i) in boundary_tets and tuple(tets[i]) not in blocked]
+        if not candidates:
+            return tets, removed
+        i = candidates[0]
+        kept = np.delete(tets, i, axis=0)
+        orphan = np.setdiff1d(tets[i], kept.reshape(-1)).size > 0
+        if orphan or not _edge_manifold(TetMesh(vertices=nodes, tets=kept).boundary_faces):
+            blocked.add(tuple(tets[i]))
+            continue
+        tets = kept
+        removed += 1
+
+
+def _edge_manifold(F: np.ndarray) -> bool:
+    """Whether every edge of triangles ``F`` (m, 3) is shared by exactly two of them."""
+    edges = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return bool(np.all(counts == 2))
 
 
 def _same_triangles(F: np.ndarray, G: np.ndarray) -> bool:
