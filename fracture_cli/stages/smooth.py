@@ -1154,6 +1154,18 @@ def _tie_points(V: np.ndarray, Zv: np.ndarray, S: np.ndarray):
     a bit-identical point.
     """
     k1 = S.shape[1]
+    kept = np.arange(len(S))
+    if Zv.shape[1] > 1 and len(S):
+        # Most simplices lie inside one region: one piece wins at every corner, and even the runner-up at
+        # any corner stays below its value at every corner, so no other piece is a candidate (the test
+        # below would skip them). Dropping them first keeps the (N, k+1, p) arrays small.
+        order = np.argsort(Zv, axis=1, kind="stable")
+        best = order[:, -1]
+        z1 = np.take_along_axis(Zv, order[:, -1:], axis=1)[:, 0]
+        z2 = np.take_along_axis(Zv, order[:, -2:-1], axis=1)[:, 0]
+        clear = np.all(best[S] == best[S[:, :1]], axis=1) & (z2[S].max(axis=1) < z1[S].min(axis=1) - _CANDIDATE_TOL)
+        kept = np.flatnonzero(~clear)
+        S = S[kept]
     Zs = Zv[S]  # (N, k+1, p)
     floor = Zs.min(axis=1).max(axis=1)
     # Pieces that can win somewhere on the simplex (necessary test, with a margin for rounding).
@@ -1191,7 +1203,7 @@ def _tie_points(V: np.ndarray, Zv: np.ndarray, S: np.ndarray):
         return np.zeros(0, np.int64), np.zeros((0, k1), np.int64), np.zeros((0, 3))
     simplex = np.concatenate(out_s)
     order = np.argsort(simplex, kind="stable")
-    return simplex[order], np.concatenate(out_tie)[order], np.concatenate(out_pos)[order]
+    return kept[simplex[order]], np.concatenate(out_tie)[order], np.concatenate(out_pos)[order]
 
 
 def _combinations(m: int, k: int) -> np.ndarray:
