@@ -30,6 +30,7 @@ from fracture_cli.stages.fragments import fragments  # noqa: E402
 from fracture_cli.stages.pieces import pieces  # noqa: E402
 from fracture_cli.stages.smooth import SmoothOptions, smooth  # noqa: E402
 from fracture_cli.testing import grid_tetmesh  # noqa: E402
+from fracture_cli.tetgeom import tet_edge_lengths  # noqa: E402
 from fracture_cli.types import Material, Modes, Normalization, SurfaceMesh, TetMesh  # noqa: E402
 
 SAMPLE_ASSETS = os.path.join(os.path.dirname(HERE), "sample_assets")
@@ -162,8 +163,7 @@ def _smoothing_table(load_surface) -> list[str]:
             tm = tetra(cage(surface, recipe["cage"]), recipe["tetra"])
             P = pieces(tm, modes(tm, recipe["modes"], eta=material(tm, surface, recipe["material"])),
                        recipe["pieces"])
-            E = tm.vertices[tm.tets[:, [0, 0, 0, 1, 1, 2]]] - tm.vertices[tm.tets[:, [1, 2, 3, 2, 3, 3]]]
-            h = float(np.linalg.norm(E, axis=2).mean())
+            h = float(tet_edge_lengths(tm.vertices, tm.tets).mean())
             own = recipe["smooth"]
             other = "field" if own.method == "geometric" else "geometric"
             for options in (dataclasses.replace(own, smoothing=0.0), own, dataclasses.replace(own, method=other)):

@@ -166,6 +166,15 @@ def orient_positive(V: np.ndarray, T: np.ndarray) -> np.ndarray:
     return T
 
 
+# The six edges of a tet as pairs of its corner slots.
+TET_EDGES = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
+
+
+def tet_edge_lengths(V: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Lengths (t, 6) of every tet's edges, in :data:`TET_EDGES` order."""
+    return np.linalg.norm(V[T[:, TET_EDGES[:, 0]]] - V[T[:, TET_EDGES[:, 1]]], axis=2)
+
+
 def refine_red(V: np.ndarray, T: np.ndarray):
     """One level of regular (1:8) refinement: every tet split at its edge midpoints.
 
@@ -196,8 +205,7 @@ def refine_red(V: np.ndarray, T: np.ndarray):
     V = np.asarray(V, dtype=np.float64)
     T = np.asarray(T, dtype=np.int64)
     n, t = len(V), len(T)
-    pairs = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
-    E = np.sort(T[:, pairs].reshape(-1, 2), axis=1)
+    E = np.sort(T[:, TET_EDGES].reshape(-1, 2), axis=1)
     edges, inverse = np.unique(E, axis=0, return_inverse=True)
     mid = n + inverse.reshape(t, 6)
     V2 = np.vstack([V, 0.5 * (V[edges[:, 0]] + V[edges[:, 1]])])

@@ -211,7 +211,7 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
     Smoothing never creates or removes a piece. Field method: a piece whose region would
     shrink below ``vanish_fraction`` of its own volume first gets its field
     raised by the constant that gives its region about its own volume
-    (estimated per tet, bisection, at most 0.5), so small pieces stay smooth
+    (estimated per tet, halfway between two ties, at most 0.5), so small pieces stay smooth
     blobs instead of disappearing. If it still vanishes, it is reported in
     ``Regions.vanished`` and keeps exactly its own tets; the field of that piece
     is then ignored everywhere and its tets are claimed by no other piece, so
@@ -271,8 +271,7 @@ def _refined(tet_mesh: TetMesh, tet_piece: np.ndarray, levels: int, max_tets: in
     if done < levels:
         log.info("%s: %d of %d refinement level(s): one more would exceed %d tets", STAGE, done, levels, max_tets)
     if done:
-        V, T = tet_mesh.vertices, tet_mesh.tets
-        edge = float(np.linalg.norm(V[T[:, [0, 0, 0, 1, 1, 2]]] - V[T[:, [1, 2, 3, 2, 3, 3]]], axis=2).mean())
+        edge = float(tetgeom.tet_edge_lengths(tet_mesh.vertices, tet_mesh.tets).mean())
         log.info("%s: %d refinement level(s): %d tets, mean edge %.3g (diagonal units)", STAGE, done,
                  tet_mesh.num_tets, edge)
     return tet_mesh, tet_piece
@@ -396,10 +395,11 @@ def _smoothed_field(tet_mesh: TetMesh, tet_piece: np.ndarray, p: int, lam: float
     vol = np.maximum(vol, _MIN_TET_WEIGHT * vol.mean()) if len(vol) else vol
     # M_V Z0 with Z0 the lumped-mass average of the one-hot tet field: each tet
     # gives a quarter of its volume to each of its vertices, in its piece's column.
+    quarter = np.repeat(vol / 4.0, 4)
     mass_onehot = sp.coo_matrix(
-        (np.repeat(vol / 4.0, 4), (tet_mesh.tets.reshape(-1), np.repeat(tet_piece, 4))), shape=(n, p)
+        (quarter, (tet_mesh.tets.reshape(-1), np.repeat(tet_piece, 4))), shape=(n, p)
     ).toarray()
-    mass = sp.diags(np.bincount(tet_mesh.tets.reshape(-1), weights=np.repeat(vol / 4.0, 4), minlength=n))
+    mass = sp.diags(np.bincount(tet_mesh.tets.reshape(-1), weights=quarter, minlength=n))
     system = (mass + lam * tet_mesh.stiffness).tocsc()
     try:
         solve = spla.factorized(system)
@@ -1159,10 +1159,9 @@ def _tie_points(V: np.ndarray, Zv: np.ndarray, S: np.ndarray):
         # Most simplices lie inside one region: one piece wins at every corner, and even the runner-up at
         # any corner stays below its value at every corner, so no other piece is a candidate (the test
         # below would skip them). Dropping them first keeps the (N, k+1, p) arrays small.
-        order = np.argsort(Zv, axis=1, kind="stable")
-        best = order[:, -1]
-        z1 = np.take_along_axis(Zv, order[:, -1:], axis=1)[:, 0]
-        z2 = np.take_along_axis(Zv, order[:, -2:-1], axis=1)[:, 0]
+        # (Which of tied best pieces argmax picks does not matter: a tie fails the margin test.)
+        best = Zv.argmax(axis=1)
+        z2, z1 = np.partition(Zv, -2, axis=1)[:, -2:].T
         clear = np.all(best[S] == best[S[:, :1]], axis=1) & (z2[S].max(axis=1) < z1[S].min(axis=1) - _CANDIDATE_TOL)
         kept = np.flatnonzero(~clear)
         S = S[kept]

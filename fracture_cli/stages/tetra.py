@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fracture_cli import tetgeom
+from fracture_cli import tetgeom, trigeom
 from fracture_cli.errors import StageError
 from fracture_cli.options import option
 from fracture_cli.stages import _tetgen
@@ -150,8 +150,7 @@ def tetra(cage: Cage, options: TetraOptions = TetraOptions()) -> TetMesh:
 
 def _shape(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """Volume / longest edge^3 of every tet (0.118 for a regular tet, 0 for a flat one)."""
-    edges = nodes[tets[:, [0, 0, 0, 1, 1, 2]]] - nodes[tets[:, [1, 2, 3, 2, 3, 3]]]
-    return tetgeom.tet_volumes(nodes, tets) / np.linalg.norm(edges, axis=2).max(axis=1) ** 3
+    return tetgeom.tet_volumes(nodes, tets) / tetgeom.tet_edge_lengths(nodes, tets).max(axis=1) ** 3
 
 
 def _peel_flat_boundary_tets(nodes: np.ndarray, tets: np.ndarray):
@@ -162,7 +161,8 @@ def _peel_flat_boundary_tets(nodes: np.ndarray, tets: np.ndarray):
     which lie in the same plane: the surface keeps its shape, the enclosed
     volume does not change, and every later stage gets tets with usable
     gradients. One at a time (flattest first), each only if the boundary stays
-    edge-manifold and no vertex is left without a tet.
+    closed, edge-manifold and consistently oriented and no vertex is left
+    without a tet.
 
     Returns the remaining tets (t', 4) and how many were removed.
     """
@@ -178,18 +178,11 @@ def _peel_flat_boundary_tets(nodes: np.ndarray, tets: np.ndarray):
         i = candidates[0]
         kept = np.delete(tets, i, axis=0)
         orphan = np.setdiff1d(tets[i], kept.reshape(-1)).size > 0
-        if orphan or not _edge_manifold(TetMesh(vertices=nodes, tets=kept).boundary_faces):
+        if orphan or not trigeom.edge_manifold_closed(TetMesh(vertices=nodes, tets=kept).boundary_faces):
             blocked.add(tuple(tets[i]))
             continue
         tets = kept
         removed += 1
-
-
-def _edge_manifold(F: np.ndarray) -> bool:
-    """Whether every edge of triangles ``F`` (m, 3) is shared by exactly two of them."""
-    edges = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(edges, axis=0, return_counts=True)
-    return bool(np.all(counts == 2))
 
 
 def _same_triangles(F: np.ndarray, G: np.ndarray) -> bool:
