@@ -46,6 +46,26 @@ class InputError(FractureError):
     """An input file (mesh, recipe, runtime file) is missing, unreadable or unusable."""
 
 
+class RuntimeFileError(InputError, ValueError):
+    """A runtime file (``.fracture.json`` + ``.bin``) is missing, damaged, of another version or inconsistent.
+
+    Also a :class:`ValueError`, so code that reads runtime files without the
+    rest of the tool can catch it as one.
+    """
+
+
+class ImpactArgumentError(InputError, ValueError):
+    """:func:`~fracture_cli.runtime.impact.project_impact` got an unusable argument.
+
+    A point or impulse that is not three finite numbers, or a threshold that
+    is NaN or negative. Also a :class:`ValueError`.
+    """
+
+
+class OutputError(FractureError):
+    """The outputs cannot be written: folder not writable, disk full, would overwrite an input, locked."""
+
+
 class RecipeError(InputError):
     """A recipe or a ``--set`` override has an unknown key, a wrong type or a value out of range."""
 

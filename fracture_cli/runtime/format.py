@@ -12,6 +12,7 @@ Depends on numpy and the standard library only (see :mod:`fracture_cli.runtime`)
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 import zlib
@@ -20,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fracture_cli.errors import InputError
+from fracture_cli.errors import RuntimeFileError
 
 FORMAT_NAME = "fracture-modes-runtime"
 FORMAT_VERSION = 1
@@ -245,8 +246,15 @@ def write_runtime(data: RuntimeData, json_path: str | os.PathLike) -> tuple[Path
     return json_path, bin_path
 
 
-def _fail(message: str, path) -> InputError:
-    return InputError(message, path=str(path))
+def _fail(message: str, path) -> RuntimeFileError:
+    return RuntimeFileError(message, path=str(path))
+
+
+def _count(value, what: str) -> int:
+    """``value`` if it is a JSON integer >= 0 (not a bool, float or string), else ValueError naming ``what``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"{what} must be a whole number >= 0, got {value!r}")
+    return value
 
 
 def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> RuntimeData:
@@ -265,38 +273,24 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
         buffer = header["buffer"]
         table = header["arrays"]
         names = tuple(str(x) for x in header["fragment_names"])
-        counts = header["counts"]
-        dim = int(header["dim"])
+        counts = dict(header["counts"])
+        dim = _count(header["dim"], "dim")
         transform = np.asarray(header["transform"], dtype=np.float64).reshape(4, 4)
         threshold = float(header["default_threshold"])
         radius = float(header["impact_radius"])
         units = str(header.get("units", ""))
-        byte_length = int(buffer["byte_length"])
-    except (KeyError, TypeError, ValueError) as exc:
+        byte_length = _count(buffer["byte_length"], "buffer.byte_length")
+        crc = _count(buffer["crc32"], "buffer.crc32") if "crc32" in buffer else None
+        if not isinstance(table, dict):
+            raise TypeError("arrays must be an object")
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise _fail(f"runtime header is missing or has a malformed entry ({exc!r})", path) from None
     if len(binary) != byte_length:
         raise _fail(f"binary file has {len(binary)} bytes but the header says {byte_length} "
                     "(truncated or from another bake); re-bake the asset", path)
-    if "crc32" in buffer and zlib.crc32(binary) != int(buffer["crc32"]):
+    if crc is not None and zlib.crc32(binary) != crc:
         raise _fail("binary file does not match its header (crc32 differs; from another bake?)", path)
-    arrays = {}
-    for name, (dtype, ndim) in ARRAY_LAYOUT.items():
-        entry = table.get(name)
-        if not isinstance(entry, dict):
-            raise _fail(f"runtime header has no entry for array '{name}'", path)
-        try:
-            shape = tuple(int(x) for x in entry["shape"])
-            offset, length = int(entry["byte_offset"]), int(entry["byte_length"])
-            if entry["dtype"] != dtype:
-                raise ValueError(f"dtype {entry['dtype']!r}, expected {dtype!r}")
-        except (KeyError, TypeError, ValueError) as exc:
-            raise _fail(f"array '{name}' entry is malformed ({exc})", path) from None
-        nbytes = int(np.prod(shape, dtype=np.int64)) * 4
-        if len(shape) != ndim or min(shape, default=0) < 0 or length != nbytes:
-            raise _fail(f"array '{name}' has shape {list(shape)} and {length} bytes, which do not agree", path)
-        if offset < 0 or offset % 4 or offset + length > len(binary):
-            raise _fail(f"array '{name}' lies outside the binary file (offset {offset}, length {length})", path)
-        arrays[name] = np.frombuffer(binary, dtype=_DTYPES[dtype], count=nbytes // 4, offset=offset).reshape(shape)
+    arrays = {name: _array(table, name, binary, path) for name in ARRAY_LAYOUT}
     data = RuntimeData(fragment_names=names, transform=transform, default_threshold=threshold,
                        radius=radius, units=units, **arrays)
     problem = check_runtime(data)
@@ -309,6 +303,35 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     if problem:
         raise _fail(f"inconsistent runtime file: {problem}", path)
     return data
+
+
+def _array(table: dict, name: str, binary: bytes, path) -> np.ndarray:
+    """The array ``name`` of the header's table, as a read-only view of ``binary``; RuntimeFileError if malformed.
+
+    Shapes, offsets and lengths are checked with Python integers (no int64
+    overflow), so a tampered header cannot reach numpy with a size it rejects.
+    """
+    dtype, ndim = ARRAY_LAYOUT[name]
+    entry = table.get(name)
+    if not isinstance(entry, dict):
+        raise _fail(f"runtime header has no entry for array '{name}'", path)
+    try:
+        if entry.get("dtype") != dtype:
+            raise ValueError(f"dtype {entry.get('dtype')!r}, expected {dtype!r}")
+        shape = entry["shape"]
+        if not isinstance(shape, list):
+            raise TypeError(f"shape must be a list, got {shape!r}")
+        shape = tuple(_count(x, "shape entry") for x in shape)
+        offset = _count(entry["byte_offset"], "byte_offset")
+        length = _count(entry["byte_length"], "byte_length")
+    except (KeyError, TypeError, ValueError) as exc:
+        raise _fail(f"array '{name}' entry is malformed ({exc})", path) from None
+    nbytes = math.prod(shape) * 4
+    if len(shape) != ndim or length != nbytes:
+        raise _fail(f"array '{name}' has shape {list(shape)} and {length} bytes, which do not agree", path)
+    if offset % 4 or offset + length > len(binary):
+        raise _fail(f"array '{name}' lies outside the binary file (offset {offset}, length {length})", path)
+    return np.frombuffer(binary, dtype=_DTYPES[dtype], count=nbytes // 4, offset=offset).reshape(shape)
 
 
 def load_runtime(path: str | os.PathLike) -> RuntimeData:
@@ -327,8 +350,9 @@ def load_runtime(path: str | os.PathLike) -> RuntimeData:
 
     Raises
     ------
-    InputError
-        If either file is missing, truncated, of another format or version, or
+    RuntimeFileError
+        (an :class:`~fracture_cli.errors.InputError` and a :class:`ValueError`)
+        if either file is missing, truncated, of another format or version, or
         inconsistent (shapes, counts, indices, checksum).
     """
     path = Path(path)
@@ -342,7 +366,7 @@ def load_runtime(path: str | os.PathLike) -> RuntimeData:
         uri = json.loads(header_bytes.decode("utf-8"))["buffer"]["uri"]
     except Exception:
         uri = None
-    if not isinstance(uri, str) or not uri or os.path.basename(uri) != uri:
+    if not isinstance(uri, str) or not uri or os.path.basename(uri) != uri or uri in (".", "..") or "\0" in uri:
         # Let decode() report what is wrong with the header itself.
         return decode(header_bytes, b"", str(path)) if uri is None else _raise_bad_uri(uri, path)
     bin_path = path.with_name(uri)
