@@ -6,9 +6,10 @@ For input ``<stem>`` a bake writes, into the output folder:
 * ``<stem>.fracture.json``  + ``<stem>.fracture.bin``: the runtime file (docs/FORMAT.md);
 * ``<stem>.report.json``    what was done: versions, recipe, counts, checks, seconds.
 
-Everything is first written into a temporary folder beside the outputs and then
-renamed into place, so a failed or interrupted bake leaves the previous outputs
-untouched and no partial files. The meshes and the runtime file are
+The four files are replaced as one set (:mod:`fracture_cli.io.outputs`): the
+output folder is checked before any work, the files are written into a staging
+folder and published under a per-stem lock, report last, with the other files'
+hashes in it; a failed or interrupted bake leaves the previous set. The meshes and the runtime file are
 byte-identical for the same input, recipe and tool version; the report is too,
 except for its ``seconds`` block.
 """
@@ -16,12 +17,8 @@ except for its ``seconds`` block.
 from __future__ import annotations
 
 import contextlib
-import hashlib
-import json
 import logging
 import os
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass
 
@@ -29,6 +26,7 @@ import numpy as np
 
 from fracture_cli import __version__
 from fracture_cli.errors import FractureError, StageError
+from fracture_cli.io.outputs import file_sha256, output_names, output_set, preflight  # noqa: F401 (file_sha256: API)
 from fracture_cli.recipe import Recipe
 from fracture_cli.types import Fragments
 
@@ -44,15 +42,6 @@ class BakeResult:
 
     report: dict
     outputs: tuple[str, ...]
-
-
-def file_sha256(path: str) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _signed_volume(V: np.ndarray, F: np.ndarray) -> float:
@@ -75,16 +64,6 @@ def fragment_summary(fragments: Fragments) -> list[dict]:
             "bbox_max": [float(x) for x in world.max(axis=0)],
         })
     return out
-
-
-@contextlib.contextmanager
-def _staging_dir(out_dir: str, stem: str):
-    os.makedirs(out_dir, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=f".{stem}.bake-", dir=out_dir)
-    try:
-        yield tmp
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = None) -> BakeResult:
@@ -137,7 +116,12 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) 
     from fracture_cli.stages.smooth import smooth
     from fracture_cli.stages.tetra import tetra
 
+    from fracture_cli.cache import input_digest
+    from fracture_cli.io.inputs import estimate_output_bytes, input_files
+
     stem = os.path.splitext(os.path.basename(input_path))[0]
+    depends = input_files(input_path)
+    preflight(out_dir, stem, inputs=depends, estimate_bytes=estimate_output_bytes(depends))
     seconds: dict[str, float] = {}
     step = [0]
 
@@ -155,7 +139,7 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) 
     with timed("repair"):
         # Cage and fragments both use the repaired solid, so they agree on what is inside.
         surface = repair(loaded, recipe["repair"])
-    input_hash = file_sha256(input_path)
+    input_hash = input_digest(depends)
     stage_cache = None
     if cache_dir is not None:
         from fracture_cli.cache import StageCache, cache_key
@@ -222,19 +206,13 @@ def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) 
         "outputs": [f"{stem}.glb", f"{stem}.fracture.json", f"{stem}.fracture.bin", f"{stem}.report.json"],
     }
 
-    with timed("export"), _staging_dir(out_dir, stem) as staging:
-        write_fragments_glb(os.path.join(staging, f"{stem}.glb"), frags)
-        write_runtime(runtime_data, os.path.join(staging, f"{stem}.fracture.json"))
+    with timed("export"), output_set(out_dir, stem) as staging:
+        write_fragments_glb(staging.file(f"{stem}.glb"), frags)
+        write_runtime(runtime_data, staging.file(f"{stem}.fracture.json"))
         report["seconds"] = dict(seconds)
         if stage_cache:
             report["cache"] = dict(stage_cache.events)
-        with open(os.path.join(staging, f"{stem}.report.json"), "w") as fh:
-            json.dump(report, fh, indent=2, sort_keys=True)
-            fh.write("\n")
-        # Data files first, the report last: a report on disk means a complete bake.
-        outputs = []
-        for name in (f"{stem}.fracture.bin", f"{stem}.fracture.json", f"{stem}.glb", f"{stem}.report.json"):
-            os.replace(os.path.join(staging, name), os.path.join(out_dir, name))
-            outputs.append(os.path.join(out_dir, name))
+        staging.write_report(report)  # the manifest: hashes of the other files, written and published last
+    outputs = [os.path.join(out_dir, name) for name in output_names(stem)]
     report["seconds"] = dict(seconds)
     return BakeResult(report=report, outputs=tuple(outputs))

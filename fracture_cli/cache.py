@@ -1,8 +1,9 @@
 """A content-addressed cache of expensive stage results (cage + tets, modes).
 
 ``fracture bake --cache DIR`` stores the cage with its tet mesh and the modes,
-keyed by a hash of everything they depend on: the tool version, the input
-file's bytes and the options of every stage up to and including that one. A
+keyed by a hash of everything they depend on: the tool version, every byte
+of the input (the asset and its companion files: glTF buffers and images,
+OBJ material libraries and textures; :func:`input_digest`) and the options of every stage up to and including that one. A
 bake that only changes later options (smoothing, fragments, runtime, export)
 then skips the cage search and the modes solve. Entries are written atomically;
 an unreadable entry is reported and recomputed, never trusted.
@@ -24,6 +25,38 @@ from fracture_cli.io.atomic import atomic_path
 from fracture_cli.types import Cage, Modes, Normalization, TetMesh
 
 log = logging.getLogger(__name__)
+
+
+def input_digest(files: list[str]) -> str:
+    """Hex SHA-256 of an input's bytes: its file alone, or its file and its companion files.
+
+    Parameters
+    ----------
+    files : list of str
+        The asset first, then its companions
+        (:func:`fracture_cli.io.inputs.input_files`).
+
+    Returns
+    -------
+    str
+        For a single file, the SHA-256 of its bytes (what ``sha256sum``
+        prints). Otherwise the SHA-256 of one line per file,
+        ``<sha256 or "missing">  <name relative to the asset's folder>``, so
+        editing, adding, removing or renaming a companion changes it.
+    """
+    from fracture_cli.io.outputs import file_sha256
+
+    if len(files) == 1:
+        return file_sha256(files[0])
+    folder = os.path.dirname(files[0])
+    lines = []
+    for path in files:
+        try:
+            digest = file_sha256(path)
+        except FileNotFoundError:
+            digest = "missing"
+        lines.append(f"{digest}  {os.path.relpath(path, folder or '.')}\n")
+    return hashlib.sha256("".join(lines).encode("utf-8", "surrogateescape")).hexdigest()
 
 
 def cache_key(*parts) -> str:

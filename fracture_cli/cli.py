@@ -172,12 +172,17 @@ class FractureGroup(click.Group):
     """A chain group that turns FractureError into one line and an exit code."""
 
     def invoke(self, ctx):
+        from fracture_cli.io.outputs import forget_published
+
+        forget_published()  # the Ctrl-C message lists only this run's outputs
         try:
             return super().invoke(ctx)
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
             raise
         except KeyboardInterrupt:
-            click.echo("fracture: interrupted; no output was written", err=True)
+            from fracture_cli.io.outputs import interrupt_message
+
+            click.echo(f"fracture: {interrupt_message()}", err=True)
             ctx.exit(130)
         except FractureError as exc:
             if ctx.meta.get("fracture.debug"):
@@ -477,6 +482,9 @@ def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, cac
                                  "bake them into different folders")
             stems[stem] = path
         recipe = load_recipe(recipe_name, overrides)
+        from fracture_cli.io.outputs import check_batch
+
+        check_batch(out_dir, inputs)  # no output may replace an input of the batch
         reports, failures = [], []
         for path in inputs:
             try:

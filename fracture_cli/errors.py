@@ -7,6 +7,8 @@ and is shown with a traceback only under ``--debug``.
 
 from __future__ import annotations
 
+import os
+
 EXIT_OK = 0
 EXIT_FAILURE = 1  # bad input or a stage that could not finish
 EXIT_USAGE = 2  # wrong command line (click's own convention)
@@ -38,7 +40,8 @@ class FractureError(Exception):
         if self.stage:
             prefix += f"{self.stage}: "
         if self.path:
-            prefix += f"{self.path}: "
+            # A file name that is not UTF-8 (surrogate-escaped by Python) is shown with \xNN escapes.
+            prefix += os.fsencode(self.path).decode("utf-8", "backslashreplace") + ": "
         return prefix + self.message
 
 
