@@ -636,7 +636,13 @@ def preview_cmd(runtime_file, out_png, size):
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``fracture`` console script."""
-    cli.main(args=argv, prog_name="fracture")
+    try:
+        cli.main(args=argv, prog_name="fracture")
+    except SystemExit:
+        import signal
+
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # exiting: a second Ctrl-C must not break the clean exit
+        raise
 
 
 if __name__ == "__main__":

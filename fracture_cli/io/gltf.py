@@ -29,6 +29,25 @@ _ELEMENT_ARRAY_BUFFER = 34963
 
 
 @dataclass(frozen=True)
+class MaterialSource:
+    """What :func:`glb_bytes` carries over from an input material besides its name and colour.
+
+    The readers of this package fill it (trimesh's material objects have the
+    same attributes, so they are carried over as well).
+
+    Attributes
+    ----------
+    baseColorTexture : PIL.Image.Image or None
+        Written as an embedded PNG.
+    metallicFactor, roughnessFactor : float
+    """
+
+    baseColorTexture: object = None
+    metallicFactor: float = 1.0
+    roughnessFactor: float = 1.0
+
+
+@dataclass(frozen=True)
 class Primitive:
     """One glTF primitive: triangles of a single material.
 

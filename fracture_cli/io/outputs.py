@@ -275,7 +275,7 @@ class StemLock:
     def path(self) -> str:
         return os.path.join(self.out_dir, f".{self.stem}.fracture-lock")
 
-    def __enter__(self) -> "StemLock":
+    def __enter__(self) -> StemLock:
         self.acquire()
         return self
 
