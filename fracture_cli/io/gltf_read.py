@@ -106,6 +106,21 @@ def read_gltf(path: str) -> list[MeshPart]:
                          path=path) from None
 
 
+def check_required_extensions(doc: dict, path: str) -> None:
+    """Refuse a document whose ``extensionsRequired`` names an extension not in :data:`SUPPORTED_EXTENSIONS`.
+
+    Raises
+    ------
+    InputError
+        Naming the extension and what to do (e.g. decompress Draco first).
+    """
+    required = doc.get("extensionsRequired", []) or []
+    for name in required if isinstance(required, list) else [required]:
+        if name not in SUPPORTED_EXTENSIONS:
+            hint = _HINTS.get(name, "this reader does not support it; export without it")
+            raise InputError(f"requires the glTF extension {name} ({hint})", path=path)
+
+
 class _Document:
     """A parsed glTF document with lazily loaded buffers."""
 
@@ -116,12 +131,8 @@ class _Document:
         self.folder = os.path.dirname(os.path.abspath(path))
         self._buffers: dict[int, bytes] = {}
         self._materials: dict[int, Material] = {}
-        required = doc.get("extensionsRequired", []) or []
-        for name in required:
-            if name not in SUPPORTED_EXTENSIONS:
-                hint = _HINTS.get(name, "this reader does not support it; export without it")
-                raise InputError(f"requires the glTF extension {name} ({hint})", path=path)
-        used = set(doc.get("extensionsUsed", []) or []) - SUPPORTED_EXTENSIONS - set(required)
+        check_required_extensions(doc, path)
+        used = set(doc.get("extensionsUsed", []) or []) - SUPPORTED_EXTENSIONS
         if "EXT_mesh_gpu_instancing" in used:
             log.warning("load: %s: EXT_mesh_gpu_instancing is not applied; each instanced mesh is read once", path)
 

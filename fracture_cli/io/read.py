@@ -86,6 +86,64 @@ def smooth_normals_welded(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray
     return out
 
 
+def double_sided_back_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Which triangles (m,) bool are the second side of a double-sided surface.
+
+    Parameters
+    ----------
+    V : (n, 3) float
+    F : (m, 3) int
+
+    Returns
+    -------
+    (m,) bool
+        In every connected part (vertices welded by position) whose every
+        non-degenerate triangle has a coincident copy facing the other way,
+        all triangles but the first (in file order) on each set of three
+        corners. Elsewhere False: a face shared by two touching solids (two
+        stacked boxes) is such a pair too, but its part has unpaired faces,
+        and repair removes both copies there, as it should.
+
+    Notes
+    -----
+    Without this, the two sides cancel: repair drops coincident opposite
+    pairs as internal walls and nothing is left of a double-sided closed
+    surface (exported with "double-sided" baked into the geometry).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    drop = np.zeros(len(F), dtype=bool)
+    if len(F) < 2:
+        return drop
+    _, weld = np.unique(V, axis=0, return_inverse=True)
+    W = weld.reshape(-1)[F]
+    ok = (W[:, 0] != W[:, 1]) & (W[:, 1] != W[:, 2]) & (W[:, 0] != W[:, 2])
+    corners = np.sort(W, axis=1)
+    first = np.argmin(W, axis=1)  # rotate each triangle to start at its smallest corner: orientation = next < last
+    rows = np.arange(len(W))
+    facing = W[rows, (first + 1) % 3] < W[rows, (first + 2) % 3]
+    _, key = np.unique(corners, axis=0, return_inverse=True)
+    key = key.reshape(-1)
+    up = np.bincount(key[ok & facing], minlength=key.max() + 1)
+    down = np.bincount(key[ok & ~facing], minlength=key.max() + 1)
+    paired = (up[key] > 0) & (down[key] > 0)
+    n = int(weld.max()) + 1
+    edges = np.concatenate([W[:, [0, 1]], W[:, [1, 2]]])
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    _, part = connected_components(graph, directed=False)
+    face_part = part[W[:, 0]]
+    unpaired = np.bincount(face_part[ok & ~paired], minlength=part.max() + 1)
+    whole = unpaired[face_part] == 0
+    if not (whole & paired).any():
+        return drop
+    # Keep the first triangle of each corner set in the double-sided parts, drop the rest.
+    order = np.lexsort((rows, key))
+    repeat = np.zeros(len(F), dtype=bool)
+    repeat[order[1:]] = key[order[1:]] == key[order[:-1]]
+    return whole & ok & repeat
+
+
 def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) -> SurfaceMesh:
     """Read a mesh file into a normalized :class:`SurfaceMesh`.
 
@@ -177,6 +235,12 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
                     path, largest, step, relative)
     V = np.concatenate(vertices)
     F = np.concatenate(faces)
+    M = np.concatenate(mat_ids)
+    back = double_sided_back_faces(V, F)
+    if back.any():
+        log.warning("load: %s: %d triangles are the back sides of a double-sided surface (each has a coincident "
+                    "copy facing the other way); one side is kept", path, int(back.sum()))
+        F, M = F[~back], M[~back]
     used = np.unique(F)
     if not np.all(np.isfinite(V[used])):
         raise InputError("has non-finite vertex coordinates (NaN or inf)", path=path)
@@ -194,7 +258,7 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
         uvs=np.concatenate(uvs) if uvs else None,
         normals=N,
         colors=np.concatenate(colors) if colors else None,
-        material_ids=np.concatenate(mat_ids),
+        material_ids=M,
         materials=tuple(materials),
         normalization=normalization,
         name=os.path.basename(path),

@@ -49,7 +49,7 @@ def read_stl(path: str) -> tuple[np.ndarray, np.ndarray]:
     size = os.path.getsize(path)
     with open(path, "rb") as fh:
         raw = fh.read()
-    count = int.from_bytes(raw[80:84], "little") if size >= HEADER else None
+    count = header_count(raw)
     if count is not None and size == HEADER + RECORD * count:
         return _binary(raw, count)
     if raw.lstrip()[:5].lower() == b"solid":
@@ -64,15 +64,32 @@ def read_stl(path: str) -> tuple[np.ndarray, np.ndarray]:
                 raise InputError("could not be read as STL: an ASCII vertex line has a value that is not a number",
                                  path=path) from None
             return V, np.arange(len(V), dtype=np.int64).reshape(-1, 3)
-    if size > HEADER and (size - HEADER) % RECORD == 0:
-        n = (size - HEADER) // RECORD
+    n = size_count(size)
+    if n is not None:
         log.warning("load: %s: binary STL header says %s triangles but the file holds %d; reading %d", path,
                     f"{count:,}", n, n)
         return _binary(raw, n)
+    raise not_stl(path, size, count)
+
+
+def header_count(head: bytes) -> int | None:
+    """The triangle count in a binary STL header (bytes 80..84), None if the file is shorter."""
+    return int.from_bytes(head[80:84], "little") if len(head) >= HEADER else None
+
+
+def size_count(size: int) -> int | None:
+    """Triangles of a binary STL of ``size`` bytes (rule 3), None if no count fits."""
+    if size > HEADER and (size - HEADER) % RECORD == 0:
+        return (size - HEADER) // RECORD
+    return None
+
+
+def not_stl(path: str, size: int, count: int | None) -> InputError:
+    """The refusal of a file that no rule reads."""
     expected = f" ({count:,} triangles, {HEADER + RECORD * count:,} bytes)" if count is not None else ""
-    raise InputError(f"could not be read as STL: not a valid STL file: it does not start with 'solid' (ASCII STL), "
-                     f"and its size ({size:,} bytes) does not match the triangle count in its binary header"
-                     f"{expected}", path=path)
+    return InputError(f"could not be read as STL: not a valid STL file: it does not start with 'solid' (ASCII STL), "
+                      f"and its size ({size:,} bytes) does not match the triangle count in its binary header"
+                      f"{expected}", path=path)
 
 
 def _binary(raw: bytes, count: int) -> tuple[np.ndarray, np.ndarray]:
