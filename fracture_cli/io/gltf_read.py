@@ -121,6 +121,22 @@ def check_required_extensions(doc: dict, path: str) -> None:
             raise InputError(f"requires the glTF extension {name} ({hint})", path=path)
 
 
+def buffer_file(folder: str, uri: str, index: int, path: str) -> str:
+    """The file a buffer's (percent-encoded) ``uri`` names, in ``folder``; URLs and absolute paths are refused.
+
+    Raises
+    ------
+    InputError
+        The uri is a URL or an absolute path (a build must not depend on the network or on another machine's
+        folders).
+    """
+    name = external_uri(uri) or ""
+    if "://" in uri or os.path.isabs(name):
+        raise InputError(f"buffer {index} has the uri '{uri}'; only file names relative to the file are read",
+                         path=path)
+    return os.path.join(folder, name)
+
+
 class _Document:
     """A parsed glTF document with lazily loaded buffers."""
 
@@ -154,10 +170,7 @@ class _Document:
         elif uri.startswith("data:"):
             data, where = self._data_uri(uri, index), f"buffer {index}'s data URI"
         else:
-            name = external_uri(uri)
-            if "://" in uri or os.path.isabs(name):
-                raise self.fail(f"buffer {index} has the uri '{uri}'; only file names relative to the file are read")
-            file = os.path.join(self.folder, name)
+            file = buffer_file(self.folder, uri, index, self.path)
             try:
                 with open(file, "rb") as fh:
                     data = fh.read()

@@ -13,7 +13,7 @@ import os
 import struct
 
 from fracture_cli.errors import InputError
-from fracture_cli.io.gltf_read import check_required_extensions
+from fracture_cli.io.gltf_read import buffer_file, check_required_extensions
 from fracture_cli.io.inputs import external_uri
 
 _GLB_MAGIC = b"glTF"
@@ -125,11 +125,10 @@ def _probe_gltf(path: str) -> int:
         raise InputError("is not valid glTF JSON (not an object)", path=path)
     check_required_extensions(doc, path)
     folder = os.path.dirname(os.path.abspath(path))
-    for buffer in doc.get("buffers", []):
-        name = external_uri(buffer.get("uri")) if isinstance(buffer, dict) else None
-        if name is not None:
+    for index, buffer in enumerate(doc.get("buffers", [])):
+        if isinstance(buffer, dict) and external_uri(buffer.get("uri")) is not None:
             uri = buffer["uri"]
-            if not os.path.isfile(os.path.join(folder, name)):
+            if not os.path.isfile(buffer_file(folder, uri, index, path)):
                 raise InputError(f"references the buffer file '{uri}', which is missing (keep it beside the .gltf, "
                                  "or export a single .glb)", path=path)
     return _gltf_triangles(doc)
