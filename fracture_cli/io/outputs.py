@@ -154,7 +154,7 @@ def preflight(out_dir: str, stem: str, inputs: Iterable[str] = (), estimate_byte
                               path=printable(target))
     check_inputs_untouched(out_dir, [stem], inputs)
     _check_writable(out_dir)
-    _check_free_space(out_dir, estimate_bytes)
+    _check_free_space(out_dir, stem, estimate_bytes)
     # Complete or clear what a killed bake left now, so the folder holds one set even if this bake fails.
     lock = StemLock(out_dir, stem)
     if lock.acquire(timeout=0):
@@ -192,11 +192,11 @@ def free_bytes(out_dir: str) -> int:
     return shutil.disk_usage(out_dir).free
 
 
-def _check_free_space(out_dir: str, estimate_bytes: int) -> None:
+def _check_free_space(out_dir: str, stem: str, estimate_bytes: int) -> None:
     free = free_bytes(out_dir)
     if estimate_bytes > free:
-        raise OutputError(f"only {_size(free)} free in the output folder; the outputs need about "
-                          f"{_size(estimate_bytes)}", path=printable(out_dir))
+        raise OutputError(f"only {_size(free)} free in the output folder; the outputs of {printable(stem)} need "
+                          f"about {_size(estimate_bytes)}", path=printable(out_dir))
 
 
 def _size(n: float) -> str:
@@ -553,11 +553,11 @@ def output_set(out_dir: str, stem: str, *, lock_timeout: float = LOCK_TIMEOUT_SE
                 _finish_files(staging)
                 with _sigint_deferred():
                     publish(staging)  # raises OutputError itself once a rename has happened
+                    _published.append(os.path.join(out_dir, stem))
             except OSError as exc:
                 raise _write_error(exc, out_dir) from None
         finally:
             shutil.rmtree(staging.path, ignore_errors=True)
-    _published.append(os.path.join(out_dir, stem))
 
 
 def _write_error(exc: OSError, out_dir: str) -> OutputError:
@@ -663,10 +663,15 @@ def _sync_dir(path: str) -> None:
         os.close(fd)
 
 
+def _in_main_thread() -> bool:
+    """Whether signal handlers can be set here (Python delivers signals to the main thread only)."""
+    return threading.current_thread() is threading.main_thread()
+
+
 @contextlib.contextmanager
 def _sigint_deferred() -> Iterator[None]:
     """Hold a Ctrl-C back until the block ends, then raise KeyboardInterrupt (main thread only)."""
-    if threading.current_thread() is not threading.main_thread():
+    if not _in_main_thread():
         yield
         return
     received: list[int] = []

@@ -209,6 +209,9 @@ def _write_atomic(path: Path, payload: bytes) -> None:
     # Temp file in the same directory so os.replace is an atomic rename.
     fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", suffix=".tmp", dir=path.parent)
     try:
+        umask = os.umask(0o022)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; readable like the GLB (0644 with the usual umask)
         with os.fdopen(fd, "wb") as handle:
             handle.write(payload)
         os.replace(tmp, path)
