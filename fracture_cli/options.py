@@ -48,7 +48,7 @@ def check_value(options_cls, name: str, value: Any) -> str | None:
         return f"unknown option '{name}'; valid: {', '.join(sorted(fields))}"
     f = fields[name]
     meta = f.metadata
-    default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+    default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[operator]
     if meta["choices"] is not None and value not in meta["choices"]:
         return f"{name} = {value!r} is not one of {', '.join(map(repr, meta['choices']))}"
     if isinstance(default, list):

@@ -15,7 +15,7 @@ from fracture_cli.cli import cli
 from fracture_cli.io.inputs import input_files
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "data"))
-from make_bad_corpus import Gltf, box, box_primitive, obj_text  # noqa: E402
+from make_bad_corpus import Gltf, box, box_primitive, obj_text
 
 SMALL = ["--set", "cage.target_faces=500", "--set", "modes.num_modes=3"]
 

@@ -25,7 +25,7 @@ from click.testing import CliRunner
 from fracture_cli.cli import cli
 from fracture_cli.errors import OutputError
 from fracture_cli.io import outputs
-from fracture_cli.io.outputs import (StemLock, output_names, output_set, preflight, verify_output_set)
+from fracture_cli.io.outputs import StemLock, output_names, output_set, preflight, verify_output_set
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)

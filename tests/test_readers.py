@@ -21,7 +21,7 @@ from fracture_cli.errors import InputError
 from fracture_cli.io.read import double_sided_back_faces, load_surface
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "data"))
-from make_bad_corpus import Gltf, box, box_primitive, concat, obj_text, stl_binary  # noqa: E402
+from make_bad_corpus import Gltf, box, box_primitive, concat, obj_text, stl_binary
 
 CORPUS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "bad")
 
@@ -94,7 +94,6 @@ def test_interleaved_buffer_view_with_byte_stride(tmp_path):
 @pytest.mark.parametrize("component, scale, lo", [(5121, 255, 0), (5123, 65535, 0), (5120, 127, -127),
                                                    (5122, 32767, -32767)])
 def test_normalized_texture_coordinates(tmp_path, component, scale, lo):
-    V, F = box()
     raw = np.array([[lo, 0], [scale, scale], [0, scale], [scale, 0]] * 2)
     dtype = {5121: "u1", 5123: "<u2", 5120: "i1", 5122: "<i2"}[component]
     g = Gltf()
@@ -108,7 +107,6 @@ def test_normalized_texture_coordinates(tmp_path, component, scale, lo):
 
 
 def test_texture_transform_follows_the_extension(tmp_path):
-    V, F = box()
     g = Gltf()
     prim = box_primitive(g, material=0)
     uv = np.tile([[1.0, 0.0]], (8, 1))
@@ -143,7 +141,7 @@ def test_triangle_strips_and_fans(tmp_path, mode):
 def test_data_uri_buffer_and_gltf_without_scenes(tmp_path):
     g = Gltf()
     g.node(mesh=g.mesh([box_primitive(g)]))
-    text, binary = g.gltf([0], "data:application/octet-stream;base64," + base64.b64encode(bytes(g.binary)).decode())
+    text, _ = g.gltf([0], "data:application/octet-stream;base64," + base64.b64encode(bytes(g.binary)).decode())
     doc = json.loads(text)
     del doc["scenes"], doc["scene"]
     assert volume_bbox(load_surface(write(tmp_path / "d.gltf", json.dumps(doc))))[0] == pytest.approx(1.0)
@@ -191,7 +189,7 @@ def test_obj_corpus_relative_boxes_are_two_boxes():
 
 
 def test_ply_ascii_mixed_polygons_and_colors(tmp_path):
-    V, F = box()
+    V, _ = box()
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6]]
     tris = [[0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]
     header = ["ply", "format ascii 1.0", "element vertex 8", "property float x", "property float y",
@@ -207,9 +205,9 @@ def test_ply_ascii_mixed_polygons_and_colors(tmp_path):
 
 def test_ply_big_endian_and_face_texcoords(tmp_path):
     V, F = box()
-    header = ("ply\nformat binary_big_endian 1.0\nelement vertex 8\nproperty double x\nproperty double y\n"
-              "property double z\nelement face 12\nproperty list uchar uint vertex_indices\n"
-              "property list uchar float texcoord\nend_header\n").encode()
+    header = (b"ply\nformat binary_big_endian 1.0\nelement vertex 8\nproperty double x\nproperty double y\n"
+              b"property double z\nelement face 12\nproperty list uchar uint vertex_indices\n"
+              b"property list uchar float texcoord\nend_header\n")
     body = V.astype(">f8").tobytes()
     for k, f in enumerate(F):
         body += struct.pack(">B3I", 3, *f) + struct.pack(">B6f", 6, *([k / 12, 0.5] * 3))
@@ -219,9 +217,9 @@ def test_ply_big_endian_and_face_texcoords(tmp_path):
 
 
 def test_ply_short_data_is_one_line(tmp_path):
-    V, F = box()
-    header = ("ply\nformat binary_little_endian 1.0\nelement vertex 8\nproperty float x\nproperty float y\n"
-              "property float z\nelement face 12\nproperty list uchar int vertex_indices\nend_header\n").encode()
+    V, _ = box()
+    header = (b"ply\nformat binary_little_endian 1.0\nelement vertex 8\nproperty float x\nproperty float y\n"
+              b"property float z\nelement face 12\nproperty list uchar int vertex_indices\nend_header\n")
     with pytest.raises(InputError, match="does not match the header"):
         load_surface(write(tmp_path / "s.ply", header + V.astype("<f4").tobytes() + b"\x03\x00"))
 

@@ -99,7 +99,7 @@ def _texture_png(material: Material) -> bytes | None:
     return buf.getvalue()
 
 
-def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Material, ...]) -> bytes:
+def glb_bytes(meshes: list[tuple], materials: tuple[Material, ...]) -> bytes:
     """Encode meshes as a GLB file, one node per mesh.
 
     Parameters
@@ -138,7 +138,9 @@ def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Materi
         accessors.append(acc)
         return len(accessors) - 1
 
-    images, textures, samplers = [], [], []
+    images: list[dict] = []
+    textures: list[dict] = []
+    samplers: list[dict] = []
     material_json = []
     for material in materials:
         png = _texture_png(material)
@@ -153,6 +155,7 @@ def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Materi
         material_json.append(_material_json(material, tex))
 
     gl_meshes, nodes = [], []
+    rest: list
     for name, primitives, *rest in meshes:
         translation = rest[0] if rest else None
         prims = []

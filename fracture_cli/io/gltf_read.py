@@ -56,7 +56,7 @@ _HINTS = {
                                "in.glb out.glb')",
     "EXT_mesh_gpu_instancing": "GPU instancing; export the instances as nodes",
 }
-_COMPONENTS = {5120: np.dtype("i1"), 5121: np.dtype("u1"), 5122: np.dtype("<i2"), 5123: np.dtype("<u2"),
+_COMPONENTS: dict[int, np.dtype] = {5120: np.dtype("i1"), 5121: np.dtype("u1"), 5122: np.dtype("<i2"), 5123: np.dtype("<u2"),
                5125: np.dtype("<u4"), 5126: np.dtype("<f4")}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 # normalized integer -> float (glTF 2.0, section 3.11 "Animations" table / KHR_mesh_quantization)
@@ -277,7 +277,7 @@ class _Document:
         else:
             return [(m, np.eye(4)) for m in range(len(self.doc.get("meshes", []) or []))]
         out: list[tuple[int, np.ndarray]] = []
-        stack = [(int(r), np.eye(4), ()) for r in reversed(roots)]
+        stack: list[tuple[int, np.ndarray, tuple[int, ...]]] = [(int(r), np.eye(4), ()) for r in reversed(roots)]
         while stack:
             index, parent, ancestors = stack.pop()
             if index in ancestors:
@@ -336,12 +336,12 @@ class _Document:
                         material=self.material(material), material_key=("gltf", material), raw_vertices=positions)
 
     def _uvs(self, attributes: dict, material: int) -> np.ndarray | None:
-        texture = {}
+        texture: dict = {}
         if material >= 0:
             texture = self.doc["materials"][material].get("pbrMetallicRoughness", {}).get("baseColorTexture") or {}
         transform = (texture.get("extensions") or {}).get("KHR_texture_transform") or {}
         channel = int(transform.get("texCoord", texture.get("texCoord", 0)))
-        key = f"TEXCOORD_{channel}"
+        key: str | None = f"TEXCOORD_{channel}"
         if key not in attributes:
             key = "TEXCOORD_0" if "TEXCOORD_0" in attributes else None
         if key is None:

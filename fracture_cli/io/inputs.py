@@ -94,19 +94,19 @@ def _gltf_uris(path: str, ext: str) -> list[str]:
 
 def _obj_companions(path: str) -> list[str]:
     folder = os.path.dirname(path)
-    names = []
+    names: list[str] = []
     with open(path, "rb") as fh:
-        for line in fh:
-            if line.startswith(b"mtllib"):
-                names += line.decode("utf-8", "replace").split()[1:]
+        for raw in fh:
+            if raw.startswith(b"mtllib"):
+                names += raw.decode("utf-8", "replace").split()[1:]
     textures = []
     for name in names:
         try:
             with open(os.path.join(folder, name), "rb") as fh:
-                lines = fh.read().decode("utf-8", "replace").splitlines()
+                text = fh.read().decode("utf-8", "replace")
         except OSError:
             continue
-        for line in lines:
+        for line in text.splitlines():
             words = line.split()
             if len(words) >= 2 and words[0].lower().startswith(_MTL_MAPS):
                 textures.append(os.path.join(os.path.dirname(name), words[-1]))

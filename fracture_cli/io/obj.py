@@ -47,7 +47,7 @@ def absolute_indices(data: bytes, path: str) -> bytes | None:
 
 def _corner(word: bytes, counts: list[int], number: int, path: str) -> bytes:
     parts = word.split(b"/")
-    out = []
+    out: list[bytes] = []
     for kind, part in enumerate(parts[:3]):
         if not part:
             out.append(part)

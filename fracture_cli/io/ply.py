@@ -127,7 +127,9 @@ def _read_binary(body: bytes, elements: list[_Element], fmt: str) -> dict[str, d
 
 def _binary_uniform(body: bytes, offset: int, element: _Element, order: str) -> tuple[dict | None, int]:
     """All rows of the element at once, if every list in it has the length of the first row's (the usual case)."""
-    fields, lengths, probe = [], {}, offset
+    fields: list[tuple] = []
+    lengths: dict[str, int] = {}
+    probe = offset
     for name, value_type, count_type in element.properties:
         if count_type is not None:
             if element.count == 0 or probe + np.dtype(count_type).itemsize > len(body):
@@ -135,7 +137,7 @@ def _binary_uniform(body: bytes, offset: int, element: _Element, order: str) -> 
             n = int(_scalar(body, probe, order + count_type))
             lengths[name] = n
             fields.append((f"{name}#n", order + count_type))
-            fields.append((name, order + value_type, (n,)) if n != 1 else (name, order + value_type, (1,)))
+            fields.append((name, order + value_type, (n,)))
             probe += np.dtype(count_type).itemsize + n * np.dtype(value_type).itemsize
         else:
             fields.append((name, order + value_type))

@@ -199,7 +199,12 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
             path=path,
         )
 
-    vertices, faces, uvs, normals, colors, mat_ids = [], [], [], [], [], []
+    vertices: list[np.ndarray] = []
+    faces: list[np.ndarray] = []
+    uvs: list[np.ndarray] = []
+    normals: list[np.ndarray] = []
+    colors: list[np.ndarray] = []
+    mat_ids: list[np.ndarray] = []
     materials: list[Material] = []
     mat_index: dict = {}  # material_key -> slot: two glTF materials with one name stay two slots
     any_uv = any(p.uvs is not None for p in parts)
@@ -218,7 +223,7 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
         offset += len(v)
         if any_uv:
             uvs.append(part.uvs if part.uvs is not None else np.zeros((len(v), 2)))
-        if any_normals:
+        if any_normals and part.normals is not None:
             normals.append(part.normals)
         if any_colors:
             colors.append(part.colors if part.colors is not None else np.ones((len(v), 4)))
@@ -249,7 +254,7 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
         raise InputError("has no extent (all vertices at one point)", path=path)
     Vn = normalization.to_normalized(V)
     if normals:
-        N = np.concatenate(normals)
+        N: np.ndarray = np.concatenate(normals)
     else:
         N = smooth_normals_welded(Vn, F)
     surface = SurfaceMesh(

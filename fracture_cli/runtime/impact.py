@@ -57,7 +57,7 @@ class _Prepared:
         # Columns stored separately and contiguous: three 1-D passes beat a (s, 3) reduction.
         self.sx, self.sy, self.sz = (np.ascontiguousarray(sites[:, c]) for c in range(3))
         self.B = np.ascontiguousarray(data.B, dtype=np.float64)  # (s, k, d)
-        self.B1 = np.ascontiguousarray(self.B[:, :, 0]) if d == 1 else None
+        self.B1 = np.ascontiguousarray(self.B[:, :, 0])  # (s, k): the d = 1 coefficients (unused for d = 3)
         W = np.asarray(data.W, dtype=np.float64)
         edges = np.asarray(data.edges, dtype=np.int64)
         self.edge_p = np.ascontiguousarray(edges[:, 0])

@@ -95,7 +95,7 @@ def _serve() -> None:
         try:
             tgen = tetgen.TetGen(vertices, faces)
             nodes, elems, _, _ = tgen.tetrahedralize(switches=switches)
-            reply = ("ok", np.asarray(nodes, dtype=np.float64), np.asarray(elems, dtype=np.int64))
+            reply: tuple = ("ok", np.asarray(nodes, dtype=np.float64), np.asarray(elems, dtype=np.int64))
         except Exception as exc:  # reported to the parent, which decides what it means
             reply = ("error", f"{type(exc).__name__}: {exc}", None)
         _write_frame(protocol_out, reply)
@@ -169,7 +169,7 @@ class _Worker:
         self._workdir: tempfile.TemporaryDirectory | None = None
         self._lock = threading.Lock()
 
-    def _start(self) -> None:
+    def _start(self) -> subprocess.Popen:
         package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH", "")) if p)
@@ -182,6 +182,7 @@ class _Worker:
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
             cwd=self._workdir.name,
         )
+        return self._process
 
     def _kill(self) -> None:
         process, self._process = self._process, None
@@ -194,7 +195,8 @@ class _Worker:
             process.wait(timeout=10)
             for stream in (process.stdin, process.stdout):
                 try:
-                    stream.close()
+                    if stream is not None:
+                        stream.close()
                 except OSError:
                     pass
         finally:
@@ -227,6 +229,8 @@ class _Worker:
                         continue
 
     def _exit_reason(self) -> str:
+        if self._process is None:
+            return "not running"
         try:
             code = self._process.wait(timeout=2)
         except subprocess.TimeoutExpired:
@@ -237,8 +241,9 @@ class _Worker:
         with self._lock:
             if self._process is None or self._process.poll() is not None:
                 self._kill()
-                self._start()
-            process = self._process
+                process = self._start()
+            else:
+                process = self._process
             try:
                 _write_frame(process.stdin, (vertices, faces, switches))
             except OSError:
