@@ -125,7 +125,9 @@ def preflight(out_dir: str, stem: str, inputs: Iterable[str] = (), estimate_byte
     Parameters
     ----------
     out_dir : str
-        Output folder; created if missing.
+        Output folder; if missing, its nearest existing parent is checked
+        instead and the folder is made by :func:`output_set`, so a bake that
+        fails before writing leaves no empty folder behind.
     stem : str
         The outputs' base name.
     inputs : iterable of str, optional
@@ -146,7 +148,12 @@ def preflight(out_dir: str, stem: str, inputs: Iterable[str] = (), estimate_byte
     except UnicodeDecodeError:
         raise OutputError(f"the file name is not valid UTF-8 ({printable(stem)}): the outputs and the runtime "
                           "file's reference to its .bin need a UTF-8 name; rename the input") from None
-    _make_folder(out_dir)
+    if not os.path.isdir(out_dir):
+        # Created only when the outputs are written, so a bake that fails leaves no empty folder behind.
+        ancestor = _existing_ancestor(out_dir)
+        _check_writable(ancestor, for_new_folder=True)
+        _check_free_space(ancestor, stem, estimate_bytes, out_dir)
+        return
     for name in output_names(stem):
         target = os.path.join(out_dir, name)
         if os.path.lexists(target) and not os.path.isfile(target):
@@ -154,7 +161,7 @@ def preflight(out_dir: str, stem: str, inputs: Iterable[str] = (), estimate_byte
                               path=printable(target))
     check_inputs_untouched(out_dir, [stem], inputs)
     _check_writable(out_dir)
-    _check_free_space(out_dir, stem, estimate_bytes)
+    _check_free_space(out_dir, stem, estimate_bytes, out_dir)
     # Complete or clear what a killed bake left now, so the folder holds one set even if this bake fails.
     lock = StemLock(out_dir, stem)
     if lock.acquire(timeout=0):
@@ -166,25 +173,34 @@ def preflight(out_dir: str, stem: str, inputs: Iterable[str] = (), estimate_byte
             lock.release()
 
 
-def _make_folder(out_dir: str) -> None:
-    if os.path.isdir(out_dir):
-        return
-    if os.path.lexists(out_dir):
-        raise OutputError("the output folder is a file, not a folder", path=printable(out_dir))
-    try:
-        os.makedirs(out_dir, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create the output folder ({exc.strerror})", path=printable(out_dir)) from None
+def _existing_ancestor(out_dir: str) -> str:
+    """The nearest existing folder above a missing ``out_dir`` (refused if a file is in the way)."""
+    path = os.path.abspath(out_dir)
+    while not os.path.exists(path):
+        parent = os.path.dirname(path)
+        if parent == path:
+            break
+        path = parent
+    if not os.path.isdir(path):
+        what = "the output folder is a file, not a folder" if path == os.path.abspath(out_dir) else \
+            f"cannot create the output folder: {printable(path)} is a file"
+        raise OutputError(what, path=printable(out_dir))
+    return path
 
 
-def _check_writable(out_dir: str) -> None:
-    probe = os.path.join(out_dir, f".fracture-probe-{secrets.token_hex(8)}")
+def _check_writable(folder: str, *, for_new_folder: bool = False) -> None:
+    """Create and remove a probe in ``folder`` (a file, or a folder when the output folder is still to be made)."""
+    probe = os.path.join(folder, f".fracture-probe-{secrets.token_hex(8)}")
     try:
-        fd = os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
+        if for_new_folder:
+            os.mkdir(probe, 0o700)
+            os.rmdir(probe)
+        else:
+            os.close(os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+            os.unlink(probe)
     except OSError as exc:
-        raise OutputError(f"the output folder is not writable ({exc.strerror})", path=printable(out_dir)) from None
-    os.close(fd)
-    os.unlink(probe)
+        what = "cannot create the output folder" if for_new_folder else "the output folder is not writable"
+        raise OutputError(f"{what} ({exc.strerror})", path=printable(folder)) from None
 
 
 def free_bytes(out_dir: str) -> int:
@@ -192,8 +208,8 @@ def free_bytes(out_dir: str) -> int:
     return shutil.disk_usage(out_dir).free
 
 
-def _check_free_space(out_dir: str, stem: str, estimate_bytes: int) -> None:
-    free = free_bytes(out_dir)
+def _check_free_space(folder: str, stem: str, estimate_bytes: int, out_dir: str) -> None:
+    free = free_bytes(folder)
     if estimate_bytes > free:
         raise OutputError(f"only {_size(free)} free in the output folder; the outputs of {printable(stem)} need "
                           f"about {_size(estimate_bytes)}", path=printable(out_dir))
@@ -540,6 +556,10 @@ def output_set(out_dir: str, stem: str, *, lock_timeout: float = LOCK_TIMEOUT_SE
     in ``out_dir`` changes. A Ctrl-C during the publish step is delivered
     after it, so the set is complete when the KeyboardInterrupt propagates.
     """
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create the output folder ({exc.strerror})", path=printable(out_dir)) from None
     with StemLock(out_dir, stem, timeout=lock_timeout):
         staging = Staging(out_dir, stem, os.path.join(out_dir, f".{stem}.staging-{secrets.token_hex(16)}"))
         try:
