@@ -94,14 +94,24 @@ def rebake(asset, out, cache, *extra, **kwargs):
     return CliRunner().invoke(cli, ["bake", asset, "-o", out, "--cache", cache, *SMALL, *NEW, *extra], **kwargs)
 
 
-def publish_renames(out: str):
-    """Predicate: an os.replace call that publishes a staged file into ``out``."""
-    real_out = os.path.realpath(out)
+def fault_at_rename(monkeypatch, out: str, number: int, fault) -> None:
+    """Call ``fault()`` just before the ``number``-th rename that publishes a staged file into ``out``."""
+    real_replace, real_out, calls = os.replace, os.path.realpath(out), []
 
-    def is_publish(src, dst) -> bool:
-        src, dst = os.fspath(src), os.fspath(dst)
-        return os.path.dirname(os.path.realpath(dst)) == real_out and ".staging-" in src
-    return is_publish
+    def replace(src, dst, **kw):
+        if os.path.dirname(os.path.realpath(dst)) == real_out and ".staging-" in os.fspath(src):
+            calls.append(dst)
+            if len(calls) == number:
+                fault()
+        return real_replace(src, dst, **kw)
+
+    monkeypatch.setattr(os, "replace", replace)
+
+
+def raise_(exc):
+    def fault():
+        raise exc
+    return fault
 
 
 # ---------------------------------------------------------------- faults during a bake (CLI)
@@ -109,16 +119,7 @@ def publish_renames(out: str):
 
 def test_failure_between_renames_restores_the_previous_set(asset, cache, old_set, monkeypatch):
     out, before = old_set
-    real_replace, is_publish, calls = os.replace, publish_renames(out), []
-
-    def failing_replace(src, dst, **kw):
-        if is_publish(src, dst):
-            calls.append(dst)
-            if len(calls) == 3:  # two files of the new set are in place
-                raise OSError(errno.EIO, "Input/output error", dst)
-        return real_replace(src, dst, **kw)
-
-    monkeypatch.setattr(os, "replace", failing_replace)
+    fault_at_rename(monkeypatch, out, 3, raise_(OSError(errno.EIO, "Input/output error")))  # two new files in place
     result = rebake(asset, out, cache)
     assert result.exit_code == 1
     assert_one_line(result, out, "the previous outputs were restored")
@@ -129,16 +130,8 @@ def test_ctrl_c_between_renames_finishes_the_new_set_then_stops(asset, cache, ol
     if threading.current_thread() is not threading.main_thread():
         pytest.skip("signals are delivered to the main thread only")
     out, before = old_set
-    real_replace, is_publish, calls = os.replace, publish_renames(out), []
-
-    def interrupted_replace(src, dst, **kw):
-        if is_publish(src, dst):
-            calls.append(dst)
-            if len(calls) == 2:
-                os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C with one file of the new set in place
-        return real_replace(src, dst, **kw)
-
-    monkeypatch.setattr(os, "replace", interrupted_replace)
+    # A real SIGINT with one file of the new set in place.
+    fault_at_rename(monkeypatch, out, 2, lambda: os.kill(os.getpid(), signal.SIGINT))
     previous_handler = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         result = rebake(asset, out, cache)
@@ -155,16 +148,7 @@ def test_ctrl_c_between_renames_finishes_the_new_set_then_stops(asset, cache, ol
 def test_interrupt_raised_inside_a_rename_rolls_back(asset, cache, old_set, monkeypatch):
     """Where no signal handler can hold Ctrl-C back (a worker thread), the renames are undone instead."""
     out, before = old_set
-    real_replace, is_publish, calls = os.replace, publish_renames(out), []
-
-    def interrupted_replace(src, dst, **kw):
-        if is_publish(src, dst):
-            calls.append(dst)
-            if len(calls) == 3:
-                raise KeyboardInterrupt
-        return real_replace(src, dst, **kw)
-
-    monkeypatch.setattr(os, "replace", interrupted_replace)
+    fault_at_rename(monkeypatch, out, 3, raise_(KeyboardInterrupt()))
     monkeypatch.setattr(outputs, "_in_main_thread", lambda: False)  # as if in a worker thread
     result = rebake(asset, out, cache)
     assert result.exit_code == 130
@@ -175,10 +159,7 @@ def test_interrupt_raised_inside_a_rename_rolls_back(asset, cache, old_set, monk
 def test_ctrl_c_while_writing_keeps_the_previous_set(asset, cache, old_set, monkeypatch):
     out, before = old_set
 
-    def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr("fracture_cli.runtime.format.write_runtime", interrupted)
+    monkeypatch.setattr("fracture_cli.runtime.format.write_runtime", lambda *a, **k: raise_(KeyboardInterrupt())())
     result = rebake(asset, out, cache)
     assert result.exit_code == 130
     assert "no output was written (previous outputs are unchanged)" in result.stderr
@@ -188,10 +169,8 @@ def test_ctrl_c_while_writing_keeps_the_previous_set(asset, cache, old_set, monk
 def test_disk_full_while_writing_keeps_the_previous_set(asset, cache, old_set, monkeypatch):
     out, before = old_set
 
-    def full(*args, **kwargs):
-        raise OSError(errno.ENOSPC, "No space left on device")
-
-    monkeypatch.setattr("fracture_cli.runtime.format.write_runtime", full)
+    monkeypatch.setattr("fracture_cli.runtime.format.write_runtime",
+                        lambda *a, **k: raise_(OSError(errno.ENOSPC, "No space left on device"))())
     result = rebake(asset, out, cache)
     assert result.exit_code == 1
     assert_one_line(result, out, "disk full while writing the outputs; the previous outputs are unchanged")
