@@ -485,6 +485,7 @@ def fracture(*args) -> list[str]:
     return [sys.executable, "-m", "fracture_cli", *args]
 
 
+@pytest.mark.usefixtures("previous")  # a warm cache: the two bakes skip the cage and modes
 def test_two_concurrent_bakes_of_one_stem(asset, cache, tmp_path):
     out = str(tmp_path / "out")
     runs = [subprocess.Popen(fracture("bake", asset, "-o", out, "--cache", cache, *SMALL, *extra),
@@ -533,6 +534,7 @@ def test_double_ctrl_c_to_the_process_group_is_clean(asset, tmp_path):
 
 
 @pytest.mark.skipif(shutil.which("pgrep") is None, reason="needs pgrep (procps) to find the TetGen worker")
+@pytest.mark.usefixtures("previous")  # a warm cache for the second bake
 def test_sigkill_then_a_new_bake_cleans_up(asset, cache, tmp_path):
     out = str(tmp_path / "out")
     killed = subprocess.Popen(fracture("bake", asset, "-o", out, *SMALL), cwd=REPO, stderr=subprocess.DEVNULL,
