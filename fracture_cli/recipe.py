@@ -42,7 +42,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "pieces": ("fracture_cli.stages.pieces", "PiecesOptions"),
     "smooth": ("fracture_cli.stages.smooth", "SmoothOptions"),
     "fragments": ("fracture_cli.stages.fragments", "FragmentOptions"),
-    "runtime": ("fracture_cli.stages.runtime", "RuntimeOptions"),
+    "runtime": ("fracture_cli.stages.precompute", "RuntimeOptions"),
 }
 TOP_LEVEL_KEYS = {"description", "extends"}
 

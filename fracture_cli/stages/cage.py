@@ -201,11 +201,6 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, target: int, decimator: s
     return vertices[used], inverse.reshape(-1, 3).astype(np.int64)
 
 
-def _signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
-
-
 class _ContainmentCheck:
     """Strict containment of the input in a candidate cage, independent of how the cage was built.
 
@@ -418,7 +413,7 @@ def _try_offset(d, values, field, options, check, seconds, entry):
     elif not trigeom.vertex_manifold(F):
         reason = "decimation left non-manifold vertices"
     else:
-        if _signed_volume(V, F) < 0:
+        if trigeom.signed_volume(V, F) < 0:
             F = F[:, ::-1].copy()
         crossing = trigeom.self_intersections(V, F)
         if len(crossing):
