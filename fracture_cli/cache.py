@@ -92,7 +92,7 @@ class StageCache:
 
     def _store(self, kind: str, key: str, arrays: dict[str, np.ndarray]) -> None:
         buf = io.BytesIO()
-        np.savez(buf, key=np.array(key), **arrays)
+        np.savez(buf, **{"key": np.array(key), **arrays})  # type: ignore[arg-type]  # numpy's stub: any name
         with atomic_path(self._path(kind, key)) as tmp:
             with open(tmp, "wb") as fh:
                 fh.write(buf.getvalue())

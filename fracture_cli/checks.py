@@ -49,18 +49,18 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
     interior_id = interior[-1] if interior else -1
     watertight = True
     pinched = 0
-    volumes = []
+    volume_list: list[float] = []
     outer_points = []
     solids = []
     for frag in fragments.fragments:
         ok, pinch = _closed_by_position(frag.vertices, frag.faces)
         watertight &= ok
         pinched += pinch
-        volumes.append(trigeom.signed_volume(frag.vertices, frag.faces))
+        volume_list.append(trigeom.signed_volume(frag.vertices, frag.faces))
         outer = frag.faces[frag.material_ids != interior_id]
         outer_points.append(frag.vertices[np.unique(outer)])
         solids.append(_solid(frag.vertices, frag.faces))
-    volumes = np.array(volumes)
+    volumes = np.array(volume_list)
     reference = fragments.input_volume
     points = np.concatenate(outer_points) if outer_points else np.zeros((0, 3))
     return {

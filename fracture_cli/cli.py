@@ -22,7 +22,7 @@ import click
 
 from fracture_cli import __version__
 from fracture_cli.cli_options import build_options, configure_output, hoist_global_flags, stage_options, toml_text
-from fracture_cli.errors import EXIT_FAILURE, FractureError, UsageError, exit_code_for
+from fracture_cli.errors import EXIT_FAILURE, FractureError, exit_code_for
 from fracture_cli.pipeline import STAGE_NAMES, PipelineState, Runner, stage
 
 log = logging.getLogger("fracture_cli")
@@ -77,12 +77,12 @@ def active_recipe(assets: tuple[str, ...] = ()) -> Any:
     from fracture_cli.recipe import load_recipe, search_path
 
     meta = _root_meta()
-    key = ("fracture.recipe", assets)
-    if key not in meta:
+    loaded = meta.setdefault("fracture.recipes", {})  # by asset folders searched
+    if assets not in loaded:
         search = search_path(meta.get("fracture.recipes_dir"), assets)
-        meta[key] = load_recipe(meta.get("fracture.recipe_name", "default"), meta.get("fracture.overrides", ()),
-                                search=search)
-    return meta[key]
+        loaded[assets] = load_recipe(meta.get("fracture.recipe_name", "default"), meta.get("fracture.overrides", ()),
+                                     search=search)
+    return loaded[assets]
 
 
 def _recipe_value(section: str, field_name: str) -> tuple[str, Any]:

@@ -60,7 +60,8 @@ def parse_toml_value(raw: str) -> Any:
 def _field_default(f: dataclasses.Field) -> Any:
     if f.default is not dataclasses.MISSING:
         return f.default
-    return f.default_factory()  # type: ignore[misc]
+    factory: Any = f.default_factory
+    return factory()
 
 
 def _toml_text(value: Any) -> str:

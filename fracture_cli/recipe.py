@@ -129,9 +129,9 @@ def find_recipe(name_or_path: str, search: Sequence[Path] | None = None, *, base
                               else "no such recipe file", path=asked_by or path)
         return path
     for folder in folders:
-        path = folder / f"{name_or_path}.toml"
-        if path.is_file():
-            return str(path)
+        candidate = folder / f"{name_or_path}.toml"
+        if candidate.is_file():
+            return str(candidate)
     names = ", ".join(list_recipes(folders)) or "(none)"
     where = f"extends = {name_or_path!r}: " if asked_by else ""
     raise RecipeError(f"{where}unknown recipe '{name_or_path}'; pick one of {names} or give a path to a .toml file",
@@ -241,5 +241,6 @@ def load_recipe(name_or_path: str = "default", overrides: Sequence[str] = (), *,
         values[section][key] = _coerce(section, key, value, None)
     options = {s: dataclasses.replace(options_class(s)(), **values[s]) for s in SECTIONS}
     name, _, data = chain[0]
-    description = data.get("description") or next((d.get("description") for _, _, d in chain if d.get("description")), "")
+    description = data.get("description") or next(
+        (d.get("description") for _, _, d in chain if d.get("description")), "")
     return Recipe(name=name, description=str(description), options=options, chain=tuple(c[0] for c in chain))

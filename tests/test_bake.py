@@ -155,7 +155,8 @@ def test_khronos_gltf_validator_accepts_output(chair_bake):
 
     modules = os.path.join(REPO, "build", "node", "node_modules")
     if not shutil.which("node") or not os.path.isdir(os.path.join(modules, "gltf-validator")):
-        pytest.skip("gltf-validator not installed (needs npm); structure is checked by test_glb_structure_is_valid_gltf")
+        pytest.skip("gltf-validator not installed (needs npm); structure is checked by "
+                    "test_glb_structure_is_valid_gltf")
     out, _ = chair_bake
     proc = subprocess.run(["node", os.path.join(REPO, "scripts", "validate_gltf.cjs"), modules, str(out / "chair.glb")],
                           capture_output=True, text=True, timeout=120)

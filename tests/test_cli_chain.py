@@ -14,7 +14,6 @@ from fracture_cli.pipeline import STEPS
 
 from conftest import SAMPLE_ASSETS
 
-
 SMALL = ["--set", "cage.target_faces=600", "--set", "modes.num_modes=3", "--set", "material.grain_axis=y",
          "--set", "material.grain_strength=4"]
 BYTES = ("chair.glb", "chair.fracture.json", "chair.fracture.bin")
@@ -49,7 +48,8 @@ def test_chain_resumes_from_saved_tets(tmp_path):
     runner = CliRunner()
     assert runner.invoke(cli, ["load", chair, "cage", "--target-faces", "500", "tetra", "save-tets",
                                str(tmp_path / "t.npz")]).exit_code == 0
-    result = runner.invoke(cli, ["load", chair, "load-tets", str(tmp_path / "t.npz"), "modes", "-k", "2", "pieces", "smooth",
+    result = runner.invoke(cli, ["load", chair, "load-tets", str(tmp_path / "t.npz"), "modes", "-k", "2", "pieces",
+                                 "smooth",
                                  "fragments", "runtime", "export", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
     assert (tmp_path / "out" / "chair.glb").is_file()

@@ -15,11 +15,12 @@ import os
 import tomllib
 
 import pytest
+from test_fragments import check_invariants
 
+from fracture_cli.checks import fragment_fault_shape
 from fracture_cli.io.read import load_surface
 from fracture_cli.recipe import load_recipe
 from fracture_cli.stages.cage import cage
-from fracture_cli.checks import fragment_fault_shape
 from fracture_cli.stages.fragments import fragments
 from fracture_cli.stages.material import material
 from fracture_cli.stages.modes import modes
@@ -29,7 +30,6 @@ from fracture_cli.stages.smooth import smooth
 from fracture_cli.stages.tetra import tetra
 
 from conftest import SAMPLE_ASSETS
-from test_fragments import check_invariants
 
 with open(os.path.join(SAMPLE_ASSETS, "manifest.toml"), "rb") as _fh:
     MANIFEST = sorted(tomllib.load(_fh)["assets"].items())

@@ -17,10 +17,9 @@ from fracture_cli.stages.smooth.field import smoothed_field as _smoothed_field
 from fracture_cli.stages.smooth.field import winning_field as _winning_field
 from fracture_cli.stages.smooth.geometric import smoothed_vertices as _smoothed_vertices
 from fracture_cli.stages.smooth.topology import Topology as _Topology
-from fracture_cli.trigeom import point_triangle_distance
 from fracture_cli.testing import grid_tetmesh, jittered_grid_tetmesh
+from fracture_cli.trigeom import point_triangle_distance
 from fracture_cli.types import Modes, Regions, TetMesh
-
 
 # The field method at the strength it was tuned for (the stage's default is the geometric method), on the cage
 # tets themselves: these tests are about the level-set regions, not the refinement.
@@ -469,8 +468,8 @@ def test_sliding_deterministic():
 
 
 def test_sliding_on_a_sample_asset(chair_case):
-    from fracture_cli.recipe import load_recipe
     from fracture_cli.checks import fragment_invariants
+    from fracture_cli.recipe import load_recipe
     from fracture_cli.stages.fragments import fragments
 
     surface, tm, P = chair_case
@@ -527,7 +526,8 @@ def test_refined_field_partitions_the_cage_and_flattens_creases():
         assert closed_by_position(V, F)
     check_partition(tm, R, 1e-9)
     shape0, shape = fault_shape(*region_faults(R0)), fault_shape(*region_faults(R))
-    print(f"refined field: mean dihedral {shape0['mean_dihedral_degrees']:.1f} -> {shape['mean_dihedral_degrees']:.1f}, "
+    print(f"refined field: mean dihedral {shape0['mean_dihedral_degrees']:.1f} -> "
+          f"{shape['mean_dihedral_degrees']:.1f}, "
           f"creases {shape0['crease_density']:.2f} -> {shape['crease_density']:.2f}")
     assert shape["mean_dihedral_degrees"] < 0.5 * shape0["mean_dihedral_degrees"]
     assert shape["crease_density"] < 0.5 * shape0["crease_density"]

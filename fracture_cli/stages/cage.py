@@ -257,7 +257,7 @@ class _ContainmentCheck:
 
 
 def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
-    """Build a nested cage: a closed, manifold surface of about ``target_faces`` triangles strictly containing the input.
+    """Build a nested cage: a closed manifold surface of about ``target_faces`` triangles strictly containing the input.
 
     Parameters
     ----------

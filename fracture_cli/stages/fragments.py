@@ -97,7 +97,8 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
         raise StageError("the input encloses no volume; fragments need a solid (closed) mesh", stage=STAGE)
     # The repair stage may already have given the surface an interior slot (faces closing its holes):
     # reuse it, with the recipe's colour, so the asset has one interior material.
-    interior = Material(INTERIOR_MATERIAL_NAME, base_color=tuple(float(c) for c in options.interior_color))
+    r, g, b, a = (float(c) for c in options.interior_color)
+    interior = Material(INTERIOR_MATERIAL_NAME, base_color=(r, g, b, a))
     names = [m.name for m in surface.materials]
     if INTERIOR_MATERIAL_NAME in names:
         interior_index = names.index(INTERIOR_MATERIAL_NAME)

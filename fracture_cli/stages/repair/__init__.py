@@ -18,15 +18,36 @@ import numpy as np
 
 from fracture_cli import tetgeom, trigeom
 from fracture_cli.errors import StageError
-from fracture_cli.meshtopo import boundary_edge_faces, boundary_edges, components, nonmanifold_edges, \
-    propagate_winding, unique_faces
+from fracture_cli.meshtopo import (
+    boundary_edge_faces,
+    boundary_edges,
+    components,
+    nonmanifold_edges,
+    propagate_winding,
+    unique_faces,
+)
 from fracture_cli.options import option
-from fracture_cli.stages._solids import COLOR, NORMAL, NUM_COLUMNS, POS, UV, SplitMesh, from_manifold, to_manifold, \
-    union_bodies, vertex_properties, weld_map
+from fracture_cli.stages._solids import (
+    COLOR,
+    NORMAL,
+    NUM_COLUMNS,
+    POS,
+    UV,
+    SplitMesh,
+    from_manifold,
+    to_manifold,
+    union_bodies,
+    vertex_properties,
+    weld_map,
+)
 from fracture_cli.stages.repair.cleanup import boundary_loops, fan_area, is_flat, split_nonmanifold
 from fracture_cli.stages.repair.closing import fill, interior_slot, shell
-from fracture_cli.stages.repair.orient import component_orientation, fix_shading_normals, internal_open_faces, \
-    sheet_orientation
+from fracture_cli.stages.repair.orient import (
+    component_orientation,
+    fix_shading_normals,
+    internal_open_faces,
+    sheet_orientation,
+)
 from fracture_cli.types import Material, SurfaceMesh
 
 __all__ = ["FLAT_HINT", "STAGE", "RepairOptions", "repair"]
@@ -182,7 +203,7 @@ def _weld_and_clean(surface: SurfaceMesh, did: list[str]) -> tuple[SplitMesh, in
 
 
 def _orient_patches(mesh: SplitMesh, did: list[str]) -> tuple[SplitMesh, np.ndarray]:
-    """Step 3a: consistent winding within each edge-connected patch; returns the mesh and the patch (m,) of each face."""
+    """Step 3a: consistent winding within each edge-connected patch; returns the mesh and each face's patch (m,)."""
     flip, patch = propagate_winding(mesh.welded)
     if flip.any():
         did.append(f"re-wound {int(flip.sum())} faces")

@@ -58,7 +58,7 @@ def split_nonmanifold(mesh: SplitMesh) -> tuple[SplitMesh, int, str]:
         for a, b in zip(members[:-1], members[1:]):
             bodies.append(np.concatenate([np.flatnonzero(patch == a), np.flatnonzero(patch == b)]))
             paired += 1
-    touched = set()
+    touched: set[int] = set()
     for p in leftover_patches:
         bodies.append(np.flatnonzero(patch == p))
         touched.update(e for e in key_edge[key_patch == p].tolist() if many[e])

@@ -8,7 +8,6 @@ from fracture_cli import trigeom
 from fracture_cli.meshtopo import components, undirected_edges
 from fracture_cli.stages._solids import NORMAL, POS
 
-
 # Closed components compared for nesting (cavities) only when their bounding boxes nest;
 # at most this many sample vertices per component.
 _NESTING_SAMPLES = 32

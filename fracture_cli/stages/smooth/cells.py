@@ -46,7 +46,7 @@ def union_regions(V: np.ndarray, T: np.ndarray, Z: np.ndarray | None, tet_piece:
 class _CellList:
     """Convex cells (whole tets or clipped corner sets) tagged with their piece."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.tets: list[np.ndarray] = []
         self.tet_pieces: list[np.ndarray] = []
         self.clipped: list[tuple[int, int, np.ndarray]] = []  # (tet, piece, corners (c, 3))

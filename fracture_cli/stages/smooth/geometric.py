@@ -102,12 +102,12 @@ def _fault_graph(tet_mesh: TetMesh, topo: Topology, tet_piece: np.ndarray, p: in
     twice = np.flatnonzero((edge[1:] == edge[:-1]) & (edge_count[edge[:-1]] == 2))
     a, b = twice, twice + 1
     # Corners (face, local corner) that see the same vertex across a sheet edge are linked.
-    links = []
+    link_blocks = []
     for end in range(2):
         ca = 3 * rows[a] + FACE_EDGE_PAIRS[local[a], end]
         cb = 3 * rows[b] + FACE_EDGE_PAIRS[local[b], end]
-        links.append(np.column_stack([ca, cb]))
-    links = np.concatenate(links) if links else np.zeros((0, 2), np.int64)
+        link_blocks.append(np.column_stack([ca, cb]))
+    links = np.concatenate(link_blocks)
     graph = sp.coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(3 * k, 3 * k))
     _, component = connected_components(graph, directed=False)
     vertex_component = np.unique(np.column_stack([corner_vertex, component]), axis=0)

@@ -96,7 +96,7 @@ class _Ties:
     tid: np.ndarray  # (c,)
 
     @classmethod
-    def none(cls) -> "_Ties":
+    def none(cls) -> _Ties:
         e = np.zeros(0, np.int64)
         return cls(e, np.zeros((0, 2), np.int64), e, e, np.zeros((0, 3), np.int64), e, e,
                    np.zeros((0, 4), np.int64), e)

@@ -8,7 +8,6 @@ from fracture_cli import tetgeom
 from fracture_cli.errors import StageError
 from fracture_cli.stages.smooth.topology import FACE_EDGE_PAIRS, STAGE, Topology
 
-
 # Relative width of the spindle carved around an edge where a tet-aligned region
 # touches itself: its notches sit this fraction of the way from the edge's
 # midpoint to the opposite vertices (volume change eps^2 of the tets around it).

@@ -8,7 +8,6 @@ from scipy.spatial import cKDTree
 from fracture_cli import trigeom
 from fracture_cli.types import SurfaceMesh
 
-
 # Sliding: a cage triangle next to a slid vertex must stay this far (unit bbox diagonal) from the input; the
 # triangle test is conservative (a separating-axis gap), so the true distance is at least this.
 _SLIDE_CLEARANCE = 1e-3
@@ -83,7 +82,7 @@ class Containment:
         moved cage no longer encloses (its triangles swept past it).
         """
         blame = np.zeros(len(X), dtype=bool)
-        touched = moved[self.F].any(axis=1)
+        touched = np.asarray(moved[self.F].any(axis=1))
         if not touched.any():
             return np.zeros(0, dtype=np.int64)
         faces = self.F[touched]
