@@ -7,6 +7,13 @@ Stages report progress without knowing where it goes::
             ...
             t.advance()
 
+A stage whose step the pipeline already shows as a task can instead count
+items on that innermost task, without opening its own::
+
+    progress.items(k, "mode")      # "modes [6/11]: mode 3/12, ... left"
+    ...
+    progress.advance()
+
 The command line chooses the sink once (:func:`configure`); the library default
 is silent, so tests and library users see nothing. Tasks nest (the bake's
 stage, then the modes inside it); on a terminal each open task is one tqdm bar
@@ -23,8 +30,9 @@ import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import TextIO
+from typing import Any, TextIO
 
+_BAR_WITH_TOTAL = "{desc} {n_fmt}/{total_fmt} {bar} [{elapsed}<{remaining}]"
 # At least this often (seconds) a line is written for a running task when the output is not a terminal.
 HEARTBEAT_SECONDS = 10.0
 
@@ -36,6 +44,7 @@ class Task:
     description: str
     total: int | None = None
     done: int = 0
+    noun: str = ""  # what is counted, when the count was added later (:func:`items`)
     started: float = field(default_factory=time.monotonic)
     _bar: object | None = None
 
@@ -45,10 +54,14 @@ class Task:
         if self._bar is not None:
             self._bar.update(items)  # type: ignore[attr-defined]
 
+    @property
+    def label(self) -> str:
+        return f"{self.description}: {self.noun}" if self.noun else self.description
+
     def status(self, now: float) -> str:
         """One line: description, i/k, elapsed and (with a total) the remaining time estimated from the rate."""
         elapsed = now - self.started
-        text = self.description
+        text = self.label
         if self.total:
             text += f" {self.done}/{self.total}"
         text += f", {_duration(elapsed)} elapsed"
@@ -99,7 +112,7 @@ def task(description: str, total: int | None = None) -> Iterator[Task]:
     if _sink.bars:
         from tqdm import tqdm
 
-        bar_format = "{desc} {n_fmt}/{total_fmt} {bar} [{elapsed}<{remaining}]" if total else "{desc} [{elapsed}]"
+        bar_format = _BAR_WITH_TOTAL if total else "{desc} [{elapsed}]"
         current._bar = tqdm(total=total, desc=description, file=_sink.stream, position=len(_sink.stack),
                             leave=not _sink.stack, bar_format=bar_format, dynamic_ncols=True)
     with _sink.lock:
@@ -112,6 +125,25 @@ def task(description: str, total: int | None = None) -> Iterator[Task]:
             _sink.stack.remove(current)
         if current._bar is not None:
             current._bar.close()  # type: ignore[attr-defined]
+
+
+def items(total: int, noun: str = "") -> None:
+    """Give the innermost open task a count of ``total`` items (named ``noun``), starting at 0."""
+    if not _sink.stack:
+        return
+    current = _sink.stack[-1]
+    current.total, current.done, current.noun = int(total), 0, noun
+    if current._bar is not None:
+        bar: Any = current._bar
+        bar.bar_format = _BAR_WITH_TOTAL
+        bar.set_description_str(current.label, refresh=False)
+        bar.reset(total=int(total))
+
+
+def advance(count: int = 1) -> None:
+    """Mark ``count`` more items of the innermost open task done."""
+    if _sink.stack:
+        _sink.stack[-1].advance(count)
 
 
 def _start_heartbeat() -> None:
@@ -134,7 +166,7 @@ def _heartbeat() -> None:
                 continue
             if now - _sink.last_line < HEARTBEAT_SECONDS:
                 continue
-            line = "progress: " + " > ".join(t.status(now) if t is _sink.stack[-1] else t.description
+            line = "progress: " + " > ".join(t.status(now) if t is _sink.stack[-1] else t.label
                                              for t in _sink.stack)
             _sink.last_line = now
         stream.write(line + "\n")

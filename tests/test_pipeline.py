@@ -157,3 +157,29 @@ def test_progress_writes_a_line_every_few_seconds_when_not_a_terminal(monkeypatc
     with progress.task("modes", total=2) as t:  # not configured: silent
         t.advance()
     assert quiet.getvalue() == ""
+
+
+def test_progress_counts_items_on_the_step_and_draws_bars(monkeypatch):
+    stream = io.StringIO()
+    monkeypatch.setattr(progress, "HEARTBEAT_SECONDS", 0.2)
+    progress.configure(stream, bars=False)
+    try:
+        with progress.task("bake chair: [6/11] modes"):
+            progress.items(3, "mode")
+            time.sleep(1.3)
+            progress.advance()
+            time.sleep(1.3)
+    finally:
+        progress.configure(None)
+    assert re.search(r"progress: bake chair: \[6/11\] modes: mode 1/3, \d+ s elapsed, about \d+ s left",
+                     stream.getvalue()), stream.getvalue()
+    bars = io.StringIO()
+    progress.configure(bars, bars=True)
+    try:
+        with progress.task("bake chair: [6/11] modes"):
+            progress.items(2, "mode")
+            progress.advance()
+            progress.advance()
+    finally:
+        progress.configure(None)
+    assert "modes: mode" in bars.getvalue() and "2/2" in bars.getvalue()

@@ -95,17 +95,7 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     input_volume = float(solid.volume())
     if input_volume <= 0:
         raise StageError("the input encloses no volume; fragments need a solid (closed) mesh", stage=STAGE)
-    # The repair stage may already have given the surface an interior slot (faces closing its holes):
-    # reuse it, with the recipe's colour, so the asset has one interior material.
-    r, g, b, a = (float(c) for c in options.interior_color)
-    interior = Material(INTERIOR_MATERIAL_NAME, base_color=(r, g, b, a))
-    names = [m.name for m in surface.materials]
-    if INTERIOR_MATERIAL_NAME in names:
-        interior_index = names.index(INTERIOR_MATERIAL_NAME)
-        materials = tuple(interior if i == interior_index else m for i, m in enumerate(surface.materials))
-    else:
-        interior_index = len(names)
-        materials = tuple(surface.materials) + (interior,)
+    interior_index, materials = _with_interior(surface.materials, options.interior_color)
     region_id = manifold3d.Manifold.reserve_ids(1)
     id_to_material = dict(id_to_material)
     id_to_material[region_id] = interior_index
@@ -137,6 +127,21 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
         normalization=surface.normalization,
         input_volume=input_volume,
     )
+
+
+def _with_interior(materials: tuple[Material, ...], color: list) -> tuple[int, tuple[Material, ...]]:
+    """The interior material's slot and the materials with it (the recipe's colour).
+
+    The repair stage may already have given the surface an interior slot (faces
+    closing its holes): it is reused, so the asset has one interior material.
+    """
+    r, g, b, a = (float(c) for c in color)
+    interior = Material(INTERIOR_MATERIAL_NAME, base_color=(r, g, b, a))
+    names = [m.name for m in materials]
+    if INTERIOR_MATERIAL_NAME in names:
+        index = names.index(INTERIOR_MATERIAL_NAME)
+        return index, tuple(interior if i == index else m for i, m in enumerate(materials))
+    return len(names), tuple(materials) + (interior,)
 
 
 def _region_manifold(vertices: np.ndarray, faces: np.ndarray, region_id: int, piece: int):
