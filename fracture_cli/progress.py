@@ -17,14 +17,16 @@ items on that innermost task, without opening its own::
 The command line chooses the sink once (:func:`configure`); the library default
 is silent, so tests and library users see nothing. Tasks nest (the bake's
 stage, then the modes inside it); on a terminal each open task is one tqdm bar
-(the innermost with "i/k" and an ETA), elsewhere a background thread writes
-one line for the innermost task whenever 10 s pass without one. Call
+(with "i/k" and an ETA once it counts items; a background thread keeps the
+clocks ticking), elsewhere that thread writes one line for the innermost task
+whenever 10 s pass without one. Call
 :meth:`Task.advance` from the thread that opened the task.
 """
 
 from __future__ import annotations
 
 import contextlib
+import shutil
 import sys
 import threading
 import time
@@ -113,8 +115,11 @@ def task(description: str, total: int | None = None) -> Iterator[Task]:
         from tqdm import tqdm
 
         bar_format = _BAR_WITH_TOTAL if total else "{desc} [{elapsed}]"
+        # A terminal that reports no size (0 x 0) would make tqdm hide every bar: fall back to 100 x 24.
+        size = shutil.get_terminal_size((100, 24))
         current._bar = tqdm(total=total, desc=description, file=_sink.stream, position=len(_sink.stack),
-                            leave=not _sink.stack, bar_format=bar_format, dynamic_ncols=True)
+                            leave=False, bar_format=bar_format, ncols=min(size.columns, 120),
+                            nrows=max(size.lines, 4))
     with _sink.lock:
         _sink.stack.append(current)
     _start_heartbeat()
@@ -147,7 +152,7 @@ def advance(count: int = 1) -> None:
 
 
 def _start_heartbeat() -> None:
-    if _sink.bars or (_sink.thread is not None and _sink.thread.is_alive()):
+    if _sink.thread is not None and _sink.thread.is_alive():
         return
     _sink.last_line = time.monotonic()
     _sink.thread = threading.Thread(target=_heartbeat, name="fracture-progress", daemon=True)
@@ -155,12 +160,17 @@ def _start_heartbeat() -> None:
 
 
 def _heartbeat() -> None:
-    """Write the innermost task's status whenever HEARTBEAT_SECONDS pass without a line (non-terminal output)."""
+    """Redraw the bars every second (their clocks tick between items); without bars, write the innermost
+    task's status whenever HEARTBEAT_SECONDS pass without a line."""
     while True:
         _sink.wake.wait(1.0)
         now = time.monotonic()
         with _sink.lock:
             stream = _sink.stream
+            if _sink.bars:
+                for t in _sink.stack:
+                    if t._bar is not None:
+                        t._bar.refresh()  # type: ignore[attr-defined]
             if not _sink.stack or stream is None or _sink.bars:
                 _sink.last_line = now
                 continue
