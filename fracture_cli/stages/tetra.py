@@ -115,8 +115,7 @@ def tetra(cage: Cage, options: TetraOptions = TetraOptions()) -> TetMesh:
     faces = np.asarray(cage.faces, dtype=np.int64)
     if len(faces) < 4:
         raise StageError(f"the cage has {len(faces)} faces; a closed surface needs at least 4", stage=STAGE)
-    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
-    cage_volume = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+    cage_volume = trigeom.signed_volume(vertices, faces)
     if cage_volume <= 0:
         raise StageError("the cage encloses no volume (inside-out or open); rebuild it with the cage stage",
                          stage=STAGE)
