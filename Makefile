@@ -10,7 +10,7 @@ STAMP      := $(VENV)/.installed
 PYTEST_ARGS ?=
 
 .SECONDEXPANSION:
-.PHONY: install test demo bench goldens assets asset-reports gltf-validator check clean
+.PHONY: install test lint demo bench goldens assets asset-reports gltf-validator check clean
 
 PACKAGE_SOURCES := $(shell find fracture_cli -name '*.py' -not -path '*/__pycache__/*' | sort)
 
@@ -24,8 +24,13 @@ $(STAMP): pyproject.toml
 
 GLTF_VALIDATOR := build/node/node_modules/gltf-validator/package.json
 
-test: install gltf-validator
+test: install gltf-validator lint
 	$(PY) -m pytest -n 2 -q $(PYTEST_ARGS)
+
+# The lint and type gate (configured in pyproject.toml), run by `make test` before the tests.
+lint: install
+	$(VENV)/bin/ruff check fracture_cli tests
+	$(VENV)/bin/mypy
 
 # The Khronos glTF validator (npm) checks every GLB the tests bake. Optional:
 # without npm the tests validate the GLB structure themselves and skip this.
@@ -64,5 +69,5 @@ build/assets.mk: sample_assets/manifest.toml scripts/assets_mk.py $(wildcard rec
 	$(PYTHON_SYS) scripts/assets_mk.py > $@
 
 clean:
-	rm -rf build bench/out .pytest_cache
+	rm -rf build bench/out .pytest_cache .mypy_cache .ruff_cache
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

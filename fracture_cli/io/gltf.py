@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import json
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -99,7 +100,8 @@ def _texture_png(material: Material) -> bytes | None:
     return buf.getvalue()
 
 
-def glb_bytes(meshes: list[tuple], materials: tuple[Material, ...]) -> bytes:
+def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Primitive], np.ndarray]],
+              materials: tuple[Material, ...]) -> bytes:
     """Encode meshes as a GLB file, one node per mesh.
 
     Parameters
@@ -138,9 +140,7 @@ def glb_bytes(meshes: list[tuple], materials: tuple[Material, ...]) -> bytes:
         accessors.append(acc)
         return len(accessors) - 1
 
-    images: list[dict] = []
-    textures: list[dict] = []
-    samplers: list[dict] = []
+    images, textures, samplers = [], [], []
     material_json = []
     for material in materials:
         png = _texture_png(material)
@@ -155,7 +155,6 @@ def glb_bytes(meshes: list[tuple], materials: tuple[Material, ...]) -> bytes:
         material_json.append(_material_json(material, tex))
 
     gl_meshes, nodes = [], []
-    rest: list
     for name, primitives, *rest in meshes:
         translation = rest[0] if rest else None
         prims = []

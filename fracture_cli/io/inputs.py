@@ -9,6 +9,7 @@ preflight refuses to replace any of them.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import struct
@@ -17,6 +18,15 @@ from urllib.parse import unquote
 _IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".webp", ".ktx2", ".tga", ".bmp", ".gif", ".tif", ".tiff")
 # MTL statements whose last word is a texture file (filenames with spaces are not portable in MTL anyway).
 _MTL_MAPS = ("map_", "bump", "disp", "decal", "refl", "norm")
+
+
+def file_sha256(path: str) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
 def input_files(path: str) -> list[str]:

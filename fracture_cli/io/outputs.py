@@ -60,7 +60,6 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import hashlib
 import json
 import logging
 import math
@@ -76,6 +75,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 from fracture_cli.errors import OutputError, StageError
+from fracture_cli.io.inputs import file_sha256
 
 log = logging.getLogger(__name__)
 
@@ -252,7 +252,7 @@ def check_inputs_untouched(out_dir: str, stems: Iterable[str], inputs: Iterable[
                                       "it; bake into another folder (-o)", path=printable(path))
 
 
-def check_batch(out_dir: str, inputs: Iterable[str]) -> None:
+def refuse_inputs_as_outputs(out_dir: str, inputs: Iterable[str]) -> None:
     """Refuse a batch in which an output path of one input is another input (or a companion file of one).
 
     Raises
@@ -505,15 +505,6 @@ class Staging:
             json.dump(report, fh, indent=2, sort_keys=True, allow_nan=False)
             fh.write("\n")
         return target
-
-
-def file_sha256(path: str) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _nonfinite(value, where: str = "") -> list[str]:
