@@ -83,7 +83,8 @@ def check_value(options_cls, name: str, value: Any) -> str | None:
         bad_hi = hi is not None and value > hi
         if bad_lo or bad_hi:
             left = "(" if meta["min_exclusive"] else "["
-            return f"{name} = {value!r} is out of range {left}{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
+            low, high = lo if lo is not None else "-inf", hi if hi is not None else "inf"
+            return f"{name} = {value!r} is out of range {left}{low}, {high}]"
     if isinstance(default, str) and not isinstance(value, str):
         return f"{name} = {value!r} must be a string"
     return None

@@ -74,7 +74,8 @@ def test_editing_the_bin_of_a_gltf_invalidates_the_cache(tmp_path):
     second = CliRunner().invoke(cli, ["bake", path, "-o", out, "--cache", cache, "--json", *SMALL])
     assert second.exit_code == 0, second.output
     a, b = json.loads(first.stdout), json.loads(second.stdout)
-    assert a["cache"] == {"cage": "miss", "modes": "miss"} and b["cache"] == {"cage": "miss", "modes": "miss"}
+    assert set(a["cache"].values()) == {"miss"} and set(b["cache"].values()) == {"miss"}  # nothing reused
+    assert {"cage", "modes"} <= set(b["cache"])
     assert a["input"]["sha256"] != b["input"]["sha256"]
     assert b["checks"]["input_volume"] == pytest.approx(2.0)
     assert sum(f["volume"] for f in b["fragments"]) == pytest.approx(2.0, rel=1e-6)

@@ -151,9 +151,10 @@ def test_non_finite_flag_is_a_usage_error(tmp_path):
 
 @pytest.mark.parametrize("threshold", ["nan", "-1"])
 def test_impact_threshold_must_be_a_number_at_least_zero(tmp_path, threshold):
-    from fracture_cli.runtime.format import write_runtime
-    from fracture_cli.stages.runtime import RuntimeOptions, runtime
     from test_runtime import slab_bar
+
+    from fracture_cli.runtime.format import write_runtime
+    from fracture_cli.stages.precompute import RuntimeOptions, runtime
 
     path, _ = write_runtime(runtime(*slab_bar(k=3), RuntimeOptions()), tmp_path / "bar.fracture.json")
     result = CliRunner().invoke(cli, ["impact", str(path), "--point", "0", "0", "0", "--impulse", "1", "0", "0",

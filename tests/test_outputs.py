@@ -333,7 +333,7 @@ def test_published_files_get_0666_minus_umask(tmp_path):
 
 def test_runtime_file_written_alone_is_0644(tmp_path):
     from fracture_cli.runtime.format import write_runtime
-    from fracture_cli.stages.runtime import RuntimeOptions, runtime
+    from fracture_cli.stages.precompute import RuntimeOptions, runtime
 
     sys.path.insert(0, HERE)
     from test_runtime import slab_bar

@@ -226,7 +226,7 @@ def test_components_match_a_reference_union_find():
             broken = rng.random(len(pairs)) < rng.random()
             parent = list(range(p))
 
-            def find(a):
+            def find(a, parent=parent):
                 while parent[a] != a:
                     a = parent[a]
                 return a

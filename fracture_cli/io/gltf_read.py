@@ -56,8 +56,8 @@ _HINTS = {
                                "in.glb out.glb')",
     "EXT_mesh_gpu_instancing": "GPU instancing; export the instances as nodes",
 }
-_COMPONENTS: dict[int, np.dtype] = {5120: np.dtype("i1"), 5121: np.dtype("u1"), 5122: np.dtype("<i2"), 5123: np.dtype("<u2"),
-               5125: np.dtype("<u4"), 5126: np.dtype("<f4")}
+_COMPONENTS: dict[int, np.dtype] = {5120: np.dtype("i1"), 5121: np.dtype("u1"), 5122: np.dtype("<i2"),
+                                    5123: np.dtype("<u2"), 5125: np.dtype("<u4"), 5126: np.dtype("<f4")}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 # normalized integer -> float (glTF 2.0, section 3.11 "Animations" table / KHR_mesh_quantization)
 _NORMALIZE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}

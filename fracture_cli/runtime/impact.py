@@ -69,7 +69,7 @@ class _Prepared:
         self.forest = _SpanningForest(p, self.edge_p, self.edge_q)
 
 
-_PREPARED: "weakref.WeakKeyDictionary[RuntimeData, _Prepared]" = weakref.WeakKeyDictionary()
+_PREPARED: weakref.WeakKeyDictionary[RuntimeData, _Prepared] = weakref.WeakKeyDictionary()
 
 
 def prepare(data: RuntimeData) -> _Prepared:

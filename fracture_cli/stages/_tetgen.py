@@ -164,7 +164,7 @@ def clean_stale_workdirs(folder: str | None = None) -> list[str]:
 class _Worker:
     """One child process running :func:`_serve`, restarted after a crash or timeout."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self._process: subprocess.Popen | None = None
         self._workdir: tempfile.TemporaryDirectory | None = None
         self._lock = threading.Lock()

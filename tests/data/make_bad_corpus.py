@@ -221,7 +221,7 @@ def tristrip_box_ply() -> bytes:
     # The four sides around z as one strip zig-zagging between z = -0.5 and z = +0.5 (corner id x*4 + y*2 + z).
     ring = [(0, 0), (1, 0), (1, 1), (0, 1), (0, 0)]
     wall = [c for x, y in ring for c in (x * 4 + y * 2 + 1, x * 4 + y * 2)]
-    # The two caps (z = -0.5 and +0.5), each as a 4-vertex strip b, c, a, d from its quad's triangles (a, b, c), (a, c, d).
+    # The two caps (z = -0.5 and +0.5), each a 4-vertex strip b, c, a, d of its quad's triangles (a, b, c), (a, c, d).
     caps = [[F[k][1], F[k][2], F[k][0], F[k + 1][2]] for k in (4, 10)]
     rows = [wall, caps[0] + [-1] + caps[1]]
     tris = [t for row in rows for part in " ".join(map(str, row)).split("-1") for t in strip_triangles(
