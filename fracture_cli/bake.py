@@ -28,7 +28,13 @@ from fracture_cli import __version__, trigeom
 from fracture_cli.cache import file_sha256
 from fracture_cli.errors import FractureError, UsageError
 from fracture_cli.io.inputs import estimate_output_bytes, input_files
-from fracture_cli.io.outputs import output_names, output_set, preflight, refuse_inputs_as_outputs
+from fracture_cli.io.outputs import (
+    check_inputs_untouched,
+    output_names,
+    output_set,
+    preflight,
+    refuse_inputs_as_outputs,
+)
 from fracture_cli.pipeline import STAGE_NAMES, STEPS, PipelineState, Runner
 from fracture_cli.recipe import Recipe
 from fracture_cli.types import Fragments
@@ -187,6 +193,7 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
     from fracture_cli.io.write import write_fragments_glb
     from fracture_cli.runtime.format import write_runtime
 
+    check_inputs_untouched(out_dir, [stem], input_files(state.need("source", "export")))  # also for a chain
     with runner.step("export"), output_set(out_dir, stem) as staging:
         write_fragments_glb(staging.file(f"{stem}.glb"), state.need("fragments", "export"))
         write_runtime(state.need("runtime", "export"), staging.file(f"{stem}.fracture.json"))

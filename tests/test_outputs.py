@@ -289,7 +289,7 @@ def test_an_input_is_never_an_output(asset, tmp_path, no_load):
     for args, name in cases:
         result = CliRunner().invoke(cli, ["bake", *args, *SMALL])
         assert result.exit_code == 1, args
-        assert_one_line(result, name, "is an input of this bake", "bake into another folder")
+        assert_one_line(result, name, "is an input of this bake", "write into another folder")
         assert glb.read_bytes() == original
     assert sorted(os.listdir(folder)) == ["prop.glb"]
 
@@ -576,3 +576,18 @@ def test_numpy_is_not_needed_by_the_protocol():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO)
     assert out.stdout.strip() == "[]"
     assert np is not None
+
+
+def test_chain_save_and_export_never_replace_their_input(tmp_path):
+    glb = tmp_path / "prop.glb"
+    shutil.copy(os.path.join(HERE, "data", "bad", "two_materials.glb"), glb)
+    original = glb.read_bytes()
+    result = CliRunner().invoke(cli, ["load", str(glb), "save", str(glb)])
+    assert result.exit_code == 1
+    assert_one_line(result, "prop.glb", "is an input of this bake")
+    from fracture_cli.bake import write_outputs
+    from fracture_cli.pipeline import PipelineState, Runner
+
+    with pytest.raises(OutputError, match="is an input of this bake"):  # the chain's `export` step
+        write_outputs(str(tmp_path), "prop", PipelineState(source=str(glb)), {}, Runner("t"))
+    assert glb.read_bytes() == original and os.listdir(tmp_path) == ["prop.glb"]

@@ -226,9 +226,20 @@ def _size(n: float) -> str:
 def check_inputs_untouched(out_dir: str, stems: Iterable[str], inputs: Iterable[str]) -> None:
     """Refuse if an output path of any of ``stems`` in ``out_dir`` is one of ``inputs``.
 
+    Raises
+    ------
+    OutputError
+        See :func:`refuse_replacing_inputs`.
+    """
+    refuse_replacing_inputs([os.path.join(out_dir, name) for stem in stems for name in output_names(stem)], inputs)
+
+
+def refuse_replacing_inputs(targets: Iterable[str], inputs: Iterable[str]) -> None:
+    """Refuse if a file about to be written (``targets``) is one of ``inputs``.
+
     Real paths are compared (:func:`os.path.samefile`: the same device and
     inode), so an input reached through a symlink, a symlinked folder or a
-    hard link is found too.
+    hard link is found too. Targets that do not exist yet are fine.
 
     Raises
     ------
@@ -239,17 +250,15 @@ def check_inputs_untouched(out_dir: str, stems: Iterable[str], inputs: Iterable[
     for path in inputs:
         with contextlib.suppress(OSError):
             existing.append((path, os.stat(path)))
-    for stem in stems:
-        for name in output_names(stem):
-            target = os.path.join(out_dir, name)
-            try:
-                st = os.stat(target)
-            except OSError:
-                continue
-            for path, ist in existing:
-                if (st.st_dev, st.st_ino) == (ist.st_dev, ist.st_ino):
-                    raise OutputError(f"is an input of this bake and the output {printable(target)} would replace "
-                                      "it; bake into another folder (-o)", path=printable(path))
+    for target in targets:
+        try:
+            st = os.stat(target)
+        except OSError:
+            continue
+        for path, ist in existing:
+            if (st.st_dev, st.st_ino) == (ist.st_dev, ist.st_ino):
+                raise OutputError(f"is an input of this bake and the output {printable(target)} would replace "
+                                  "it; write into another folder", path=printable(path))
 
 
 def refuse_inputs_as_outputs(out_dir: str, inputs: Iterable[str]) -> None:
