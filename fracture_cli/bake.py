@@ -28,13 +28,8 @@ from fracture_cli import __version__, trigeom
 from fracture_cli.cache import file_sha256
 from fracture_cli.errors import FractureError, UsageError
 from fracture_cli.io.inputs import estimate_output_bytes, input_files
-from fracture_cli.io.outputs import (
-    check_inputs_untouched,
-    output_names,
-    output_set,
-    preflight,
-    refuse_inputs_as_outputs,
-)
+from fracture_cli.io.outputs import output_names, output_set
+from fracture_cli.io.preflight import check_inputs_untouched, preflight, refuse_inputs_as_outputs
 from fracture_cli.pipeline import STAGE_NAMES, STEPS, PipelineState, Runner
 from fracture_cli.recipe import Recipe
 from fracture_cli.types import Fragments

@@ -226,7 +226,7 @@ def _file_command(name: str, doc: str, run: Callable[[Chain, str], None], folder
 
 def _save(chain: Chain, path: str) -> None:
     from fracture_cli.io.inputs import input_files
-    from fracture_cli.io.outputs import refuse_replacing_inputs
+    from fracture_cli.io.preflight import refuse_replacing_inputs
     from fracture_cli.io.write import save_surface
 
     refuse_replacing_inputs([path], input_files(chain.state.source) if chain.state.source else [])

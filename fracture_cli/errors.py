@@ -14,6 +14,11 @@ EXIT_FAILURE = 1  # bad input or a stage that could not finish
 EXIT_USAGE = 2  # wrong command line (click's own convention)
 
 
+def printable(path: str | os.PathLike) -> str:
+    """``path`` for a message: a file name that is not UTF-8 (surrogate-escaped by Python) gets ``\\xNN`` escapes."""
+    return os.fsencode(path).decode("utf-8", "backslashreplace")
+
+
 class FractureError(Exception):
     """Base class of every error the tool reports to its user.
 
@@ -40,8 +45,7 @@ class FractureError(Exception):
         if self.stage:
             prefix += f"{self.stage}: "
         if self.path:
-            # A file name that is not UTF-8 (surrogate-escaped by Python) is shown with \xNN escapes.
-            prefix += os.fsencode(self.path).decode("utf-8", "backslashreplace") + ": "
+            prefix += printable(self.path) + ": "
         return prefix + self.message
 
 

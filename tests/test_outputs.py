@@ -24,8 +24,11 @@ from click.testing import CliRunner
 
 from fracture_cli.cli import cli
 from fracture_cli.errors import OutputError
-from fracture_cli.io import outputs
-from fracture_cli.io.outputs import StemLock, output_names, output_set, preflight, verify_output_set
+from fracture_cli.io import outputs, stemlock
+from fracture_cli.io import preflight as preflight_module
+from fracture_cli.io.outputs import output_names, output_set, verify_output_set
+from fracture_cli.io.preflight import preflight
+from fracture_cli.io.stemlock import StemLock
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
@@ -199,7 +202,7 @@ def no_load(monkeypatch):
 
 
 def test_too_little_free_space_is_refused_before_work(asset, tmp_path, monkeypatch, no_load):
-    monkeypatch.setattr(outputs, "free_bytes", lambda folder: 1000)
+    monkeypatch.setattr(preflight_module, "free_bytes", lambda folder: 1000)
     result = CliRunner().invoke(cli, ["bake", asset, "-o", str(tmp_path / "out"), *SMALL])
     assert result.exit_code == 1
     assert_one_line(result, str(tmp_path / "out"), "only 1000 bytes free in the output folder; the outputs of box "
@@ -393,7 +396,7 @@ def test_stale_lock_of_a_dead_process_is_broken_and_a_live_one_waited_for(tmp_pa
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     lock = StemLock(str(tmp_path), "s")
     with open(lock.path, "w") as fh:
-        json.dump({"host": outputs.socket.gethostname(), "pid": int(dead.stdout), "token": "dead"}, fh)
+        json.dump({"host": stemlock.socket.gethostname(), "pid": int(dead.stdout), "token": "dead"}, fh)
     with output_set(str(tmp_path), "s") as staging:  # the dead owner's lock does not block
         fake_set(staging, "x")
     assert not os.path.exists(lock.path)
@@ -402,7 +405,7 @@ def test_stale_lock_of_a_dead_process_is_broken_and_a_live_one_waited_for(tmp_pa
             StemLock(str(tmp_path), "s", timeout=0.3).acquire()
         assert StemLock(str(tmp_path), "s").acquire(timeout=0) is False
     # A lock from another machine whose heartbeat stopped: stale after STALE_SECONDS of no change.
-    monkeypatch.setattr(outputs, "STALE_SECONDS", 0.3)
+    monkeypatch.setattr(stemlock, "STALE_SECONDS", 0.3)
     with open(lock.path, "w") as fh:
         json.dump({"host": "elsewhere.example", "pid": 1, "token": "remote"}, fh)
     started = time.monotonic()

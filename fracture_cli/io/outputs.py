@@ -8,13 +8,13 @@ and the report is the set's *manifest*: it is written and published last and
 lists the SHA-256 and size of the other three (``report["files"]``). How a
 set is replaced:
 
-1. **Preflight** (before any long work): the output folder name is usable
+1. **Preflight** (:mod:`.preflight`, before any long work): the output folder name is usable
    (not ``""``, the stem is UTF-8), the folder exists or can be created and
    accepts a new file, the output names are free or regular files, no output
    path is an input of the batch (compared by real path, symlinks and hard
    links included, via :func:`os.path.samefile`), and the free space covers
    an estimate of the outputs. Each failure is one :class:`OutputError` line.
-2. **Lock.** ``.<stem>.fracture-lock`` is created with ``O_CREAT | O_EXCL``
+2. **Lock** (:mod:`.stemlock`). ``.<stem>.fracture-lock`` is created with ``O_CREAT | O_EXCL``
    (atomic on local disks and on NFSv3+ and SMB shares, unlike ``fcntl``
    locks, which NFS honours only with a working lock daemon). It holds the
    owner's host, pid and a random token; the owner touches it every
@@ -68,24 +68,19 @@ import re
 import secrets
 import shutil
 import signal
-import socket
 import threading
-import time
-from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from dataclasses import dataclass
 
-from fracture_cli.errors import OutputError, StageError
+from fracture_cli.errors import OutputError, StageError, printable
 from fracture_cli.io.inputs import file_sha256
+from fracture_cli.io.stemlock import LOCK_TIMEOUT_SECONDS, StemLock
 
 log = logging.getLogger(__name__)
 
 #: The suffixes of one output set, in publish order: the report (the manifest) last.
 SUFFIXES = (".fracture.bin", ".fracture.json", ".glb", ".report.json")
 REPORT_SUFFIX = ".report.json"
-HEARTBEAT_SECONDS = 5.0
-STALE_SECONDS = 60.0
-LOCK_TIMEOUT_SECONDS = 600.0
-_POLL_SECONDS = 0.1
 _JOURNAL = "PUBLISHING"
 _BACKUP = "previous"
 _TOKEN_RE = "[0-9a-f]{32}"
@@ -99,11 +94,6 @@ def output_names(stem: str) -> tuple[str, ...]:
     return tuple(stem + s for s in SUFFIXES)
 
 
-def printable(path: str | os.PathLike) -> str:
-    """``path`` for a message: bytes that are not UTF-8 shown as ``\\xNN`` escapes."""
-    return os.fsencode(path).decode("utf-8", "backslashreplace")
-
-
 def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
@@ -113,322 +103,6 @@ def _umask() -> int:
 def file_mode() -> int:
     """Mode of every published file: ``0666`` minus the umask (``0644`` with the usual umask)."""
     return 0o666 & ~_umask()
-
-
-# ----------------------------------------------------------------------------
-# Preflight
-
-
-def preflight(out_dir: str, stem: str, inputs: Iterable[str] = (), estimate_bytes: int = 0) -> None:
-    """Check, before any long work, that ``stem``'s outputs can be written into ``out_dir``.
-
-    Parameters
-    ----------
-    out_dir : str
-        Output folder; if missing, its nearest existing parent is checked
-        instead and the folder is made by :func:`output_set`, so a bake that
-        fails before writing leaves no empty folder behind.
-    stem : str
-        The outputs' base name.
-    inputs : iterable of str, optional
-        Every file the batch reads (assets and their companion files): none
-        may be an output path.
-    estimate_bytes : int, optional (default 0)
-        Expected size of the outputs; refused when the folder has less free space.
-
-    Raises
-    ------
-    OutputError
-        One line naming the folder or file and the problem.
-    """
-    if not out_dir:
-        raise OutputError('the output folder is "" (empty); give one, e.g. -o build/out')
-    try:
-        os.fsencode(stem).decode("utf-8")
-    except UnicodeDecodeError:
-        raise OutputError(f"the file name is not valid UTF-8 ({printable(stem)}): the outputs and the runtime "
-                          "file's reference to its .bin need a UTF-8 name; rename the input") from None
-    if not os.path.isdir(out_dir):
-        # Created only when the outputs are written, so a bake that fails leaves no empty folder behind.
-        ancestor = _existing_ancestor(out_dir)
-        _check_writable(ancestor, for_new_folder=True)
-        _check_free_space(ancestor, stem, estimate_bytes, out_dir)
-        return
-    for name in output_names(stem):
-        target = os.path.join(out_dir, name)
-        if os.path.lexists(target) and not os.path.isfile(target):
-            raise OutputError("is in the way of an output (not a regular file); remove or rename it",
-                              path=printable(target))
-    check_inputs_untouched(out_dir, [stem], inputs)
-    _check_writable(out_dir)
-    _check_free_space(out_dir, stem, estimate_bytes, out_dir)
-    # Complete or clear what a killed bake left now, so the folder holds one set even if this bake fails.
-    lock = StemLock(out_dir, stem)
-    if lock.acquire(timeout=0):
-        try:
-            recover(out_dir, stem)
-        except OSError as exc:
-            raise _write_error(exc, out_dir) from None
-        finally:
-            lock.release()
-
-
-def _existing_ancestor(out_dir: str) -> str:
-    """The nearest existing folder above a missing ``out_dir`` (refused if a file is in the way)."""
-    path = os.path.abspath(out_dir)
-    while not os.path.exists(path):
-        parent = os.path.dirname(path)
-        if parent == path:
-            break
-        path = parent
-    if not os.path.isdir(path):
-        what = "the output folder is a file, not a folder" if path == os.path.abspath(out_dir) else \
-            f"cannot create the output folder: {printable(path)} is a file"
-        raise OutputError(what, path=printable(out_dir))
-    return path
-
-
-def _check_writable(folder: str, *, for_new_folder: bool = False) -> None:
-    """Create and remove a probe in ``folder`` (a file, or a folder when the output folder is still to be made)."""
-    probe = os.path.join(folder, f".fracture-probe-{secrets.token_hex(8)}")
-    try:
-        if for_new_folder:
-            os.mkdir(probe, 0o700)
-            os.rmdir(probe)
-        else:
-            os.close(os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
-            os.unlink(probe)
-    except OSError as exc:
-        what = "cannot create the output folder" if for_new_folder else "the output folder is not writable"
-        raise OutputError(f"{what} ({exc.strerror})", path=printable(folder)) from None
-
-
-def free_bytes(out_dir: str) -> int:
-    """Bytes available to this user in ``out_dir``'s file system."""
-    return shutil.disk_usage(out_dir).free
-
-
-def _check_free_space(folder: str, stem: str, estimate_bytes: int, out_dir: str) -> None:
-    free = free_bytes(folder)
-    if estimate_bytes > free:
-        raise OutputError(f"only {_size(free)} free in the output folder; the outputs of {printable(stem)} need "
-                          f"about {_size(estimate_bytes)}", path=printable(out_dir))
-
-
-def _size(n: float) -> str:
-    for unit in ("bytes", "KiB", "MiB", "GiB"):
-        if n < 1024 or unit == "GiB":
-            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
-        n /= 1024
-    return f"{n:.1f} TiB"  # pragma: no cover
-
-
-def check_inputs_untouched(out_dir: str, stems: Iterable[str], inputs: Iterable[str]) -> None:
-    """Refuse if an output path of any of ``stems`` in ``out_dir`` is one of ``inputs``.
-
-    Raises
-    ------
-    OutputError
-        See :func:`refuse_replacing_inputs`.
-    """
-    refuse_replacing_inputs([os.path.join(out_dir, name) for stem in stems for name in output_names(stem)], inputs)
-
-
-def refuse_replacing_inputs(targets: Iterable[str], inputs: Iterable[str]) -> None:
-    """Refuse if a file about to be written (``targets``) is one of ``inputs``.
-
-    Real paths are compared (:func:`os.path.samefile`: the same device and
-    inode), so an input reached through a symlink, a symlinked folder or a
-    hard link is found too. Targets that do not exist yet are fine.
-
-    Raises
-    ------
-    OutputError
-        Naming the input and the output that would replace it.
-    """
-    existing = []
-    for path in inputs:
-        with contextlib.suppress(OSError):
-            existing.append((path, os.stat(path)))
-    for target in targets:
-        try:
-            st = os.stat(target)
-        except OSError:
-            continue
-        for path, ist in existing:
-            if (st.st_dev, st.st_ino) == (ist.st_dev, ist.st_ino):
-                raise OutputError(f"is an input of this bake and the output {printable(target)} would replace "
-                                  "it; write into another folder", path=printable(path))
-
-
-def refuse_inputs_as_outputs(out_dir: str, inputs: Iterable[str]) -> None:
-    """Refuse a batch in which an output path of one input is another input (or a companion file of one).
-
-    Raises
-    ------
-    OutputError
-        See :func:`check_inputs_untouched`.
-    """
-    from fracture_cli.io.inputs import input_files
-
-    if not out_dir:
-        return  # preflight() says what is wrong with it
-    inputs = list(inputs)
-    stems = [os.path.splitext(os.path.basename(p))[0] for p in inputs]
-    check_inputs_untouched(out_dir, stems, [f for p in inputs for f in input_files(p)])
-
-
-# ----------------------------------------------------------------------------
-# The stem lock
-
-
-@dataclass
-class StemLock:
-    """``.<stem>.fracture-lock`` in the output folder; see the module docstring.
-
-    Use as a context manager, or :meth:`acquire` / :meth:`release`.
-    """
-
-    out_dir: str
-    stem: str
-    timeout: float = LOCK_TIMEOUT_SECONDS
-    token: str = field(default_factory=lambda: secrets.token_hex(16))
-    _stop: threading.Event = field(default_factory=threading.Event, repr=False)
-    _beat: threading.Thread | None = field(default=None, repr=False)
-
-    @property
-    def path(self) -> str:
-        return os.path.join(self.out_dir, f".{self.stem}.fracture-lock")
-
-    def __enter__(self) -> StemLock:
-        self.acquire()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.release()
-
-    def acquire(self, timeout: float | None = None) -> bool:
-        """Take the lock, waiting up to ``timeout`` s (default ``self.timeout``) for a live owner.
-
-        Returns
-        -------
-        bool
-            True when taken; False only if ``timeout`` is 0 and a live bake holds it.
-
-        Raises
-        ------
-        OutputError
-            The lock is still held by a live bake after ``timeout`` seconds, or
-            cannot be created.
-        """
-        timeout = self.timeout if timeout is None else timeout
-        deadline = time.monotonic() + timeout
-        seen: tuple[float, str] | None = None  # (mtime, token) of the holder's lock when first seen
-        seen_since = time.monotonic()
-        while True:
-            if self._try_create():
-                self._beat = threading.Thread(target=self._heartbeat, name="fracture-lock", daemon=True)
-                self._beat.start()
-                return True
-            holder = _read_lock(self.path)
-            if holder is None:
-                continue  # released between our attempt and the read
-            mtime, info = holder
-            if seen is None or seen != (mtime, info.get("token", "")):
-                seen, seen_since = (mtime, info.get("token", "")), time.monotonic()
-            if _owner_dead(info) or time.monotonic() - seen_since > STALE_SECONDS:
-                log.warning("output lock %s of pid %s on %s is stale; removing it", printable(self.path),
-                            info.get("pid"), info.get("host"))
-                self._break(info.get("token", ""))
-                continue
-            if time.monotonic() >= deadline:
-                if timeout == 0:
-                    return False
-                raise OutputError(f"another bake (pid {info.get('pid')} on {info.get('host')}, since "
-                                  f"{info.get('started')}) is writing {printable(self.stem)}.* here; waited "
-                                  f"{timeout:.0f} s (remove the lock if no bake is running)",
-                                  path=printable(self.path))
-            time.sleep(_POLL_SECONDS)
-
-    def _try_create(self) -> bool:
-        try:
-            fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-        except FileExistsError:
-            return False
-        except OSError as exc:
-            raise OutputError(f"cannot create the output lock ({exc.strerror})", path=printable(self.path)) from None
-        info = {"host": socket.gethostname(), "pid": os.getpid(), "token": self.token,
-                "started": time.strftime("%Y-%m-%d %H:%M:%S")}
-        with os.fdopen(fd, "w") as fh:
-            json.dump(info, fh)
-        return True
-
-    def _break(self, stale_token: str) -> None:
-        """Remove the lock if it still holds ``stale_token``, under ``<lock>.break`` so only one waiter does."""
-        breaker = self.path + ".break"
-        try:
-            fd = os.open(breaker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-        except FileExistsError:
-            # Another waiter is breaking it; a breaker file older than STALE_SECONDS was left by a killed one.
-            with contextlib.suppress(OSError):
-                if time.time() - os.stat(breaker).st_mtime > STALE_SECONDS:
-                    os.unlink(breaker)
-            time.sleep(_POLL_SECONDS)
-            return
-        os.close(fd)
-        try:
-            holder = _read_lock(self.path)
-            if holder is not None and holder[1].get("token", "") == stale_token:
-                with contextlib.suppress(FileNotFoundError):
-                    os.unlink(self.path)
-        finally:
-            with contextlib.suppress(OSError):
-                os.unlink(breaker)
-
-    def _heartbeat(self) -> None:
-        while not self._stop.wait(HEARTBEAT_SECONDS):
-            with contextlib.suppress(OSError):
-                os.utime(self.path)
-
-    def release(self) -> None:
-        """Stop the heartbeat and remove the lock file if it is still ours."""
-        self._stop.set()
-        if self._beat is not None:
-            self._beat.join()
-            self._beat = None
-        holder = _read_lock(self.path)
-        if holder is not None and holder[1].get("token") == self.token:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(self.path)
-
-
-def _read_lock(path: str) -> tuple[float, dict] | None:
-    """(mtime, owner info) of a lock file, None if it does not exist; unreadable content counts as no owner info."""
-    try:
-        with open(path, "rb") as fh:
-            mtime = os.fstat(fh.fileno()).st_mtime
-            raw = fh.read(4096)
-    except FileNotFoundError:
-        return None
-    try:
-        info = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError):
-        info = {}
-    return mtime, info if isinstance(info, dict) else {}
-
-
-def _owner_dead(info: dict) -> bool:
-    """True if the lock's owner ran on this host and no longer runs (unknown: False)."""
-    pid = info.get("pid")
-    if info.get("host") != socket.gethostname() or not isinstance(pid, int) or pid <= 0 or os.name == "nt":
-        return False  # on Windows os.kill(pid, 0) would send a Ctrl-C event
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    except OSError:
-        return False  # EPERM: alive, another user's
-    return False
 
 
 # ----------------------------------------------------------------------------
@@ -566,7 +240,7 @@ def output_set(out_dir: str, stem: str, *, lock_timeout: float = LOCK_TIMEOUT_SE
             recover(out_dir, stem)
             os.mkdir(staging.path, 0o700)
         except OSError as exc:
-            raise _write_error(exc, out_dir) from None
+            raise write_error(exc, out_dir) from None
         try:
             try:
                 yield staging
@@ -575,16 +249,19 @@ def output_set(out_dir: str, stem: str, *, lock_timeout: float = LOCK_TIMEOUT_SE
                     publish(staging)  # raises OutputError itself once a rename has happened
                     _published.append(os.path.join(out_dir, stem))
             except OSError as exc:
-                raise _write_error(exc, out_dir) from None
+                raise write_error(exc, out_dir) from None
         finally:
             shutil.rmtree(staging.path, ignore_errors=True)
 
 
-def _write_error(exc: OSError, out_dir: str) -> OutputError:
+def write_error(exc: OSError, out_dir: str) -> OutputError:
+    """One line for an OSError while writing into ``out_dir`` (nothing of the previous set was replaced)."""
+    from fracture_cli.io.preflight import free_bytes, human_size
+
     where = printable(out_dir)
     if exc.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)):
         with contextlib.suppress(OSError):
-            where += f" ({_size(free_bytes(out_dir))} free)"
+            where += f" ({human_size(free_bytes(out_dir))} free)"
         return OutputError("disk full while writing the outputs; the previous outputs are unchanged", path=where)
     return OutputError(f"could not write the outputs ({exc.strerror or exc}); the previous outputs are unchanged",
                        path=where)
