@@ -148,24 +148,19 @@ def test_ctrl_c_between_renames_finishes_the_new_set_then_stops(asset, cache, ol
     assert after["box.glb"] != before["box.glb"] and after["box.fracture.json"] != before["box.fracture.json"]
 
 
-def test_interrupt_raised_inside_a_rename_rolls_back(asset, cache, old_set, monkeypatch):
-    """Where no signal handler can hold Ctrl-C back (a worker thread), the renames are undone instead."""
+@pytest.mark.parametrize("where", ["while writing", "inside a rename, off the main thread"])
+def test_interrupt_keeps_the_previous_set(asset, cache, old_set, monkeypatch, where):
+    """Ctrl-C while the files are written, or inside a rename where no signal handler can hold it back (a worker
+    thread): the previous set stays, byte for byte (renames already done are undone)."""
     out, before = old_set
-    fault_at_rename(monkeypatch, out, 3, raise_(KeyboardInterrupt()))
-    monkeypatch.setattr(outputs, "_in_main_thread", lambda: False)  # as if in a worker thread
+    if where == "while writing":
+        monkeypatch.setattr("fracture_cli.runtime.format.write_runtime", lambda *a, **k: raise_(KeyboardInterrupt())())
+    else:
+        fault_at_rename(monkeypatch, out, 3, raise_(KeyboardInterrupt()))
+        monkeypatch.setattr(outputs, "_in_main_thread", lambda: False)
     result = rebake(asset, out, cache)
     assert result.exit_code == 130
     assert "interrupted; no output was written (previous outputs are unchanged)" in result.stderr
-    assert snapshot(out) == before
-
-
-def test_ctrl_c_while_writing_keeps_the_previous_set(asset, cache, old_set, monkeypatch):
-    out, before = old_set
-
-    monkeypatch.setattr("fracture_cli.runtime.format.write_runtime", lambda *a, **k: raise_(KeyboardInterrupt())())
-    result = rebake(asset, out, cache)
-    assert result.exit_code == 130
-    assert "no output was written (previous outputs are unchanged)" in result.stderr
     assert snapshot(out) == before
 
 
