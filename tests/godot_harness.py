@@ -88,7 +88,7 @@ class GodotProject:
 
     def import_resources(self, timeout: float = 300) -> None:
         """Run the editor's import pass once (GLB files become importable scenes)."""
-        result = subprocess.run([self.godot, "--path", str(self.root), "--editor", "--quit"], capture_output=True,
+        result = subprocess.run([self.godot, "--path", str(self.root), "--editor", "--quit"], check=False, capture_output=True,
                                 text=True, timeout=timeout)
         missing = [p.name for p in self.root.glob("*.glb") if not (self.root / (p.name + ".import")).exists()]
         assert not missing, f"Godot did not import {missing} (exit {result.returncode}):\n{result.stderr[-3000:]}"
@@ -98,7 +98,7 @@ class GodotProject:
         self.write(name, script)
         try:
             result = subprocess.run([self.godot, "--path", str(self.root), "--script", "res://" + name, "--", *args],
-                                    capture_output=True, text=True, timeout=timeout)
+                                    check=False, capture_output=True, text=True, timeout=timeout)
         except subprocess.TimeoutExpired as exc:
             raise AssertionError(f"Godot did not finish {name} within {timeout} s:\n{exc.stdout!r:.3000}") from None
         run = GodotRun(result.stdout, result.stderr, result.returncode)

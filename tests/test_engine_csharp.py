@@ -6,8 +6,18 @@ import os
 import subprocess
 
 import pytest
-from engine_support import (CORRUPT, REPO, check_answers, corrupt_cases, hex_names, load_vectors, protocol_input,
-                            require_tool, runtime_paths, vector_names)
+from engine_support import (
+    CORRUPT,
+    REPO,
+    check_answers,
+    corrupt_cases,
+    hex_names,
+    load_vectors,
+    protocol_input,
+    require_tool,
+    runtime_paths,
+    vector_names,
+)
 
 CS_DIR = os.path.join(REPO, "engines", "csharp")
 SOURCES = [os.path.join(CS_DIR, "FractureRuntime.cs"), os.path.join(CS_DIR, "tools", "FractureCheck.cs")]
@@ -20,13 +30,13 @@ def driver(tmp_path_factory) -> list[str]:
     exe = str(tmp_path_factory.mktemp("csharp") / "FractureCheck.exe")
     # C# 7.2 (mcs's newest) keeps the file buildable by mcs as well as by Unity's compiler (C# 8/9).
     result = subprocess.run([mcs, "-langversion:7.2", "-warnaserror", "-checked-", "-out:" + exe, *SOURCES],
-                            capture_output=True, text=True)
+                            check=False, capture_output=True, text=True)
     assert result.returncode == 0, f"the C# reader does not compile:\n{result.stdout}\n{result.stderr}"
     return [mono, exe]
 
 
 def run_driver(driver, header: str, binary: str, stdin: str = "", *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([*driver, header, binary, *args], input=stdin, capture_output=True, text=True, timeout=300)
+    return subprocess.run([*driver, header, binary, *args], input=stdin, check=False, capture_output=True, text=True, timeout=300)
 
 
 @pytest.mark.parametrize("name", vector_names())

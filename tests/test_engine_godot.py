@@ -8,8 +8,18 @@ import sys
 
 import numpy as np
 import pytest
-from engine_support import (CORRUPT, REPO, check_answers, corrupt_cases, float_to_bits, hex_names, load_vectors,
-                            protocol_input, runtime_paths, vector_names)
+from engine_support import (
+    CORRUPT,
+    REPO,
+    check_answers,
+    corrupt_cases,
+    float_to_bits,
+    hex_names,
+    load_vectors,
+    protocol_input,
+    runtime_paths,
+    vector_names,
+)
 from godot_harness import GodotProject
 
 from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime
@@ -86,7 +96,8 @@ def _hits_file(path, hits) -> str:
 
 def _bodies_after_each_step(run) -> list[dict]:
     """Parse break_scene.gd's report: per step, {body index: (class, fragment names, shape counts)}."""
-    steps, current = [], {}
+    steps: list[dict] = []
+    current: dict = {}
     for line in run.stdout.splitlines():
         fields = line.split()
         if fields[:1] == ["body"]:
@@ -159,6 +170,12 @@ def _robust(data, point, impulse) -> bool:
     return bool(np.all(np.abs(jumps - data.default_threshold) > 1e-6 * max(data.default_threshold, 1e-12)))
 
 
+def _root(parent: dict[int, int], a: int) -> int:
+    while parent[a] != a:
+        a = parent[a]
+    return a
+
+
 def _expected_bodies(data, hits) -> list[list[list[int]]]:
     """FractureBody's rule replayed on the Python reference: per step, the fragments of each body."""
     bodies = [list(range(data.p))]
@@ -167,19 +184,13 @@ def _expected_bodies(data, hits) -> list[list[list[int]]]:
         broken = project_impact(data, point, impulse).broken
         members = set(bodies[index])
         parent = {j: j for j in members}
-
-        def root(a):
-            while parent[a] != a:
-                a = parent[a]
-            return a
-
         for (P, Q), cut in zip(data.edges.tolist(), broken.tolist()):
             if not cut and P in members and Q in members:
-                a, b = root(P), root(Q)
+                a, b = _root(parent, P), _root(parent, Q)
                 parent[max(a, b)] = min(a, b)
-        pieces = {}
+        pieces: dict[int, list[int]] = {}
         for j in sorted(members):
-            pieces.setdefault(root(j), []).append(j)
+            pieces.setdefault(_root(parent, j), []).append(j)
         ordered = sorted(pieces.values(), key=lambda piece: (-len(piece), piece[0]))
         bodies[index] = ordered[0]
         bodies += ordered[1:]

@@ -637,15 +637,15 @@ func nearest_site(x: float, y: float, z: float) -> int:
 
 # ---------------------------------------------------------------- projection
 
-func _root(parent: PoolIntArray, a: int) -> int:
+func _root(parent: Array, a: int) -> int:
 	while parent[a] != a:
 		a = parent[a]
 	return a
 
 
-# Groups of the graph without the `broken` edges (smallest fragment index per group); sets _last_count.
+# Groups of the graph without the `broken` edges: the smallest fragment index of each group.
 func components(broken: Array) -> PoolIntArray:
-	var parent := PoolIntArray()
+	var parent := []  # an Array, not a PoolIntArray: pool arrays are copied when passed to _root()
 	parent.resize(fragments)
 	for v in range(fragments):
 		parent[v] = v
@@ -657,9 +657,12 @@ func components(broken: Array) -> PoolIntArray:
 				parent[b] = a
 			elif b < a:
 				parent[a] = b
+	var groups := PoolIntArray()
+	groups.resize(fragments)
 	for v in range(fragments):
 		parent[v] = parent[parent[v]]  # parent[v] <= v, so one increasing pass resolves every root
-	return parent
+		groups[v] = parent[v]
+	return groups
 
 
 func _whole_graph() -> void:
