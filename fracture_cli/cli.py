@@ -626,6 +626,49 @@ def preview_cmd(runtime_file, out_png, size):
     return process
 
 
+@cli.command("view", cls=TerminalCommand)
+@click.argument("path", type=click.Path(path_type=str))
+@click.option("--port", type=click.IntRange(0, 65535), default=8765, show_default=True,
+              help="TCP port (0 picks a free one).")
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Interface to listen on; anything but loopback exposes the folder to the network.")
+@click.option("--no-browser", is_flag=True, help="Only print the address; do not open a browser.")
+def view_cmd(path, port, host, no_browser):
+    """Open a bake in the browser: click to hit it, watch it break, tune magnitude and threshold.
+
+    PATH is a bake output folder (a picker lists every asset in it) or one
+    <stem>.fracture.json. The page reloads when a bake rewrites the files.
+    Runs until Ctrl-C.
+    """
+
+    def process(state: PipelineState) -> PipelineState:
+        from fracture_cli.view.assets import list_assets, resolve_source
+        from fracture_cli.view.server import ViewOptions, ViewServer, is_loopback
+
+        source = resolve_source(path)
+        if not list_assets(source):
+            log.warning("no baked assets (<stem>.fracture.json) in %s yet; the page shows them once a bake "
+                        "writes them", source.folder)
+        if not is_loopback(host):
+            log.warning("listening on %s: anyone who can reach this machine can read the bake files", host)
+        server = ViewServer(source, ViewOptions(host=host, port=port)).start()
+        click.echo(f"fracture view: {server.url}  (Ctrl-C to stop)")
+        sys.stdout.flush()
+        if not no_browser:
+            import webbrowser
+
+            webbrowser.open(server.url)
+        try:
+            server.wait()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            server.stop()
+        return state
+
+    return process
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``fracture`` console script."""
     cli.main(args=argv, prog_name="fracture")
