@@ -442,7 +442,10 @@ def export_cmd(out_dir, **kwargs):
 @click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
               help="Override one recipe parameter, e.g. --set modes.num_modes=16 (repeatable).")
 @click.option("--json", "as_json", is_flag=True, help="Print the bake report(s) as JSON on stdout.")
-@click.option("--preview", is_flag=True, help="Also write <stem>.preview.png (input, fragments, modes, an impact).")
+@click.option("--preview", is_flag=True, help="Also write <stem>.preview.png (input, fragments, modes, an impact); "
+              "without it a stale <stem>.preview.png from an earlier bake is removed.")
+@click.option("--preview-size", nargs=2, type=int, default=None, metavar="W H",
+              help="Preview size in pixels (implies --preview). [default: 1600 1000]")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False, path_type=str), default=None,
               help="Reuse cage, tets and modes from this folder when nothing they depend on changed.")
 @click.option("-k", "--keep-going", is_flag=True,
@@ -450,7 +453,8 @@ def export_cmd(out_dir, **kwargs):
 @click.option("-q", "--quiet", is_flag=True, help="Print only errors.")
 @click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
 @click.pass_context
-def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, cache_dir, keep_going, quiet, debug):
+def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, preview_size, cache_dir, keep_going, quiet,
+             debug):
     """Run the whole pipeline on INPUTS with a recipe, writing into OUT.
 
     For each input <stem>: <stem>.glb (fragments), <stem>.fracture.json/.bin
@@ -460,6 +464,9 @@ def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, cac
         ctx.find_root().meta["fracture.debug"] = True
     if quiet:
         configure_logging(0, True)
+    if preview_size is not None:
+        _check_preview_size(preview_size, "--preview-size")
+        preview = True
 
     def process(state: PipelineState) -> PipelineState:
         import json as _json
@@ -489,12 +496,16 @@ def bake_cmd(ctx, inputs, out_dir, recipe_name, overrides, as_json, preview, cac
                 reports.append({"input": {"name": os.path.basename(path)}, "error": str(exc)})
                 continue
             reports.append(result.report)
+            stem = os.path.splitext(os.path.basename(path))[0]
+            preview_png = os.path.join(out_dir, f"{stem}.preview.png")
             if preview:
                 from fracture_cli.preview import render_preview
 
-                stem = os.path.splitext(os.path.basename(path))[0]
-                render_preview(os.path.join(out_dir, f"{stem}.fracture.json"),
-                               os.path.join(out_dir, f"{stem}.preview.png"))
+                width, height = preview_size or (1600, 1000)
+                render_preview(os.path.join(out_dir, f"{stem}.fracture.json"), preview_png, width=width, height=height)
+            elif os.path.exists(preview_png):  # it shows the previous bake: misleading next to the new files
+                os.remove(preview_png)
+                log.info("bake: removed %s (from an earlier bake; pass --preview for a new one)", preview_png)
             if not (quiet or as_json):
                 r = result.report
                 c = r["counts"]
@@ -563,12 +574,20 @@ def _toml_value(value) -> str:
 @click.option("--impulse", nargs=3, type=float, required=True, metavar="X Y Z", help="Impulse vector.")
 @click.option("--threshold", type=float, default=None, help="Toughness (default: the file's).")
 @click.option("-o", "--out", "out_glb", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Write the fragments regrouped into one mesh per group (GLB).")
+              help="Write a GLB with one node per group, named group_### like the printed groups, holding its "
+                   "fragments (as child nodes, or one merged mesh when they share a transform).")
+@click.option("--warn-distance", type=click.FloatRange(min=0), default=0.1, show_default=True,
+              help="Warn when the point is farther than this fraction of the bounding-box diagonal from the "
+                   "nearest contact site (probably not on the asset, or in other units).")
 @click.option("--png", "out_png", type=click.Path(dir_okay=False, path_type=str), default=None,
               help="Render a preview picture of this impact.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
-def impact_cmd(runtime_file, point, impulse, threshold, out_glb, out_png, as_json):
-    """Project an impact on a baked asset and print which fragments move together."""
+def impact_cmd(runtime_file, point, impulse, threshold, out_glb, out_png, as_json, warn_distance):
+    """Project an impact on a baked asset and print which fragments move together.
+
+    Each group is named group_### after its smallest fragment index, as in the
+    GLB that -o writes.
+    """
 
     def process(state: PipelineState) -> PipelineState:
         import json as _json
@@ -577,18 +596,30 @@ def impact_cmd(runtime_file, point, impulse, threshold, out_glb, out_png, as_jso
         from fracture_cli.runtime.format import load_runtime
         from fracture_cli.runtime.impact import project_impact
 
+        import numpy as np
+
+        from fracture_cli.io.regroup import group_name
+
         data = load_runtime(runtime_file)
         result = project_impact(data, point, impulse, threshold)
-        groups: dict[int, list[str]] = {}
+        sites = np.asarray(data.sites, dtype=np.float64)
+        diagonal = float(np.linalg.norm(sites.max(axis=0) - sites.min(axis=0))) or 1.0
+        distance = float(np.linalg.norm(sites[result.site] - np.asarray(point, dtype=np.float64)))
+        if distance > warn_distance * diagonal:
+            log.warning("the point is %.4g units from the nearest contact site, %.2g times the asset's %.4g-unit "
+                        "diagonal: is it on the asset, in model space and the asset's units?", distance,
+                        distance / diagonal, diagonal)
+        groups: dict[str, list[str]] = {}
         for j, g in enumerate(result.groups):
-            groups.setdefault(int(g), []).append(data.fragment_names[j])
+            groups.setdefault(group_name(int(g)), []).append(data.fragment_names[j])
         if as_json:
-            click.echo(_json.dumps({"site": int(result.site), "broken_bonds": int(result.broken.sum()),
+            click.echo(_json.dumps({"site": int(result.site), "site_distance": distance,
+                                    "broken_bonds": int(result.broken.sum()), "group_names": list(groups),
                                     "groups": list(groups.values())}, indent=2))
         else:
             click.echo(f"{len(groups)} group(s), {int(result.broken.sum())} of {len(result.broken)} bonds broken")
-            for i, members in enumerate(groups.values()):
-                click.echo(f"group {i}: {' '.join(members)}")
+            for name, members in groups.items():
+                click.echo(f"{name}: {' '.join(members)}")
         if out_glb:
             from fracture_cli.io.regroup import write_groups_glb
 
@@ -605,6 +636,11 @@ def impact_cmd(runtime_file, point, impulse, threshold, out_glb, out_png, as_jso
     return process
 
 
+def _check_preview_size(size: tuple[int, int], flag: str) -> None:
+    if size[0] < 200 or size[1] < 150 or size[0] > 8000 or size[1] > 8000:
+        raise UsageError(f"{flag} {size[0]} {size[1]} is out of range (200..8000 x 150..8000)")
+
+
 @cli.command("preview", cls=TerminalCommand)
 @click.argument("runtime_file", type=click.Path(dir_okay=False, path_type=str))
 @click.option("-o", "--out", "out_png", required=True, type=click.Path(dir_okay=False, path_type=str),
@@ -617,8 +653,7 @@ def preview_cmd(runtime_file, out_png, size):
     def process(state: PipelineState) -> PipelineState:
         from fracture_cli.preview import render_preview
 
-        if size[0] < 200 or size[1] < 150 or size[0] > 8000 or size[1] > 8000:
-            raise UsageError(f"--size {size[0]} {size[1]} is out of range (200..8000 x 150..8000)")
+        _check_preview_size(size, "--size")
         render_preview(runtime_file, out_png, width=size[0], height=size[1])
         log.info("preview: wrote %s", out_png)
         return state
