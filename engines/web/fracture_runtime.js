@@ -67,8 +67,9 @@ function asBytes(binary) {
 
 function asHeader(header) {
   if (typeof header === 'string' || header instanceof Uint8Array || header instanceof ArrayBuffer) {
-    const text = typeof header === 'string' ? header : new TextDecoder('utf-8').decode(asBytes(header));
+    let text = header;
     try {
+      if (typeof header !== 'string') text = new TextDecoder('utf-8', { fatal: true }).decode(asBytes(header));
       return JSON.parse(text);
     } catch (err) {
       return fail(`not a JSON runtime file (${err.message})`);
@@ -104,7 +105,18 @@ function checkHeader(h) {
   if (!Number.isFinite(h.impact_radius)) fail('impact_radius must be a finite number');
   const b = h.buffer;
   if (!b || typeof b !== 'object' || !isCount(b.byte_length)) fail('buffer.byte_length must be a non-negative integer');
+  if (b.crc32 !== undefined && !(Number.isInteger(b.crc32) && b.crc32 >= 0 && b.crc32 <= 0xffffffff)) {
+    fail('buffer.crc32 must be an unsigned 32-bit integer');
+  }
+  checkUri(b.uri);
   if (!h.arrays || typeof h.arrays !== 'object') fail('the header has no arrays table');
+}
+
+/** Throw unless uri is a plain file name in the header's folder (docs/FORMAT.md section 1). */
+export function checkUri(uri) {
+  if (typeof uri !== 'string' || uri === '' || uri === '.' || uri === '..' || /[/\\:]/.test(uri)) {
+    fail(`buffer.uri must be a plain file name next to the header, got ${JSON.stringify(uri)}`);
+  }
 }
 
 function expectedShapes(h) {
@@ -126,7 +138,7 @@ function readArray(name, dtype, ndim, entry, view, shapes) {
   if (!isCount(offset) || !isCount(length) || length !== 4 * count) {
     fail(`array '${name}' has shape ${JSON.stringify(shape)} and ${length} bytes, which do not agree`);
   }
-  if (offset % 4 !== 0 || offset + length > view.byteLength) {
+  if (offset % 16 !== 0 || offset + length > view.byteLength) {
     fail(`array '${name}' lies outside the binary file (offset ${offset}, length ${length})`);
   }
   if (shape.join(',') !== shapes[name].join(',')) {
@@ -187,9 +199,7 @@ export async function loadRuntime(jsonUrl, fetchFn = globalThis.fetch) {
   if (!response.ok) throw new RuntimeFileError(`cannot fetch ${jsonUrl} (HTTP ${response.status})`);
   const header = asHeader(await response.text());
   const uri = header && header.buffer && header.buffer.uri;
-  if (typeof uri !== 'string' || uri === '' || uri.includes('/') || uri.includes('\\')) {
-    fail(`buffer.uri must be a plain file name next to the header, got ${JSON.stringify(uri)}`);
-  }
+  checkUri(uri);
   const base = new URL(jsonUrl, globalThis.location ? globalThis.location.href : undefined);
   const binUrl = new URL(encodeURIComponent(uri), base);
   binUrl.search = base.search;  // keep a cache-busting query
@@ -343,7 +353,6 @@ export class FractureRuntime {
     const alpha = this._alpha(site, [n[0] / m, n[1] / m, n[2] / m]);
     const disp = this._displacement(alpha);
     const limit = T / m;  // +Infinity: nothing breaks; 0 (underflow or T = 0): any nonzero jump breaks
-    const limit2 = limit * limit;
     const jumps = new Float64Array(e * d);
     for (let q = 0; q < e; q++) {
       const P = edges[2 * q] * d;
@@ -359,8 +368,7 @@ export class FractureRuntime {
         jumps[3 * q] = j0;
         jumps[3 * q + 1] = j1;
         jumps[3 * q + 2] = j2;
-        const sum = j0 * j0 + j1 * j1 + j2 * j2;
-        broken[q] = (limit === 0 ? j0 !== 0 || j1 !== 0 || j2 !== 0 : sum > limit2) ? 1 : 0;
+        broken[q] = Math.sqrt(j0 * j0 + j1 * j1 + j2 * j2) > limit ? 1 : 0;
       }
     }
     for (let i = 0; i < alpha.length; i++) alpha[i] *= m;
