@@ -14,6 +14,7 @@
 //   {"do": "click_model", "point": [x, y, z]}              real mouse click where the model point is drawn
 //   {"do": "wait_animation"}                               the groups have landed
 //   {"do": "wait", "ms": 500}
+//   {"do": "mouse", "x": 10, "y": 10}                      move the mouse (e.g. off the object: no tooltip)
 //   {"do": "screenshot", "path": "out.png"}
 //   {"do": "touch", "paths": ["a", "b"]}                   bump mtimes (a re-bake in miniature)
 //   {"do": "wait_reload", "after": N}                      fractureTest.reloads > N
@@ -90,6 +91,9 @@ async function act(page, action) {
       return true;
     case 'wait':
       await page.waitForTimeout(action.ms);
+      return true;
+    case 'mouse':
+      await page.mouse.move(action.x, action.y);
       return true;
     case 'screenshot':
       await page.screenshot({ path: action.path });

@@ -37,7 +37,8 @@ def main(folder: str, stem: str, out_png: str) -> None:
     try:
         url = server.stdout.readline().split()[2]
         actions = [{"do": "wait_ready"}, {"do": "set", "id": "magnitude", "value": round(magnitude, 3)},
-                   {"do": "click_model", "point": point}, {"do": "wait", "ms": 450},
+                   {"do": "click_model", "point": point}, {"do": "mouse", "x": 5, "y": 700},
+                   {"do": "wait", "ms": 420},
                    {"do": "screenshot", "path": os.path.abspath(out_png)}]
         with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as fh:
             json.dump({"url": f"{url}#{stem}", "modules": os.path.join(REPO, "build", "web", "node_modules"),
