@@ -593,12 +593,11 @@ def impact_cmd(runtime_file, point, impulse, threshold, out_glb, out_png, as_jso
         import json as _json
         import os
 
-        from fracture_cli.runtime.format import load_runtime
-        from fracture_cli.runtime.impact import project_impact
-
         import numpy as np
 
         from fracture_cli.io.regroup import group_name
+        from fracture_cli.runtime.format import load_runtime
+        from fracture_cli.runtime.impact import project_impact
 
         data = load_runtime(runtime_file)
         result = project_impact(data, point, impulse, threshold)

@@ -13,8 +13,19 @@ import subprocess
 
 import numpy as np
 import pytest
-from engine_support import (CORRUPT, REPO, check_answers, corrupt_cases, float_to_bits, hex_names, load_vectors,
-                            parse_answer, protocol_input, runtime_paths, vector_names)
+from engine_support import (
+    CORRUPT,
+    REPO,
+    check_answers,
+    corrupt_cases,
+    float_to_bits,
+    hex_names,
+    load_vectors,
+    parse_answer,
+    protocol_input,
+    runtime_paths,
+    vector_names,
+)
 
 from fracture_cli.runtime.format import RuntimeData, write_runtime
 from fracture_cli.runtime.impact import project_impact
@@ -28,7 +39,7 @@ pytestmark = pytest.mark.skipif(NODE is None, reason="node (Node.js) is not inst
 
 def run_driver(header: str, binary: str, stdin: str = "", *flags: str) -> subprocess.CompletedProcess:
     return subprocess.run([NODE, DRIVER, *flags, header, binary], input=stdin, capture_output=True, text=True,
-                          timeout=300)
+                          timeout=300, check=False)
 
 
 @pytest.mark.parametrize("name", vector_names())

@@ -26,6 +26,7 @@ import socket
 import threading
 import urllib.parse
 from dataclasses import dataclass
+from typing import Self
 
 from fracture_cli.errors import FractureError, UsageError
 from fracture_cli.view.assets import ViewSource, list_assets, served_file
@@ -89,13 +90,13 @@ def make_handler(source: ViewSource) -> type[http.server.BaseHTTPRequestHandler]
         server_version = "fracture-view"
         protocol_version = "HTTP/1.1"
 
-        def log_message(self, format: str, *args) -> None:  # noqa: A002  (signature of the base class)
+        def log_message(self, format: str, *args) -> None:
             log.debug("view: %s %s", self.address_string(), format % args)
 
-        def do_HEAD(self) -> None:  # noqa: N802
+        def do_HEAD(self) -> None:
             self._route(send_body=False)
 
-        def do_GET(self) -> None:  # noqa: N802
+        def do_GET(self) -> None:
             self._route(send_body=True)
 
         def _route(self, send_body: bool) -> None:
@@ -181,7 +182,7 @@ class ViewServer:
         shown = f"[{host}]" if ":" in str(host) else host
         return f"http://{shown}:{port}/"
 
-    def start(self) -> "ViewServer":
+    def start(self) -> Self:
         self._thread = threading.Thread(target=self.httpd.serve_forever, name="fracture-view", daemon=True)
         self._thread.start()
         return self
@@ -198,7 +199,7 @@ class ViewServer:
             self._thread.join()
             self._thread = None
 
-    def __enter__(self) -> "ViewServer":
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc) -> None:

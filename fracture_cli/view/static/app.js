@@ -55,11 +55,12 @@ function palette(n) {
   return Array.from({ length: n }, (_, i) => new THREE.Color().setHSL((i * 0.61803398875) % 1, 0.55, 0.58));
 }
 
-function coolwarm(t) {  // t in [-1, 1]: blue, white, red
+function coolwarm(t) {  // t in [-1, 1]: blue, grey, red; square-root ramp so small values still show
   const a = new THREE.Color(0x3b4cc0);
-  const mid = new THREE.Color(0xdddddd);
+  const mid = new THREE.Color(0xc8c8c8);
   const b = new THREE.Color(0xb40426);
-  return t < 0 ? mid.clone().lerp(a, Math.min(1, -t)) : mid.clone().lerp(b, Math.min(1, t));
+  const amount = Math.sqrt(Math.min(1, Math.abs(t)));
+  return t < 0 ? mid.clone().lerp(a, amount) : mid.clone().lerp(b, amount);
 }
 
 /** Per-fragment value of mode i: W[i, j] (d = 1), or the signed length of W[i, j, :] (d = 3). */

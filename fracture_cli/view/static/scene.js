@@ -106,6 +106,8 @@ export class FragmentScene {
     for (const mesh of meshes) {
       mesh.userData.fragment = index;
       mesh.userData.restWorld = mesh.matrixWorld.clone();
+      // Two-sided: with the interior faces hidden, the inside of the shell shows instead of holes.
+      if (mesh.material) mesh.material.side = THREE.DoubleSide;
       mesh.userData.original = mesh.material;
       mesh.userData.interior = mesh.material && mesh.material.name === INTERIOR_MATERIAL;
       mesh.geometry.computeBoundingBox();
@@ -202,8 +204,9 @@ export class FragmentScene {
       let outer = null;
       let inner = null;
       if (colors) {
-        outer = new THREE.MeshStandardMaterial({ color: colors[f.index], roughness: 0.75, metalness: 0 });
-        inner = new THREE.MeshStandardMaterial({ color: colors[f.index].clone().multiplyScalar(0.55), roughness: 0.9 });
+        const side = THREE.DoubleSide;
+        outer = new THREE.MeshStandardMaterial({ color: colors[f.index], roughness: 0.75, metalness: 0, side });
+        inner = new THREE.MeshStandardMaterial({ color: colors[f.index].clone().multiplyScalar(0.55), roughness: 0.9, side });
       }
       for (const mesh of f.meshes) {
         const old = mesh.material;
