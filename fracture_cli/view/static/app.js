@@ -154,7 +154,7 @@ function fillPicker(assets) {
   const names = assets.map((a) => a.stem).join('\n');
   if (select.dataset.names === names) return;
   select.dataset.names = names;
-  select.innerHTML = assets.map((a) => `<option value="${encodeURIComponent(a.stem)}">${a.stem}</option>`).join('');
+  select.replaceChildren(...assets.map((a) => new Option(a.stem, encodeURIComponent(a.stem))));
   if (state.stem) select.value = encodeURIComponent(state.stem);
 }
 
