@@ -90,8 +90,8 @@ def parse_answer(line: str) -> dict:
         raise ValueError(f"unexpected driver output line: {line!r}")
     if tokens[0] == "error":
         return {"expect": "error", "reason": " ".join(tokens[1:])}
-    sections: dict[str, list[str]] = {}
-    key = None
+    sections: dict[str, list[str]] = {"": []}
+    key = ""
     for token in tokens[3:]:
         if token in ("g", "b", "a", "d"):
             key = token

@@ -6,8 +6,18 @@ import os
 import subprocess
 
 import pytest
-from engine_support import (CORRUPT, REPO, check_answers, corrupt_cases, hex_names, load_vectors, protocol_input,
-                            require_tool, runtime_paths, vector_names)
+from engine_support import (
+    CORRUPT,
+    REPO,
+    check_answers,
+    corrupt_cases,
+    hex_names,
+    load_vectors,
+    protocol_input,
+    require_tool,
+    runtime_paths,
+    vector_names,
+)
 
 C_DIR = os.path.join(REPO, "engines", "c")
 SOURCES = [os.path.join(C_DIR, "fracture_runtime.c"), os.path.join(C_DIR, "tools", "fracture_check.c")]
@@ -18,7 +28,7 @@ SANITIZER_ENV = {"ASAN_OPTIONS": "detect_leaks=1:abort_on_error=0", "UBSAN_OPTIO
 
 def _compile(out: str, flags: list[str]) -> str:
     compiler = require_tool("cc", "gcc (build-essential)")
-    result = subprocess.run([compiler, *STRICT, *flags, *SOURCES, "-o", out, "-lm"], capture_output=True, text=True)
+    result = subprocess.run([compiler, *STRICT, *flags, *SOURCES, "-o", out, "-lm"], check=False, capture_output=True, text=True)
     assert result.returncode == 0, f"the C reader does not compile with {' '.join(STRICT + flags)}:\n{result.stderr}"
     return out
 
@@ -31,7 +41,7 @@ def driver(tmp_path_factory) -> str:
 @pytest.fixture(scope="module")
 def sanitized_driver(tmp_path_factory) -> str:
     probe = subprocess.run(["cc", "-fsanitize=address,undefined", "-x", "c", "-", "-o", os.devnull],
-                           input="int main(void){return 0;}", capture_output=True, text=True)
+                           input="int main(void){return 0;}", check=False, capture_output=True, text=True)
     if probe.returncode != 0:
         pytest.skip(f"the C compiler cannot build with AddressSanitizer + UBSan: {probe.stderr.strip()[:200]}")
     return _compile(str(tmp_path_factory.mktemp("c_asan") / "fracture_check"), ["-O1", *SANITIZE])
@@ -39,7 +49,7 @@ def sanitized_driver(tmp_path_factory) -> str:
 
 def run_driver(driver: str, header: str, binary: str, stdin: str = "", *args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, **SANITIZER_ENV}
-    return subprocess.run([driver, *args, header, binary], input=stdin, capture_output=True, text=True, env=env,
+    return subprocess.run([driver, *args, header, binary], input=stdin, check=False, capture_output=True, text=True, env=env,
                           timeout=300)
 
 
@@ -96,6 +106,6 @@ def test_c_header_compiles_as_cxx(tmp_path):
     source.write_text('#include "fracture_runtime.h"\nint main() { return fr_status_string(FR_OK)[0] == 0; }\n')
     result = subprocess.run([compiler, "-std=c++11", "-Wall", "-Wextra", "-Werror", "-pedantic", "-I", C_DIR,
                              str(source), os.path.join(C_DIR, "fracture_runtime.c"), "-o",
-                             str(tmp_path / "use")], capture_output=True, text=True)
+                             str(tmp_path / "use")], check=False, capture_output=True, text=True)
     # g++ compiles the .c file as C++ too: the source is valid C++ as well as C99.
     assert result.returncode == 0, result.stderr

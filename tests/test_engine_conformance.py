@@ -48,7 +48,7 @@ def _reference_has_scale_rule() -> bool:
 
 
 def _extreme(impact: dict) -> bool:
-    point, impulse, threshold = impact_inputs(impact)
+    _, impulse, threshold = impact_inputs(impact)
     values = [abs(c) for c in impulse if c] + ([threshold] if threshold else [])
     return any(v > 1e100 or v < 1e-100 for v in values)
 

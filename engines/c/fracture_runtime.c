@@ -29,8 +29,7 @@
 #define URI_MAX 255
 #define KD_LEAF 8
 #define KD_STACK 96
-#define CUT_LIMIT 32 /* more broken tree edges than this: plain union-find is cheaper */
-#define BOUND_SLACK (1.0 + 1e-9) /* covers the rounding of a k-term dot product for k << 1e6 */
+#define BOUND_SLACK 1e-9 /* far above the rounding of a k-term sum in double for any k << 1e6 */
 
 /* ------------------------------------------------------------------ messages */
 
@@ -705,10 +704,9 @@ struct fr_runtime {
     fr_allocator allocator;
     int32_t s, k, p, e, d;
     double default_threshold, impact_radius, transform[16];
-    float *sites, *B, *W, *areas;
+    float *sites, *B, *areas;
+    double *Wd; /* (k, p, d) W in double */
     int32_t *edges;
-    double *dW;        /* (e, k, d): W[i, P, c] - W[i, Q, c], edge-major */
-    double *edge_norm; /* (e,): Frobenius norm of dW[m], for the skip bound */
     char *names;
     int32_t *name_offsets;
     double *kd_points; /* (s, 3) sites in tree order */
@@ -718,11 +716,16 @@ struct fr_runtime {
     int32_t whole_groups;
     /* Spanning forest in DFS preorder ("positions"): a subtree is a range of positions. */
     int32_t *pos;         /* (p,) position of each fragment */
-    int32_t *subtree_end; /* (p,) by position: one past the subtree's last position */
-    int32_t *root_pos;    /* (p,) by position: position of the tree's root */
+    int32_t *parent_pos;  /* (p,) by position: position of the parent (itself for a root) */
+    uint8_t *root_head;   /* (p,) by position: 1 for a tree's root */
+    int32_t *identity;    /* (p,) 0, 1, 2, ...: initial union-find parents */
     int32_t *tree_child;  /* (e,) position of the child a tree edge leads to, -1 for other edges */
-    int32_t *extra;       /* (num_extra, 3): edge index and both end positions of each non-tree edge */
-    int32_t num_extra;
+    int32_t *order;       /* (e,) edges in test order: the num_tree spanning-tree edges first */
+    int32_t *ends;        /* (e, 2) (P, Q) of each edge in test order */
+    int32_t *child_at;    /* (num_tree,) tree_child of each tree edge in test order */
+    double *edge_bound;   /* (e,) in test order: |W[:, P] - W[:, Q]| + slack * (|W[:, P]| + |W[:, Q]|) */
+    int32_t num_tree;
+    int32_t *end_pos;     /* (e, 2) positions of each edge's ends, in test order */
     void *scratch;        /* the built-in workspace */
 };
 
@@ -916,27 +919,29 @@ static uint64_t take(uint64_t *cursor, uint64_t bytes)
 }
 
 typedef struct workspace_layout {
-    uint64_t alpha, broken, piece, uf, first, cuts, size;
+    uint64_t alpha, disp, head, broken, piece, uf, first, size;
 } workspace_layout;
 
-static workspace_layout workspace_plan(int64_t k, int64_t p, int64_t e)
+static workspace_layout workspace_plan(int64_t k, int64_t p, int64_t e, int64_t d)
 {
     workspace_layout w;
     uint64_t cursor = 0;
     w.alpha = take(&cursor, 8u * (uint64_t)k);
+    w.disp = take(&cursor, 8u * (uint64_t)p * (uint64_t)d);
+    w.head = take(&cursor, (uint64_t)p);
     w.broken = take(&cursor, (uint64_t)e);
     w.piece = take(&cursor, 4u * (uint64_t)p);
     w.uf = take(&cursor, 4u * (uint64_t)p);
     w.first = take(&cursor, 4u * (uint64_t)p);
-    w.cuts = take(&cursor, 4u * (CUT_LIMIT + 1u));
     w.size = take(&cursor, 0);
     return w;
 }
 
 /* Offsets of every array in the runtime's block (after the struct itself). */
 typedef struct block_layout {
-    uint64_t sites, B, W, areas, edges, dW, edge_norm, names, name_offsets, kd_points, kd_index, kd_nodes, whole;
-    uint64_t pos, subtree_end, root_pos, tree_child, extra, scratch, size, kd_capacity;
+    uint64_t sites, B, W, areas, edges, edge_bound, names, name_offsets, kd_points, kd_index, kd_nodes, whole;
+    uint64_t pos, parent_pos, root_head, identity, tree_child, order, ends, end_pos, child_at, scratch, size;
+    uint64_t kd_capacity;
 } block_layout;
 
 static block_layout block_plan(const dims *dm, int64_t name_bytes)
@@ -947,11 +952,10 @@ static block_layout block_plan(const dims *dm, int64_t name_bytes)
     b.kd_capacity = s / 2 + 2;
     b.sites = take(&cursor, 12u * s);
     b.B = take(&cursor, 4u * s * k * d);
-    b.W = take(&cursor, 4u * k * p * d);
+    b.W = take(&cursor, 8u * k * p * d);
     b.areas = take(&cursor, 4u * e);
     b.edges = take(&cursor, 8u * e);
-    b.dW = take(&cursor, 8u * e * k * d);
-    b.edge_norm = take(&cursor, 8u * e);
+    b.edge_bound = take(&cursor, 8u * e);
     b.names = take(&cursor, (uint64_t)name_bytes);
     b.name_offsets = take(&cursor, 4u * p);
     b.kd_points = take(&cursor, 24u * s);
@@ -959,48 +963,58 @@ static block_layout block_plan(const dims *dm, int64_t name_bytes)
     b.kd_nodes = take(&cursor, sizeof(kd_node) * b.kd_capacity);
     b.whole = take(&cursor, 4u * p);
     b.pos = take(&cursor, 4u * p);
-    b.subtree_end = take(&cursor, 4u * p);
-    b.root_pos = take(&cursor, 4u * p);
+    b.parent_pos = take(&cursor, 4u * p);
+    b.root_head = take(&cursor, p);
+    b.identity = take(&cursor, 4u * p);
     b.tree_child = take(&cursor, 4u * e);
-    b.extra = take(&cursor, 12u * e);
-    b.scratch = take(&cursor, workspace_plan(dm->k, dm->p, dm->e).size);
+    b.order = take(&cursor, 4u * e);
+    b.ends = take(&cursor, 8u * e);
+    b.child_at = take(&cursor, 4u * e);
+    b.end_pos = take(&cursor, 8u * e);
+    b.scratch = take(&cursor, workspace_plan(dm->k, dm->p, dm->e, dm->d).size);
     b.size = take(&cursor, 0);
     return b;
 }
 
 static void copy_arrays(fr_runtime *rt, const header *h, const unsigned char *bin)
 {
-    float *floats[4];
-    static const int FLOAT_ARRAYS[4] = {A_SITES, A_B, A_W, A_AREAS};
+    float *floats[3];
+    static const int FLOAT_ARRAYS[3] = {A_SITES, A_B, A_AREAS};
     int a;
     int64_t i;
     floats[0] = rt->sites;
     floats[1] = rt->B;
-    floats[2] = rt->W;
-    floats[3] = rt->areas;
-    for (a = 0; a < 4; a++) {
+    floats[2] = rt->areas;
+    for (a = 0; a < 3; a++) {
         const array_entry *entry = &h->arrays[FLOAT_ARRAYS[a]];
         for (i = 0; i < entry->length / 4; i++)
             floats[a][i] = read_f32(bin + entry->offset + 4 * i);
     }
+    for (i = 0; i < h->arrays[A_W].length / 4; i++)
+        rt->Wd[i] = read_f32(bin + h->arrays[A_W].offset + 4 * i);
     for (i = 0; i < 2 * (int64_t)rt->e; i++)
         rt->edges[i] = read_i32(bin + h->arrays[A_EDGES].offset + 4 * i);
 }
 
-static void edge_differences(fr_runtime *rt)
+/*
+ * Per edge, a constant c with |jump'| <= |alpha'| * c for the computed jump (Cauchy-Schwarz
+ * on W[:, P] - W[:, Q], plus the rounding of both displacements), so fr_project can skip
+ * the edges that surely hold without computing any displacement.
+ */
+static void edge_bounds(fr_runtime *rt)
 {
     int32_t m, i, c, k = rt->k, p = rt->p, d = rt->d;
     for (m = 0; m < rt->e; m++) {
-        int32_t P = rt->edges[2 * m], Q = rt->edges[2 * m + 1];
-        double *out = rt->dW + (size_t)m * (size_t)k * (size_t)d, sum = 0;
+        int32_t P = rt->ends[2 * m], Q = rt->ends[2 * m + 1];
+        double diff2 = 0, wp2 = 0, wq2 = 0;
         for (i = 0; i < k; i++)
             for (c = 0; c < d; c++) {
-                /* float32 - float32 is exact in double */
-                double diff = (double)rt->W[((size_t)i * p + P) * d + c] - (double)rt->W[((size_t)i * p + Q) * d + c];
-                out[i * d + c] = diff;
-                sum += diff * diff;
+                double wp = rt->Wd[((size_t)i * p + P) * d + c], wq = rt->Wd[((size_t)i * p + Q) * d + c];
+                diff2 += (wp - wq) * (wp - wq); /* float32 - float32 is exact in double */
+                wp2 += wp * wp;
+                wq2 += wq * wq;
             }
-        rt->edge_norm[m] = sqrt(sum);
+        rt->edge_bound[m] = (sqrt(diff2) + BOUND_SLACK * (sqrt(wp2) + sqrt(wq2))) * (1.0 + BOUND_SLACK);
     }
 }
 
@@ -1085,65 +1099,94 @@ static void uf_union(int32_t *parent, int32_t a, int32_t b)
 }
 
 /*
- * Depth-first spanning forest numbered in preorder, so each subtree is a contiguous
- * range of positions; `temp` holds 2p + 1 + 4e + 2p ints for the adjacency and the stack.
+ * Spanning forest (breadth-first, so subtrees stay small) numbered in depth-first
+ * preorder, so each subtree is a contiguous range of positions. `temp` holds
+ * 7p + 2 + 4e ints for the adjacency, the queue and the tree's child lists.
  */
 static void build_forest(fr_runtime *rt, int32_t *temp)
 {
-    int32_t p = rt->p, e = rt->e, *start = temp, *adj = temp + p + 1, *stack = adj + 4 * e, *next = stack + p;
-    int32_t m, v, counter = 0, top, num_extra = 0;
+    int32_t p = rt->p, e = rt->e, *start = temp, *adj = start + p + 1, *queue = adj + 4 * e;
+    int32_t *child_start = queue + p, *children = child_start + p + 1, *next = children + p, *stack = next + p;
+    int32_t *parent = stack + p, m, v, head, tail, counter = 0;
     memset(start, 0, sizeof(int32_t) * ((size_t)p + 1));
+    memset(child_start, 0, sizeof(int32_t) * ((size_t)p + 1));
     for (m = 0; m < e; m++) {
         start[rt->edges[2 * m] + 1]++;
         start[rt->edges[2 * m + 1] + 1]++;
-    }
-    for (v = 0; v < p; v++)
-        start[v + 1] += start[v];
-    for (v = 0; v < p; v++)
-        next[v] = start[v];
-    for (m = 0; m < e; m++) {
-        int32_t P = rt->edges[2 * m], Q = rt->edges[2 * m + 1];
-        adj[2 * next[P]] = Q, adj[2 * next[P]++ + 1] = m;
-        adj[2 * next[Q]] = P, adj[2 * next[Q]++ + 1] = m;
         rt->tree_child[m] = -1;
     }
     for (v = 0; v < p; v++) {
-        rt->pos[v] = -1;
+        start[v + 1] += start[v];
         next[v] = start[v];
+        parent[v] = -2; /* unvisited */
+    }
+    for (m = 0; m < e; m++) {
+        int32_t P = rt->edges[2 * m], Q = rt->edges[2 * m + 1];
+        adj[2 * next[P]] = Q;
+        adj[2 * next[P]++ + 1] = m;
+        adj[2 * next[Q]] = P;
+        adj[2 * next[Q]++ + 1] = m;
+    }
+    for (v = 0; v < p; v++) { /* breadth-first trees; parent[w] = the edge to w's parent, -1 for a root */
+        if (parent[v] != -2)
+            continue;
+        parent[v] = -1;
+        queue[0] = v;
+        for (head = 0, tail = 1; head < tail; head++) {
+            int32_t u = queue[head], a;
+            for (a = start[u]; a < start[u + 1]; a++)
+                if (parent[adj[2 * a]] == -2) {
+                    parent[adj[2 * a]] = adj[2 * a + 1];
+                    queue[tail++] = adj[2 * a];
+                    child_start[u + 1]++;
+                }
+        }
     }
     for (v = 0; v < p; v++) {
-        int32_t root_position = counter;
-        if (rt->pos[v] >= 0)
+        child_start[v + 1] += child_start[v];
+        next[v] = child_start[v];
+    }
+    for (v = 0; v < p; v++)
+        if (parent[v] >= 0) {
+            int32_t up = rt->edges[2 * parent[v]] == v ? rt->edges[2 * parent[v] + 1] : rt->edges[2 * parent[v]];
+            children[next[up]++] = v;
+        }
+    for (v = 0; v < p; v++) { /* preorder numbering of each tree */
+        int32_t top = 1;
+        if (parent[v] != -1)
             continue;
-        rt->root_pos[counter] = root_position;
-        rt->pos[v] = counter++;
         stack[0] = v;
-        top = 1;
         while (top > 0) {
-            int32_t u = stack[top - 1];
-            if (next[u] < start[u + 1]) {
-                int32_t w = adj[2 * next[u]], edge = adj[2 * next[u] + 1];
-                next[u]++;
-                if (rt->pos[w] < 0) {
-                    rt->root_pos[counter] = root_position;
-                    rt->tree_child[edge] = counter;
-                    rt->pos[w] = counter++;
-                    stack[top++] = w;
-                }
-            } else {
-                rt->subtree_end[rt->pos[u]] = counter;
-                top--;
+            int32_t u = stack[--top], c;
+            rt->pos[u] = counter;
+            rt->root_head[counter] = parent[u] < 0;
+            rt->parent_pos[counter] = counter;
+            if (parent[u] >= 0) {
+                int32_t P = rt->edges[2 * parent[u]], Q = rt->edges[2 * parent[u] + 1];
+                rt->tree_child[parent[u]] = counter;
+                rt->parent_pos[counter] = rt->pos[P == u ? Q : P]; /* numbered before u */
             }
+            rt->identity[counter] = counter;
+            counter++;
+            for (c = child_start[u + 1] - 1; c >= child_start[u]; c--)
+                stack[top++] = children[c];
         }
     }
+    rt->num_tree = 0; /* test order: tree edges first */
     for (m = 0; m < e; m++)
-        if (rt->tree_child[m] < 0) {
-            rt->extra[3 * num_extra] = m;
-            rt->extra[3 * num_extra + 1] = rt->pos[rt->edges[2 * m]];
-            rt->extra[3 * num_extra + 2] = rt->pos[rt->edges[2 * m + 1]];
-            num_extra++;
+        if (rt->tree_child[m] >= 0) {
+            rt->child_at[rt->num_tree] = rt->tree_child[m];
+            rt->order[rt->num_tree++] = m;
         }
-    rt->num_extra = num_extra;
+    for (m = 0, v = rt->num_tree; m < e; m++)
+        if (rt->tree_child[m] < 0)
+            rt->order[v++] = m;
+    for (m = 0; m < e; m++) {
+        rt->ends[2 * m] = rt->edges[2 * rt->order[m]];
+        rt->ends[2 * m + 1] = rt->edges[2 * rt->order[m] + 1];
+        rt->end_pos[2 * m] = rt->pos[rt->ends[2 * m]];
+        rt->end_pos[2 * m + 1] = rt->pos[rt->ends[2 * m + 1]];
+    }
     for (v = 0; v < p; v++)
         rt->whole[v] = v;
     for (m = 0; m < e; m++)
@@ -1192,7 +1235,7 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     b = block_plan(&dm, h.name_bytes);
     if (b.size > (uint64_t)(SIZE_MAX / 2) || (block = (unsigned char *)al.alloc(al.user, (size_t)b.size)) == NULL)
         return fail(message, message_size, FR_ERR_MEMORY, "out of memory (%lu bytes)", (unsigned long)b.size);
-    temp = (int32_t *)al.alloc(al.user, sizeof(int32_t) * (4 * (size_t)dm.p + 1 + 4 * (size_t)dm.e));
+    temp = (int32_t *)al.alloc(al.user, sizeof(int32_t) * (7 * (size_t)dm.p + 2 + 4 * (size_t)dm.e));
     if (temp == NULL) {
         al.free(al.user, block);
         return fail(message, message_size, FR_ERR_MEMORY, "out of memory");
@@ -1206,11 +1249,10 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     memcpy(rt->transform, h.transform, sizeof rt->transform);
     rt->sites = (float *)(block + b.sites);
     rt->B = (float *)(block + b.B);
-    rt->W = (float *)(block + b.W);
+    rt->Wd = (double *)(block + b.W);
     rt->areas = (float *)(block + b.areas);
     rt->edges = (int32_t *)(block + b.edges);
-    rt->dW = (double *)(block + b.dW);
-    rt->edge_norm = (double *)(block + b.edge_norm);
+    rt->edge_bound = (double *)(block + b.edge_bound);
     rt->names = (char *)(block + b.names);
     rt->name_offsets = (int32_t *)(block + b.name_offsets);
     rt->kd_points = (double *)(block + b.kd_points);
@@ -1218,16 +1260,20 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     rt->kd_nodes = (kd_node *)(block + b.kd_nodes);
     rt->whole = (int32_t *)(block + b.whole);
     rt->pos = (int32_t *)(block + b.pos);
-    rt->subtree_end = (int32_t *)(block + b.subtree_end);
-    rt->root_pos = (int32_t *)(block + b.root_pos);
+    rt->parent_pos = (int32_t *)(block + b.parent_pos);
+    rt->root_head = block + b.root_head;
+    rt->identity = (int32_t *)(block + b.identity);
     rt->tree_child = (int32_t *)(block + b.tree_child);
-    rt->extra = (int32_t *)(block + b.extra);
+    rt->order = (int32_t *)(block + b.order);
+    rt->ends = (int32_t *)(block + b.ends);
+    rt->child_at = (int32_t *)(block + b.child_at);
+    rt->end_pos = (int32_t *)(block + b.end_pos);
     rt->scratch = block + b.scratch;
     copy_arrays(rt, &h, (const unsigned char *)binary);
     decode_names(rt, &h, h.name_bytes);
-    edge_differences(rt);
     build_kd_tree(rt);
     build_forest(rt, temp);
+    edge_bounds(rt);
     al.free(al.user, temp);
     *out = rt;
     return FR_OK;
@@ -1271,7 +1317,7 @@ const float *fr_sites(const fr_runtime *rt) { return rt != NULL ? rt->sites : NU
 
 size_t fr_workspace_size(const fr_runtime *rt)
 {
-    return rt != NULL ? (size_t)workspace_plan(rt->k, rt->p, rt->e).size : 0;
+    return rt != NULL ? (size_t)workspace_plan(rt->k, rt->p, rt->e, rt->d).size : 0;
 }
 
 /* Squared distance from (x, y, z) to a box, computed like a site's so it never exceeds one inside. */
@@ -1342,132 +1388,137 @@ static void mode_coefficients(const fr_runtime *rt, int32_t site, const double n
     }
 }
 
-/* |jump'| of edge m (step 5) from the precomputed per-edge mode differences. */
-static double edge_jump(const fr_runtime *rt, int32_t m, const double *alpha)
+/*
+ * Step 4: disp'[j, c] = sum over i of alpha'[i] W[i, j, c], each sum in mode order.
+ * Eight outputs at a time keep eight independent sums in registers (no dependency
+ * chain, and compilers vectorize it), with W stored in double.
+ */
+static void displacements(const fr_runtime *rt, const double *alpha, double *disp)
 {
-    int32_t i, k = rt->k;
-    const double *w = rt->dW + (size_t)m * (size_t)k * (size_t)rt->d;
-    if (rt->d == 1) {
-        double j = 0.0;
-        for (i = 0; i < k; i++)
-            j += alpha[i] * w[i];
-        return fabs(j);
-    } else {
-        double j0 = 0.0, j1 = 0.0, j2 = 0.0;
+    size_t n = (size_t)rt->p * (size_t)rt->d, k = (size_t)rt->k, i, j = 0, c;
+    const double *W = rt->Wd;
+    for (; j + 8 <= n; j += 8) {
+        double s0 = 0, s1 = 0, s2 = 0, s3 = 0, s4 = 0, s5 = 0, s6 = 0, s7 = 0;
         for (i = 0; i < k; i++) {
-            j0 += alpha[i] * w[3 * i];
-            j1 += alpha[i] * w[3 * i + 1];
-            j2 += alpha[i] * w[3 * i + 2];
+            const double a = alpha[i], *w = W + i * n + j;
+            s0 += a * w[0];
+            s1 += a * w[1];
+            s2 += a * w[2];
+            s3 += a * w[3];
+            s4 += a * w[4];
+            s5 += a * w[5];
+            s6 += a * w[6];
+            s7 += a * w[7];
         }
+        disp[j] = s0, disp[j + 1] = s1, disp[j + 2] = s2, disp[j + 3] = s3;
+        disp[j + 4] = s4, disp[j + 5] = s5, disp[j + 6] = s6, disp[j + 7] = s7;
+    }
+    for (c = j; c < n; c++) {
+        double sum = 0;
+        for (i = 0; i < k; i++)
+            sum += alpha[i] * W[i * n + c];
+        disp[c] = sum;
+    }
+}
+
+/* |jump'| of the edge (P, Q): |disp'[P] - disp'[Q]| (d = 1) or its Euclidean norm (d = 3). */
+static double jump_norm(const double *disp, int32_t d, int32_t P, int32_t Q)
+{
+    if (d == 1)
+        return fabs(disp[P] - disp[Q]);
+    else {
+        const double *a = disp + 3 * (size_t)P, *b = disp + 3 * (size_t)Q;
+        double j0 = a[0] - b[0], j1 = a[1] - b[1], j2 = a[2] - b[2];
         return sqrt(j0 * j0 + j1 * j1 + j2 * j2);
     }
 }
 
-/*
- * Step 5: mark broken edges; returns how many, and the positions of broken
- * spanning-tree edges in cuts (up to CUT_LIMIT + 1 of them, *num_cuts may say more).
- */
-static int32_t edge_test(const fr_runtime *rt, const double *alpha, double t, uint8_t *broken, int32_t *cuts,
-                         int32_t *num_cuts)
+/* Whether some edge might break: |jump'| <= |alpha'| * edge_bound[m] for every edge (see edge_bounds). */
+static int any_edge_may_break(const fr_runtime *rt, const double *alpha, double t)
 {
-    int32_t i, m, count = 0, ncuts = 0;
-    double norm2 = 0.0, bound;
+    int32_t i, m;
+    double norm2 = 0.0, norm;
     for (i = 0; i < rt->k; i++)
         norm2 += alpha[i] * alpha[i];
-    /* Cauchy-Schwarz: |jump'| <= |alpha'| |dW[m]|, so an edge below t with slack for rounding holds. */
-    bound = sqrt(norm2) * BOUND_SLACK;
-    for (m = 0; m < rt->e; m++) {
-        uint8_t cut = 0;
-        if (!(bound * rt->edge_norm[m] <= t))
-            cut = edge_jump(rt, m, alpha) > t;
-        broken[m] = cut;
-        if (cut) {
-            count++;
-            if (rt->tree_child[m] >= 0 && ncuts++ <= CUT_LIMIT)
-                cuts[ncuts - 1] = rt->tree_child[m];
-        }
-    }
-    *num_cuts = ncuts;
-    return count;
+    norm = sqrt(norm2) * (1.0 + BOUND_SLACK);
+    for (m = 0; m < rt->e; m++)
+        if (!(norm * rt->edge_bound[m] <= t))
+            return 1;
+    return 0;
 }
 
-/* Step 6 with many cuts: union-find over the unbroken edges (groups doubles as the parent array). */
-static int32_t groups_union_find(const fr_runtime *rt, const uint8_t *broken, int32_t *groups)
+/* Pointers into the caller's (or the built-in) workspace. */
+typedef struct scratch {
+    double *alpha, *disp;
+    uint8_t *head, *broken;
+    int32_t *piece, *uf, *first;
+} scratch;
+
+static int32_t uf_root(int32_t *uf, int32_t a)
 {
-    int32_t v, m, count = 0;
-    for (v = 0; v < rt->p; v++)
-        groups[v] = v;
-    for (m = 0; m < rt->e; m++)
-        if (!broken[m])
-            uf_union(groups, rt->edges[2 * m], rt->edges[2 * m + 1]);
-    for (v = 0; v < rt->p; v++) {
-        groups[v] = uf_find(groups, v);
-        count += groups[v] == v;
-    }
-    return count;
+    while (uf[a] != a)
+        a = uf[a] = uf[uf[a]]; /* path halving */
+    return a;
 }
 
 /*
- * Step 6 with a few cuts: cutting spanning-tree edges splits the forest into
- * subtrees (ranges of preorder positions, labelled by their first position);
- * unbroken non-tree edges glue subtrees back together.
+ * Steps 5 and 6 once the displacements are known. Edges are tested in the order
+ * of build_forest: spanning-tree edges first. A broken tree edge makes its child
+ * the head of a subtree; since a parent precedes its children in preorder, one
+ * forward pass labels every position with its subtree's head. Unbroken non-tree
+ * edges then join subtrees (union-find on heads), and the group of a fragment is
+ * the first fragment met in its component in increasing order. Branch-free where
+ * a shattering hit makes the branches unpredictable. Returns the number of groups.
  */
-static int32_t groups_forest(const fr_runtime *rt, const uint8_t *broken, int32_t *cuts, int32_t num_cuts,
-                             int32_t *piece, int32_t *uf, int32_t *first, int32_t *groups)
+static int32_t break_and_group(const fr_runtime *rt, double t, const scratch *w, int32_t *groups,
+                               int32_t *num_broken)
 {
-    int32_t i, j, v, count = 0, p = rt->p;
-    for (i = 1; i < num_cuts; i++) /* insertion sort: a nested subtree comes after its ancestor */
-        for (j = i; j > 0 && cuts[j - 1] > cuts[j]; j--) {
-            int32_t t = cuts[j];
-            cuts[j] = cuts[j - 1];
-            cuts[j - 1] = t;
+    /* Everything in locals: stores through uint8_t may alias anything, so fields would be reloaded. */
+    const int32_t e = rt->e, p = rt->p, d = rt->d, num_tree = rt->num_tree, *ends = rt->ends, *order = rt->order;
+    const int32_t *child = rt->child_at, *parent_pos = rt->parent_pos, *end_pos = rt->end_pos, *pos = rt->pos;
+    const double *disp = w->disp;
+    uint8_t *broken = w->broken, *head = w->head;
+    int32_t *piece = w->piece, *uf = w->uf, *first = w->first, r, j, v, count = 0, groups_count = 0;
+    memcpy(head, rt->root_head, (size_t)p);
+    for (r = 0; r < num_tree; r++) {
+        const int cut = jump_norm(disp, d, ends[2 * r], ends[2 * r + 1]) > t;
+        broken[order[r]] = (uint8_t)cut;
+        head[child[r]] = (uint8_t)cut;
+        count += cut;
+    }
+    for (j = 0; j < p; j++)
+        piece[j] = head[j] ? j : piece[parent_pos[j]];
+    memcpy(uf, rt->identity, sizeof(int32_t) * (size_t)p);
+    for (; r < e; r++) {
+        const int cut = jump_norm(disp, d, ends[2 * r], ends[2 * r + 1]) > t;
+        broken[order[r]] = (uint8_t)cut;
+        count += cut;
+        if (!cut) {
+            int32_t a = uf_root(uf, piece[end_pos[2 * r]]), b = uf_root(uf, piece[end_pos[2 * r + 1]]);
+            uf[a > b ? a : b] = a > b ? b : a;
         }
-    memcpy(piece, rt->root_pos, sizeof(int32_t) * (size_t)p);
-    for (i = 0; i < num_cuts; i++)
-        for (j = cuts[i]; j < rt->subtree_end[cuts[i]]; j++)
-            piece[j] = cuts[i];
-    for (i = 0; i < p; i++) {
-        uf[i] = i;
-        first[i] = -1;
     }
-    for (i = 0; i < rt->num_extra; i++) {
-        const int32_t *x = rt->extra + 3 * (size_t)i;
-        if (!broken[x[0]] && piece[x[1]] != piece[x[2]])
-            uf_union(uf, piece[x[1]], piece[x[2]]);
-    }
-    for (v = 0; v < p; v++) { /* ascending v: the first fragment met in a component is its smallest */
-        int32_t c = uf_find(uf, piece[rt->pos[v]]);
+    memset(first, 0xFF, sizeof(int32_t) * (size_t)p); /* -1 */
+    for (v = 0; v < p; v++) {
+        const int32_t c = uf_root(uf, piece[pos[v]]);
         if (first[c] < 0) {
             first[c] = v;
-            count++;
+            groups_count++;
         }
         groups[v] = first[c];
     }
-    return count;
-}
-
-static void displacements(const fr_runtime *rt, const double *alpha, double m, double *out)
-{
-    size_t n = (size_t)rt->p * (size_t)rt->d, i, j;
-    for (j = 0; j < n; j++)
-        out[j] = 0.0;
-    for (i = 0; i < (size_t)rt->k; i++) {
-        const float *w = rt->W + i * n;
-        for (j = 0; j < n; j++)
-            out[j] += alpha[i] * (double)w[j];
-    }
-    for (j = 0; j < n; j++)
-        out[j] *= m;
+    *num_broken = count;
+    return groups_count;
 }
 
 fr_status fr_project(const fr_runtime *rt, const double point[3], const double impulse[3], double threshold,
                      void *workspace, fr_impact *out)
 {
-    workspace_layout w;
-    unsigned char *ws;
-    double *alpha, n[3], m = 0.0;
-    uint8_t *broken;
-    int32_t *cuts, num_cuts = 0, i, c;
+    workspace_layout layout;
+    unsigned char *base;
+    scratch w;
+    double n[3], m = 0.0;
+    int32_t i, c, breaks = 0;
     if (rt == NULL || point == NULL || impulse == NULL || out == NULL || out->groups == NULL)
         return FR_ERR_ARGUMENT;
     for (c = 0; c < 3; c++) {
@@ -1477,36 +1528,40 @@ fr_status fr_project(const fr_runtime *rt, const double point[3], const double i
     }
     if (isnan(threshold) || threshold < 0)
         return FR_ERR_INPUT;
-    w = workspace_plan(rt->k, rt->p, rt->e);
-    ws = workspace != NULL ? (unsigned char *)workspace : (unsigned char *)rt->scratch;
-    alpha = (double *)(ws + w.alpha);
-    broken = out->broken != NULL ? out->broken : ws + w.broken;
-    cuts = (int32_t *)(ws + w.cuts);
+    layout = workspace_plan(rt->k, rt->p, rt->e, rt->d);
+    base = workspace != NULL ? (unsigned char *)workspace : (unsigned char *)rt->scratch;
+    w.alpha = (double *)(base + layout.alpha);
+    w.disp = (double *)(base + layout.disp);
+    w.head = base + layout.head;
+    w.broken = out->broken != NULL ? out->broken : base + layout.broken;
+    w.piece = (int32_t *)(base + layout.piece);
+    w.uf = (int32_t *)(base + layout.uf);
+    w.first = (int32_t *)(base + layout.first);
     out->site = kd_nearest(rt, point[0], point[1], point[2]);
     if (m == 0.0) { /* step 2: a zero impulse breaks nothing */
-        memset(alpha, 0, sizeof(double) * (size_t)rt->k);
-        if (rt->e > 0)
-            memset(broken, 0, (size_t)rt->e);
-        out->num_broken = 0;
+        memset(w.alpha, 0, sizeof(double) * (size_t)rt->k);
     } else {
         for (c = 0; c < 3; c++)
             n[c] = impulse[c] / m;
-        mode_coefficients(rt, out->site, n, alpha);
-        out->num_broken = edge_test(rt, alpha, threshold / m, broken, cuts, &num_cuts);
+        mode_coefficients(rt, out->site, n, w.alpha);
+        breaks = any_edge_may_break(rt, w.alpha, threshold / m);
     }
-    if (num_cuts == 0) {
+    if (breaks || out->displacement != NULL)
+        displacements(rt, w.alpha, w.disp);
+    if (breaks) {
+        out->num_groups = break_and_group(rt, threshold / m, &w, out->groups, &out->num_broken);
+    } else { /* nothing breaks: the components of the whole graph */
+        if (rt->e > 0)
+            memset(w.broken, 0, (size_t)rt->e);
         memcpy(out->groups, rt->whole, sizeof(int32_t) * (size_t)rt->p);
         out->num_groups = rt->whole_groups;
-    } else if (num_cuts > CUT_LIMIT) {
-        out->num_groups = groups_union_find(rt, broken, out->groups);
-    } else {
-        out->num_groups = groups_forest(rt, broken, cuts, num_cuts, (int32_t *)(ws + w.piece), (int32_t *)(ws + w.uf),
-                                        (int32_t *)(ws + w.first), out->groups);
+        out->num_broken = 0;
     }
     if (out->displacement != NULL)
-        displacements(rt, alpha, m, out->displacement);
+        for (i = 0; i < rt->p * rt->d; i++)
+            out->displacement[i] = m * w.disp[i];
     if (out->alpha != NULL)
         for (i = 0; i < rt->k; i++)
-            out->alpha[i] = m * alpha[i];
+            out->alpha[i] = m * w.alpha[i];
     return FR_OK;
 }

@@ -199,8 +199,10 @@ def generate(out: str, example_json: str, dyadic_json: str) -> list[str]:
     os.makedirs(out, exist_ok=True)
     bases = {}
     for key, path in (("example", example_json), ("dyadic", dyadic_json)):
-        header = json.loads(open(path, encoding="utf-8").read())
-        binary = open(os.path.join(os.path.dirname(path), header["buffer"]["uri"]), "rb").read()
+        with open(path, encoding="utf-8") as fh:
+            header = json.load(fh)
+        with open(os.path.join(os.path.dirname(path), header["buffer"]["uri"]), "rb") as fh:
+            binary = fh.read()
         bases[key] = (header, binary, os.path.basename(path).replace(".fracture.json", ".vectors.json"))
     entries, written = [], []
     for name, base, edit, expect, why in CASES:
@@ -215,7 +217,7 @@ def generate(out: str, example_json: str, dyadic_json: str) -> list[str]:
             fh.write(header_out)
         with open(os.path.join(out, f"{name}.fracture.bin"), "wb") as fh:
             fh.write(binary_out)
-        entry = {"name": name, "header": f"{name}.fracture.json", "binary": f"{name}.fracture.bin",
+        entry: dict[str, object] = {"name": name, "header": f"{name}.fracture.json", "binary": f"{name}.fracture.bin",
                  "expect": expect, "why": why}
         if expect == "ok":
             entry["vectors"] = vectors

@@ -36,6 +36,7 @@ sys.path.insert(0, REPO)
 
 import corrupt  # noqa: E402
 import reference  # noqa: E402
+
 from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime  # noqa: E402
 
 VECTORS_FORMAT = "fracture-runtime-conformance"
@@ -51,11 +52,18 @@ def _names(p: int) -> tuple[str, ...]:
     return tuple(f"fragment_{j:03d}" for j in range(p))
 
 
+def _doc_example() -> dict:
+    """The JSON block after <!-- example-data --> in docs/FORMAT.md."""
+    with open(os.path.join(REPO, "docs", "FORMAT.md"), encoding="utf-8") as fh:
+        match = re.search(r"<!-- example-data -->\s*```json\n(.*?)```", fh.read(), re.DOTALL)
+    if match is None:
+        raise ValueError("docs/FORMAT.md has no <!-- example-data --> block")
+    return json.loads(match.group(1))
+
+
 def example_data() -> RuntimeData:
     """The worked example of docs/FORMAT.md section 6 (d = 1)."""
-    text = open(os.path.join(REPO, "docs", "FORMAT.md"), encoding="utf-8").read()
-    block = re.search(r"<!-- example-data -->\s*```json\n(.*?)```", text, re.S).group(1)
-    ex = json.loads(block)
+    ex = _doc_example()
     return RuntimeData(sites=np.array(ex["sites"], np.float32), B=np.array(ex["B"], np.float32),
                        W=np.array(ex["W"], np.float32), edges=np.array(ex["edges"], np.int32),
                        edge_areas=np.array(ex["edge_areas"], np.float32),
@@ -70,19 +78,17 @@ def dyadic_d3() -> RuntimeData:
     jump of exactly 1.25 for a unit x impulse at site 0 (an exact threshold tie).
     """
     sites = [[0, 0, 0], [4, 0, 0], [0, 4, 0], [0, 0, 4], [4, 4, 0], [-4, 0, 0], [0, 4, 0], [2, 2, 2]]
-    B = np.zeros((8, 3, 3))
-    B[0] = [[1, 0, 0], [0, 0.5, 0], [0, 0, 0.25]]
-    B[1] = [[-0.5, 0, 0], [0, 1, 0], [0.5, 0, 0]]
-    B[2] = [[0, 1, 0], [0.25, 0, 0], [0, 0, -1]]
-    B[3] = [[0, 0, 1], [0, -0.5, 0], [1, 0, 0]]
-    B[4] = [[0.5, 0.5, 0], [0, 0, 0.5], [-0.25, 0, 0]]
-    B[5] = [[-1, 0, 0], [0, -1, 0], [0, 0, -1]]
-    B[6] = [[0, 0.75, 0], [0, 0, 0.5], [0.5, 0, 0]]
-    B[7] = [[0.25, 0.25, 0.25], [0.5, 0, 0], [0, 0.5, 0]]
-    W = np.zeros((3, 5, 3))
-    W[0] = [[1, 0, 0], [0.25, 0, 0], [-0.5, 0, 0], [-1, 0, 0], [0, 0, 0]]
-    W[1] = [[0, 0.5, 0], [0, -0.5, 0], [0, 0, 0], [0, 0.25, 0.5], [0, 0, -1]]
-    W[2] = [[0, 0, 1], [0, 0, 0], [0, 0, -0.5], [0.5, 0, 0], [0, 0.25, 0]]
+    B = np.array([[[1, 0, 0], [0, 0.5, 0], [0, 0, 0.25]],
+                  [[-0.5, 0, 0], [0, 1, 0], [0.5, 0, 0]],
+                  [[0, 1, 0], [0.25, 0, 0], [0, 0, -1]],
+                  [[0, 0, 1], [0, -0.5, 0], [1, 0, 0]],
+                  [[0.5, 0.5, 0], [0, 0, 0.5], [-0.25, 0, 0]],
+                  [[-1, 0, 0], [0, -1, 0], [0, 0, -1]],
+                  [[0, 0.75, 0], [0, 0, 0.5], [0.5, 0, 0]],
+                  [[0.25, 0.25, 0.25], [0.5, 0, 0], [0, 0.5, 0]]])
+    W = np.array([[[1, 0, 0], [0.25, 0, 0], [-0.5, 0, 0], [-1, 0, 0], [0, 0, 0]],
+                  [[0, 0.5, 0], [0, -0.5, 0], [0, 0, 0], [0, 0.25, 0.5], [0, 0, -1]],
+                  [[0, 0, 1], [0, 0, 0], [0, 0, -0.5], [0.5, 0, 0], [0, 0.25, 0]]])
     edges = [[0, 1], [0, 2], [1, 2], [1, 3], [2, 4], [3, 4]]
     return RuntimeData(sites=np.array(sites, np.float32), B=B.astype(np.float32), W=W.astype(np.float32),
                        edges=np.array(edges, np.int32), edge_areas=np.arange(1, 7, dtype=np.float32),
@@ -220,7 +226,7 @@ def random_impacts(rt: reference.Runtime, count: int, seed: int) -> list[dict]:
 
 
 # Exact ties in the dyadic d = 3 file: all sums exact, so every evaluation order agrees.
-DYADIC_TIES = [
+DYADIC_TIES: list[dict] = [
     {"name": "exact threshold tie: |jump| == T holds", "point": [0.5, 0.0, 0.0], "impulse": [1.0, 0.0, 0.0],
      "threshold": 1.25, "exact": True},
     {"name": "exact threshold tie, impulse and threshold x8", "point": [0.5, 0.0, 0.0],
@@ -230,7 +236,7 @@ DYADIC_TIES = [
     {"name": "equidistant from sites 0 and 5", "point": [-2.0, 7.0, -3.0], "impulse": [0.0, 0.0, 3.0],
      "threshold": 0.5, "exact": True},
 ]
-EXAMPLE_TIES = [
+EXAMPLE_TIES: list[dict] = [
     {"name": "worked example case 1 with T = 2.5: |jump| == T holds", "point": [0.1, 0.0, 0.0],
      "impulse": [0.0, 0.0, -2.0], "threshold": 2.5, "exact": True},
 ]
@@ -304,13 +310,12 @@ def generate(out: str, rebake: bool = False) -> list[str]:
         written += [f"{name}.fracture.json", f"{name}.fracture.bin"]
     if rebake:
         rebake_sample_assets(out)
-    for asset, _ in sample_assets():
-        stem = os.path.splitext(asset)[0]
+    stems = [os.path.splitext(asset)[0] for asset, _ in sample_assets()]
+    for stem in stems:
         if os.path.abspath(out) != HERE and not rebake:
             for suffix in (".fracture.json", ".fracture.bin"):
                 shutil.copyfile(os.path.join(HERE, stem + suffix), os.path.join(out, stem + suffix))
-        small[stem] = None
-    for seed, name in enumerate(small):
+    for seed, name in enumerate([*small, *stems]):
         rt = reference.Runtime.from_data(load_runtime(os.path.join(out, f"{name}.fracture.json")))
         rng = np.random.default_rng(100 + seed)
         impacts = designed_impacts(rt, rng)
@@ -318,7 +323,7 @@ def generate(out: str, rebake: bool = False) -> list[str]:
             impacts = _doc_cases() + EXAMPLE_TIES + impacts
         elif name == "dyadic_d3":
             impacts = DYADIC_TIES + impacts
-        count = SMALL_IMPACTS if name.startswith("random") else SAMPLE_IMPACTS if small[name] is None else 8
+        count = SMALL_IMPACTS if name.startswith("random") else SAMPLE_IMPACTS if name in stems else 8
         impacts += random_impacts(rt, count, seed=200 + seed)
         write_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", rt, impacts)
         written.append(f"{name}.vectors.json")
@@ -328,8 +333,7 @@ def generate(out: str, rebake: bool = False) -> list[str]:
 
 
 def _doc_cases() -> list[dict]:
-    text = open(os.path.join(REPO, "docs", "FORMAT.md"), encoding="utf-8").read()
-    ex = json.loads(re.search(r"<!-- example-data -->\s*```json\n(.*?)```", text, re.S).group(1))
+    ex = _doc_example()
     return [{"name": f"worked example case {i + 1}", "point": [float(c) for c in case["point"]],
              "impulse": [float(c) for c in case["impulse"]], "threshold": case["threshold"], "exact": True}
             for i, case in enumerate(ex["cases"])]

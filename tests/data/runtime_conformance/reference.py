@@ -59,7 +59,7 @@ class Runtime:
         return len(self.W[0])
 
     @classmethod
-    def from_data(cls, data) -> "Runtime":
+    def from_data(cls, data) -> Runtime:
         """From a :class:`fracture_cli.runtime.format.RuntimeData`."""
         return cls(sites=[tuple(float(c) for c in s) for s in data.sites.tolist()],
                    B=[[tuple(m) for m in site] for site in data.B.tolist()],
