@@ -2,7 +2,7 @@
 // realtime impact projection, written from docs/FORMAT.md alone.
 //
 // A standalone ES module with no dependencies; it runs in browsers and in Node.js (>= 18).
-// MIT licence, Copyright (c) fracture developers.
+// MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
 //
 //   import { parseRuntime, loadRuntime } from './fracture_runtime.js';
 //   const rt = parseRuntime(headerJsonTextOrObject, binaryArrayBufferOrUint8Array);
