@@ -21,6 +21,8 @@ import json
 import os
 import shutil
 import struct
+import subprocess
+from collections.abc import Callable
 
 import pytest
 
@@ -147,3 +149,20 @@ def check_answers(vectors: dict, output: str, check_values: bool = True) -> list
 def hex_names(names: list[str]) -> list[str]:
     """Fragment names as the drivers print them (hex of the UTF-8 bytes; ``-`` for an empty name)."""
     return [name.encode("utf-8").hex() or "-" for name in names]
+
+
+def check_damaged_file(case: dict, run: Callable[..., subprocess.CompletedProcess]) -> None:
+    """Assert a driver's handling of one ``corrupt/`` case: rejected with exit 2, or loaded with the right
+    names and answers. ``run(header, binary, stdin, *flags)`` runs the driver."""
+    header, binary = os.path.join(CORRUPT, case["header"]), os.path.join(CORRUPT, case["binary"])
+    if case["expect"] == "rejected":
+        result = run(header, binary, "")
+        assert result.returncode == 2 and result.stdout.startswith("load-error "), result.stdout + result.stderr
+        if case.get("only_crc"):  # with the check off, the same file loads
+            assert run(header, binary, "", "--skip-crc").returncode == 0
+        return
+    vectors = load_vectors(case["vectors"][: -len(".vectors.json")])
+    result = run(header, binary, protocol_input(vectors["impacts"]), "--names")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert result.stdout.splitlines()[0].split()[1:] == hex_names(case["fragment_names"])
+    assert check_answers(vectors, result.stdout) == []

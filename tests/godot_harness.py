@@ -1,5 +1,7 @@
 """Run Godot 3 headless on a throwaway project: the fracture add-on, some files, an import pass, a script.
 
+The project gets res://addons/fracture/ and res://hex_bits.gd (doubles to and from hex bits).
+
 Reusable by any engine test (conformance, breaking a baked asset, rigid bodies at rest)::
 
     project = GodotProject(tmp_path / "godot")          # skips the test when godot3-server is missing
@@ -26,6 +28,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 ADDON = REPO / "engines" / "godot" / "addons" / "fracture"
+HEX_BITS = REPO / "engines" / "godot" / "tests" / "hex_bits.gd"  # exact doubles for test scripts
 GODOT_NAMES = ("godot3-server", "godot3", "godot")
 PROJECT_FILE = """config_version=4
 
@@ -75,6 +78,7 @@ class GodotProject:
         self.root.mkdir(parents=True, exist_ok=True)
         (self.root / "project.godot").write_text(PROJECT_FILE.format(name=name))
         shutil.copytree(ADDON, self.root / "addons" / "fracture", dirs_exist_ok=True)
+        shutil.copyfile(HEX_BITS, self.root / HEX_BITS.name)
 
     def add_file(self, source: str | os.PathLike, name: str | None = None) -> str:
         """Copy a file into the project; returns its res:// path."""

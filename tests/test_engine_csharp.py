@@ -7,11 +7,10 @@ import subprocess
 
 import pytest
 from engine_support import (
-    CORRUPT,
     REPO,
     check_answers,
+    check_damaged_file,
     corrupt_cases,
-    hex_names,
     load_vectors,
     protocol_input,
     require_tool,
@@ -49,15 +48,4 @@ def test_csharp_reader_passes_the_vectors(driver, name):
 
 @pytest.mark.parametrize("case", corrupt_cases(), ids=lambda c: c["name"])
 def test_csharp_reader_on_damaged_files(driver, case):
-    header, binary = os.path.join(CORRUPT, case["header"]), os.path.join(CORRUPT, case["binary"])
-    if case["expect"] == "rejected":
-        result = run_driver(driver, header, binary)
-        assert result.returncode == 2 and result.stdout.startswith("load-error "), result.stdout + result.stderr
-        if case.get("only_crc"):
-            assert run_driver(driver, header, binary, "", "--skip-crc").returncode == 0
-    else:
-        vectors = load_vectors(case["vectors"][: -len(".vectors.json")])
-        result = run_driver(driver, header, binary, protocol_input(vectors["impacts"]), "--names")
-        assert result.returncode == 0, result.stdout + result.stderr
-        assert result.stdout.splitlines()[0].split()[1:] == hex_names(case["fragment_names"])
-        assert check_answers(vectors, result.stdout) == []
+    check_damaged_file(case, lambda *args: run_driver(driver, *args))

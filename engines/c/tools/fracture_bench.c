@@ -14,6 +14,7 @@
  */
 #define _POSIX_C_SOURCE 199309L
 #include "../fracture_runtime.h"
+#include "tool_common.h"
 
 #include <inttypes.h>
 #include <stdio.h>
@@ -34,32 +35,6 @@ static int by_value(const void *a, const void *b)
 {
     double x = *(const double *)a, y = *(const double *)b;
     return (x > y) - (x < y);
-}
-
-static unsigned char *read_file(const char *path, size_t *size)
-{
-    FILE *f = fopen(path, "rb");
-    unsigned char *data = NULL;
-    long n;
-    if (f != NULL && fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0) {
-        data = (unsigned char *)malloc(n > 0 ? (size_t)n : 1);
-        if (data != NULL && fread(data, 1, (size_t)n, f) != (size_t)n) {
-            free(data);
-            data = NULL;
-        }
-        *size = (size_t)n;
-    }
-    if (f != NULL)
-        fclose(f);
-    return data;
-}
-
-static double bits(const char *hex)
-{
-    uint64_t u = (uint64_t)strtoull(hex, NULL, 16);
-    double v;
-    memcpy(&v, &u, sizeof v);
-    return v;
 }
 
 int main(int argc, char **argv)
@@ -88,7 +63,7 @@ int main(int argc, char **argv)
     while (n < MAX_HITS && fgets(line, sizeof line, stdin) != NULL) {
         char *token = strtok(line, " \t\r\n");
         for (i = 0; i < 7 && token != NULL; i++, token = strtok(NULL, " \t\r\n"))
-            hits[n][i] = strcmp(token, "-") == 0 ? info.default_threshold : bits(token);
+            hits[n][i] = strcmp(token, "-") == 0 ? info.default_threshold : from_bits(token);
         n += i == 7;
     }
     times = (double *)malloc(sizeof(double) * (size_t)n * (size_t)rounds + 1);

@@ -17,39 +17,12 @@
  * MIT licence, Copyright (c) fracture developers.
  */
 #include "../fracture_runtime.h"
+#include "tool_common.h"
 
 #include <inttypes.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-static unsigned char *read_file(const char *path, size_t *size)
-{
-    FILE *f = fopen(path, "rb");
-    unsigned char *data;
-    long n;
-    if (f == NULL || fseek(f, 0, SEEK_END) != 0 || (n = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) {
-        if (f != NULL)
-            fclose(f);
-        return NULL;
-    }
-    data = (unsigned char *)malloc(n > 0 ? (size_t)n : 1);
-    if (data != NULL && fread(data, 1, (size_t)n, f) != (size_t)n) {
-        free(data);
-        data = NULL;
-    }
-    fclose(f);
-    *size = (size_t)n;
-    return data;
-}
-
-static double from_bits(const char *hex)
-{
-    uint64_t u = (uint64_t)strtoull(hex, NULL, 16);
-    double v;
-    memcpy(&v, &u, sizeof v);
-    return v;
-}
 
 static void print_bits(double v)
 {

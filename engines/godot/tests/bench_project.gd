@@ -9,8 +9,7 @@
 extends SceneTree
 
 const FractureRuntimeScript = preload("res://addons/fracture/fracture_runtime.gd")
-
-var _peer := StreamPeerBuffer.new()
+const HexBits = preload("res://hex_bits.gd")
 
 
 func _init() -> void:
@@ -32,8 +31,8 @@ func _init() -> void:
 				if t.size() >= 7:
 					var hit := []
 					for i in range(6):
-						hit.append(_from_bits(t[i]))
-					hit.append(runtime.default_threshold if t[6] == "-" else _from_bits(t[6]))
+						hit.append(HexBits.from_bits(t[i]))
+					hit.append(runtime.default_threshold if t[6] == "-" else HexBits.from_bits(t[6]))
 					hits.append(hit)
 		var times := []
 		for hit in hits:
@@ -46,18 +45,3 @@ func _init() -> void:
 					times.size()])
 	print("done")
 	quit()
-
-
-func _hex32(text: String) -> int:
-	var value := 0
-	for i in range(text.length()):
-		value = value * 16 + "0123456789abcdef".find(text[i].to_lower())
-	return value
-
-
-func _from_bits(hex: String) -> float:
-	_peer.clear()
-	_peer.put_32(_hex32(hex.substr(8, 8)))
-	_peer.put_32(_hex32(hex.substr(0, 8)))
-	_peer.seek(0)
-	return _peer.get_double()

@@ -11,8 +11,8 @@
 extends SceneTree
 
 const FractureBodyScript = preload("res://addons/fracture/fracture_body.gd")
+const HexBits = preload("res://hex_bits.gd")
 
-var _peer := StreamPeerBuffer.new()
 var _args := []
 var _started := false
 
@@ -45,8 +45,10 @@ func _idle(_delta: float) -> bool:
 				if t.size() < 7:
 					continue
 				var target = body.bodies()[int(t[6])]
-				body.hit(Vector3(_from_bits(t[0]), _from_bits(t[1]), _from_bits(t[2])),
-						Vector3(_from_bits(t[3]), _from_bits(t[4]), _from_bits(t[5])), target)
+				var v := []
+				for i in range(6):
+					v.append(HexBits.from_bits(t[i]))
+				body.hit(Vector3(v[0], v[1], v[2]), Vector3(v[3], v[4], v[5]), target)
 				_report(body)
 	print("done")
 	quit()
@@ -68,18 +70,3 @@ func _report(body) -> void:
 		print(names.join(" "))
 		print(shapes.join(" "))
 	print("step")
-
-
-func _hex32(text: String) -> int:
-	var value := 0
-	for i in range(text.length()):
-		value = value * 16 + "0123456789abcdef".find(text[i].to_lower())
-	return value
-
-
-func _from_bits(hex: String) -> float:
-	_peer.clear()
-	_peer.put_32(_hex32(hex.substr(8, 8)))
-	_peer.put_32(_hex32(hex.substr(0, 8)))
-	_peer.seek(0)
-	return _peer.get_double()

@@ -12,32 +12,7 @@
 extends SceneTree
 
 const FractureRuntimeScript = preload("res://addons/fracture/fracture_runtime.gd")
-
-var _peer := StreamPeerBuffer.new()
-
-
-func _hex32(text: String) -> int:
-	var value := 0
-	for i in range(text.length()):
-		value = value * 16 + "0123456789abcdef".find(text[i].to_lower())
-	return value
-
-
-func _from_bits(hex: String) -> float:
-	_peer.clear()
-	_peer.put_32(_hex32(hex.substr(8, 8)))
-	_peer.put_32(_hex32(hex.substr(0, 8)))
-	_peer.seek(0)
-	return _peer.get_double()
-
-
-func _bits(value: float) -> String:
-	_peer.clear()
-	_peer.put_double(value)
-	_peer.seek(0)
-	var low := _peer.get_u32()
-	var high := _peer.get_u32()
-	return "%08x%08x" % [high, low]
+const HexBits = preload("res://hex_bits.gd")
 
 
 func _read(path: String) -> PoolByteArray:
@@ -86,9 +61,11 @@ func _run_job(header: String, binary: String, impacts_path: String, flags: PoolS
 			var t: PoolStringArray = impacts.get_line().split(" ", false)
 			if t.size() < 7:
 				continue
-			var threshold: float = runtime.default_threshold if t[6] == "-" else _from_bits(t[6])
-			var hit: Dictionary = runtime.project(_from_bits(t[0]), _from_bits(t[1]), _from_bits(t[2]),
-					_from_bits(t[3]), _from_bits(t[4]), _from_bits(t[5]), threshold)
+			var threshold: float = runtime.default_threshold if t[6] == "-" else HexBits.from_bits(t[6])
+			var v := []
+			for i in range(6):
+				v.append(HexBits.from_bits(t[i]))
+			var hit: Dictionary = runtime.project(v[0], v[1], v[2], v[3], v[4], v[5], threshold)
 			lines.append(_answer(hit))
 	return lines
 
@@ -105,8 +82,8 @@ func _answer(hit: Dictionary) -> String:
 			parts.append(str(m))
 	parts.append("a")
 	for a in hit["alpha"]:
-		parts.append(_bits(a))
+		parts.append(HexBits.to_bits(a))
 	parts.append("d")
 	for x in hit["displacement"]:
-		parts.append(_bits(x))
+		parts.append(HexBits.to_bits(x))
 	return parts.join(" ")

@@ -93,6 +93,11 @@ def _flip_padding(header, binary):
     return header, bytes(raw)
 
 
+# Cases the numpy reference (fracture_cli/runtime/format.py) does not handle as the spec says yet.
+PYTHON_REFERENCE_BUGS = {
+    "header_deep_nesting": "json.loads raises RecursionError, which decode() does not turn into an InputError",
+}
+
 UNICODE_NAMES = ["fr\u00e4gment_000", "\U0001f4a5 shard \"1\" \\ /", "tab\there\nnewline \u20ac"]
 
 # (name, base file, edit, expect, what the reader must notice). Bases: "example" (d = 1,
@@ -108,6 +113,8 @@ CASES = [
      "invalid UTF-8"),
     ("header_nan_token", "example", _text(lambda t: t.replace(b'"default_threshold": 1.5', b'"default_threshold": NaN')),
      "rejected", "NaN is not JSON (and not a valid threshold)"),
+    ("header_deep_nesting", "example", _text(lambda t: t[:-2] + b',\n  "zzz": ' + b"[" * 5000 + b"]" * 5000 + b"\n}\n"),
+     "rejected", "an unknown key nested 5000 deep: readers limit the depth instead of recursing without bound"),
     ("format_wrong", "example", _edit(["format"], "fracture-modes-runtime-x"), "rejected", "other format"),
     ("format_missing", "example", _edit(["format"], ...), "rejected", "no format key"),
     ("version_2", "example", _edit(["version"], 2), "rejected", "unknown version"),
@@ -224,6 +231,8 @@ def generate(out: str, example_json: str, dyadic_json: str) -> list[str]:
             entry["fragment_names"] = UNICODE_NAMES if name == "ok_unicode_names" else header["fragment_names"]
         if name == "crc_mismatch":
             entry["only_crc"] = True
+        if name in PYTHON_REFERENCE_BUGS:
+            entry["python_reference_bug"] = PYTHON_REFERENCE_BUGS[name]
         entries.append(entry)
         written += [f"corrupt/{name}.fracture.json", f"corrupt/{name}.fracture.bin"]
     index = {"format": INDEX_FORMAT, "version": 1, "cases": entries}
