@@ -213,7 +213,8 @@ def check_batch(inputs: Sequence[str], out_dir: str) -> None:
 
 
 def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir: str | None = None,
-              keep_going: bool = False, preview: bool = False) -> Iterator[BatchItem]:
+              keep_going: bool = False, preview: bool = False,
+              preview_size: tuple[int, int] = (1600, 1000)) -> Iterator[BatchItem]:
     """Bake several inputs into one folder, yielding each one's outcome as it finishes.
 
     Parameters
@@ -227,7 +228,11 @@ def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir:
         yielded with its error line and the others are still baked; without
         it (or with one input) the first error is raised.
     preview : bool, optional (default False)
-        Also render ``<stem>.preview.png`` for each bake.
+        Also render ``<stem>.preview.png`` for each bake; without it a
+        ``<stem>.preview.png`` left by an earlier bake is removed (it would show
+        other fragments than the files beside it).
+    preview_size : (int, int), optional (default (1600, 1000))
+        Width and height of the preview in pixels.
 
     Yields
     ------
@@ -238,12 +243,15 @@ def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir:
     for path in inputs:
         try:
             result = bake(path, out_dir, recipe, cache_dir=cache_dir)
+            preview_png = os.path.join(out_dir, f"{stem_of(path)}.preview.png")
             if preview:
                 from fracture_cli.preview import render_preview
 
-                stem = stem_of(path)
-                render_preview(os.path.join(out_dir, f"{stem}.fracture.json"),
-                               os.path.join(out_dir, f"{stem}.preview.png"))
+                render_preview(os.path.join(out_dir, f"{stem_of(path)}.fracture.json"), preview_png,
+                               width=preview_size[0], height=preview_size[1])
+            elif os.path.exists(preview_png):
+                os.remove(preview_png)
+                log.info("bake: removed %s (from an earlier bake; pass --preview for a new one)", preview_png)
         except Exception as exc:
             if not keep_going or len(inputs) == 1:
                 raise

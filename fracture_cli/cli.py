@@ -273,7 +273,7 @@ _file_command("export", "Write <stem>.glb, the runtime file <stem>.fracture.json
 # ----------------------------------------------------------------------------
 # Terminal commands
 
-from fracture_cli import cli_tools  # noqa: E402  (registers bake, recipes, impact, preview on `cli`)
+from fracture_cli import cli_tools  # noqa: E402  (registers bake, recipes, impact, preview, view on `cli`)
 
 
 def main(argv: list[str] | None = None) -> None:

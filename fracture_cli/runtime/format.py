@@ -332,7 +332,7 @@ def _array(table: dict, name: str, binary: bytes, path) -> np.ndarray:
     nbytes = math.prod(shape) * 4
     if len(shape) != ndim or length != nbytes:
         raise _fail(f"array '{name}' has shape {list(shape)} and {length} bytes, which do not agree", path)
-    if offset % 4 or offset + length > len(binary):
+    if offset % ALIGNMENT or offset + length > len(binary):
         raise _fail(f"array '{name}' lies outside the binary file (offset {offset}, length {length})", path)
     return np.frombuffer(binary, dtype=_DTYPES[dtype], count=nbytes // 4, offset=offset).reshape(shape)
 
