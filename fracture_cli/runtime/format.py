@@ -146,8 +146,10 @@ def check_runtime(data: RuntimeData) -> str | None:
             return f"array {name} has non-finite values"
     if not (np.isfinite(data.default_threshold) and data.default_threshold >= 0):
         return f"default threshold must be a finite number >= 0, got {data.default_threshold!r}"
-    if not np.asarray(data.transform).shape == (4, 4):
+    if np.asarray(data.transform).shape != (4, 4):
         return "transform must be a 4x4 matrix"
+    if not (np.all(np.isfinite(data.transform)) and np.isfinite(data.radius)):
+        return "transform and impact radius must be finite numbers"
     return None
 
 
@@ -260,16 +262,56 @@ def _count(value, what: str) -> int:
     return value
 
 
+MAX_JSON_DEPTH = 64
+
+
+def _reject_constant(name: str):
+    raise ValueError(f"{name} is not JSON")
+
+
+def parse_header(header_bytes: bytes):
+    """The header's JSON value, parsed strictly (docs/FORMAT.md section 1).
+
+    UTF-8, standard JSON only (``NaN``, ``Infinity`` rejected), nesting at most
+    :data:`MAX_JSON_DEPTH` levels (checked before parsing, so a hostile file
+    cannot make the parser recurse without bound).
+
+    Raises
+    ------
+    ValueError
+        With the reason (``UnicodeDecodeError`` and ``json.JSONDecodeError`` are ValueErrors).
+    """
+    text = header_bytes.decode("utf-8")
+    depth, in_string, escaped = 0, False, False
+    for char in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif char == "\\":
+                escaped = True
+            elif char == '"':
+                in_string = False
+        elif char == '"':
+            in_string = True
+        elif char in "[{":
+            depth += 1
+            if depth > MAX_JSON_DEPTH:
+                raise ValueError(f"nested deeper than {MAX_JSON_DEPTH} levels")
+        elif char in "]}":
+            depth -= 1
+    return json.loads(text, parse_constant=_reject_constant)
+
+
 def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> RuntimeData:
     """Parse a header and its binary payload (see :func:`load_runtime`)."""
     try:
-        header = json.loads(header_bytes.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        header = parse_header(header_bytes)
+    except ValueError as exc:
         raise _fail(f"not a JSON runtime file ({exc})", path) from None
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
         raise _fail(f"not a fracture runtime file (expected \"format\": \"{FORMAT_NAME}\")", path)
     version = header.get("version")
-    if not isinstance(version, int) or version < 1 or version > FORMAT_VERSION:
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1 or version > FORMAT_VERSION:
         raise _fail(f"runtime file version {version!r} is not supported (this reader knows 1..{FORMAT_VERSION}); "
                     "re-bake the asset or update fracture", path)
     try:
@@ -366,7 +408,7 @@ def load_runtime(path: str | os.PathLike) -> RuntimeData:
     except OSError as exc:
         raise _fail(f"cannot read runtime file ({exc.strerror})", path) from None
     try:
-        uri = json.loads(header_bytes.decode("utf-8"))["buffer"]["uri"]
+        uri = parse_header(header_bytes)["buffer"]["uri"]
     except Exception:
         uri = None
     if not isinstance(uri, str) or not uri or os.path.basename(uri) != uri or uri in (".", "..") or "\0" in uri:
