@@ -49,8 +49,10 @@ def godot_binary() -> str:
         path = shutil.which(name)
         if path:
             return path
-    pytest.skip("Godot 3 not found: install the Debian package godot3-server (.ci/run does: apt-get install -y "
-                "--no-install-recommends godot3-server) or set GODOT=/path/to/godot3")
+    pytest.skip(
+        "Godot 3 not found: install the Debian package godot3-server (.ci/run does: apt-get install -y "
+        "--no-install-recommends godot3-server) or set GODOT=/path/to/godot3"
+    )
 
 
 @dataclass(frozen=True)
@@ -92,8 +94,13 @@ class GodotProject:
 
     def import_resources(self, timeout: float = 300) -> None:
         """Run the editor's import pass once (GLB files become importable scenes)."""
-        result = subprocess.run([self.godot, "--path", str(self.root), "--editor", "--quit"], check=False, capture_output=True,
-                                text=True, timeout=timeout)
+        result = subprocess.run(
+            [self.godot, "--path", str(self.root), "--editor", "--quit"],
+            check=False,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+        )
         missing = [p.name for p in self.root.glob("*.glb") if not (self.root / (p.name + ".import")).exists()]
         assert not missing, f"Godot did not import {missing} (exit {result.returncode}):\n{result.stderr[-3000:]}"
 
@@ -101,11 +108,20 @@ class GodotProject:
         """Write ``script`` (a GDScript extending SceneTree) and run it headless with ``-- args``."""
         self.write(name, script)
         try:
-            result = subprocess.run([self.godot, "--path", str(self.root), "--script", "res://" + name, "--", *args],
-                                    check=False, capture_output=True, text=True, timeout=timeout)
+            result = subprocess.run(
+                [self.godot, "--path", str(self.root), "--script", "res://" + name, "--", *args],
+                check=False,
+                capture_output=True,
+                text=True,
+                timeout=timeout,
+            )
         except subprocess.TimeoutExpired as exc:
             raise AssertionError(f"Godot did not finish {name} within {timeout} s:\n{exc.stdout!r:.3000}") from None
         run = GodotRun(result.stdout, result.stderr, result.returncode)
-        assert not run.script_errors, "GDScript errors:\n" + "\n".join(run.script_errors[:20]) + "\n" + run.stderr[-3000:]
-        assert run.lines("done"), f"{name} did not finish (exit {result.returncode}):\n{run.stdout[-2000:]}\n{run.stderr[-3000:]}"
+        assert not run.script_errors, (
+            "GDScript errors:\n" + "\n".join(run.script_errors[:20]) + "\n" + run.stderr[-3000:]
+        )
+        assert run.lines("done"), (
+            f"{name} did not finish (exit {result.returncode}):\n{run.stdout[-2000:]}\n{run.stderr[-3000:]}"
+        )
         return run

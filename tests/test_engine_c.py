@@ -28,7 +28,9 @@ SANITIZER_ENV = {"ASAN_OPTIONS": "detect_leaks=1:abort_on_error=0", "UBSAN_OPTIO
 
 def _compile(out: str, flags: list[str]) -> str:
     compiler = require_tool("cc", "gcc (build-essential)")
-    result = subprocess.run([compiler, *STRICT, *flags, *SOURCES, "-o", out, "-lm"], check=False, capture_output=True, text=True)
+    result = subprocess.run(
+        [compiler, *STRICT, *flags, *SOURCES, "-o", out, "-lm"], check=False, capture_output=True, text=True
+    )
     assert result.returncode == 0, f"the C reader does not compile with {' '.join(STRICT + flags)}:\n{result.stderr}"
     return out
 
@@ -40,8 +42,13 @@ def driver(tmp_path_factory) -> str:
 
 @pytest.fixture(scope="module")
 def sanitized_driver(tmp_path_factory) -> str:
-    probe = subprocess.run(["cc", "-fsanitize=address,undefined", "-x", "c", "-", "-o", os.devnull],
-                           input="int main(void){return 0;}", check=False, capture_output=True, text=True)
+    probe = subprocess.run(
+        ["cc", "-fsanitize=address,undefined", "-x", "c", "-", "-o", os.devnull],
+        input="int main(void){return 0;}",
+        check=False,
+        capture_output=True,
+        text=True,
+    )
     if probe.returncode != 0:
         pytest.skip(f"the C compiler cannot build with AddressSanitizer + UBSan: {probe.stderr.strip()[:200]}")
     return _compile(str(tmp_path_factory.mktemp("c_asan") / "fracture_check"), ["-O1", *SANITIZE])
@@ -49,8 +56,9 @@ def sanitized_driver(tmp_path_factory) -> str:
 
 def run_driver(driver: str, header: str, binary: str, stdin: str = "", *args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, **SANITIZER_ENV}
-    return subprocess.run([driver, *args, header, binary], input=stdin, check=False, capture_output=True, text=True, env=env,
-                          timeout=300)
+    return subprocess.run(
+        [driver, *args, header, binary], input=stdin, check=False, capture_output=True, text=True, env=env, timeout=300
+    )
 
 
 def _assert_clean(result: subprocess.CompletedProcess, allowed=(0,)):
@@ -84,8 +92,9 @@ def test_c_reader_under_sanitizers(sanitized_driver):
         _assert_clean(result)
         assert check_answers(vectors, result.stdout) == []
     for case in corrupt_cases():
-        result = run_driver(sanitized_driver, os.path.join(CORRUPT, case["header"]),
-                            os.path.join(CORRUPT, case["binary"]))
+        result = run_driver(
+            sanitized_driver, os.path.join(CORRUPT, case["header"]), os.path.join(CORRUPT, case["binary"])
+        )
         _assert_clean(result, allowed=(0, 2))
         assert (result.returncode == 2) == (case["expect"] == "rejected"), case["name"]
     for name in ("example", "dyadic_d3", "pillar"):
@@ -98,8 +107,24 @@ def test_c_header_compiles_as_cxx(tmp_path):
     compiler = require_tool("c++", "g++")
     source = tmp_path / "use.cpp"
     source.write_text('#include "fracture_runtime.h"\nint main() { return fr_status_string(FR_OK)[0] == 0; }\n')
-    result = subprocess.run([compiler, "-std=c++11", "-Wall", "-Wextra", "-Werror", "-pedantic", "-I", C_DIR,
-                             str(source), os.path.join(C_DIR, "fracture_runtime.c"), "-o",
-                             str(tmp_path / "use")], check=False, capture_output=True, text=True)
+    result = subprocess.run(
+        [
+            compiler,
+            "-std=c++11",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-pedantic",
+            "-I",
+            C_DIR,
+            str(source),
+            os.path.join(C_DIR, "fracture_runtime.c"),
+            "-o",
+            str(tmp_path / "use"),
+        ],
+        check=False,
+        capture_output=True,
+        text=True,
+    )
     # g++ compiles the .c file as C++ too: the source is valid C++ as well as C99.
     assert result.returncode == 0, result.stderr

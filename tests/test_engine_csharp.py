@@ -28,14 +28,20 @@ def driver(tmp_path_factory) -> list[str]:
     mono = require_tool("mono", "mono-runtime")
     exe = str(tmp_path_factory.mktemp("csharp") / "FractureCheck.exe")
     # C# 7.2 (mcs's newest) keeps the file buildable by mcs as well as by Unity's compiler (C# 8/9).
-    result = subprocess.run([mcs, "-langversion:7.2", "-warnaserror", "-checked-", "-out:" + exe, *SOURCES],
-                            check=False, capture_output=True, text=True)
+    result = subprocess.run(
+        [mcs, "-langversion:7.2", "-warnaserror", "-checked-", "-out:" + exe, *SOURCES],
+        check=False,
+        capture_output=True,
+        text=True,
+    )
     assert result.returncode == 0, f"the C# reader does not compile:\n{result.stdout}\n{result.stderr}"
     return [mono, exe]
 
 
 def run_driver(driver, header: str, binary: str, stdin: str = "", *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([*driver, header, binary, *args], input=stdin, check=False, capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [*driver, header, binary, *args], input=stdin, check=False, capture_output=True, text=True, timeout=300
+    )
 
 
 @pytest.mark.parametrize("name", vector_names())

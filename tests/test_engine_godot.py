@@ -89,7 +89,9 @@ BREAK_SCRIPT = os.path.join(REPO, "engines", "godot", "tests", "break_scene.gd")
 
 def _hits_file(path, hits) -> str:
     """Write hits (point, impulse, body index) in break_scene.gd's format."""
-    lines = [" ".join([float_to_bits(float(c)) for c in (*point, *impulse)] + [str(body)]) for point, impulse, body in hits]
+    lines = [
+        " ".join([float_to_bits(float(c)) for c in (*point, *impulse)] + [str(body)]) for point, impulse, body in hits
+    ]
     path.write_text("\n".join(lines) + "\n")
     return str(path)
 
@@ -104,7 +106,8 @@ def _bodies_after_each_step(run) -> list[dict]:
             current[int(fields[1])] = (fields[2], fields[3:], {})
         elif fields[:1] == ["shapes"]:
             current[int(fields[1])][2].update(
-                {name: int(count) for name, count in (field.rsplit(":", 1) for field in fields[2:])})
+                {name: int(count) for name, count in (field.rsplit(":", 1) for field in fields[2:])}
+            )
         elif fields[:1] == ["step"]:
             steps.append(current)
             current = {}
@@ -118,20 +121,34 @@ def _row_of_boxes(tmp_path):
     for j in range(4):
         at = np.eye(4)
         at[0, 3] = 1.0 * j
-        scene.add_geometry(trimesh.creation.box(extents=(1, 1, 1)), node_name=f"fragment_{j:03d}",
-                           geom_name=f"mesh_{j}", transform=at)
-    parts = {"fragment_000-convcolonly": "fragment_000", "fragment_001_00-convcolonly": "fragment_001",
-             "fragment_001_01-convcolonly": "fragment_001", "UCX_fragment_002_00": "fragment_002"}
+        scene.add_geometry(
+            trimesh.creation.box(extents=(1, 1, 1)), node_name=f"fragment_{j:03d}", geom_name=f"mesh_{j}", transform=at
+        )
+    parts = {
+        "fragment_000-convcolonly": "fragment_000",
+        "fragment_001_00-convcolonly": "fragment_001",
+        "fragment_001_01-convcolonly": "fragment_001",
+        "UCX_fragment_002_00": "fragment_002",
+    }
     for name, parent in parts.items():
-        scene.add_geometry(trimesh.creation.box(extents=(0.9, 0.9, 0.45)), node_name=name, geom_name="c_" + name,
-                           parent_node_name=parent)
+        scene.add_geometry(
+            trimesh.creation.box(extents=(0.9, 0.9, 0.45)),
+            node_name=name,
+            geom_name="c_" + name,
+            parent_node_name=parent,
+        )
     glb = tmp_path / "row.glb"
     scene.export(glb)
     # One mode, W = (1, 1, -1, -1): a unit impulse anywhere breaks only the edge (1, 2).
-    data = RuntimeData(sites=np.array([[j, 0.5, 0] for j in range(4)], np.float32), B=np.ones((4, 1, 1), np.float32),
-                       W=np.array([[[1], [1], [-1], [-1]]], np.float32), edges=np.array([[0, 1], [1, 2], [2, 3]], np.int32),
-                       edge_areas=np.ones(3, np.float32), fragment_names=tuple(f"fragment_{j:03d}" for j in range(4)),
-                       default_threshold=1.0)
+    data = RuntimeData(
+        sites=np.array([[j, 0.5, 0] for j in range(4)], np.float32),
+        B=np.ones((4, 1, 1), np.float32),
+        W=np.array([[[1], [1], [-1], [-1]]], np.float32),
+        edges=np.array([[0, 1], [1, 2], [2, 3]], np.int32),
+        edge_areas=np.ones(3, np.float32),
+        fragment_names=tuple(f"fragment_{j:03d}" for j in range(4)),
+        default_threshold=1.0,
+    )
     json_path, _ = write_runtime(data, tmp_path / "row.fracture.json")
     return glb, json_path
 
@@ -143,8 +160,9 @@ def _godot_break(tmp_path, glb, json_path, hits):
     project.add_file(str(json_path).replace(".fracture.json", ".fracture.bin"))
     project.import_resources()
     with open(BREAK_SCRIPT, encoding="utf-8") as fh:
-        run = project.run_script(fh.read(), scene, runtime, _hits_file(tmp_path / "hits.txt", hits),
-                                 name="break_scene.gd")
+        run = project.run_script(
+            fh.read(), scene, runtime, _hits_file(tmp_path / "hits.txt", hits), name="break_scene.gd"
+        )
     assert not run.lines("setup-error"), run.lines("setup-error")
     return _bodies_after_each_step(run)
 
@@ -218,8 +236,22 @@ def _pick_hits(data) -> list:
 def test_fracture_body_breaks_a_baked_asset_like_the_reference(tmp_path):
     """Bake the pillar, break it in Godot twice: the detached bodies are exactly the reference's groups."""
     out = tmp_path / "bake"
-    subprocess.run([sys.executable, "-m", "fracture_cli", "-q", "bake", os.path.join(REPO, "sample_assets", "pillar.glb"),
-                    "-o", str(out), "--recipe", "stone"], check=True, cwd=REPO)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fracture_cli",
+            "-q",
+            "bake",
+            os.path.join(REPO, "sample_assets", "pillar.glb"),
+            "-o",
+            str(out),
+            "--recipe",
+            "stone",
+        ],
+        check=True,
+        cwd=REPO,
+    )
     json_path = out / "pillar.fracture.json"
     data = load_runtime(json_path)
     hits = _pick_hits(data)

@@ -64,11 +64,16 @@ def _doc_example() -> dict:
 def example_data() -> RuntimeData:
     """The worked example of docs/FORMAT.md section 6 (d = 1)."""
     ex = _doc_example()
-    return RuntimeData(sites=np.array(ex["sites"], np.float32), B=np.array(ex["B"], np.float32),
-                       W=np.array(ex["W"], np.float32), edges=np.array(ex["edges"], np.int32),
-                       edge_areas=np.array(ex["edge_areas"], np.float32),
-                       fragment_names=tuple(ex["fragment_names"]), default_threshold=ex["default_threshold"],
-                       radius=ex["impact_radius"])
+    return RuntimeData(
+        sites=np.array(ex["sites"], np.float32),
+        B=np.array(ex["B"], np.float32),
+        W=np.array(ex["W"], np.float32),
+        edges=np.array(ex["edges"], np.int32),
+        edge_areas=np.array(ex["edge_areas"], np.float32),
+        fragment_names=tuple(ex["fragment_names"]),
+        default_threshold=ex["default_threshold"],
+        radius=ex["impact_radius"],
+    )
 
 
 def dyadic_d3() -> RuntimeData:
@@ -78,45 +83,72 @@ def dyadic_d3() -> RuntimeData:
     jump of exactly 1.25 for a unit x impulse at site 0 (an exact threshold tie).
     """
     sites = [[0, 0, 0], [4, 0, 0], [0, 4, 0], [0, 0, 4], [4, 4, 0], [-4, 0, 0], [0, 4, 0], [2, 2, 2]]
-    B = np.array([[[1, 0, 0], [0, 0.5, 0], [0, 0, 0.25]],
-                  [[-0.5, 0, 0], [0, 1, 0], [0.5, 0, 0]],
-                  [[0, 1, 0], [0.25, 0, 0], [0, 0, -1]],
-                  [[0, 0, 1], [0, -0.5, 0], [1, 0, 0]],
-                  [[0.5, 0.5, 0], [0, 0, 0.5], [-0.25, 0, 0]],
-                  [[-1, 0, 0], [0, -1, 0], [0, 0, -1]],
-                  [[0, 0.75, 0], [0, 0, 0.5], [0.5, 0, 0]],
-                  [[0.25, 0.25, 0.25], [0.5, 0, 0], [0, 0.5, 0]]])
-    W = np.array([[[1, 0, 0], [0.25, 0, 0], [-0.5, 0, 0], [-1, 0, 0], [0, 0, 0]],
-                  [[0, 0.5, 0], [0, -0.5, 0], [0, 0, 0], [0, 0.25, 0.5], [0, 0, -1]],
-                  [[0, 0, 1], [0, 0, 0], [0, 0, -0.5], [0.5, 0, 0], [0, 0.25, 0]]])
+    B = np.array(
+        [
+            [[1, 0, 0], [0, 0.5, 0], [0, 0, 0.25]],
+            [[-0.5, 0, 0], [0, 1, 0], [0.5, 0, 0]],
+            [[0, 1, 0], [0.25, 0, 0], [0, 0, -1]],
+            [[0, 0, 1], [0, -0.5, 0], [1, 0, 0]],
+            [[0.5, 0.5, 0], [0, 0, 0.5], [-0.25, 0, 0]],
+            [[-1, 0, 0], [0, -1, 0], [0, 0, -1]],
+            [[0, 0.75, 0], [0, 0, 0.5], [0.5, 0, 0]],
+            [[0.25, 0.25, 0.25], [0.5, 0, 0], [0, 0.5, 0]],
+        ]
+    )
+    W = np.array(
+        [
+            [[1, 0, 0], [0.25, 0, 0], [-0.5, 0, 0], [-1, 0, 0], [0, 0, 0]],
+            [[0, 0.5, 0], [0, -0.5, 0], [0, 0, 0], [0, 0.25, 0.5], [0, 0, -1]],
+            [[0, 0, 1], [0, 0, 0], [0, 0, -0.5], [0.5, 0, 0], [0, 0.25, 0]],
+        ]
+    )
     edges = [[0, 1], [0, 2], [1, 2], [1, 3], [2, 4], [3, 4]]
-    return RuntimeData(sites=np.array(sites, np.float32), B=B.astype(np.float32), W=W.astype(np.float32),
-                       edges=np.array(edges, np.int32), edge_areas=np.arange(1, 7, dtype=np.float32),
-                       fragment_names=_names(5), default_threshold=1.0, radius=0.05)
+    return RuntimeData(
+        sites=np.array(sites, np.float32),
+        B=B.astype(np.float32),
+        W=W.astype(np.float32),
+        edges=np.array(edges, np.int32),
+        edge_areas=np.arange(1, 7, dtype=np.float32),
+        fragment_names=_names(5),
+        default_threshold=1.0,
+        radius=0.05,
+    )
 
 
 def single_fragment() -> RuntimeData:
     """One site, one mode, one fragment, no edges: zero-length arrays in the file."""
-    return RuntimeData(sites=np.array([[1, 2, 3]], np.float32), B=np.array([[[2.0]]], np.float32),
-                       W=np.array([[[1.0]]], np.float32), edges=np.zeros((0, 2), np.int32),
-                       edge_areas=np.zeros(0, np.float32), fragment_names=_names(1), default_threshold=0.5)
+    return RuntimeData(
+        sites=np.array([[1, 2, 3]], np.float32),
+        B=np.array([[[2.0]]], np.float32),
+        W=np.array([[[1.0]]], np.float32),
+        edges=np.zeros((0, 2), np.int32),
+        edge_areas=np.zeros(0, np.float32),
+        fragment_names=_names(1),
+        default_threshold=0.5,
+    )
 
 
 def random_data(d: int, seed: int, s: int = 400, k: int = 8, p: int = 40, e: int = 100) -> RuntimeData:
     """Random sites on a bumpy sphere and a connected graph with cycles (many cuts per hit)."""
     rng = np.random.default_rng(seed)
     sites = rng.normal(size=(s, 3))
-    sites *= (rng.uniform(0.8, 1.2, size=(s, 1)) / np.linalg.norm(sites, axis=1, keepdims=True))
+    sites *= rng.uniform(0.8, 1.2, size=(s, 1)) / np.linalg.norm(sites, axis=1, keepdims=True)
     pairs = {(j, j + 1) for j in range(p - 1)}
     while len(pairs) < e:
         a, b = sorted(rng.integers(0, p, 2).tolist())
         if a != b:
             pairs.add((a, b))
     W = rng.normal(size=(k, p, d))
-    return RuntimeData(sites=(sites * 2.5).astype(np.float32), B=rng.normal(size=(s, k, d)).astype(np.float32),
-                       W=W.astype(np.float32), edges=np.array(sorted(pairs), np.int32),
-                       edge_areas=rng.uniform(0.1, 1, e).astype(np.float32), fragment_names=_names(p),
-                       default_threshold=2.0, radius=0.05)
+    return RuntimeData(
+        sites=(sites * 2.5).astype(np.float32),
+        B=rng.normal(size=(s, k, d)).astype(np.float32),
+        W=W.astype(np.float32),
+        edges=np.array(sorted(pairs), np.int32),
+        edge_areas=rng.uniform(0.1, 1, e).astype(np.float32),
+        fragment_names=_names(p),
+        default_threshold=2.0,
+        radius=0.05,
+    )
 
 
 def sample_assets() -> list[tuple[str, str]]:
@@ -130,8 +162,22 @@ def rebake_sample_assets(dest: str) -> None:
     for asset, recipe in sample_assets():
         stem = os.path.splitext(asset)[0]
         with tempfile.TemporaryDirectory() as tmp:
-            subprocess.run([sys.executable, "-m", "fracture_cli", "-q", "bake", os.path.join(REPO, "sample_assets", asset),
-                            "-o", tmp, "--recipe", recipe], check=True, cwd=REPO)
+            subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "fracture_cli",
+                    "-q",
+                    "bake",
+                    os.path.join(REPO, "sample_assets", asset),
+                    "-o",
+                    tmp,
+                    "--recipe",
+                    recipe,
+                ],
+                check=True,
+                cwd=REPO,
+            )
             for suffix in (".fracture.json", ".fracture.bin"):
                 shutil.copyfile(os.path.join(tmp, stem + suffix), os.path.join(dest, stem + suffix))
 
@@ -193,16 +239,32 @@ def designed_impacts(rt: reference.Runtime, rng) -> list[dict]:
         ("invalid: negative threshold", site0, u, -1.0),
         ("invalid: -inf threshold", site0, u, -math.inf),
     ]
-    impacts = [{"name": name, "point": point, "impulse": impulse, "threshold": threshold}
-               for name, point, impulse, threshold in cases]
+    impacts = [
+        {"name": name, "point": point, "impulse": impulse, "threshold": threshold}
+        for name, point, impulse, threshold in cases
+    ]
     # Exact site ties by construction: every squared distance overflows to +inf (so site 0),
     # and a point exactly halfway between two sites that no other site is nearer to.
-    impacts.append({"name": "exact tie: point so far that every squared distance overflows (site 0)",
-                    "point": [1e300, -1e300, 1e300], "impulse": strong, "threshold": None, "site_tie": True})
+    impacts.append(
+        {
+            "name": "exact tie: point so far that every squared distance overflows (site 0)",
+            "point": [1e300, -1e300, 1e300],
+            "impulse": strong,
+            "threshold": None,
+            "site_tie": True,
+        }
+    )
     mid = _midpoint_tie(rt, rng)
     if mid is not None:
-        impacts.append({"name": "exact tie: halfway between two sites", "point": mid, "impulse": strong,
-                        "threshold": None, "site_tie": True})
+        impacts.append(
+            {
+                "name": "exact tie: halfway between two sites",
+                "point": mid,
+                "impulse": strong,
+                "threshold": None,
+                "site_tie": True,
+            }
+        )
     return impacts
 
 
@@ -220,25 +282,51 @@ def random_impacts(rt: reference.Runtime, count: int, seed: int) -> list[dict]:
         threshold = None if len(impacts) % 3 else float(np.float32(rt.default_threshold * rng.uniform(0.5, 2)))
         result = reference.project(rt, point, impulse, threshold)
         if result.site_margin > reference.SAFE_MARGIN and result.edge_margin > reference.SAFE_MARGIN:
-            impacts.append({"name": f"random hit {len(impacts)}", "point": point, "impulse": impulse,
-                            "threshold": threshold})
+            impacts.append(
+                {"name": f"random hit {len(impacts)}", "point": point, "impulse": impulse, "threshold": threshold}
+            )
     return impacts
 
 
 # Exact ties in the dyadic d = 3 file: all sums exact, so every evaluation order agrees.
 DYADIC_TIES: list[dict] = [
-    {"name": "exact threshold tie: |jump| == T holds", "point": [0.5, 0.0, 0.0], "impulse": [1.0, 0.0, 0.0],
-     "threshold": 1.25, "exact": True},
-    {"name": "exact threshold tie, impulse and threshold x8", "point": [0.5, 0.0, 0.0],
-     "impulse": [8.0, 0.0, 0.0], "threshold": 10.0, "exact": True},
-    {"name": "identical sites 2 and 6: the smaller index", "point": [0.0, 4.0, 0.0],
-     "impulse": [0.0, -2.0, 0.0], "threshold": None, "exact": True},
-    {"name": "equidistant from sites 0 and 5", "point": [-2.0, 7.0, -3.0], "impulse": [0.0, 0.0, 3.0],
-     "threshold": 0.5, "exact": True},
+    {
+        "name": "exact threshold tie: |jump| == T holds",
+        "point": [0.5, 0.0, 0.0],
+        "impulse": [1.0, 0.0, 0.0],
+        "threshold": 1.25,
+        "exact": True,
+    },
+    {
+        "name": "exact threshold tie, impulse and threshold x8",
+        "point": [0.5, 0.0, 0.0],
+        "impulse": [8.0, 0.0, 0.0],
+        "threshold": 10.0,
+        "exact": True,
+    },
+    {
+        "name": "identical sites 2 and 6: the smaller index",
+        "point": [0.0, 4.0, 0.0],
+        "impulse": [0.0, -2.0, 0.0],
+        "threshold": None,
+        "exact": True,
+    },
+    {
+        "name": "equidistant from sites 0 and 5",
+        "point": [-2.0, 7.0, -3.0],
+        "impulse": [0.0, 0.0, 3.0],
+        "threshold": 0.5,
+        "exact": True,
+    },
 ]
 EXAMPLE_TIES: list[dict] = [
-    {"name": "worked example case 1 with T = 2.5: |jump| == T holds", "point": [0.1, 0.0, 0.0],
-     "impulse": [0.0, 0.0, -2.0], "threshold": 2.5, "exact": True},
+    {
+        "name": "worked example case 1 with T = 2.5: |jump| == T holds",
+        "point": [0.1, 0.0, 0.0],
+        "impulse": [0.0, 0.0, -2.0],
+        "threshold": 2.5,
+        "exact": True,
+    },
 ]
 
 
@@ -261,11 +349,17 @@ def _bits(x: float) -> str:
 def vector_entry(rt: reference.Runtime, impact: dict) -> dict:
     """One impact with its expected outcome, as written to ``<name>.vectors.json``."""
     point, impulse, threshold = impact["point"], impact["impulse"], impact["threshold"]
-    entry = {"name": impact["name"], "point": [_number(c) for c in point],
-             "impulse": [_number(c) for c in impulse],
-             "threshold": None if threshold is None else _number(threshold),
-             "bits": {"point": [_bits(c) for c in point], "impulse": [_bits(c) for c in impulse],
-                      "threshold": None if threshold is None else _bits(threshold)}}
+    entry = {
+        "name": impact["name"],
+        "point": [_number(c) for c in point],
+        "impulse": [_number(c) for c in impulse],
+        "threshold": None if threshold is None else _number(threshold),
+        "bits": {
+            "point": [_bits(c) for c in point],
+            "impulse": [_bits(c) for c in impulse],
+            "threshold": None if threshold is None else _bits(threshold),
+        },
+    }
     try:
         result = reference.project(rt, point, impulse, threshold)
     except reference.InvalidImpact as exc:
@@ -279,22 +373,36 @@ def vector_entry(rt: reference.Runtime, impact: dict) -> dict:
         raise ValueError(f"{impact['name']}: nearest site within rounding of a tie")
     if not exact and result.edge_margin <= reference.SAFE_MARGIN:
         raise ValueError(f"{impact['name']}: an edge is within rounding of the threshold")
-    entry.update(expect="ok", site=result.site, tied_sites=list(result.tied_sites),
-                 num_groups=sum(1 for j, g in enumerate(result.groups) if g == j),
-                 groups=result.groups, broken=[m for m, cut in enumerate(result.broken) if cut],
-                 alpha=[_number(a) for a in result.alpha],
-                 displacement=[[_number(x) for x in row] for row in result.displacement])
+    entry.update(
+        expect="ok",
+        site=result.site,
+        tied_sites=list(result.tied_sites),
+        num_groups=sum(1 for j, g in enumerate(result.groups) if g == j),
+        groups=result.groups,
+        broken=[m for m, cut in enumerate(result.broken) if cut],
+        alpha=[_number(a) for a in result.alpha],
+        displacement=[[_number(x) for x in row] for row in result.displacement],
+    )
     return entry
 
 
 def write_vectors(path: str, runtime_name: str, rt: reference.Runtime, impacts: list[dict]) -> None:
     """``<name>.vectors.json``: one impact per line so diffs stay readable."""
-    head = {"format": VECTORS_FORMAT, "version": VECTORS_VERSION, "runtime": runtime_name,
-            "dim": rt.d, "counts": {"sites": len(rt.sites), "modes": rt.k, "fragments": rt.p,
-                                    "edges": len(rt.edges)},
-            "default_threshold": rt.default_threshold}
+    head = {
+        "format": VECTORS_FORMAT,
+        "version": VECTORS_VERSION,
+        "runtime": runtime_name,
+        "dim": rt.d,
+        "counts": {"sites": len(rt.sites), "modes": rt.k, "fragments": rt.p, "edges": len(rt.edges)},
+        "default_threshold": rt.default_threshold,
+    }
     lines = [json.dumps(vector_entry(rt, impact), allow_nan=False) for impact in impacts]
-    text = json.dumps(head, indent=2, allow_nan=False)[:-2] + ',\n  "impacts": [\n    ' + ",\n    ".join(lines) + "\n  ]\n}\n"
+    text = (
+        json.dumps(head, indent=2, allow_nan=False)[:-2]
+        + ',\n  "impacts": [\n    '
+        + ",\n    ".join(lines)
+        + "\n  ]\n}\n"
+    )
     with open(path, "w", encoding="ascii", newline="\n") as fh:
         fh.write(text)
 
@@ -303,8 +411,13 @@ def generate(out: str, rebake: bool = False) -> list[str]:
     """Write every file of the conformance set into ``out``; returns the file names written."""
     os.makedirs(out, exist_ok=True)
     written = []
-    small = {"example": example_data(), "dyadic_d3": dyadic_d3(), "single": single_fragment(),
-             "random_d1": random_data(1, seed=11), "random_d3": random_data(3, seed=13)}
+    small = {
+        "example": example_data(),
+        "dyadic_d3": dyadic_d3(),
+        "single": single_fragment(),
+        "random_d1": random_data(1, seed=11),
+        "random_d3": random_data(3, seed=13),
+    }
     for name, data in small.items():
         write_runtime(data, os.path.join(out, f"{name}.fracture.json"))
         written += [f"{name}.fracture.json", f"{name}.fracture.bin"]
@@ -327,16 +440,26 @@ def generate(out: str, rebake: bool = False) -> list[str]:
         impacts += random_impacts(rt, count, seed=200 + seed)
         write_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", rt, impacts)
         written.append(f"{name}.vectors.json")
-    written += corrupt.generate(os.path.join(out, "corrupt"), os.path.join(out, "example.fracture.json"),
-                                os.path.join(out, "dyadic_d3.fracture.json"))
+    written += corrupt.generate(
+        os.path.join(out, "corrupt"),
+        os.path.join(out, "example.fracture.json"),
+        os.path.join(out, "dyadic_d3.fracture.json"),
+    )
     return written
 
 
 def _doc_cases() -> list[dict]:
     ex = _doc_example()
-    return [{"name": f"worked example case {i + 1}", "point": [float(c) for c in case["point"]],
-             "impulse": [float(c) for c in case["impulse"]], "threshold": case["threshold"], "exact": True}
-            for i, case in enumerate(ex["cases"])]
+    return [
+        {
+            "name": f"worked example case {i + 1}",
+            "point": [float(c) for c in case["point"]],
+            "impulse": [float(c) for c in case["impulse"]],
+            "threshold": case["threshold"],
+            "exact": True,
+        }
+        for i, case in enumerate(ex["cases"])
+    ]
 
 
 def main() -> int:
