@@ -148,7 +148,7 @@ def read_triangles(path: str) -> np.ndarray:
     import trimesh
 
     scene = trimesh.load_scene(path, process=False)
-    return np.concatenate([g.triangles for g in scene.dump()]).astype(np.float64)
+    return np.concatenate([np.asarray(g.triangles) for g in scene.dump()]).astype(np.float64)  # type: ignore
 
 
 # ----------------------------------------------------------------------------
@@ -264,7 +264,7 @@ def check_fragment(frag: GlbFragment) -> FragmentCheck:
     volume = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0) * float(np.linalg.det(frag.matrix[:3, :3]))
     return FragmentCheck(
         name=frag.name,
-        triangles=int(len(frag.faces)),
+        triangles=len(frag.faces),
         open_edges=int((count == 1).sum()),
         pinched_edges=int((count > 2).sum()),
         misoriented_edges=int(((count == 2) & (balance != 0)).sum()),

@@ -189,7 +189,7 @@ def test_open_fins_have_no_inside():
 
 
 def test_boundary_loops_split_where_two_holes_touch():
-    V, F = cube()
+    _, F = cube()
     loops = boundary_loops(F[2:])  # the x = 0 side missing: one loop of 4
     assert [len(loop) for loop in loops] == [4]
     # Two triangles removed that share only vertex 0 (on the x = 0 and the z = 0 side).

@@ -137,7 +137,9 @@ def boundary_loops(F: np.ndarray) -> list[np.ndarray]:
 
 def _simple_loops(walk: list[int]) -> list[np.ndarray]:
     """Split a closed walk that revisits vertices into simple loops."""
-    out, stack, position = [], [], {}
+    out: list[np.ndarray] = []
+    stack: list[int] = []
+    position: dict[int, int] = {}
     for v in walk:
         if v in position:
             i = position[v]
@@ -260,7 +262,8 @@ def winding_numbers(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndar
 
 def _with_centroids(V: np.ndarray, loops: list[HoleLoop]) -> tuple[np.ndarray, list[np.ndarray]]:
     """Vertices with every loop's centroid appended, and each loop's patch over those ids."""
-    extra, patches = [], []
+    extra: list[np.ndarray] = []
+    patches: list[np.ndarray] = []
     for loop in loops:
         centre = len(V) + len(extra)
         if (loop.patch < 0).any():
