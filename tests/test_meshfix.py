@@ -237,6 +237,18 @@ def test_non_star_shaped_hole_is_ear_clipped():
     assert not (filled.faces >= len(V)).any()  # ear clipping adds no vertex
 
 
+def test_patch_crossing_the_surface_is_not_filled():
+    """An open box whose bottom is a tent rising above the rim: a cap over the rim would cut the tent."""
+    c = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
+    V = np.vstack([c, c + [0.0, 0.0, 1.0], [[0.5, 0.5, 1.5]]])
+    F = []
+    for i in range(4):
+        j = (i + 1) % 4
+        F += [[i, j, 4 + j], [i, 4 + j, 4 + i], [j, i, 8]]  # outward walls; tent facing into the pyramid
+    plan = plan_fill(V, np.array(F, dtype=np.int64))
+    assert plan.bodies[0].action == "thicken" and "cross" in plan.bodies[0].reason
+
+
 def test_sheet_edge_is_not_a_hole():
     V, F = grid_sheet(height=lambda x, y: 0.3 * np.sin(3 * x) * np.cos(2 * y))
     plan = plan_fill(V, F)

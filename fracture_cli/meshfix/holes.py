@@ -278,6 +278,18 @@ def _patch_samples(W: np.ndarray, patch: np.ndarray) -> np.ndarray:
     return W[patch[pick]].mean(axis=1)
 
 
+def _patch_crosses(W: np.ndarray, surface: np.ndarray, patch: np.ndarray) -> bool:
+    """Whether a patch triangle meets a surface or patch triangle it shares no vertex with."""
+    faces = np.vstack([surface, patch])
+    boxes = trigeom.triangle_boxes(W, faces)
+    grid = trigeom.BoxGrid(boxes, trigeom.default_cell(boxes))
+    i, j = grid.query(boxes[len(surface):])
+    i = i + len(surface)
+    keep = (i != j) & ~(faces[i][:, :, None] == faces[j][:, None, :]).any(axis=(1, 2))
+    i, j = i[keep], j[keep]
+    return bool(len(i)) and bool(trigeom.triangles_intersect(W[faces[i]], W[faces[j]]).any())
+
+
 def _judge_body(b: int, loops: list[HoleLoop], W: np.ndarray, patches: list[np.ndarray], F: np.ndarray,
                 face_body: np.ndarray, others: np.ndarray, options: FillOptions) -> BodyPlan:
     """Fill or thicken one open body (see the module docstring)."""
@@ -296,8 +308,7 @@ def _judge_body(b: int, loops: list[HoleLoop], W: np.ndarray, patches: list[np.n
     area = float(triangle_areas(W, filled).sum())
     if abs(volume) <= options.min_thickness * diag * area:
         return BodyPlan(b, "thicken", "filling its holes encloses no volume (a flat or folded sheet)", tuple(loops))
-    crossing = trigeom.self_intersections(W, filled if volume > 0 else filled[:, ::-1])
-    if (crossing >= len(body_faces)).any():
+    if _patch_crosses(W, body_faces, patch_faces):
         return BodyPlan(b, "thicken", "a fill patch would cross the surface", tuple(loops))
     share = float(sum(loop.area for loop in loops)) / area
     hidden = False
