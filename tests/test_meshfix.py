@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fracture_cli.errors import StageError
+from fracture_cli.meshfix.faces import orient_consistently, unique_faces
 from fracture_cli.meshfix.holes import FillOptions, boundary_loops, fill_holes, plan_fill, winding_numbers
 from fracture_cli.meshfix.nonmanifold import split_nonmanifold
 from fracture_cli.meshfix.thicken import thicken_inward
@@ -107,6 +108,38 @@ def test_as_written_rounds_like_the_glb_writer():
     assert np.array_equal(local[0], local[8])
     assert check_mesh(local, F).degenerate_faces == 1
     assert check_mesh(V, F).degenerate_faces == 0
+
+
+# ----------------------------------------------------------------------------
+# faces
+
+
+def test_repeated_surface_faces_keep_one_copy_whatever_their_winding():
+    V, F = cube()
+    soup = np.vstack([F, F[:4][:, ::-1], F[4:6]])  # faces repeated reversed and as they are
+    unique = unique_faces(soup)
+    assert unique.keep.sum() == 12 and unique.duplicates == 6 and unique.enclosing_nothing == 0
+    kept = soup[unique.keep]
+    flip, _ = orient_consistently(kept)
+    kept[flip] = kept[flip][:, ::-1]
+    c = check_mesh(V, kept)
+    assert c.open_edges == c.misoriented_edges == 0 and abs(c.volume) == pytest.approx(1.0)
+
+
+def test_double_sided_card_encloses_nothing():
+    unique = unique_faces(np.array([[0, 1, 2], [0, 2, 1]]))
+    assert not unique.keep.any() and unique.enclosing_nothing == 1
+    assert any(r.what == "removed_double_sided_faces" for r in unique.records)
+
+
+def test_orientation_propagates_across_each_patch():
+    V, F = cube()
+    F = F.copy()
+    F[[0, 5, 7]] = F[[0, 5, 7]][:, ::-1]
+    flip, records = orient_consistently(F)
+    assert np.array_equal(np.flatnonzero(flip), [0, 5, 7]) and records[0].count == 3
+    F[flip] = F[flip][:, ::-1]
+    assert check_mesh(V, F).closed
 
 
 # ----------------------------------------------------------------------------
