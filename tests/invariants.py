@@ -188,6 +188,7 @@ class FragmentCheck:
 
     @property
     def ok(self) -> bool:
+        """No violated invariant."""
         return not self.problems
 
 
@@ -290,10 +291,12 @@ class GlbCheck:
 
     @property
     def ok(self) -> bool:
+        """Every fragment and the set as a whole pass."""
         return not self.problems
 
     @property
     def failing(self) -> list[FragmentCheck]:
+        """The fragments with a violated invariant."""
         return [f for f in self.fragments if not f.ok]
 
     def summary(self) -> dict:

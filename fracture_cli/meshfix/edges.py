@@ -41,6 +41,7 @@ class EdgeTable:
 
     @property
     def num_faces(self) -> int:
+        """Number of faces ``m``."""
         return len(self.face) // 3
 
     def balance(self) -> np.ndarray:

@@ -105,6 +105,7 @@ class FillPlan:
     records: list[RepairRecord] = field(default_factory=list)
 
     def loops_to_fill(self) -> list[HoleLoop]:
+        """The loops of every body decided ``fill``, in body order."""
         return [loop for b in self.bodies if b.action == "fill" for loop in b.loops]
 
 
