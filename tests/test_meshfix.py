@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import sys
+
 import numpy as np
 import pytest
 
@@ -11,6 +14,9 @@ from fracture_cli.meshfix.holes import FillOptions, boundary_loops, fill_holes, 
 from fracture_cli.meshfix.nonmanifold import split_nonmanifold
 from fracture_cli.meshfix.thicken import thicken_inward
 from fracture_cli.meshfix.weld_check import as_written, check_mesh
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "data"))
+from make_realworld_corpus import grid_faces
 
 # ----------------------------------------------------------------------------
 # Shapes
@@ -42,13 +48,7 @@ def welded(*parts):
 def grid_sheet(nx=6, ny=6, height=lambda x, y: 0.0 * x):
     """A sheet over [0, 1]^2 with z = height(x, y), normals towards +z."""
     x, y = np.meshgrid(np.linspace(0, 1, nx), np.linspace(0, 1, ny), indexing="ij")
-    V = np.column_stack([x.ravel(), y.ravel(), height(x, y).ravel()])
-    F = []
-    for i in range(nx - 1):
-        for j in range(ny - 1):
-            a, b, c, d = i * ny + j, (i + 1) * ny + j, (i + 1) * ny + j + 1, i * ny + j + 1
-            F += [[a, b, c], [a, c, d]]
-    return V, np.array(F, dtype=np.int64)
+    return np.column_stack([x.ravel(), y.ravel(), height(x, y).ravel()]), grid_faces(nx, ny)
 
 
 def open_tube(radius=1.0, height=0.2, segments=16, z0=0.0):

@@ -145,6 +145,16 @@ def tube(path: np.ndarray, radii: np.ndarray, segments: int) -> tuple[np.ndarray
     return np.array(V), np.array(F, dtype=np.int64)
 
 
+def grid_faces(nx: int, ny: int) -> np.ndarray:
+    """Faces (2 (nx - 1)(ny - 1), 3) of an nx x ny vertex grid (vertex i * ny + j), two per cell."""
+    F = []
+    for i in range(nx - 1):
+        for j in range(ny - 1):
+            a, b, c, d = i * ny + j, (i + 1) * ny + j, (i + 1) * ny + j + 1, i * ny + j + 1
+            F += [[a, b, c], [a, c, d]]
+    return np.array(F, dtype=np.int64)
+
+
 def concat(*parts: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     V, F, n = [], [], 0
     for v, f in parts:
@@ -321,13 +331,7 @@ def awning_sheet():
     T, Y = np.meshgrid(theta, y, indexing="ij")
     R = 0.8 * (1 + 0.04 * np.sin(3 * Y) * np.cos(T))
     V = np.column_stack([(R * np.sin(T)).ravel(), Y.ravel(), (R * np.cos(T)).ravel()])
-    nt, ny = T.shape
-    F = []
-    for i in range(nt - 1):
-        for j in range(ny - 1):
-            a, b, c, d = i * ny + j, (i + 1) * ny + j, (i + 1) * ny + j + 1, i * ny + j + 1
-            F += [[a, b, c], [a, c, d]]
-    return V, np.array(F, dtype=np.int64)
+    return V, grid_faces(*T.shape)
 
 
 def teapot():
