@@ -21,8 +21,23 @@ from make_realworld_corpus import grid_faces
 # ----------------------------------------------------------------------------
 # Shapes
 
-_CUBE_F = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-                    [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], dtype=np.int64)
+_CUBE_F = np.array(
+    [
+        [0, 1, 3],
+        [0, 3, 2],
+        [4, 6, 7],
+        [4, 7, 5],
+        [0, 4, 5],
+        [0, 5, 1],
+        [2, 3, 7],
+        [2, 7, 6],
+        [0, 2, 6],
+        [0, 6, 4],
+        [1, 5, 7],
+        [1, 7, 3],
+    ],
+    dtype=np.int64,
+)
 # Faces 0-1: x = 0 side, 2-3: x = 1, 4-5: y = 0, 6-7: y = 1, 8-9: z = 0, 10-11: z = 1.
 
 
@@ -55,7 +70,9 @@ def open_tube(radius=1.0, height=0.2, segments=16, z0=0.0):
     """A cylinder wall without caps (two planar circular holes), outward."""
     a = 2 * np.pi * np.arange(segments) / segments
     ring = np.column_stack([radius * np.cos(a), radius * np.sin(a)])
-    V = np.vstack([np.column_stack([ring, np.full(segments, z0)]), np.column_stack([ring, np.full(segments, z0 + height)])])
+    V = np.vstack(
+        [np.column_stack([ring, np.full(segments, z0)]), np.column_stack([ring, np.full(segments, z0 + height)])]
+    )
     F = []
     for i in range(segments):
         j = (i + 1) % segments
@@ -189,7 +206,7 @@ def test_internal_wall_is_doubled_one_copy_per_cell():
     assert np.allclose(split.body_volume, 1.0)
     assert any(r.what == "doubled_wall_faces" and r.count == 2 for r in split.records)
     # The copies point back to the wall's corners, reversed.
-    copies = split.source_corner[len(F) - 2:]
+    copies = split.source_corner[len(F) - 2 :]
     assert np.array_equal(np.sort(copies // 3, axis=1)[:, 0], np.sort(copies // 3, axis=1)[:, 2])
 
 
@@ -209,8 +226,10 @@ def test_three_wedges_around_one_edge():
 
 def test_open_fins_have_no_inside():
     """Three single quads hinged on one edge (a book's pages): nothing to pair into a solid."""
-    V = np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0], [1, 0, 1], [-0.5, 0.8, 0], [-0.5, 0.8, 1], [-0.5, -0.8, 0],
-                  [-0.5, -0.8, 1]], dtype=np.float64)
+    V = np.array(
+        [[0, 0, 0], [0, 0, 1], [1, 0, 0], [1, 0, 1], [-0.5, 0.8, 0], [-0.5, 0.8, 1], [-0.5, -0.8, 0], [-0.5, -0.8, 1]],
+        dtype=np.float64,
+    )
     F = np.array([[0, 2, 3], [0, 3, 1], [0, 1, 5], [0, 5, 4], [0, 6, 7], [0, 7, 1]])
     split = split_nonmanifold(V, F)
     assert not split.body_closed.any()
@@ -322,7 +341,7 @@ def test_curved_sheet_thickened_inward_inside_its_box():
     sheet = thicken_inward(V, F, 0.02, box=box)
     c = check_mesh(sheet.vertices, sheet.faces)
     assert c.closed and c.volume > 0
-    assert np.array_equal(sheet.vertices[:len(V)], V) and np.array_equal(sheet.faces[:len(F)], F)
+    assert np.array_equal(sheet.vertices[: len(V)], V) and np.array_equal(sheet.faces[: len(F)], F)
     assert np.all(sheet.vertices >= box[0]) and np.all(sheet.vertices <= box[1])
     assert np.all(sheet.vertices[sheet.faces[sheet.kind == 1]][..., 2] <= V[:, 2].max())
     record = sheet.records[0].to_dict()

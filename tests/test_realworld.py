@@ -35,16 +35,24 @@ with open(os.path.join(CORPUS, "expected.toml"), "rb") as _fh:
 SMALL = ("cage.target_faces=500", "modes.num_modes=4")
 
 # Root causes (see docs/notes/realworld-diagnosis.md); each entry is a strict xfail of test_corpus_bake.
-_FILL_LIMIT = ("repair.auto shells an open body whose holes exceed max_fill_ratio=2% of the area "
-               "(repair.py:repair step 4), so a closed shape with holes becomes an eggshell 1% of the diagonal thick")
-_EDGE_UNION = ("repair.py:_split_nonmanifold + _union_bodies: bodies touching along an edge are united by manifold3d, "
-               "which keeps the edge as two coincident edges; fragments cut from that solid have 4-face (pinched) "
-               "edges, and checks.py:_closed_by_position counts a balanced 4-face edge as watertight")
-_REFUSED = ("repair.py:_split_nonmanifold pairs only closed patches or open patches with identical boundaries; "
-            "coincident faces triangulated differently leave 4-face edges it cannot pair, and the bake is refused")
-_SOUP = ("repair.py:_unique_faces drops a duplicated face together with its reversed copy ('back-to-back'), so a "
-         "soup's duplicate of opposite winding becomes a hole; the soup is then shelled (over 2%), outward where the "
-         "load-time shading normals (from the random winding) point in, and the shell's rims pinch")
+_FILL_LIMIT = (
+    "repair.auto shells an open body whose holes exceed max_fill_ratio=2% of the area "
+    "(repair.py:repair step 4), so a closed shape with holes becomes an eggshell 1% of the diagonal thick"
+)
+_EDGE_UNION = (
+    "repair.py:_split_nonmanifold + _union_bodies: bodies touching along an edge are united by manifold3d, "
+    "which keeps the edge as two coincident edges; fragments cut from that solid have 4-face (pinched) "
+    "edges, and checks.py:_closed_by_position counts a balanced 4-face edge as watertight"
+)
+_REFUSED = (
+    "repair.py:_split_nonmanifold pairs only closed patches or open patches with identical boundaries; "
+    "coincident faces triangulated differently leave 4-face edges it cannot pair, and the bake is refused"
+)
+_SOUP = (
+    "repair.py:_unique_faces drops a duplicated face together with its reversed copy ('back-to-back'), so a "
+    "soup's duplicate of opposite winding becomes a hole; the soup is then shelled (over 2%), outward where the "
+    "load-time shading normals (from the random winding) point in, and the shell's rims pinch"
+)
 KNOWN_FAILURES = {
     "head_open_eyes.glb": _FILL_LIMIT + " (the eyes' rims are 2.35% of the area)",
     "scan_holes_037.glb": _FILL_LIMIT,
@@ -56,10 +64,12 @@ KNOWN_FAILURES = {
     "touching_fragments.glb": _REFUSED,
     "soup.stl": _SOUP,
     "teapot.glb": _FILL_LIMIT + " (22.9%): four thin shells, the pot's inside empty; and the shelled union has a "
-                  "cavity, for which repair.py:_reversed passes manifold3d a read-only vert_properties view: TypeError, "
-                  "an internal error",
-    "awning_sheet.glb": ("repair.py:_shell offsets along the area-weighted vertex normal with no bound: at the rim the "
-                         "normal tilts, and the back side leaves the input's bounding box (by ~0.1% of the diagonal)"),
+    "cavity, for which repair.py:_reversed passes manifold3d a read-only vert_properties view: TypeError, "
+    "an internal error",
+    "awning_sheet.glb": (
+        "repair.py:_shell offsets along the area-weighted vertex normal with no bound: at the rim the "
+        "normal tilts, and the back side leaves the input's bounding box (by ~0.1% of the diagonal)"
+    ),
 }
 
 
@@ -98,8 +108,12 @@ def check_bake(case: dict, path: str, exit_code: int, output: str, out: str) -> 
         return [f"exit code {exit_code}: {output.strip().splitlines()[-1] if output.strip() else ''}"]
     stem = os.path.splitext(os.path.basename(path))[0]
     glb = os.path.join(out, f"{stem}.glb")
-    check = check_glb(glb, reference_volume=case.get("volume"), volume_tolerance=case["volume_tolerance"],
-                      reference_box=input_box(path))
+    check = check_glb(
+        glb,
+        reference_volume=case.get("volume"),
+        volume_tolerance=case["volume_tolerance"],
+        reference_box=input_box(path),
+    )
     problems = list(check.problems)
     with open(os.path.join(out, f"{stem}.report.json")) as fh:
         report = json.load(fh)
@@ -124,8 +138,9 @@ def test_corpus_bake(name, tmp_path_factory, request):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="report.json has no 'repairs' list yet (bake.py); round two adds it from the "
-                   "meshfix records")
+@pytest.mark.xfail(
+    strict=True, reason="report.json has no 'repairs' list yet (bake.py); round two adds it from the meshfix records"
+)
 @pytest.mark.parametrize("name", ["scan_holes_037.glb", "gear_edge_contact.glb", "soup.stl"])
 def test_corpus_repairs_are_reported(name, tmp_path_factory):
     """What repair did (filled holes and their area, split edges, re-wound faces) is listed in report.json."""
@@ -140,11 +155,14 @@ def test_corpus_repairs_are_reported(name, tmp_path_factory):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the output GLB stores each fragment in float32 about its own pivot, so "
-                   "neighbours' shared faces no longer coincide (off by ~1e-8); repair.py:_union_bodies unites them "
-                   "into a solid with hairline gaps and pinched edges; its fragments have vertices 1e-9 apart that "
-                   "merge when written in float32 (degenerate faces, pinched edges, several bodies), while "
-                   "checks.py:fragment_invariants checks the float64 meshes and reports watertight")
+@pytest.mark.xfail(
+    strict=True,
+    reason="the output GLB stores each fragment in float32 about its own pivot, so "
+    "neighbours' shared faces no longer coincide (off by ~1e-8); repair.py:_union_bodies unites them "
+    "into a solid with hairline gaps and pinched edges; its fragments have vertices 1e-9 apart that "
+    "merge when written in float32 (degenerate faces, pinched edges, several bodies), while "
+    "checks.py:fragment_invariants checks the float64 meshes and reports watertight",
+)
 def test_rebaking_an_output_glb(tmp_path_factory):
     """Bake a sample asset, then bake its output GLB: one solid of the same volume, every fragment closed."""
     from conftest import SAMPLE_ASSETS
@@ -167,13 +185,23 @@ def test_rebaking_an_output_glb(tmp_path_factory):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [
-    "two_prisms.glb",
-    pytest.param("scan_holes_01.glb", marks=pytest.mark.xfail(strict=True, reason=(
-        "pieces.py: the atomic pieces are the common refinement of all 12 modes' partitions; on a round, "
-        "nearly symmetric body the modes cut along unrelated surfaces, so the refinement has 520 atomic pieces "
-        "(a cube: 40), and min_volume_fraction=0.002, measured on cage volume, merges only down to 197"))),
-])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "two_prisms.glb",
+        pytest.param(
+            "scan_holes_01.glb",
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason=(
+                    "pieces.py: the atomic pieces are the common refinement of all 12 modes' partitions; on a round, "
+                    "nearly symmetric body the modes cut along unrelated surfaces, so the refinement has 520 "
+                    "atomic pieces (a cube: 40), and min_volume_fraction=0.002, measured on cage volume, merges only down to 197"
+                ),
+            ),
+        ),
+    ],
+)
 def test_fragment_count_follows_the_recipe(name, tmp_path_factory):
     """With the default recipe (full settings), a compact asset gives tens of fragments, not gravel."""
     case = CASES[name]

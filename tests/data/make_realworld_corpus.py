@@ -29,8 +29,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.join(HERE, "realworld")
 sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
 
-from fracture_cli.io.gltf import Primitive, glb_bytes
-from fracture_cli.types import Material
+from fracture_cli.io.gltf import Primitive, glb_bytes  # noqa: E402  (after the sys.path line)
+from fracture_cli.types import Material  # noqa: E402
 
 # ----------------------------------------------------------------------------
 # Shapes (world units, outward winding unless said otherwise)

@@ -27,7 +27,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(HERE)))
 sys.path.insert(0, os.path.join(REPO, "tests"))
 
-from invariants import check_glb, input_box
+from invariants import check_glb, input_box  # noqa: E402  (after the sys.path line)
 
 
 def bake_one(path: str, out: str, recipe: str, overrides: list[str], reference: float | None) -> dict:
