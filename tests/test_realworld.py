@@ -196,7 +196,8 @@ def test_rebaking_an_output_glb(tmp_path_factory):
                 reason=(
                     "pieces.py: the atomic pieces are the common refinement of all 12 modes' partitions; on a round, "
                     "nearly symmetric body the modes cut along unrelated surfaces, so the refinement has 520 "
-                    "atomic pieces (a cube: 40), and min_volume_fraction=0.002, measured on cage volume, merges only down to 197"
+                    "atomic pieces (a cube: 40), and min_volume_fraction=0.002, measured on cage volume, merges only "
+                    "down to 197"
                 ),
             ),
         ),
