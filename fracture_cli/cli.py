@@ -626,6 +626,11 @@ def preview_cmd(runtime_file, out_png, size):
     return process
 
 
+from fracture_cli.batch.command import register as _register_batch  # noqa: E402
+
+_register_batch(cli, TerminalCommand)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``fracture`` console script."""
     cli.main(args=argv, prog_name="fracture")
