@@ -8,8 +8,8 @@ worker never leaves a bake running that could publish after the retry.
 
 The job is a pickled :class:`~fracture_cli.batch.jobs.BakeJob`; the result, a
 pickled :class:`~fracture_cli.batch.jobs.TaskResult`, is written atomically.
-Every error ends up as the result's one-line ``error``; a traceback goes to
-stderr, which the worker keeps for crashes.
+Every error ends up as the result's one-line ``error`` (an unexpected one
+also with its traceback in ``detail``, for ``--debug`` and bug reports).
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def _impacts(job: BakeJob):
 
     data = load_runtime(os.path.join(job.out_dir, f"{job.stem}.fracture.json"))
     surface = load_surface(job.input_path, job.recipe["load"])
-    return asset_impacts(data, surface.world_vertices, surface.faces, job.impacts, job.seed)
+    return asset_impacts(data, surface.world_vertices(), surface.faces, job.impacts, job.seed)
 
 
 def _read_report(job: BakeJob) -> dict:
@@ -97,10 +97,9 @@ def main(argv: list[str]) -> int:
         result = run(job)
     except FractureError as exc:
         result = TaskResult(index=job.index, status=FAILED, error=str(exc))
-    except Exception as exc:  # a bug in a stage: one line in the summary, the traceback in the worker's log
-        traceback.print_exc()
+    except Exception as exc:  # noqa: BLE001 -- a bug in a stage: one line in the summary, the traceback in the report
         first = str(exc).splitlines()[0] if str(exc) else ""
-        result = TaskResult(index=job.index, status=FAILED,
+        result = TaskResult(index=job.index, status=FAILED, detail=traceback.format_exc(),
                             error=f"{job.input_path}: internal error ({type(exc).__name__}: {first})")
     result = dataclasses.replace(result, warnings=tuple(collect.messages))
     write_bytes_atomic(result_file, pickle.dumps(result))

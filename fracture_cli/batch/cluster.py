@@ -14,7 +14,8 @@ import contextlib
 import logging
 import os
 import uuid
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 from fracture_cli import __version__
 from fracture_cli.errors import FractureError, InputError

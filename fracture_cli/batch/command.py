@@ -24,7 +24,7 @@ def _options(manifest, out_dir, scheduler, workers, timeout, impacts, cache_dir,
                         overrides=tuple(overrides), force=force, verbose=verbose, **extra)
 
 
-def _run(manifest: str, options, as_json: bool, quiet: bool) -> None:
+def _run(manifest: str, options, as_json: bool, quiet: bool, debug: bool) -> None:
     from fracture_cli.batch.progress import Progress
     from fracture_cli.batch.report import summary_text, to_json
     from fracture_cli.batch.runner import batch_files, run_batch
@@ -52,6 +52,9 @@ def _run(manifest: str, options, as_json: bool, quiet: bool) -> None:
     elif report.failed:
         for a in report.failed:
             click.echo(f"failed: {a.name}: {a.error}", err=True)
+    for a in report.failed if debug else ():
+        if a.detail:
+            click.echo(f"{a.name}:\n{a.detail}", err=True)
     if report.failed:
         raise FractureError(f"{len(report.failed)} of {len(report.assets)} asset(s) failed; report: "
                             f"{batch_files(manifest, options.out_dir)[1]}")
@@ -98,7 +101,7 @@ def _command(command_cls: type[click.Command]) -> click.Command:
             if quiet:
                 configure_logging(0, True)
             _run(manifest, _options(manifest, out_dir, scheduler, workers, timeout, impacts, cache_dir, overrides,
-                                    force, verbose), as_json, quiet)
+                                    force, verbose), as_json, quiet, debug)
             return state
 
         return process

@@ -10,27 +10,27 @@ bake publishes its outputs as a set, so the retry never meets half a set.
 
 from __future__ import annotations
 
-import logging
+import traceback
 import uuid
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from fracture_cli.batch.cluster import require_distributed
 from fracture_cli.batch.jobs import FAILED, BakeJob, TaskResult
 from fracture_cli.batch.task import run_job
 
-log = logging.getLogger(__name__)
 
-
-def _outcome(future: Any, job: BakeJob, killed_worker: type) -> TaskResult:
+def _outcome(future: Any, job: BakeJob, killed_worker: type[BaseException]) -> TaskResult:
     try:
         return future.result()
     except killed_worker:
         error = (f"{job.input_path}: the Dask workers running it died repeatedly (out of memory, or killed); "
                  "gave up on this asset")
-    except Exception as exc:  # the task itself raised: this asset fails, the batch goes on
+    except Exception as exc:  # noqa: BLE001 -- the task itself raised: this asset fails, the batch goes on
         first = str(exc).splitlines()[0] if str(exc) else ""
         error = f"{job.input_path}: task failed ({type(exc).__name__}: {first[:300]})"
-    log.debug("batch: %s", error)
+        return TaskResult(index=job.index, status=FAILED, error=error, detail="".join(
+            traceback.format_exception(type(exc), exc, exc.__traceback__)))
     return TaskResult(index=job.index, status=FAILED, error=error)
 
 

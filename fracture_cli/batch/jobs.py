@@ -83,6 +83,8 @@ class TaskResult:
         Wall-clock seconds of the bake process (0 when nothing ran).
     error : str or None
         One line, for a failed asset.
+    detail : str
+        Traceback of an unexpected error (a bug), else empty.
     report : dict or None
         The bake report (fresh, or the one on disk for an up-to-date asset).
     impacts : ImpactRows or None
@@ -97,6 +99,7 @@ class TaskResult:
     status: str
     seconds: float = 0.0
     error: str | None = None
+    detail: str = ""
     report: dict | None = None
     impacts: ImpactRows | None = None
     warnings: tuple[str, ...] = field(default_factory=tuple)

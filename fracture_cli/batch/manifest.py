@@ -14,7 +14,8 @@ A manifest is a TOML file; paths are relative to the manifest's folder::
 
 An explicit file wins over a glob that also matches it; two globs that match one
 file with different settings are an error. Globs skip files that are not meshes
-(a glTF's ``.bin``, an OBJ's ``.mtl``) and anything inside the output folder.
+(a glTF's ``.bin``, an OBJ's ``.mtl``) and earlier outputs (a ``.glb`` beside a
+``.fracture.json`` of the same stem), so a glob never picks up what a batch baked.
 Outputs mirror the asset's folder below the manifest's: ``props/rock.glb`` is
 baked into ``OUTDIR/props/``.
 """
@@ -181,7 +182,13 @@ def _inside(path: str, folder: str) -> bool:
     return os.path.commonpath([path, folder]) == folder
 
 
-def _matches(manifest: Manifest, entry: Entry, out_root: str, extensions: frozenset[str]) -> list[str]:
+def _baked_output(path: str) -> bool:
+    """A ``<stem>.glb`` beside a ``<stem>.fracture.json`` is a bake's output, never an asset to bake."""
+    stem, ext = os.path.splitext(path)
+    return ext.lower() == ".glb" and os.path.exists(stem + ".fracture.json")
+
+
+def _matches(manifest: Manifest, entry: Entry, extensions: frozenset[str]) -> list[str]:
     """Absolute paths an entry selects, sorted."""
     pattern = os.path.join(manifest.folder, entry.pattern)
     if not entry.is_glob:
@@ -192,19 +199,18 @@ def _matches(manifest: Manifest, entry: Entry, out_root: str, extensions: frozen
             raise _error(manifest.path, f"{entry.where}: not a mesh file; pick one of {', '.join(sorted(extensions))}")
         return [path]
     found = sorted({os.path.abspath(p) for p in glob.glob(pattern, recursive=True)
-                    if os.path.isfile(p) and os.path.splitext(p)[1].lower() in extensions})
-    found = [p for p in found if not _inside(p, out_root)]  # never re-bake our own outputs
+                    if os.path.isfile(p) and os.path.splitext(p)[1].lower() in extensions and not _baked_output(p)})
     if not found:
         raise _error(manifest.path, f"{entry.where}: the glob matches no mesh file")
     return found
 
 
-def _selected(manifest: Manifest, out_root: str, extensions: frozenset[str]) -> dict[str, Entry]:
+def _selected(manifest: Manifest, extensions: frozenset[str]) -> dict[str, Entry]:
     """Each selected file's entry: explicit files win over globs; conflicting globs are an error."""
     explicit: dict[str, Entry] = {}
     globbed: dict[str, Entry] = {}
     for entry in manifest.entries:
-        for path in _matches(manifest, entry, out_root, extensions):
+        for path in _matches(manifest, entry, extensions):
             chosen = explicit if not entry.is_glob else globbed
             other = chosen.get(path)
             if other is not None and (other.recipe, other.overrides) != (entry.recipe, entry.overrides):
@@ -255,19 +261,18 @@ def resolve_assets(manifest: Manifest, out_root: str, overrides: tuple[str, ...]
     from fracture_cli.io.read import READERS
 
     out_root = os.path.abspath(out_root)
-    selected = _selected(manifest, out_root, frozenset(READERS))
+    selected = _selected(manifest, frozenset(READERS))
     memo: dict = {}
-    assets, stems = [], {}
+    assets: list[Asset] = []
+    stems: dict[tuple[str, str], str] = {}
     for path, entry in selected.items():
         if not _inside(path, manifest.folder):
             raise _error(manifest.path, f"{entry.where}: {path} is outside the manifest's folder; outputs mirror "
                                         "the folders below it (move the manifest up)")
-        if _inside(path, out_root):
-            raise _error(manifest.path, f"{entry.where}: {path} is inside the output folder {out_root}")
         name = os.path.relpath(path, manifest.folder).replace(os.sep, "/")
         folder, base = os.path.split(name)
         stem = os.path.splitext(base)[0]
-        out_dir = os.path.join(out_root, folder)
+        out_dir = os.path.normpath(os.path.join(out_root, folder))
         clash = stems.get((out_dir, stem))
         if clash is not None:
             raise _error(manifest.path, f"{entry.where}: {clash} and {name} would both write {stem}.* into "

@@ -28,6 +28,7 @@ class AssetOutcome:
     fragments: int | None = None
     checks: dict = field(default_factory=dict)
     error: str | None = None
+    detail: str = ""
     warnings: tuple[str, ...] = ()
     worker: str = ""
 
@@ -78,7 +79,8 @@ def asset_outcome(asset: Asset, result: TaskResult | None) -> AssetOutcome:
     report = result.report or {}
     return AssetOutcome(name=asset.name, recipe=asset.recipe.name, status=result.status, out_dir=asset.out_dir,
                         seconds=result.seconds, fragments=(report.get("counts") or {}).get("fragments"),
-                        checks=dict(report.get("checks") or {}), error=result.error, warnings=result.warnings,
+                        checks=dict(report.get("checks") or {}), error=result.error, detail=result.detail,
+                        warnings=result.warnings,
                         worker=result.worker)
 
 
@@ -103,7 +105,7 @@ def to_json(report: BatchReport) -> dict:
         "dataset": {"path": report.dataset, "rows": report.dataset_rows} if report.dataset else None,
         "assets": [{"name": a.name, "recipe": a.recipe, "status": a.status, "out_dir": a.out_dir,
                     "seconds": a.seconds, "fragments": a.fragments, "checks": a.checks, "error": a.error,
-                    "warnings": list(a.warnings), "worker": a.worker} for a in report.assets],
+                    **({"detail": a.detail} if a.detail else {}), "warnings": list(a.warnings), "worker": a.worker} for a in report.assets],
     }
 
 

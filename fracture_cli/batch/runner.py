@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from fracture_cli.batch.cluster import check_workers, connect, require_distributed
 from fracture_cli.batch.dataset import require_pyarrow, write_impacts
@@ -167,8 +167,8 @@ def run_batch(manifest_path: str, options: BatchOptions, on_result: Callable[[Ta
     outcomes = tuple(asset_outcome(a, results.get(i)) for i, a in enumerate(assets))
     dataset, rows = None, 0
     if options.impacts:
-        impacts = [(a.name, a.recipe.name, results[i].impacts) for i, a in enumerate(assets)
-                   if i in results and results[i].impacts is not None]
+        impacts = [(a.name, a.recipe.name, found) for i, a in enumerate(assets)
+                   if (found := getattr(results.get(i), "impacts", None)) is not None]
         dataset, rows = data_path, write_impacts(data_path, impacts, options.impacts)
     report = BatchReport(manifest=manifest.path, out_dir=out_root, cluster=cluster, assets=outcomes,
                          seconds=time.perf_counter() - start, dataset=dataset, dataset_rows=rows,
