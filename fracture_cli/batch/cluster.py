@@ -13,6 +13,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import signal
+import threading
 import uuid
 from collections.abc import Iterator
 from typing import Any
@@ -48,6 +50,45 @@ def _quiet_dask(verbose: bool) -> Iterator[None]:
 
 
 @contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """Ignore Ctrl-C while worker processes start (they inherit it) and while the cluster closes.
+
+    A worker interrupted half-way through its imports prints a traceback and
+    leaves the cluster in a state its close asserts against; ignored, Ctrl-C
+    reaches only this process, which cancels the tasks and closes the cluster.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _open(distributed: Any, scheduler: str | None, workers: int, verbose: bool) -> tuple[Any, Any]:
+    """(cluster or None, client)."""
+    if not scheduler:
+        with _sigint_ignored():
+            cluster = distributed.LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                silence_logs=logging.INFO if verbose else logging.ERROR)
+        return cluster, distributed.Client(cluster)
+    try:
+        client = distributed.Client(scheduler, timeout="30s")
+    except (OSError, TimeoutError) as exc:
+        raise FractureError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+    try:
+        client.wait_for_workers(1, timeout=60)
+    except TimeoutError:
+        client.close()
+        raise FractureError(f"the Dask scheduler at {scheduler} has no workers (start some with "
+                            f"'dask worker {scheduler} --nthreads 1')") from None
+    return None, client
+
+
+@contextlib.contextmanager
 def connect(scheduler: str | None, workers: int, verbose: bool = False) -> Iterator[Any]:
     """Yield a ``distributed.Client``: to ``scheduler``, or to a new local cluster of ``workers`` processes.
 
@@ -57,25 +98,17 @@ def connect(scheduler: str | None, workers: int, verbose: bool = False) -> Itera
         Dask missing, the scheduler unreachable, or a scheduler without workers.
     """
     distributed = require_distributed()
-    with _quiet_dask(verbose), contextlib.ExitStack() as stack:
-        if scheduler:
-            try:
-                client = stack.enter_context(distributed.Client(scheduler, timeout="30s"))
-            except (OSError, TimeoutError) as exc:
-                raise FractureError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
-            try:
-                client.wait_for_workers(1, timeout=60)
-            except TimeoutError:
-                raise FractureError(f"the Dask scheduler at {scheduler} has no workers (start some with "
-                                    f"'dask worker {scheduler} --nthreads 1')") from None
-        else:
-            cluster = stack.enter_context(distributed.LocalCluster(
-                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                silence_logs=logging.INFO if verbose else logging.ERROR))
-            client = stack.enter_context(distributed.Client(cluster))
-        log.info("batch: Dask scheduler %s, %d worker(s)", client.scheduler.address,
-                 len(client.scheduler_info()["workers"]))
-        yield client
+    with _quiet_dask(verbose):
+        cluster, client = _open(distributed, scheduler, workers, verbose)
+        try:
+            log.info("batch: Dask scheduler %s, %d worker(s)", client.scheduler.address,
+                     len(client.scheduler_info()["workers"]))
+            yield client
+        finally:
+            with _sigint_ignored():
+                client.close()
+                if cluster is not None:
+                    cluster.close()
 
 
 def _worker_facts(probe: str, manifest: str) -> dict:

@@ -97,12 +97,15 @@ def batch_files(manifest: str, out_root: str) -> tuple[str, str, str]:
 
 
 def _run_jobs(jobs: tuple[BakeJob, ...], options: BatchOptions, manifest: str, out_root: str,
-              collect: Callable[[TaskResult], None], task: Callable[[BakeJob], TaskResult]) -> tuple[str, bool]:
+              collect: Callable[[TaskResult], None], task: Callable[[BakeJob], TaskResult],
+              on_plan: Callable[[tuple[BakeJob, ...]], None] | None) -> tuple[str, bool]:
     """Run the jobs on a cluster; returns (cluster description, interrupted)."""
     with connect(options.scheduler, options.workers, options.verbose) as client:
         workers = len(client.scheduler_info()["workers"])
         where = f"scheduler {options.scheduler}" if options.scheduler else "local cluster"
         check_workers(client, out_root, manifest)
+        if on_plan:
+            on_plan(jobs)
         try:
             execute(client, jobs, collect, task)
         except KeyboardInterrupt:
@@ -122,7 +125,7 @@ def run_batch(manifest_path: str, options: BatchOptions, on_result: Callable[[Ta
     on_result : callable, optional
         Called with each task's result as it arrives (progress display).
     on_plan : callable, optional
-        Called with the jobs about to be submitted (progress display).
+        Called with the jobs once the cluster is up, just before they are submitted (progress display).
     task : callable, optional (default :func:`~fracture_cli.batch.task.run_job`)
         The per-asset task (a seam for tests).
 
@@ -161,9 +164,7 @@ def run_batch(manifest_path: str, options: BatchOptions, on_result: Callable[[Ta
     cluster, interrupted = "no cluster (everything up to date)", False
     if plan.jobs:
         require_distributed()
-        if on_plan:
-            on_plan(plan.jobs)
-        cluster, interrupted = _run_jobs(plan.jobs, options, manifest.path, out_root, collect, task)
+        cluster, interrupted = _run_jobs(plan.jobs, options, manifest.path, out_root, collect, task, on_plan)
     outcomes = tuple(asset_outcome(a, results.get(i)) for i, a in enumerate(assets))
     dataset, rows = None, 0
     if options.impacts:
