@@ -22,7 +22,7 @@ from click.testing import CliRunner
 pytest.importorskip("distributed", reason="fracture batch needs the 'batch' extra (dask[distributed])")
 pytest.importorskip("pyarrow", reason="the impacts dataset needs the 'batch' extra (pyarrow)")
 
-from conftest import REPO, SAMPLE_ASSETS
+from conftest import SAMPLE_ASSETS
 
 from fracture_cli.batch.jobs import BAKED, FAILED, UP_TO_DATE, BakeJob, TaskResult
 from fracture_cli.batch.runner import BatchOptions, run_batch
@@ -280,9 +280,3 @@ def test_missing_dask_is_one_line(tmp_path, monkeypatch):
     assert result.exit_code == 1
     assert "pip install 'fracture-cli[batch]'" in result.output
     assert len(result.output.strip().splitlines()) == 1
-
-
-def test_readme_documents_the_manifest_forms():
-    with open(os.path.join(REPO, "README.md")) as fh:
-        text = fh.read()
-    assert "fracture batch" in text and "[[batch]]" in text and "dask worker" in text
