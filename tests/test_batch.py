@@ -121,7 +121,7 @@ def test_generated_batch_is_incremental_and_writes_an_impacts_dataset(tmp_path):
 
     manifest = _generated_manifest(tmp_path / "assets")
     out = tmp_path / "out"
-    options = BatchOptions(out_dir=str(out), workers=2)
+    options = BatchOptions(out_dir=str(out), workers=2, cache_dir=str(tmp_path / "cache"))
     first = run_batch(manifest, options)
     assert _statuses(first) == {"ball.obj": BAKED, "boxes/a.obj": BAKED, "boxes/b.obj": BAKED}
     for folder, stem in ((out, "ball"), (out / "boxes", "a"), (out / "boxes", "b")):
@@ -133,6 +133,8 @@ def test_generated_batch_is_incremental_and_writes_an_impacts_dataset(tmp_path):
     crate.write_text(crate.read_text() + "\n[smooth]\nsmoothing = 0.002\n")
     second = run_batch(manifest, options)
     assert _statuses(second) == {"ball.obj": UP_TO_DATE, "boxes/a.obj": BAKED, "boxes/b.obj": BAKED}
+    # Only smoothing changed: the workers reused the shared cache's cages and modes.
+    assert _complete_set(str(out / "boxes"), "a")["cache"] == {"cage": "hit", "modes": "hit"}
 
     # Impacts only: nothing is re-baked; rows are deterministic and some hits break, some do not.
     third = run_batch(manifest, BatchOptions(out_dir=str(out), workers=2, impacts=6))

@@ -93,7 +93,9 @@ def _command(command_cls: type[click.Command]) -> click.Command:
         """
         if debug:
             ctx.find_root().meta["fracture.debug"] = True
-        verbose = ctx.find_root().params.get("verbose", 0) >= 1
+        root = ctx.find_root().params
+        verbose = (root.get("verbose") or 0) >= 1
+        quiet = quiet or bool(root.get("quiet"))
 
         def process(state):
             from fracture_cli.cli import configure_logging
