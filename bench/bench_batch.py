@@ -18,7 +18,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from fracture_cli.batch.runner import BatchOptions, run_batch  # noqa: E402
+from fracture_cli.batch.runner import BatchOptions, run_batch
 
 ASSETS = 8
 SETTINGS = ("cage.target_faces=1000", "modes.num_modes=8")
@@ -66,10 +66,10 @@ def run(quick: bool = False) -> str:
     return "\n".join([
         "## Batch: `fracture batch` throughput on a local Dask cluster",
         "",
-        f"{ASSETS} generated assets (boxes and spheres), recipe `stone` with {', '.join(settings)}, baked from "
+        (f"{ASSETS} generated assets (boxes and spheres), recipe `stone` with {', '.join(settings)}, baked from "
         "scratch; wall time includes starting the cluster. CPU s per asset counts the workers and their bake "
         "processes (each bake runs in its own process: ~1.3 s of imports plus the TetGen helper's start). "
-        "Target: 2 workers near 2x the throughput of 1 on 2 cores.",
+        "Target: 2 workers near 2x the throughput of 1 on 2 cores."),
         "",
         *rows,
     ])
