@@ -49,7 +49,8 @@ def test_globs_tables_overrides_and_mirrored_outputs(tmp_path):
                      "hero.obj": BOX_OBJ, "my.toml": 'extends = "glass"\n[modes]\nnum_modes = 5\n'})
     assets = _assets(tmp_path, '[assets]\n"props/*.obj" = "stone"\n"props/b.obj" = { recipe = "wood", set = '
                                '["modes.num_modes=7"] }\n\n[[batch]]\nglob = "props/**/c.obj"\nrecipe = "stone"\n\n'
-                               '[[batch]]\nfile = "hero.obj"\nrecipe = "my.toml"\nset = ["runtime.threshold=9"]\n',
+                               '[[batch]]\nfile = "hero.obj"\nrecipe = "my.toml"\nset = ["runtime.threshold=9"]\n'
+                               'timeout = 60\n',
                      overrides=["cage.target_faces=500"])
     by = {a.name: a for a in assets}
     assert sorted(by) == ["hero.obj", "props/a.obj", "props/b.obj", "props/deep/c.obj"]
@@ -57,6 +58,7 @@ def test_globs_tables_overrides_and_mirrored_outputs(tmp_path):
     assert (by["props/b.obj"].recipe.name, by["props/b.obj"].recipe["modes"].num_modes) == ("wood", 7)  # explicit wins
     assert by["hero.obj"].recipe.chain == ("my", "glass", "default")
     assert by["hero.obj"].recipe["runtime"].threshold == 9.0
+    assert (by["hero.obj"].timeout, by["props/a.obj"].timeout) == (60.0, None)
     assert all(a.recipe["cage"].target_faces == 500 for a in assets)  # --set applies to every asset
     assert by["props/deep/c.obj"].out_dir == str(tmp_path / "out" / "props" / "deep")
 
@@ -69,6 +71,7 @@ def test_globs_tables_overrides_and_mirrored_outputs(tmp_path):
     ('[assets]\n"a.obj" = { recipe = "stone", sett = [] }\n', "unknown key(s) sett"),
     ('[[batch]]\nglob = "*.obj"\nfile = "a.obj"\n', "[[batch]] #1: give exactly one of 'file' or 'glob'"),
     ('[asset]\n"a.obj" = "stone"\n', "unknown key(s) asset"),
+    ('[assets]\n"a.obj" = { recipe = "stone", timeout = -5 }\n', "'timeout' must be a positive number of seconds"),
     ("", "names no assets"),
     ('[assets\n', "is not valid TOML"),
     ('[assets]\n"a.mtl" = "stone"\n', '"a.mtl": not a mesh file'),

@@ -11,6 +11,7 @@ A manifest is a TOML file; paths are relative to the manifest's folder::
     glob = "rocks/**/*.obj"                    # or: file = "rocks/big.obj"
     recipe = "recipes/granite.toml"            # a name, or a path (relative to the manifest)
     set = ["cage.target_faces=1000"]
+    timeout = 7200                             # seconds; instead of --timeout for these assets
 
 An explicit file wins over a glob that also matches it; two globs that match one
 file with different settings are an error. Globs skip files that are not meshes
@@ -23,6 +24,7 @@ baked into ``OUTDIR/props/``.
 from __future__ import annotations
 
 import glob
+import math
 import os
 import tomllib
 from dataclasses import dataclass
@@ -32,7 +34,7 @@ from fracture_cli.errors import FractureError, InputError
 from fracture_cli.recipe import Recipe, load_recipe
 
 TOP_LEVEL_KEYS = ("assets", "batch")
-ENTRY_KEYS = ("file", "glob", "recipe", "set")
+ENTRY_KEYS = ("file", "glob", "recipe", "set", "timeout")
 GLOB_CHARS = "*?["
 
 
@@ -51,6 +53,8 @@ class Entry:
         Recipe name or path (a path is relative to the manifest's folder).
     overrides : tuple of str
         ``section.key=value`` strings applied after the recipe.
+    timeout : float or None
+        Seconds before a bake of these assets is killed (None: ``--timeout``).
     """
 
     where: str
@@ -58,6 +62,7 @@ class Entry:
     is_glob: bool
     recipe: str
     overrides: tuple[str, ...] = ()
+    timeout: float | None = None
 
 
 @dataclass(frozen=True)
@@ -79,6 +84,8 @@ class Asset:
         The resolved recipe, manifest and command-line overrides applied.
     entry : str
         The manifest entry that selected the asset (for error messages).
+    timeout : float or None
+        The entry's own timeout (None: the batch's).
     """
 
     name: str
@@ -87,6 +94,7 @@ class Asset:
     stem: str
     recipe: Recipe
     entry: str
+    timeout: float | None = None
 
 
 @dataclass(frozen=True)
@@ -113,15 +121,21 @@ def _string_list(value: Any, manifest: str, where: str) -> tuple[str, ...]:
 def _entry(pattern: Any, table: dict, manifest: str, where: str) -> Entry:
     unknown = sorted(set(table) - set(ENTRY_KEYS))
     if unknown:
-        raise _error(manifest, f"{where}: unknown key(s) {', '.join(unknown)}; valid: recipe, set, and file or glob")
+        raise _error(manifest, f"{where}: unknown key(s) {', '.join(unknown)}; valid: recipe, set, timeout, and file "
+                               "or glob")
     if not isinstance(pattern, str) or not pattern.strip():
         raise _error(manifest, f"{where}: the file or glob must be a non-empty string")
     recipe = table.get("recipe", "default")
     if not isinstance(recipe, str) or not recipe:
         raise _error(manifest, f"{where}: 'recipe' must be a recipe name or a path to a .toml file")
+    timeout = table.get("timeout")
+    if timeout is not None and (isinstance(timeout, bool) or not isinstance(timeout, (int, float))
+                                or not math.isfinite(timeout) or timeout <= 0):
+        raise _error(manifest, f"{where}: 'timeout' must be a positive number of seconds, got {timeout!r}")
     pattern = pattern.replace("\\", "/")
     return Entry(where=where, pattern=pattern, is_glob=any(c in pattern for c in GLOB_CHARS), recipe=recipe,
-                 overrides=_string_list(table.get("set", []), manifest, where))
+                 overrides=_string_list(table.get("set", []), manifest, where),
+                 timeout=float(timeout) if timeout is not None else None)
 
 
 def _assets_entries(table: Any, manifest: str) -> list[Entry]:
@@ -213,7 +227,8 @@ def _selected(manifest: Manifest, extensions: frozenset[str]) -> dict[str, Entry
         for path in _matches(manifest, entry, extensions):
             chosen = explicit if not entry.is_glob else globbed
             other = chosen.get(path)
-            if other is not None and (other.recipe, other.overrides) != (entry.recipe, entry.overrides):
+            if other is not None and (other.recipe, other.overrides, other.timeout) != \
+                    (entry.recipe, entry.overrides, entry.timeout):
                 kind = "globs" if entry.is_glob else "entries"
                 raise _error(manifest.path, f"{other.where} and {entry.where}: both {kind} select "
                                             f"{os.path.relpath(path, manifest.folder)} with different settings; "
@@ -279,5 +294,6 @@ def resolve_assets(manifest: Manifest, out_root: str, overrides: tuple[str, ...]
                                         f"{out_dir}; rename one")
         stems[(out_dir, stem)] = name
         assets.append(Asset(name=name, path=path, out_dir=out_dir, stem=stem,
-                            recipe=_recipe(manifest, entry, tuple(overrides), memo), entry=entry.where))
+                            recipe=_recipe(manifest, entry, tuple(overrides), memo), entry=entry.where,
+                            timeout=entry.timeout))
     return sorted(assets, key=lambda a: a.name)

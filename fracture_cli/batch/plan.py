@@ -87,6 +87,7 @@ def plan_batch(assets: list[Asset], *, impacts: int, cache_dir: str | None, time
         Dataset impacts per asset (0: none); up-to-date assets then still get a task.
     cache_dir : str or None
     timeout : float
+        Seconds per bake, for assets whose manifest entry sets none.
     force : bool, optional (default False)
         Bake everything, ignoring the state files.
 
@@ -108,7 +109,7 @@ def plan_batch(assets: list[Asset], *, impacts: int, cache_dir: str | None, time
         jobs.append(BakeJob(index=index, name=asset.name, input_path=asset.path, out_dir=asset.out_dir,
                             stem=asset.stem, recipe=asset.recipe, key=key, inputs=inputs, hashed_at_ns=hashed_at,
                             bake=not (fresh and report is not None), impacts=impacts, seed=content_seed(inputs),
-                            cache_dir=cache_dir, timeout=timeout))
+                            cache_dir=cache_dir, timeout=asset.timeout or timeout))
     log.info("batch: %d asset(s): %d to bake, %d up to date", len(assets), sum(j.bake for j in jobs),
              len(assets) - sum(j.bake for j in jobs))
     return Plan(jobs=tuple(jobs), done=tuple(done))
