@@ -20,6 +20,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import eigsh
 
+from fracture_cli import progress
 from fracture_cli.discontinuity import (
     ConicSubproblemSolver,
     CutSubproblemSolver,
@@ -300,6 +301,7 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
     """
     found = []
     per_mode = []
+    progress.items(count, f"mode{label}")
     for i in range(count):
         mode_start = time.perf_counter()
         c = inner.orthonormalize(starts[i], inner.translations + found)
@@ -335,6 +337,7 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
                          "seconds": seconds, "max_gap": float(max(gaps)), "last_gap": float(gaps[-1])})
         log.info("%s: mode %d%s: %d ICCM rounds, %d inner iterations, %.3f s", STAGE, i, label, rounds,
                  inner_iterations, seconds)
+        progress.advance()
     return found, per_mode
 
 

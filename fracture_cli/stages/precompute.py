@@ -1,4 +1,8 @@
-"""Precompute the impact-projection data a game needs at runtime (ALGORITHM.md section 4)."""
+"""The ``runtime`` stage: precompute the impact-projection data a game needs (ALGORITHM.md section 4).
+
+Named ``precompute`` so it is not confused with :mod:`fracture_cli.runtime`, the
+game-side reader of what it writes; the recipe section keeps the name ``runtime``.
+"""
 
 from __future__ import annotations
 
@@ -72,23 +76,11 @@ def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOpt
 
     Notes
     -----
-    ALGORITHM.md section 4 writes ``B[v, i] = U_i^T M_T C (M_V + tau K)^{-1} M_V e_v``.
-    Two scalings make the result independent of the mesh and of the asset's size:
-
-    * the impulse is spread as a *unit-mass* density, ``g_v = (M_V + tau K)^{-1} e_v``
-      instead of ``... M_V e_v``: since ``K 1 = 0``, ``1^T M_V g_v = 1``, whereas the
-      paper's version carries the lumped mass ``m_v`` of the nearest vertex, which
-      would make a hit near a coarse tet stronger than one near a fine tet;
-    * modes are rescaled to unit RMS over the volume, ``U_hat = sqrt(vol) U``
-      (``vol`` = total tet volume), both in ``B`` and in ``W``.
-
-    So ``B[v, i] = sqrt(vol) U_i^T M_T C g_v`` is the diffusion-weighted average of
-    the RMS-normalized mode ``i`` around site ``v``, ``W = sqrt(vol) W_pieces``, and
-    ``displacement = vol * (projected impact of a unit-mass impulse)``: a value of 1
-    means "as strong as the impulse spread uniformly over the whole object".
-    ``B`` for all sites costs ``k d`` solves with one factorization, using the
-    symmetry of ``M_V + tau K``: ``B[:, i] = (M_V + tau K)^{-1} C^T M_T U_i``
-    restricted to the sites.
+    ALGORITHM.md section 4, with the two scalings of section 8 that make the
+    result independent of the mesh and of the asset's size: the impulse is
+    spread as a unit-mass density, and modes are rescaled to unit RMS over the
+    volume. ``B`` for all sites costs ``k d`` solves with one factorization
+    (``M_V + tau K`` is symmetric).
     """
     started = time.perf_counter()
     U = np.asarray(modes.U, dtype=np.float64)
@@ -114,24 +106,9 @@ def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOpt
     total_volume = float(volumes.sum())
     if not total_volume > 0:
         raise StageError("tet mesh has no volume", stage=STAGE)
-    tau = float(options.radius) ** 2
-    C = sp.csr_matrix(tet_mesh.tet_from_vertex)
-    # Lumped vertex mass built from C and M_T themselves (a quarter of each tet's
-    # volume per corner), so 1^T M_T C = 1^T M_V holds exactly and the impulse
-    # density below has unit mass whatever TetMesh.vertex_mass does.
-    vertex_mass = sp.diags(np.asarray(C.T @ volumes).ravel())
-    system = (vertex_mass + tau * tet_mesh.stiffness).tocsc()
-    try:
-        lu = spla.splu(system, permc_spec="MMD_AT_PLUS_A")
-    except RuntimeError as exc:
-        raise StageError(f"cannot factor M_V + tau K ({exc}); is the tet mesh valid?", stage=STAGE) from None
-    # Right-hand sides C^T M_T U_i, one column per (mode, component).
-    weighted = (U * volumes[None, :, None]).transpose(1, 0, 2).reshape(t, k * d)
-    rhs = np.asarray(C.T @ weighted)
-    solution = lu.solve(np.asfortranarray(rhs))  # (n, k d)
     sites = tet_mesh.boundary_vertices
     scale = np.sqrt(total_volume)
-    B = (solution[sites] * scale).reshape(len(sites), k, d)
+    B = _site_coefficients(tet_mesh, U, float(options.radius) ** 2)[sites] * scale
 
     norm = tet_mesh.normalization
     data = RuntimeData(
@@ -152,6 +129,26 @@ def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOpt
     log.info("%s: %d sites, %d modes (d=%d), %d fragments, %d edges, radius %.3g, %.2fs", STAGE, len(sites), k, d,
              p, data.num_edges, options.radius, time.perf_counter() - started)
     return data
+
+
+def _site_coefficients(tet_mesh: TetMesh, U: np.ndarray, tau: float) -> np.ndarray:
+    """``(M_V + tau K)^{-1} C^T M_T U_i`` at every vertex, (n, k, d): the unit-mass spread of ALGORITHM.md s. 4."""
+    k, t, d = U.shape
+    volumes = tet_mesh.tet_volumes
+    C = sp.csr_matrix(tet_mesh.tet_from_vertex)
+    # Lumped vertex mass built from C and M_T themselves (a quarter of each tet's
+    # volume per corner), so 1^T M_T C = 1^T M_V holds exactly and the impulse
+    # density has unit mass whatever TetMesh.vertex_mass does.
+    vertex_mass = sp.diags(np.asarray(C.T @ volumes).ravel())
+    system = (vertex_mass + tau * tet_mesh.stiffness).tocsc()
+    try:
+        lu = spla.splu(system, permc_spec="MMD_AT_PLUS_A")
+    except RuntimeError as exc:
+        raise StageError(f"cannot factor M_V + tau K ({exc}); is the tet mesh valid?", stage=STAGE) from None
+    # Right-hand sides C^T M_T U_i, one column per (mode, component).
+    weighted = (U * volumes[None, :, None]).transpose(1, 0, 2).reshape(t, k * d)
+    rhs = np.asarray(C.T @ weighted)
+    return lu.solve(np.asfortranarray(rhs)).reshape(-1, k, d)  # (n, k, d)
 
 
 def _restrict_to_fragments(W: np.ndarray, pieces: Pieces, fragment_pieces):

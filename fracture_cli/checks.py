@@ -1,4 +1,8 @@
-"""Invariants of a set of fragments, for the bake report (ALGORITHM.md section 6)."""
+"""What the bake report says about fragments: invariants (closed, volumes, overlap) and fault shape.
+
+Not a stage: measurements on the fragments stage's output (ALGORITHM.md section 6), used by the
+pipeline's report and by the tests.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +12,7 @@ import manifold3d
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fracture_cli import trigeom
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, Regions, SurfaceMesh
 
 log = logging.getLogger(__name__)
@@ -44,18 +49,18 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
     interior_id = interior[-1] if interior else -1
     watertight = True
     pinched = 0
-    volumes = []
+    volume_list: list[float] = []
     outer_points = []
     solids = []
     for frag in fragments.fragments:
         ok, pinch = _closed_by_position(frag.vertices, frag.faces)
         watertight &= ok
         pinched += pinch
-        volumes.append(_volume(frag.vertices, frag.faces))
+        volume_list.append(trigeom.signed_volume(frag.vertices, frag.faces))
         outer = frag.faces[frag.material_ids != interior_id]
         outer_points.append(frag.vertices[np.unique(outer)])
         solids.append(_solid(frag.vertices, frag.faces))
-    volumes = np.array(volumes)
+    volumes = np.array(volume_list)
     reference = fragments.input_volume
     points = np.concatenate(outer_points) if outer_points else np.zeros((0, 3))
     return {
@@ -322,11 +327,6 @@ def _closed_by_position(vertices: np.ndarray, faces: np.ndarray):
     return ok, int(np.sum(counts > 2))
 
 
-def _volume(V: np.ndarray, F: np.ndarray) -> float:
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
-
-
 def _solid(V: np.ndarray, F: np.ndarray):
     _, first, pos = np.unique(V, axis=0, return_index=True, return_inverse=True)
     pos = pos.reshape(-1)
@@ -374,7 +374,7 @@ def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -
     scene.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
     result = scene.compute_closest_points(o3d.core.Tensor(points.astype(np.float32)))
     tri = result["primitive_ids"].numpy().astype(np.int64)
-    distance = point_triangle_distance(points, V[F[tri]])
+    distance = trigeom.point_triangle_distance(points, V[F[tri]])
     # In float32 a point on an edge or corner can pick a neighbour of its triangle (at a fold, 1e-6 away):
     # measure such points against every triangle sharing a vertex with the one found.
     far = np.flatnonzero(distance > 1e-12)
@@ -385,40 +385,5 @@ def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -
                                shape=(len(V), len(F)))
         for i in far:
             near = np.unique(incidence[F[tri[i]]].indices)
-            distance[i] = point_triangle_distance(np.repeat(points[i][None], len(near), 0), V[F[near]]).min()
+            distance[i] = trigeom.point_triangle_distance(np.repeat(points[i][None], len(near), 0), V[F[near]]).min()
     return float(distance.max())
-
-
-def point_triangle_distance(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Distances (n,) from points (n, 3) to triangles (n, 3, 3), float64 (Ericson's closest-point regions)."""
-    p = points
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = np.einsum("ij,ij->i", ab, ap), np.einsum("ij,ij->i", ac, ap)
-    bp = p - b
-    d3, d4 = np.einsum("ij,ij->i", ab, bp), np.einsum("ij,ij->i", ac, bp)
-    cp = p - c
-    d5, d6 = np.einsum("ij,ij->i", ab, cp), np.einsum("ij,ij->i", ac, cp)
-    va = d3 * d6 - d5 * d4
-    vb = d5 * d2 - d1 * d6
-    vc = d1 * d4 - d3 * d2
-    denom = va + vb + vc
-    with np.errstate(divide="ignore", invalid="ignore"):
-        v = vb / denom
-        w = vc / denom
-        closest = a + ab * v[:, None] + ac * w[:, None]
-        # Edge and vertex regions, checked in Ericson's order (later ones override).
-        t_ab = d1 / (d1 - d3)
-        t_ac = d2 / (d2 - d6)
-        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-    on_bc = (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)
-    closest = np.where(on_bc[:, None], b + (c - b) * t_bc[:, None], closest)
-    on_ac = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
-    closest = np.where(on_ac[:, None], a + ac * t_ac[:, None], closest)
-    on_ab = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
-    closest = np.where(on_ab[:, None], a + ab * t_ab[:, None], closest)
-    closest = np.where(((d6 >= 0) & (d5 <= d6))[:, None], c, closest)
-    closest = np.where(((d3 >= 0) & (d4 <= d3))[:, None], b, closest)
-    closest = np.where(((d1 <= 0) & (d2 <= 0))[:, None], a, closest)
-    closest = np.where(np.isfinite(closest), closest, a)
-    return np.linalg.norm(p - closest, axis=1)
