@@ -22,11 +22,11 @@ from click.testing import CliRunner
 pytest.importorskip("distributed", reason="fracture batch needs the 'batch' extra (dask[distributed])")
 pytest.importorskip("pyarrow", reason="the impacts dataset needs the 'batch' extra (pyarrow)")
 
-from conftest import SAMPLE_ASSETS
-
 from fracture_cli.batch.jobs import BAKED, FAILED, UP_TO_DATE, BakeJob, TaskResult
 from fracture_cli.batch.runner import BatchOptions, run_batch
 from fracture_cli.cli import cli
+
+from conftest import SAMPLE_ASSETS
 
 FAST = ("cage.target_faces=600", "modes.num_modes=4")
 TINY = ("cage.target_faces=300", "modes.num_modes=4")
@@ -162,7 +162,8 @@ def _check_rows_recomputed(rows, out_dir, stem, asset) -> None:
 
     surface = load_surface(str(asset))
     data = load_runtime(str(out_dir / f"{stem}.fracture.json"))
-    expect = asset_impacts(data, surface.world_vertices(), surface.faces, len(rows), content_seed(hash_inputs(str(asset))))
+    seed = content_seed(hash_inputs(str(asset)))
+    expect = asset_impacts(data, surface.world_vertices(), surface.faces, len(rows), seed)
     np.testing.assert_array_equal(np.array([r["point"] for r in rows]), expect.points)
     np.testing.assert_array_equal(np.array([r["groups"] for r in rows]), expect.groups)
 

@@ -2,25 +2,24 @@
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import time
 
 import numpy as np
 import pytest
-from conftest import SAMPLE_ASSETS
 
 from fracture_cli.batch.impacts import asset_impacts
 from fracture_cli.batch.inputs import dependency_files, hash_inputs
 from fracture_cli.batch.jobs import BAKED, FAILED, UP_TO_DATE, TaskResult
 from fracture_cli.batch.manifest import read_manifest, resolve_assets
 from fracture_cli.batch.plan import check_no_input_overwritten, plan_batch
-from fracture_cli.batch.progress import Progress
 from fracture_cli.batch.report import BatchReport, asset_outcome, summary_text, to_markdown
 from fracture_cli.batch.state import asset_key, is_up_to_date, read_state, state_path, write_state
 from fracture_cli.errors import InputError
 from fracture_cli.runtime.format import RuntimeData
+
+from conftest import SAMPLE_ASSETS
 
 BOX_OBJ = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 
@@ -198,12 +197,3 @@ def test_report_and_progress_text(tmp_path):
     text = summary_text(report)
     assert "failed: b|c.obj: b|c.obj: no triangles" in text
     assert text.splitlines()[-1].startswith("2 asset(s): 1 baked, 0 up to date, 1 failed")
-    stream = io.StringIO()
-    progress = Progress(2, stream, tty=False, names={0: "a.obj", 1: "b|c.obj"}, interval=3600)
-    for r in results:
-        progress.update(r)
-    progress.close()
-    lines = stream.getvalue().splitlines()
-    assert lines[0] == "batch: 2 task(s) submitted"
-    assert lines[1] == "failed: b|c.obj: b|c.obj: no triangles"
-    assert lines[2].startswith("batch: 2/2 done (1 baked, 0 up to date, 1 failed)")

@@ -12,7 +12,8 @@ calls :func:`~fracture_cli.batch.runner.run_batch`. One concern per module:
   killable bake process per task;
 * :mod:`~fracture_cli.batch.adapter`: the only caller of the bake API;
 * :mod:`~fracture_cli.batch.impacts`, :mod:`~fracture_cli.batch.dataset`: ``--impacts`` (Parquet);
-* :mod:`~fracture_cli.batch.report`, :mod:`~fracture_cli.batch.progress`: what the user reads.
+* :mod:`~fracture_cli.batch.report`: what the user reads (progress goes through
+  :mod:`fracture_cli.progress`, like a bake's).
 
 Dask and pyarrow come from the ``batch`` extra (``pip install 'fracture-cli[batch]'``)
 and are imported only when a batch runs.

@@ -22,6 +22,7 @@ import signal
 import sys
 import traceback
 
+from fracture_cli.bake import describe_error
 from fracture_cli.batch.adapter import bake_asset
 from fracture_cli.batch.jobs import BAKED, FAILED, UP_TO_DATE, BakeJob, TaskResult
 from fracture_cli.batch.state import state_path, write_state
@@ -97,10 +98,9 @@ def main(argv: list[str]) -> int:
         result = run(job)
     except FractureError as exc:
         result = TaskResult(index=job.index, status=FAILED, error=str(exc))
-    except Exception as exc:  # noqa: BLE001 -- a bug in a stage: one line in the summary, the traceback in the report
-        first = str(exc).splitlines()[0] if str(exc) else ""
+    except Exception as exc:  # a bug in a stage: one line in the summary, the traceback in the report
         result = TaskResult(index=job.index, status=FAILED, detail=traceback.format_exc(),
-                            error=f"{job.input_path}: internal error ({type(exc).__name__}: {first})")
+                            error=describe_error(exc, job.input_path))
     result = dataclasses.replace(result, warnings=tuple(collect.messages))
     write_bytes_atomic(result_file, pickle.dumps(result))
     return 0

@@ -10,14 +10,18 @@ bake publishes its outputs as a set, so the retry never meets half a set.
 
 from __future__ import annotations
 
+import logging
 import traceback
 import uuid
 from collections.abc import Callable
 from typing import Any
 
+from fracture_cli import progress
 from fracture_cli.batch.cluster import require_distributed
 from fracture_cli.batch.jobs import FAILED, BakeJob, TaskResult
 from fracture_cli.batch.task import run_job
+
+log = logging.getLogger(__name__)
 
 
 def _outcome(future: Any, job: BakeJob, killed_worker: type[BaseException]) -> TaskResult:
@@ -26,7 +30,7 @@ def _outcome(future: Any, job: BakeJob, killed_worker: type[BaseException]) -> T
     except killed_worker:
         error = (f"{job.input_path}: the Dask workers running it died repeatedly (out of memory, or killed); "
                  "gave up on this asset")
-    except Exception as exc:  # noqa: BLE001 -- the task itself raised: this asset fails, the batch goes on
+    except Exception as exc:  # the task itself raised: this asset fails, the batch goes on
         first = str(exc).splitlines()[0] if str(exc) else ""
         error = f"{job.input_path}: task failed ({type(exc).__name__}: {first[:300]})"
         return TaskResult(index=job.index, status=FAILED, error=error, detail="".join(
@@ -43,7 +47,8 @@ def execute(client: Any, jobs: tuple[BakeJob, ...], on_result: Callable[[TaskRes
     client : distributed.Client
     jobs : tuple of BakeJob
     on_result : callable
-        Called with each result as it arrives (progress display).
+        Called with each result as it arrives. Progress goes to
+        :mod:`fracture_cli.progress`, a failure's line to the log at once.
     task : callable, optional (default :func:`~fracture_cli.batch.task.run_job`)
         The function run on a worker for each job.
 
@@ -58,14 +63,18 @@ def execute(client: Any, jobs: tuple[BakeJob, ...], on_result: Callable[[TaskRes
     pending = {client.submit(task, job, key=f"fracture-bake-{run_id}-{job.index:06d}", pure=False): job
                for job in jobs}
     results = []
-    try:
-        for future in distributed.as_completed(list(pending)):
-            job = pending.pop(future)
-            result = _outcome(future, job, distributed.KilledWorker)
-            future.release()
-            results.append(result)
-            on_result(result)
-    except BaseException:
-        client.cancel(list(pending))
-        raise
+    with progress.task("batch", total=len(jobs)) as bar:
+        try:
+            for future in distributed.as_completed(list(pending)):
+                job = pending.pop(future)
+                result = _outcome(future, job, distributed.KilledWorker)
+                future.release()
+                if result.status == FAILED:
+                    log.error("failed: %s: %s", job.name, result.error)
+                results.append(result)
+                on_result(result)
+                bar.advance()
+        except BaseException:
+            client.cancel(list(pending))
+            raise
     return results

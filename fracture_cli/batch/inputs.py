@@ -67,7 +67,7 @@ def _gltf_files(path: str) -> list[str]:
         else:
             with open(path, encoding="utf-8") as fh:
                 doc = json.load(fh)
-    except Exception as exc:  # noqa: BLE001 -- the bake reports an unreadable file; its key is then the file alone
+    except Exception as exc:  # the bake reports an unreadable file; its key is then the file alone
         log.debug("batch: %s: cannot list external files (%s)", path, exc)
         return []
     return _uri_files(doc, os.path.dirname(path)) if isinstance(doc, dict) else []

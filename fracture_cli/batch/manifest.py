@@ -9,7 +9,7 @@ A manifest is a TOML file; paths are relative to the manifest's folder::
 
     [[batch]]                                  # the same as a table
     glob = "rocks/**/*.obj"                    # or: file = "rocks/big.obj"
-    recipe = "recipes/granite.toml"            # a name, or a path (relative to the manifest)
+    recipe = "recipes/granite.toml"            # a path (relative to the manifest) or a name
     set = ["cage.target_faces=1000"]
     timeout = 7200                             # seconds; instead of --timeout for these assets
 
@@ -17,8 +17,10 @@ An explicit file wins over a glob that also matches it; two globs that match one
 file with different settings are an error. Globs skip files that are not meshes
 (a glTF's ``.bin``, an OBJ's ``.mtl``) and earlier outputs (a ``.glb`` beside a
 ``.fracture.json`` of the same stem), so a glob never picks up what a batch baked.
-Outputs mirror the asset's folder below the manifest's: ``props/rock.glb`` is
-baked into ``OUTDIR/props/``.
+Recipe names are looked up as ``fracture bake`` does (``--recipes``,
+``$FRACTURE_RECIPES``, ``recipes/`` beside the asset), then in ``recipes/``
+beside the manifest, ``./recipes`` and the built-ins. Outputs mirror the asset's
+folder below the manifest's: ``props/rock.glb`` is baked into ``OUTDIR/props/``.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from fracture_cli.errors import FractureError, InputError
-from fracture_cli.recipe import Recipe, load_recipe
+from fracture_cli.recipe import Recipe, load_recipe, search_path
 
 TOP_LEVEL_KEYS = ("assets", "batch")
 ENTRY_KEYS = ("file", "glob", "recipe", "set", "timeout")
@@ -237,20 +239,25 @@ def _selected(manifest: Manifest, extensions: frozenset[str]) -> dict[str, Entry
     return {**globbed, **explicit}
 
 
-def _recipe(manifest: Manifest, entry: Entry, extra: tuple[str, ...], memo: dict) -> Recipe:
+def _recipe(manifest: Manifest, entry: Entry, asset: str, extra: tuple[str, ...], recipes_dir: str | None,
+            memo: dict) -> Recipe:
+    """The entry's recipe: a path relative to the manifest, or a name on bake's search path (the asset's
+    ``recipes/`` folder first, then the manifest's)."""
     name = entry.recipe
     if name.endswith(".toml") or "/" in name or os.sep in name:
         name = os.path.join(manifest.folder, name)
-    key = (name, entry.overrides + extra)
+    search = tuple(search_path(recipes_dir, (asset, manifest.path)))
+    key = (name, entry.overrides + extra, search)
     if key not in memo:
         try:
-            memo[key] = load_recipe(name, list(key[1]))
+            memo[key] = load_recipe(name, list(key[1]), search=search)
         except FractureError as exc:
             raise _error(manifest.path, f"{entry.where}: {exc}") from None
     return memo[key]
 
 
-def resolve_assets(manifest: Manifest, out_root: str, overrides: tuple[str, ...] = ()) -> list[Asset]:
+def resolve_assets(manifest: Manifest, out_root: str, overrides: tuple[str, ...] = (),
+                   recipes_dir: str | None = None) -> list[Asset]:
     """Expand globs, resolve recipes and place the outputs.
 
     Parameters
@@ -260,6 +267,8 @@ def resolve_assets(manifest: Manifest, out_root: str, overrides: tuple[str, ...]
         OUTDIR; outputs mirror the asset's folder below the manifest's.
     overrides : tuple of str, optional
         Command-line ``--set`` overrides, applied after each entry's own.
+    recipes_dir : str, optional
+        The ``--recipes`` folder, searched first for recipe names.
 
     Returns
     -------
@@ -294,6 +303,7 @@ def resolve_assets(manifest: Manifest, out_root: str, overrides: tuple[str, ...]
                                         f"{out_dir}; rename one")
         stems[(out_dir, stem)] = name
         assets.append(Asset(name=name, path=path, out_dir=out_dir, stem=stem,
-                            recipe=_recipe(manifest, entry, tuple(overrides), memo), entry=entry.where,
+                            recipe=_recipe(manifest, entry, path, tuple(overrides), recipes_dir, memo),
+                            entry=entry.where,
                             timeout=entry.timeout))
     return sorted(assets, key=lambda a: a.name)

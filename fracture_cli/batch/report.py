@@ -105,7 +105,8 @@ def to_json(report: BatchReport) -> dict:
         "dataset": {"path": report.dataset, "rows": report.dataset_rows} if report.dataset else None,
         "assets": [{"name": a.name, "recipe": a.recipe, "status": a.status, "out_dir": a.out_dir,
                     "seconds": a.seconds, "fragments": a.fragments, "checks": a.checks, "error": a.error,
-                    **({"detail": a.detail} if a.detail else {}), "warnings": list(a.warnings), "worker": a.worker} for a in report.assets],
+                    **({"detail": a.detail} if a.detail else {}), "warnings": list(a.warnings),
+                    "worker": a.worker} for a in report.assets],
     }
 
 

@@ -57,6 +57,8 @@ class BatchOptions:
         Bake everything, even what is up to date.
     verbose : bool
         Let Dask log at INFO.
+    recipes_dir : str or None
+        The user's recipe folder (``--recipes``), searched first for recipe names.
     """
 
     out_dir: str
@@ -68,6 +70,7 @@ class BatchOptions:
     overrides: tuple[str, ...] = ()
     force: bool = False
     verbose: bool = False
+    recipes_dir: str | None = None
 
 
 def _check_options(options: BatchOptions) -> None:
@@ -97,15 +100,12 @@ def batch_files(manifest: str, out_root: str) -> tuple[str, str, str]:
 
 
 def _run_jobs(jobs: tuple[BakeJob, ...], options: BatchOptions, manifest: str, out_root: str,
-              collect: Callable[[TaskResult], None], task: Callable[[BakeJob], TaskResult],
-              on_plan: Callable[[tuple[BakeJob, ...]], None] | None) -> tuple[str, bool]:
+              collect: Callable[[TaskResult], None], task: Callable[[BakeJob], TaskResult]) -> tuple[str, bool]:
     """Run the jobs on a cluster; returns (cluster description, interrupted)."""
     with connect(options.scheduler, options.workers, options.verbose) as client:
         workers = len(client.scheduler_info()["workers"])
         where = f"scheduler {options.scheduler}" if options.scheduler else "local cluster"
         check_workers(client, out_root, manifest)
-        if on_plan:
-            on_plan(jobs)
         try:
             execute(client, jobs, collect, task)
         except KeyboardInterrupt:
@@ -113,8 +113,7 @@ def _run_jobs(jobs: tuple[BakeJob, ...], options: BatchOptions, manifest: str, o
     return f"{where}, {workers} worker(s)", False
 
 
-def run_batch(manifest_path: str, options: BatchOptions, on_result: Callable[[TaskResult], None] | None = None,
-              on_plan: Callable[[tuple[BakeJob, ...]], None] | None = None,
+def run_batch(manifest_path: str, options: BatchOptions,
               task: Callable[[BakeJob], TaskResult] = run_job) -> BatchReport:
     """Bake every asset of a manifest on Dask; see the module docstring.
 
@@ -122,10 +121,6 @@ def run_batch(manifest_path: str, options: BatchOptions, on_result: Callable[[Ta
     ----------
     manifest_path : str
     options : BatchOptions
-    on_result : callable, optional
-        Called with each task's result as it arrives (progress display).
-    on_plan : callable, optional
-        Called with the jobs once the cluster is up, just before they are submitted (progress display).
     task : callable, optional (default :func:`~fracture_cli.batch.task.run_job`)
         The per-asset task (a seam for tests).
 
@@ -133,6 +128,8 @@ def run_batch(manifest_path: str, options: BatchOptions, on_result: Callable[[Ta
     -------
     BatchReport
         Also written as ``<manifest stem>.batch.json`` / ``.batch.md`` in OUTDIR.
+        Progress goes to :mod:`fracture_cli.progress` (one item per task), a
+        failed asset's line to the log as it happens.
 
     Raises
     ------
@@ -145,7 +142,7 @@ def run_batch(manifest_path: str, options: BatchOptions, on_result: Callable[[Ta
     start = time.perf_counter()
     manifest = read_manifest(manifest_path)
     out_root = os.path.abspath(options.out_dir)
-    assets = resolve_assets(manifest, out_root, options.overrides)
+    assets = resolve_assets(manifest, out_root, options.overrides, options.recipes_dir)
     json_path, md_path, data_path = batch_files(manifest.path, out_root)
     check_no_input_overwritten(assets, (json_path, md_path, data_path), manifest.path)
     _check_writable(out_root)
@@ -158,13 +155,11 @@ def run_batch(manifest_path: str, options: BatchOptions, on_result: Callable[[Ta
 
     def collect(result: TaskResult) -> None:
         results[result.index] = result
-        if on_result:
-            on_result(result)
 
     cluster, interrupted = "no cluster (everything up to date)", False
     if plan.jobs:
         require_distributed()
-        cluster, interrupted = _run_jobs(plan.jobs, options, manifest.path, out_root, collect, task, on_plan)
+        cluster, interrupted = _run_jobs(plan.jobs, options, manifest.path, out_root, collect, task)
     outcomes = tuple(asset_outcome(a, results.get(i)) for i, a in enumerate(assets))
     dataset, rows = None, 0
     if options.impacts:
