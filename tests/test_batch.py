@@ -134,7 +134,7 @@ def test_generated_batch_is_incremental_and_writes_an_impacts_dataset(tmp_path):
     second = run_batch(manifest, options)
     assert _statuses(second) == {"ball.obj": UP_TO_DATE, "boxes/a.obj": BAKED, "boxes/b.obj": BAKED}
     # Only smoothing changed: the workers reused the shared cache's cages and modes.
-    assert _complete_set(str(out / "boxes"), "a")["cache"] == {"cage": "hit", "modes": "hit"}
+    assert set(_complete_set(str(out / "boxes"), "a")["cache"].values()) == {"hit"}
 
     # Impacts only: nothing is re-baked; rows are deterministic and some hits break, some do not.
     third = run_batch(manifest, BatchOptions(out_dir=str(out), workers=2, impacts=6))
