@@ -66,11 +66,41 @@ function asBytes(binary) {
   throw new TypeError('binary must be an ArrayBuffer or a typed array');
 }
 
+// FORMAT.md section 1: a runtime header nests 3 levels; deeper than this is refused
+// before parsing, so a hostile file cannot exhaust the parser's stack.
+const MAX_NESTING = 64;
+
+function nestingDepth(text) {
+  let depth = 0;
+  let deepest = 0;
+  let inString = false;
+  for (let i = 0; i < text.length; i++) {
+    const c = text.charCodeAt(i);
+    if (inString) {
+      if (c === 0x5c) i++; // backslash: skip the escaped character
+      else if (c === 0x22) inString = false;
+    } else if (c === 0x22) {
+      inString = true;
+    } else if (c === 0x5b || c === 0x7b) {
+      depth++;
+      if (depth > deepest) deepest = depth;
+    } else if (c === 0x5d || c === 0x7d) {
+      depth--;
+    }
+  }
+  return deepest;
+}
+
 function asHeader(header) {
   if (typeof header === 'string' || header instanceof Uint8Array || header instanceof ArrayBuffer) {
     let text = header;
     try {
       if (typeof header !== 'string') text = new TextDecoder('utf-8', { fatal: true }).decode(asBytes(header));
+    } catch (err) {
+      return fail(`not a JSON runtime file (${err.message})`);
+    }
+    if (nestingDepth(text) > MAX_NESTING) fail(`header nests deeper than ${MAX_NESTING} levels`);
+    try {
       return JSON.parse(text);
     } catch (err) {
       return fail(`not a JSON runtime file (${err.message})`);
