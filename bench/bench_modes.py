@@ -52,7 +52,7 @@ def bench_tetmesh(target_tets: int) -> TetMesh:
 
 
 def _time_modes(mesh: TetMesh, solver: str, num_modes: int, max_flow: str = "auto"):
-    from fracture_cli import discontinuity
+    from fracture_cli.discontinuity import mincut as discontinuity
 
     saved = discontinuity.MAX_FLOW_BACKEND
     discontinuity.MAX_FLOW_BACKEND = max_flow
