@@ -119,9 +119,9 @@ def sweep(quick: bool = False) -> str:
     lines = [
         "### Mode-count sweep (CPU seconds, `time.process_time`)",
         "",
-        f"One run with k = {k_max} per mesh; the figure for a smaller k is the CPU time of that run's first k modes "
-        "(a k-mode run solves the same first k subproblem sequences, from start vectors equal up to the "
-        "eigensolver's round-off). 'median' / 'max' are over the first k modes; the eigensolver is not included.",
+        (f"One run with k = {k_max} per mesh; the figure for a smaller k is the CPU time of that run's first k "
+         "modes (a k-mode run solves the same first k subproblem sequences, from start vectors equal up to the "
+         "eigensolver's round-off). 'median' / 'max' are over the first k modes; the eigensolver is not included."),
         "",
         "| mesh | k | modes CPU s | s/mode | median mode s | max mode s | max/median | max-flows |",
         "|---|---:|---:|---:|---:|---:|---:|---:|",

@@ -71,15 +71,15 @@ class ConicSubproblemSolver:
             vals = np.concatenate([e, -e, -np.ones(f), -e, e, -np.ones(f)])
             return sp.csc_matrix((vals, (rows, cols)), shape=(2 * f, nu + f))
         block = d + 1
-        rows = [block * fid]
-        cols = [nu + fid]
-        vals = [-np.ones(f)]
+        row_parts = [block * fid]
+        col_parts = [nu + fid]
+        val_parts = [-np.ones(f)]
         for a in range(d):
             r = block * fid + 1 + a
-            rows += [r, r]
-            cols += [fa * d + a, fb * d + a]
-            vals += [-self.eta[:, a], self.eta[:, a]]
-        return sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+            row_parts += [r, r]
+            col_parts += [fa * d + a, fb * d + a]
+            val_parts += [-self.eta[:, a], self.eta[:, a]]
+        return sp.csc_matrix((np.concatenate(val_parts), (np.concatenate(row_parts), np.concatenate(col_parts))),
                              shape=(block * f, nu + f))
 
     def solve(self, c: np.ndarray, fixed=()) -> SubproblemResult:

@@ -209,7 +209,7 @@ class CutSubproblemSolver:
         u = self._constraints.project(u)
         energy, residual = self._check(u, Y, b, objective)
         self.counters["lp_retries"] = self._master_lp.retries
-        stats = {key: self.counters[key] - before[key] for key in self.counters}
+        stats: dict = {key: self.counters[key] - before[key] for key in self.counters}
         stats.update(cells=int(self.cells.max()) + 1, min_reduced_cost=worst_rc * self.scale,
                      uses_start_vector=bool(theta > 0.0), constraint_residual=residual)
         return SubproblemResult(u=u[:, None], energy=energy * self.scale, lower_bound=objective * self.scale,

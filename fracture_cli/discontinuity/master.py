@@ -11,11 +11,13 @@ row duals.
 from __future__ import annotations
 
 import logging
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
+_highspy: Any
 try:  # HiGHS's own bindings allow warm starts; scipy's linprog (same HiGHS) is the fallback
     import highspy as _highspy
 except ImportError:
@@ -29,7 +31,7 @@ _HIGHS_SETTINGS = {"solver": "simplex", "simplex_strategy": 1, "primal_feasibili
                    "dual_feasibility_tolerance": 1e-9, "threads": 1, "output_flag": False}
 # Cold retries when the warm-started solve does not end optimal (small masters with nearly dependent
 # constraint rows can leave HiGHS without a status): a fresh dual simplex, primal simplex, then IPM.
-_HIGHS_RETRIES = ({}, {"simplex_strategy": 4}, {"solver": "ipm"})
+_HIGHS_RETRIES: tuple[dict, ...] = ({}, {"simplex_strategy": 4}, {"solver": "ipm"})
 _LINPROG_OPTIONS = (("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9}),
                     ("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9,
                                   "presolve": False}),

@@ -7,6 +7,9 @@ source, ``supply^-`` to the sink.
 
 from __future__ import annotations
 
+import importlib
+from typing import Any
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, maximum_flow
@@ -51,10 +54,10 @@ class MinCut:
         heads = np.concatenate([fb, fa, arange, np.full(t, snk)])
         if backend == "auto":
             backend = MAX_FLOW_BACKEND
-        ortools_max_flow = None
+        ortools_max_flow: Any = None
         if backend != "scipy":
             try:
-                from ortools.graph.python import max_flow as ortools_max_flow
+                ortools_max_flow = importlib.import_module("ortools.graph.python.max_flow")
             except ImportError:
                 if backend == "ortools":
                     raise

@@ -301,8 +301,8 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
 
     ``solve(c, earlier_modes) -> SubproblemResult``.
     """
-    found = []
-    per_mode = []
+    found: list[np.ndarray] = []
+    per_mode: list[dict] = []
     for i in range(count):
         mode_start = time.perf_counter()
         mode_cpu = time.process_time()
