@@ -106,10 +106,11 @@ class CutSubproblemSolver:
         self._fixed_count = -1
         self._fixed_cache: list[tuple[np.ndarray, np.ndarray]] = []
         self._cell_cache = None
+        self._before_merge: np.ndarray | None = None
         # "stalls": pricing found a violated set that is already a union of cells, i.e. the
         # violation is within HiGHS's tolerance; the result stands, min_reduced_cost says by how much.
         self.counters = {"max_flows": 0, "master_lps": 0, "refinements": 0, "stalls": 0, "merges": 0,
-                         "lp_retries": 0}
+                         "unmerges": 0, "lp_retries": 0}
 
     @property
     def max_flow_backend(self) -> str:
@@ -129,13 +130,19 @@ class CutSubproblemSolver:
         self._set_cells(cells)
         return True
 
-    def _coarsen(self, x: np.ndarray) -> np.ndarray:
-        """Merge neighbouring cells whose master values ``x`` (n,) are equal; returns ``x`` on the new cells."""
+    def _coarsen(self, x: np.ndarray, constraints: int) -> np.ndarray:
+        """Merge neighbouring cells whose master values ``x`` (n,) are equal; returns ``x`` on the new cells.
+
+        With fewer cells than constraint rows the master's duals are underdetermined and HiGHS can
+        end without a status; :meth:`_solve_master` then undoes the merge. Not below ``constraints // 2``
+        cells.
+        """
         ca, cb = self.cells[self._fa], self.cells[self._fb]
         scale = float(np.abs(x).max()) or 1.0
         count, cells = self._components(np.abs(x[ca] - x[cb]) <= 1e-9 * scale)
-        if count == len(x):
+        if count == len(x) or count < constraints // 2:
             return x
+        self._before_merge = self.cells
         merged = np.zeros(count)
         merged[cells] = x[self.cells]
         self._set_cells(cells)
@@ -199,6 +206,7 @@ class CutSubproblemSolver:
         if len(fixed) != self._fixed_count:  # a new mode: start from one cell (see the class notes)
             self._fixed_count = len(fixed)
             self._set_cells(np.zeros(self.t, dtype=np.int64))
+            self._before_merge = None
         Y, v, v_cost = self._constraint_vectors(c, fixed)
         b = np.zeros(Y.shape[1])
         b[-1] = 1.0
@@ -241,10 +249,9 @@ class CutSubproblemSolver:
         merged_at = np.inf
         for _ in range(self.max_iter):
             self.counters["master_lps"] += 1
-            x, theta, lam, objective = self._master_lp.solve(self.cells, self._partition_version,
-                                                             self._cell_graph(), Y, b, v_cost)
+            x, theta, lam, objective = self._solve_master(Y, b, v_cost)
             if len(x) > self.merge_cells and objective < merged_at - 1e-9 * abs(objective):
-                x = self._coarsen(x)
+                x = self._coarsen(x, Y.shape[1])
                 merged_at = objective
             supply = MY @ lam
             members, rc = self._price(supply)
@@ -257,6 +264,22 @@ class CutSubproblemSolver:
                 return x, theta, objective, worst_rc
             self.counters["refinements"] += 1
         raise RuntimeError(f"no optimality certificate after {self.max_iter} max-flows")
+
+    def _solve_master(self, Y: np.ndarray, b: np.ndarray, v_cost: float):
+        """The master LP on the current partition. If every LP solver fails on it (a merged partition
+        can be badly conditioned), once more on its common refinement with the partition before the
+        last merge."""
+        try:
+            return self._master_lp.solve(self.cells, self._partition_version, self._cell_graph(), Y, b, v_cost)
+        except RuntimeError:
+            if self._before_merge is None:
+                raise
+        old = self._before_merge
+        self._before_merge = None
+        self.counters["unmerges"] += 1
+        self._set_cells(self._components((self.cells[self._fa] == self.cells[self._fb])
+                                         & (old[self._fa] == old[self._fb]))[1])
+        return self._master_lp.solve(self.cells, self._partition_version, self._cell_graph(), Y, b, v_cost)
 
     def _check(self, u: np.ndarray, Y: np.ndarray, b: np.ndarray, objective: float) -> tuple[float, float]:
         """Safeguards on the recovered ``u`` (t,): constraints met, energy not above the master's; returns

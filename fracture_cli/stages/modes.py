@@ -114,6 +114,12 @@ def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.nda
     its max-flow/min-cut condition), its solution is piecewise constant, so the
     pieces do not depend on ``sigma``. ``stats["max_gap"]`` is the largest
     primal-dual gap over all subproblems.
+
+    Parallelism (``options.jobs``): mode ``i`` is constrained by modes ``< i``,
+    so one ICCM chain is sequential; only chains that share nothing (``d = 3``
+    with per-axis weights) run in worker processes. BLAS is single-threaded in
+    every chain (threadpoolctl), so results are the same bytes for any ``jobs``
+    and a pool of bakes does not oversubscribe the cores.
     """
     opts = options
     t = tet_mesh.num_tets
