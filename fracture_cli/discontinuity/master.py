@@ -181,7 +181,8 @@ class MasterLP:
             if h.getModelStatus() == _highspy.HighsModelStatus.kOptimal:
                 self._lp = h
                 return h
-        log.debug("master LP: HiGHS ended without an optimal status %d times; trying scipy's chain", len(_HIGHS_RETRIES))
+        log.debug("master LP: HiGHS ended without an optimal status %d times; trying scipy's chain",
+                  len(_HIGHS_RETRIES))
         return None
 
     def _inherited_basis(self, cells, n, edges, m):

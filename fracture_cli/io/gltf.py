@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import json
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,7 +81,8 @@ def _texture_png(material: Material) -> bytes | None:
     return buf.getvalue()
 
 
-def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Material, ...]) -> bytes:
+def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Primitive], np.ndarray]],
+              materials: tuple[Material, ...]) -> bytes:
     """Encode meshes as a GLB file, one node per mesh.
 
     Parameters

@@ -294,7 +294,7 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
         nbytes = int(np.prod(shape, dtype=np.int64)) * 4
         if len(shape) != ndim or min(shape, default=0) < 0 or length != nbytes:
             raise _fail(f"array '{name}' has shape {list(shape)} and {length} bytes, which do not agree", path)
-        if offset < 0 or offset % 4 or offset + length > len(binary):
+        if offset < 0 or offset % ALIGNMENT or offset + length > len(binary):
             raise _fail(f"array '{name}' lies outside the binary file (offset {offset}, length {length})", path)
         arrays[name] = np.frombuffer(binary, dtype=_DTYPES[dtype], count=nbytes // 4, offset=offset).reshape(shape)
     data = RuntimeData(fragment_names=names, transform=transform, default_threshold=threshold,

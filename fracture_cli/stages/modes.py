@@ -21,6 +21,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import eigsh
 
+from fracture_cli import progress
 from fracture_cli.discontinuity import (
     ConicSubproblemSolver,
     CutSubproblemSolver,
@@ -309,6 +310,7 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
     """
     found: list[np.ndarray] = []
     per_mode: list[dict] = []
+    progress.items(count, f"mode{label}")
     for i in range(count):
         mode_start = time.perf_counter()
         mode_cpu = time.process_time()
@@ -346,6 +348,7 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
                          "last_gap": float(gaps[-1])})
         log.info("%s: mode %d%s: %d ICCM rounds, %d inner iterations, %.3f s", STAGE, i, label, rounds,
                  inner_iterations, seconds)
+        progress.advance()
     return found, per_mode
 
 
@@ -369,7 +372,8 @@ def _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
     results = _run_chains(tasks, _jobs(opts.jobs))
     per_axis_modes: list = [None] * d
     per_axis_stats: list = [None] * d
-    for (a, same, _), (found, stats, backend) in zip(chains, results):
+    backend = results[0][2]
+    for (a, same, _), (found, stats, _backend) in zip(chains, results):
         for b in same:
             per_axis_modes[b] = found
             per_axis_stats[b] = stats if b == a else [dict(m, seconds=0.0, replicated=True) for m in stats]
@@ -402,13 +406,22 @@ def _run_chains(tasks, jobs: int):
     from concurrent.futures import ProcessPoolExecutor
 
     method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context(method)) as pool:
+    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context(method),
+                             initializer=_quiet_worker) as pool:
         return list(pool.map(_axis_chain, *zip(*tasks)))
 
 
+def _quiet_worker() -> None:
+    """Workers report no progress (the parent process owns the terminal)."""
+    progress.configure(None)
+
+
 def _axis_chain(face_tets, weights, weight_scale: float, volumes, scalar_init, count, opts, axis: int, d: int):
-    """One ICCM chain of scalar modes with face weights ``weights`` (in units of ``weight_scale``); returns the modes, their stats and the
-    max-flow backend. Runs in the caller or in a worker process (BLAS single-threaded either way)."""
+    """One ICCM chain of scalar modes with face weights ``weights`` (in units of ``weight_scale``).
+
+    Returns the modes, their stats and the max-flow backend. Runs in the caller or in a worker
+    process (BLAS single-threaded either way).
+    """
     from threadpoolctl import threadpool_limits
 
     t = len(volumes)
