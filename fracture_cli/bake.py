@@ -6,22 +6,20 @@ For input ``<stem>`` a bake writes, into the output folder:
 * ``<stem>.fracture.json``  + ``<stem>.fracture.bin``: the runtime file (docs/FORMAT.md);
 * ``<stem>.report.json``    what was done: versions, recipe, counts, checks, seconds.
 
-The stages come from :data:`fracture_cli.pipeline.STAGES`. Outputs are written
-into a staging folder beside them and renamed into place, so a failed bake
-leaves the previous outputs untouched. Meshes and runtime file are
+The stages come from :data:`fracture_cli.pipeline.STAGES`. The four files are
+replaced as one set (:mod:`fracture_cli.io.outputs`, docs/OUTPUTS.md): the
+output folder is checked before any work, the files are written into a staging
+folder and published under a per-stem lock, the report last with the other
+files' hashes; a failed or interrupted bake leaves the previous set. Meshes and runtime file are
 byte-identical for the same input, recipe and tool version; so is the report,
 except for its ``seconds`` block. :func:`bake_many` bakes a batch.
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import json
 import logging
 import os
-import shutil
-import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -29,6 +27,9 @@ from typing import Any
 from fracture_cli import __version__, trigeom
 from fracture_cli.cache import file_sha256
 from fracture_cli.errors import FractureError, UsageError
+from fracture_cli.io.inputs import estimate_output_bytes, input_files
+from fracture_cli.io.outputs import output_names, output_set
+from fracture_cli.io.preflight import check_inputs_untouched, preflight, refuse_inputs_as_outputs
 from fracture_cli.pipeline import STAGE_NAMES, STEPS, PipelineState, Runner
 from fracture_cli.recipe import Recipe
 from fracture_cli.types import Fragments
@@ -111,6 +112,8 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
     """
     try:
         stem = stem_of(input_path)
+        depends = input_files(input_path)
+        preflight(out_dir, stem, inputs=depends, estimate_bytes=estimate_output_bytes(depends))
         cache = None
         if cache_dir is not None:
             from fracture_cli.cache import StageCache
@@ -178,42 +181,27 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
                   runner: Runner) -> tuple[str, ...]:
     """Write the fragments, the runtime file and the report as the ``export`` step; returns the paths.
 
-    Everything is written into a staging folder beside the outputs, then
-    renamed into place, data files first and the report last (a report on disk
-    means a complete bake). ``report`` gets its ``seconds`` (and ``cache``) block.
+    The files are written into a staging folder and published as one set
+    (:func:`fracture_cli.io.outputs.output_set`), the report last with the
+    other files' hashes. ``report`` gets its ``seconds`` (and ``cache``) block.
     """
     from fracture_cli.io.write import write_fragments_glb
     from fracture_cli.runtime.format import write_runtime
 
-    outputs = []
-    with runner.step("export"), _staging_dir(out_dir, stem) as staging:
-        write_fragments_glb(os.path.join(staging, f"{stem}.glb"), state.need("fragments", "export"))
-        write_runtime(state.need("runtime", "export"), os.path.join(staging, f"{stem}.fracture.json"))
+    check_inputs_untouched(out_dir, [stem], input_files(state.need("source", "export")))  # also for a chain
+    with runner.step("export"), output_set(out_dir, stem) as staging:
+        write_fragments_glb(staging.file(f"{stem}.glb"), state.need("fragments", "export"))
+        write_runtime(state.need("runtime", "export"), staging.file(f"{stem}.fracture.json"))
         report["seconds"] = dict(runner.seconds)
         if runner.cache is not None:
             report["cache"] = dict(runner.cache.events)
-        with open(os.path.join(staging, f"{stem}.report.json"), "w") as fh:
-            json.dump(report, fh, indent=2, sort_keys=True)
-            fh.write("\n")
-        for name in (f"{stem}.fracture.bin", f"{stem}.fracture.json", f"{stem}.glb", f"{stem}.report.json"):
-            os.replace(os.path.join(staging, name), os.path.join(out_dir, name))
-            outputs.append(os.path.join(out_dir, name))
+        staging.write_report(report)
     report["seconds"] = dict(runner.seconds)
-    return tuple(outputs)
-
-
-@contextlib.contextmanager
-def _staging_dir(out_dir: str, stem: str) -> Iterator[str]:
-    os.makedirs(out_dir, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=f".{stem}.bake-", dir=out_dir)
-    try:
-        yield tmp
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    return tuple(os.path.join(out_dir, name) for name in output_names(stem))
 
 
 def check_batch(inputs: Sequence[str], out_dir: str) -> None:
-    """Refuse a batch in which two inputs would write the same outputs."""
+    """Refuse a batch in which two inputs would write the same outputs, or an output would replace an input."""
     stems: dict[str, str] = {}
     for path in inputs:
         stem = stem_of(path)
@@ -221,6 +209,7 @@ def check_batch(inputs: Sequence[str], out_dir: str) -> None:
             raise UsageError(f"{stems[stem]} and {path} would both write {stem}.* into {out_dir}; "
                              "bake them into different folders")
         stems[stem] = path
+    refuse_inputs_as_outputs(out_dir, inputs)
 
 
 def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir: str | None = None,

@@ -2,7 +2,9 @@
 
 ``fracture bake --cache DIR`` stores the result of every stage the pipeline
 table marks ``cached``, keyed by a hash of everything it depends on: the tool
-version, the input file's bytes and the options of every stage up to and
+version, every byte of the input (the asset and its companion files: glTF
+buffers and images, OBJ material libraries and textures; :func:`input_digest`)
+and the options of every stage up to and
 including that one (:class:`~fracture_cli.pipeline.Runner` chains the keys). A
 bake that only changes later options (smoothing, fragments, runtime) then skips
 the cage search and the modes solve. Entries are written atomically; an
@@ -24,6 +26,7 @@ import numpy as np
 
 from fracture_cli import __version__
 from fracture_cli.io.atomic import atomic_path
+from fracture_cli.io.inputs import file_sha256  # noqa: F401 (part of this module's API: the input hash)
 from fracture_cli.types import Cage, Modes, Normalization, TetMesh
 
 if TYPE_CHECKING:
@@ -32,18 +35,41 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-def file_sha256(path: str) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def input_key(path: str) -> str:
-    """What the cache keys of an input depend on: a hash of its bytes."""
-    return file_sha256(path)
+    """What the cache keys of an input depend on: its bytes and its companion files' (:func:`input_digest`)."""
+    from fracture_cli.io.inputs import input_files
+
+    return input_digest(input_files(path))
+
+
+def input_digest(files: list[str]) -> str:
+    """Hex SHA-256 of an input's bytes: its file alone, or its file and its companion files.
+
+    Parameters
+    ----------
+    files : list of str
+        The asset first, then its companions
+        (:func:`fracture_cli.io.inputs.input_files`).
+
+    Returns
+    -------
+    str
+        For a single file, the SHA-256 of its bytes (what ``sha256sum``
+        prints). Otherwise the SHA-256 of one line per file,
+        ``<sha256 or "missing">  <name relative to the asset's folder>``, so
+        editing, adding, removing or renaming a companion changes it.
+    """
+    if len(files) == 1:
+        return file_sha256(files[0])
+    folder = os.path.dirname(files[0])
+    lines = []
+    for path in files:
+        try:
+            digest = file_sha256(path)
+        except FileNotFoundError:
+            digest = "missing"
+        lines.append(f"{digest}  {os.path.relpath(path, folder or '.')}\n")
+    return hashlib.sha256("".join(lines).encode("utf-8", "surrogateescape")).hexdigest()
 
 
 def cache_key(*parts: Any) -> str:

@@ -113,12 +113,15 @@ class FractureGroup(click.Group):
             formatter.write_dl(rows)
 
     def invoke(self, ctx: click.Context) -> Any:
+        from fracture_cli.io.outputs import forget_published, interrupt_message
+
+        forget_published()  # the Ctrl-C message lists only this run's outputs
         try:
             return super().invoke(ctx)
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
             raise
         except KeyboardInterrupt:
-            click.echo("fracture: interrupted; no output was written", err=True)
+            click.echo(f"fracture: {interrupt_message()}", err=True)
             ctx.exit(130)
         except Exception as exc:  # FractureError: one line; anything else is a bug: one line unless --debug
             from fracture_cli.bake import describe_error
@@ -222,8 +225,11 @@ def _file_command(name: str, doc: str, run: Callable[[Chain, str], None], folder
 
 
 def _save(chain: Chain, path: str) -> None:
+    from fracture_cli.io.inputs import input_files
+    from fracture_cli.io.preflight import refuse_replacing_inputs
     from fracture_cli.io.write import save_surface
 
+    refuse_replacing_inputs([path], input_files(chain.state.source) if chain.state.source else [])
     save_surface(path, chain.state.need("surface", "save"))
     log.info("save: wrote %s", path)
 
@@ -275,7 +281,13 @@ _register_batch(cli, TerminalCommand)
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``fracture`` console script."""
-    cli.main(args=argv, prog_name="fracture")
+    try:
+        cli.main(args=argv, prog_name="fracture")
+    except SystemExit:
+        import signal
+
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # exiting: a second Ctrl-C must not break the clean exit
+        raise
 
 
 __all__ = ["Chain", "EXAMPLES", "TerminalCommand", "active_recipe", "cli", "cli_tools", "main", "toml_text"]

@@ -111,12 +111,12 @@ class Stage:
 # What each stage calls. Imports are local so `fracture --help` does not load the geometry stack.
 
 def _load(state: PipelineState, options: Any) -> PipelineState:
-    from fracture_cli.cache import file_sha256
+    from fracture_cli.cache import input_key
     from fracture_cli.io.read import load_surface
 
     path = state.need("source", "load")
     surface = load_surface(path, options)
-    return dataclasses.replace(state, loaded=surface, surface=surface, source_sha256=file_sha256(path))
+    return dataclasses.replace(state, loaded=surface, surface=surface, source_sha256=input_key(path))
 
 
 def _repair(state: PipelineState, options: Any) -> PipelineState:

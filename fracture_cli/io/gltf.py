@@ -30,6 +30,25 @@ _ELEMENT_ARRAY_BUFFER = 34963
 
 
 @dataclass(frozen=True)
+class MaterialSource:
+    """What :func:`glb_bytes` carries over from an input material besides its name and colour.
+
+    The readers of this package fill it (trimesh's material objects have the
+    same attributes, so they are carried over as well).
+
+    Attributes
+    ----------
+    baseColorTexture : PIL.Image.Image or None
+        Written as an embedded PNG.
+    metallicFactor, roughnessFactor : float
+    """
+
+    baseColorTexture: object = None
+    metallicFactor: float = 1.0
+    roughnessFactor: float = 1.0
+
+
+@dataclass(frozen=True)
 class Primitive:
     """One glTF primitive: triangles of a single material.
 
@@ -121,7 +140,9 @@ def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Pri
         accessors.append(acc)
         return len(accessors) - 1
 
-    images, textures, samplers = [], [], []
+    images: list[dict] = []
+    textures: list[dict] = []
+    samplers: list[dict] = []
     material_json = []
     for material in materials:
         png = _texture_png(material)
@@ -151,7 +172,8 @@ def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Pri
             if prim.uvs is not None:
                 uv = np.array(prim.uvs, dtype=np.float64)
                 uv[:, 1] = 1.0 - uv[:, 1]
-                attributes["TEXCOORD_0"] = add_accessor(np.ascontiguousarray(uv, dtype="<f4"), "VEC2", _FLOAT, _ARRAY_BUFFER)
+                attributes["TEXCOORD_0"] = add_accessor(np.ascontiguousarray(uv, dtype="<f4"), "VEC2", _FLOAT,
+                                                        _ARRAY_BUFFER)
             idx = np.ascontiguousarray(prim.indices, dtype="<u4").reshape(-1)
             indices = add_accessor(idx, "SCALAR", _UINT32, _ELEMENT_ARRAY_BUFFER)
             prims.append({"attributes": attributes, "indices": indices, "material": int(prim.material), "mode": 4})
