@@ -17,6 +17,7 @@ exits with status 2; ``--names`` prints ``names <hex of each name's UTF-8 bytes.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
@@ -77,11 +78,13 @@ def impact_inputs(impact: dict) -> tuple[list[float], list[float], float | None]
     return ([bits_to_float(b) for b in bits["point"]], [bits_to_float(b) for b in bits["impulse"]], threshold)
 
 
+@functools.lru_cache(maxsize=None)
 def random_impacts(name: str, count: int, seed: int = 0) -> list[dict]:
     """Random hits on a conformance runtime file with the numpy reference's answers, shaped like vector impacts.
 
     Points near random sites, impulses in random directions with magnitudes from a tenth
     to twenty times the default threshold (from no break to shattering), default threshold.
+    Cached: every engine's test gets the same list (do not modify it).
     """
     import numpy as np
 
