@@ -970,7 +970,7 @@ static block_layout block_plan(const dims *dm, int64_t name_bytes, int table)
     block_layout b;
     uint64_t s = (uint64_t)dm->s, k = (uint64_t)dm->k, p = (uint64_t)dm->p, e = (uint64_t)dm->e, d = (uint64_t)dm->d;
     uint64_t cursor = sizeof(struct fr_runtime);
-    b.kd_capacity = 4u * s / KD_LEAF + 2; /* a leaf holds more than KD_LEAF / 2 sites */
+    b.kd_capacity = 4u * s / KD_LEAF + 2; /* a leaf holds at least KD_LEAF / 2 sites */
     b.sites = take(&cursor, 12u * s);
     b.B = take(&cursor, 4u * s * k * d);
     b.W = take(&cursor, 8u * k * (uint64_t)round_up(dm->p * dm->d, 16));
