@@ -78,7 +78,7 @@ def impact_inputs(impact: dict) -> tuple[list[float], list[float], float | None]
     return ([bits_to_float(b) for b in bits["point"]], [bits_to_float(b) for b in bits["impulse"]], threshold)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def random_impacts(name: str, count: int, seed: int = 0) -> list[dict]:
     """Random hits on a conformance runtime file with the numpy reference's answers, shaped like vector impacts.
 

@@ -9,12 +9,12 @@ import pytest
 from engine_support import (
     CORRUPT,
     REPO,
+    SAMPLE_ASSETS,
     check_answers,
     check_damaged_file,
     corrupt_cases,
     load_vectors,
     protocol_input,
-    SAMPLE_ASSETS,
     random_impacts,
     require_tool,
     runtime_paths,
