@@ -31,8 +31,8 @@
 #define KD_LEAF 16
 #define KD_STACK 96
 #define BOUND_SLACK 1e-9 /* far above the rounding of a k-term sum in double for any k << 1e6 */
-#ifdef __cplusplus
-#define restrict __restrict /* the source also compiles as C++ */
+#if defined(__cplusplus) || (defined(_MSC_VER) && !defined(__STDC_VERSION__))
+#define restrict __restrict /* the source also compiles as C++, and as C by MSVC before /std:c11 */
 #endif
 #if defined(__GNUC__) || defined(__clang__)
 #define NOINLINE __attribute__((noinline))
