@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
-from fracture_cli import trigeom
+from fracture_cli import parallel, trigeom
 from fracture_cli.errors import StageError
 from fracture_cli.options import option
 from fracture_cli.stages._solids import SHELL_VOLUME, shell_mask, surface_solid
@@ -100,17 +100,12 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     id_to_material = dict(id_to_material)
     id_to_material[region_id] = interior_index
 
-    results = []
-    empty = []
-    for piece, (rv, rf) in enumerate(regions.meshes):
-        region = _region_manifold(rv, rf, region_id, piece)
-        part = solid ^ region
-        volume = part.volume()
-        if part.is_empty() or volume <= SHELL_VOLUME * input_volume:
-            empty.append(piece)
-            continue
-        results.append(_to_fragment(part, piece, id_to_material, interior_index, surface, options,
-                                    SHELL_VOLUME * input_volume))
+    cut = _Cut(solid, regions.meshes, region_id, id_to_material, interior_index, surface, options,
+               SHELL_VOLUME * input_volume)
+    # One boolean per piece, independent of the others: on parallel.current_jobs() processes, results in order.
+    cuts = parallel.ordered_map(_cut_piece, range(len(regions.meshes)), cut)
+    results = [f for f in cuts if f is not None]
+    empty = [piece for piece, f in enumerate(cuts) if f is None]
     if empty:
         log.warning("%s: %d piece(s) do not reach the input and give no fragment: %s", STAGE, len(empty),
                     ", ".join(map(str, empty[:20])) + (" ..." if len(empty) > 20 else ""))
@@ -127,6 +122,30 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
         normalization=surface.normalization,
         input_volume=input_volume,
     )
+
+
+@dataclass(frozen=True)
+class _Cut:
+    """What cutting one piece needs (shared with the worker processes)."""
+
+    solid: manifold3d.Manifold
+    meshes: tuple
+    region_id: int
+    id_to_material: dict
+    interior_index: int
+    surface: SurfaceMesh
+    options: FragmentOptions
+    min_volume: float
+
+
+def _cut_piece(cut: _Cut, piece: int) -> Fragment | None:
+    """The fragment of ``piece`` (``input ^ region``), or None where the region misses the input."""
+    rv, rf = cut.meshes[piece]
+    part = cut.solid ^ _region_manifold(rv, rf, cut.region_id, piece)
+    if part.is_empty() or part.volume() <= cut.min_volume:
+        return None
+    return _to_fragment(part, piece, cut.id_to_material, cut.interior_index, cut.surface, cut.options,
+                        cut.min_volume)
 
 
 def _with_interior(materials: tuple[Material, ...], color: list) -> tuple[int, tuple[Material, ...]]:
