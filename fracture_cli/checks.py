@@ -376,8 +376,11 @@ def _max_overlap(fragments: Fragments, volumes: np.ndarray, max_pairs: int, jobs
     centres = (lo + hi) / 2
     order = np.argsort(np.linalg.norm(centres[i] - centres[j], axis=1), kind="stable")[:max_pairs]
     todo = list(zip(i[order].tolist(), j[order].tolist()))
-    # One boolean per pair, independent: on worker processes, results in order (the same max either way).
-    overlaps = parallel.ordered_map(_pair_overlap, todo, frags, jobs=jobs)
+    # Each solid built once here (the workers inherit them), then one boolean per pair, independent: on worker
+    # processes, results in order (the same max either way).
+    used = set(i[order].tolist()) | set(j[order].tolist())
+    solids = {k: _solid(frags[k].vertices, frags[k].faces) for k in sorted(used)}
+    overlaps = parallel.ordered_map(_pair_overlap, todo, solids, jobs=jobs)
     worst = 0.0
     for (a, b), overlap in zip(todo, overlaps):
         smaller = min(volumes[a], volumes[b])
@@ -386,9 +389,8 @@ def _max_overlap(fragments: Fragments, volumes: np.ndarray, max_pairs: int, jobs
     return worst
 
 
-def _pair_overlap(frags: tuple, pair: tuple[int, int]) -> float:
-    a, b = frags[pair[0]], frags[pair[1]]
-    return float((_solid(a.vertices, a.faces) ^ _solid(b.vertices, b.faces)).volume())
+def _pair_overlap(solids: dict, pair: tuple[int, int]) -> float:
+    return float((solids[pair[0]] ^ solids[pair[1]]).volume())
 
 
 def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> float:
