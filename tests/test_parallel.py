@@ -76,3 +76,26 @@ def test_bake_with_one_job_and_two_is_byte_identical(tmp_path):
     assert reports[0] == reports[1]
     assert reports[0]["counts"]["fragments"] > 1
     assert np.isfinite(reports[0]["checks"]["max_overlap"])
+
+
+def test_large_input_crop_gives_the_same_fragments(monkeypatch):
+    """Above _CROP_TRIANGLES pieces are cut from crops of the input: same fragments, same volumes."""
+    from test_fragments import cage_tets, octant_pieces, uv_sphere
+
+    import fracture_cli.stages.fragments as fr
+    from fracture_cli.stages.smooth import SmoothOptions, smooth
+    from fracture_cli.trigeom import signed_volume
+
+    surf = uv_sphere()
+    tm = cage_tets()
+    regions = smooth(tm, octant_pieces(tm), SmoothOptions(smoothing=0.0))
+    whole = fr.fragments(surf, regions)
+    monkeypatch.setattr(fr, "_CROP_TRIANGLES", 0)
+    monkeypatch.setattr(fr, "_CROP_GROUPS", 3)
+    cropped = fr.fragments(surf, regions)
+    assert [f.piece for f in cropped.fragments] == [f.piece for f in whole.fragments]
+    for a, b in zip(cropped.fragments, whole.fragments):
+        assert np.isclose(signed_volume(a.vertices, a.faces), signed_volume(b.vertices, b.faces), rtol=1e-9)
+        np.testing.assert_allclose(a.vertices.min(axis=0), b.vertices.min(axis=0), atol=1e-12)
+    assert fr._piece_groups(regions.meshes, 3) == fr._piece_groups(regions.meshes, 3)
+    assert sorted(p for g in fr._piece_groups(regions.meshes, 3) for p in g) == list(range(len(regions.meshes)))
