@@ -101,7 +101,7 @@ def run(quick: bool = False) -> str:
         t, Z = _best(lambda: _spd_factor(A).solve(B))
         rows.append(("SuperLU, symmetric mode (MMD on A+A^T, no pivoting), one multi-RHS solve (used)", t,
                      np.abs(Z - reference).max(), f"nnz(L) {_spd_factor(A).L.nnz:,} vs {spla.splu(A).L.nnz:,}"))
-        rows += _optional_rows(A, B, reference)
+        rows += _optional_rows(A, B, reference, used=rows[-1][1])
         if not quick:
             d = A.diagonal()
             c0 = time.process_time()
@@ -123,7 +123,7 @@ def run(quick: bool = False) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _optional_rows(A, B, reference) -> list[tuple[str, float, float, str]]:
+def _optional_rows(A, B, reference, used: float) -> list[tuple[str, float, float, str]]:
     rows = []
     try:
         from cholespy import CholeskySolverD, MatrixType
@@ -139,7 +139,7 @@ def _optional_rows(A, B, reference) -> list[tuple[str, float, float, str]]:
 
         t, Z = _best(cholmod)
         rows.append(("CHOLMOD sparse Cholesky via cholespy", t, np.abs(Z - reference).max(),
-                     "LGPL core; ~10% faster than the row used: not worth a dependency"))
+                     f"{used / t:.1f}x faster than the row used; a binary dependency bundling LGPL code"))
     try:
         import pyamg
     except ImportError:
