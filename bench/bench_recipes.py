@@ -59,7 +59,7 @@ def timed(self, name, state, options):
 
 pipeline.Runner.run = timed
 c0 = cpu()
-result = bake(sys.argv[1], sys.argv[2], load_recipe(sys.argv[3]))
+result = bake(sys.argv[1], sys.argv[2], load_recipe(sys.argv[3], sys.argv[4:]))
 cpu_seconds["export"] = cpu() - c0 - sum(cpu_seconds.values())
 print(json.dumps({"report": result.report, "wall": time.perf_counter() - t0, "cpu": cpu(), "cpu_stages": cpu_seconds,
                   "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
@@ -113,6 +113,11 @@ def recipe_names() -> list[str]:
     return sorted(os.path.splitext(os.path.basename(p))[0] for p in glob.glob(os.path.join(REPO, "recipes", "*.toml")))
 
 
+def bake_child(path: str, out: str, recipe: str, *settings: str) -> dict:
+    """Bake ``path`` into ``out`` in a fresh process (``--set`` ``settings``): report, wall, CPU per stage, peaks."""
+    return _child(_BAKE_CHILD, path, out, recipe, *settings)
+
+
 def _child(code: str, *args: str) -> dict:
     proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, cwd=REPO)
     if proc.returncode != 0:
@@ -123,7 +128,7 @@ def _child(code: str, *args: str) -> dict:
 def bake_one(asset: str, recipe: str) -> dict:
     """Bake ``asset`` with ``recipe`` in a fresh process: report, wall, CPU per stage, peaks."""
     with tempfile.TemporaryDirectory(prefix="fracture-bench-recipes-") as out:
-        return _child(_BAKE_CHILD, os.path.join(REPO, "sample_assets", asset), out, recipe)
+        return bake_child(os.path.join(REPO, "sample_assets", asset), out, recipe)
 
 
 def baseline(asset: str, fragments: int) -> dict:
