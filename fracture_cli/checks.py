@@ -12,13 +12,14 @@ import manifold3d
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fracture_cli import trigeom
+from fracture_cli import parallel, trigeom
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, Regions, SurfaceMesh
 
 log = logging.getLogger(__name__)
 
 
-def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs: int = 2000) -> dict:
+def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs: int = 2000,
+                        jobs: int | None = None) -> dict:
     """Measure what ALGORITHM.md section 6 promises of the fragments.
 
     Parameters
@@ -28,8 +29,10 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
     fragments : Fragments
         The fragments.
     max_pairs : int, optional (default 2000)
-        At most this many bounding-box-overlapping fragment pairs are
-        intersected for the overlap estimate (closest centroids first).
+        At most this many neighbouring fragment pairs are intersected for the
+        overlap estimate (closest centroids first).
+    jobs : int, optional (default :func:`fracture_cli.parallel.current_jobs`)
+        Processes for the pairwise booleans; the result does not depend on it.
 
     Returns
     -------
@@ -42,8 +45,16 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
         volume, input volume = ``fragments.input_volume``);
         ``max_outer_distance`` (largest distance from a vertex of a non-interior
         face to the input surface, in units of the bounding-box diagonal);
-        ``max_overlap`` (largest intersection volume of two fragments relative
+        ``max_overlap`` (largest intersection volume of two neighbouring
+        fragments, those sharing a fault (:func:`fragment_neighbours`), relative
         to the smaller one); ``min_fragment_volume`` relative to the input.
+
+    Notes
+    -----
+    Overlaps are measured between neighbours only: fragments that share no
+    fault are kept apart by the regions between them, so an overlap there
+    would also show as a volume error (the volumes sum to more than the
+    input's) or a fragment reaching outside the input (``max_outer_distance``).
     """
     interior = [i for i, m in enumerate(fragments.materials) if m.name == INTERIOR_MATERIAL_NAME]
     interior_id = interior[-1] if interior else -1
@@ -51,7 +62,6 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
     pinched = 0
     volume_list: list[float] = []
     outer_points = []
-    solids = []
     for frag in fragments.fragments:
         ok, pinch = _closed_by_position(frag.vertices, frag.faces)
         watertight &= ok
@@ -59,7 +69,6 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
         volume_list.append(trigeom.signed_volume(frag.vertices, frag.faces))
         outer = frag.faces[frag.material_ids != interior_id]
         outer_points.append(frag.vertices[np.unique(outer)])
-        solids.append(_solid(frag.vertices, frag.faces))
     volumes = np.array(volume_list)
     reference = fragments.input_volume
     points = np.concatenate(outer_points) if outer_points else np.zeros((0, 3))
@@ -69,7 +78,7 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
         "pinched_edges": int(pinched),
         "volume_error": float(abs(volumes.sum() - reference) / reference) if reference > 0 else float("nan"),
         "max_outer_distance": float(_max_distance_to_surface(points, surface.vertices, surface.faces)),
-        "max_overlap": float(_max_overlap(solids, volumes, max_pairs)),
+        "max_overlap": float(_max_overlap(fragments, volumes, max_pairs, jobs)),
         "min_fragment_volume": float(volumes.min() / reference) if len(volumes) and reference > 0 else 0.0,
     }
 
@@ -341,22 +350,47 @@ def _solid(V: np.ndarray, F: np.ndarray):
     return manifold3d.Manifold(mesh)
 
 
-def _max_overlap(solids: list, volumes: np.ndarray, max_pairs: int) -> float:
-    if len(solids) < 2:
+def fragment_neighbours(fragments: Fragments) -> np.ndarray:
+    """Pairs ``(i, j)``, ``i < j`` (e, 2) int64, of fragments that share a fault (the fragment graph).
+
+    Measured on the meshes: ``j`` owns the interior face nearest to some
+    interior face of ``i`` (or the other way round), as in :func:`fragment_faults`.
+    """
+    q = len(fragments.fragments)
+    fault = fragment_faults(fragments)[2]
+    labels = np.unique(fault[fault >= 0])
+    pairs = np.sort(np.column_stack([labels // max(q, 1), labels % max(q, 1)]), axis=1)
+    return np.unique(pairs, axis=0) if len(pairs) else np.zeros((0, 2), dtype=np.int64)
+
+
+def _max_overlap(fragments: Fragments, volumes: np.ndarray, max_pairs: int, jobs: int | None) -> float:
+    frags = fragments.fragments
+    if len(frags) < 2:
         return 0.0
-    boxes = np.array([s.bounding_box() for s in solids])  # (q, 6) min xyz, max xyz
-    lo, hi = boxes[:, :3], boxes[:, 3:]
-    touching = np.all((lo[:, None, :] <= hi[None, :, :]) & (lo[None, :, :] <= hi[:, None, :]), axis=2)
-    i, j = np.nonzero(np.triu(touching, 1))
+    lo = np.array([f.vertices.min(axis=0) for f in frags])
+    hi = np.array([f.vertices.max(axis=0) for f in frags])
+    pairs = fragment_neighbours(fragments)
+    i, j = pairs[:, 0], pairs[:, 1]
+    touching = np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)
+    i, j = i[touching], j[touching]
     centres = (lo + hi) / 2
     order = np.argsort(np.linalg.norm(centres[i] - centres[j], axis=1), kind="stable")[:max_pairs]
+    todo = list(zip(i[order].tolist(), j[order].tolist()))
+    # Each solid built once here (the workers inherit them), then one boolean per pair, independent: on worker
+    # processes, results in order (the same max either way).
+    used = set(i[order].tolist()) | set(j[order].tolist())
+    solids = {k: _solid(frags[k].vertices, frags[k].faces) for k in sorted(used)}
+    overlaps = parallel.ordered_map(_pair_overlap, todo, solids, jobs=jobs)
     worst = 0.0
-    for a, b in zip(i[order].tolist(), j[order].tolist()):
-        overlap = (solids[a] ^ solids[b]).volume()
+    for (a, b), overlap in zip(todo, overlaps):
         smaller = min(volumes[a], volumes[b])
         if smaller > 0:
             worst = max(worst, overlap / smaller)
     return worst
+
+
+def _pair_overlap(solids: dict, pair: tuple[int, int]) -> float:
+    return float((solids[pair[0]] ^ solids[pair[1]]).volume())
 
 
 def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> float:
@@ -381,9 +415,16 @@ def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -
     if len(far):
         from scipy.sparse import csr_matrix
 
+        # All (point, triangle) pairs at once: each far point against the triangles around its triangle's corners.
         incidence = csr_matrix((np.ones(F.size), (F.reshape(-1), np.repeat(np.arange(len(F)), 3))),
                                shape=(len(V), len(F)))
-        for i in far:
-            near = np.unique(incidence[F[tri[i]]].indices)
-            distance[i] = trigeom.point_triangle_distance(np.repeat(points[i][None], len(near), 0), V[F[near]]).min()
+        corners = F[tri[far]].reshape(-1)  # (3 * far,)
+        count = np.diff(incidence.indptr)[corners]
+        start = np.repeat(incidence.indptr[corners] - np.cumsum(count) + count, count)
+        near = incidence.indices[start + np.arange(int(count.sum()))]
+        point = np.repeat(np.repeat(far, 3), count)
+        pair_distance = trigeom.point_triangle_distance(points[point], V[F[near]])
+        best = np.full(len(points), np.inf)
+        np.minimum.at(best, point, pair_distance)
+        distance[far] = best[far]
     return float(distance.max())

@@ -19,15 +19,15 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from fracture_cli import progress
+from fracture_cli import parallel, progress
 from fracture_cli.errors import UsageError
-from fracture_cli.types import Cage, Fragments, Modes, Pieces, Regions, SurfaceMesh, TetMesh
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help` imports neither
+    import numpy as np
+
     from fracture_cli.cache import StageCache
     from fracture_cli.runtime.format import RuntimeData
+    from fracture_cli.types import Cage, Fragments, Modes, Pieces, Regions, SurfaceMesh, TetMesh
 
 log = logging.getLogger(__name__)
 
@@ -241,6 +241,9 @@ class Runner:
         Number of steps this run will take, for "[i/n]" (default: unknown).
     cache : StageCache, optional
         Where results of :attr:`Stage.cached` stages are stored and found.
+    jobs : int, optional
+        How many processes a stage may use for its independent work (``--jobs``; default: every core).
+        It never changes a result, so it is not part of the options the report and the cache keys record.
 
     Attributes
     ----------
@@ -250,10 +253,12 @@ class Runner:
         The options each stage ran with (the report's recipe parameters).
     """
 
-    def __init__(self, label: str, total: int | None = None, cache: StageCache | None = None):
+    def __init__(self, label: str, total: int | None = None, cache: StageCache | None = None,
+                 jobs: int | None = None):
         self.label = label
         self.total = total
         self.cache = cache
+        self.jobs = jobs
         self.seconds: dict[str, float] = {}
         self.options: dict[str, Any] = {}
         self._step = 0
@@ -267,7 +272,8 @@ class Runner:
             cache = self.cache if row.cached and key is not None else None
             result = cache.get(name, key, state) if cache and key else None
             if result is None:
-                result = row.run(state, options)
+                with parallel.using(self.jobs):
+                    result = row.run(state, options)
                 if cache and key:
                     cache.put(name, key, result)
         self.options[name] = options

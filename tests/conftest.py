@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 
 import pytest
@@ -24,3 +25,13 @@ def update_goldens(request) -> bool:
 @pytest.fixture(params=SAMPLE_FILES)
 def sample_asset(request) -> str:
     return os.path.join(SAMPLE_ASSETS, request.param)
+
+
+@pytest.fixture(autouse=True)
+def _restore_fracture_logger():
+    """CLI tests route the 'fracture_cli' logger to stderr and stop its propagation (configure_output); put
+    it back afterwards, so a later test in the same worker still sees its records through caplog."""
+    logger = logging.getLogger("fracture_cli")
+    saved = (list(logger.handlers), logger.level, logger.propagate)
+    yield
+    logger.handlers[:], logger.level, logger.propagate = saved[0], saved[1], saved[2]
