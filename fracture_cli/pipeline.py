@@ -27,6 +27,7 @@ from fracture_cli.types import Cage, Fragments, Modes, Pieces, Regions, SurfaceM
 
 if TYPE_CHECKING:
     from fracture_cli.cache import StageCache
+    from fracture_cli.meshfix.records import RepairRecord
     from fracture_cli.runtime.format import RuntimeData
 
 log = logging.getLogger(__name__)
@@ -43,6 +44,7 @@ class PipelineState:
     source_sha256: str | None = None
     loaded: SurfaceMesh | None = None  # as read, before repair
     surface: SurfaceMesh | None = None  # the solid every later stage uses
+    repairs: tuple[RepairRecord, ...] = ()  # what the repair stage did (report.json ``repairs``)
     cage: Cage | None = None
     tet_mesh: TetMesh | None = None
     eta: np.ndarray | None = None  # (f,) or (f, d) material weights of the interior faces
@@ -120,10 +122,11 @@ def _load(state: PipelineState, options: Any) -> PipelineState:
 
 
 def _repair(state: PipelineState, options: Any) -> PipelineState:
-    from fracture_cli.stages.repair import repair
+    from fracture_cli.stages.repair import repair_surface
 
     # Cage and fragments both use the repaired solid, so they agree on what is inside.
-    return dataclasses.replace(state, surface=repair(state.need("surface", "repair"), options))
+    result = repair_surface(state.need("surface", "repair"), options)
+    return dataclasses.replace(state, surface=result.surface, repairs=result.records)
 
 
 def _cage(state: PipelineState, options: Any) -> PipelineState:
@@ -165,12 +168,15 @@ def _smooth(state: PipelineState, options: Any) -> PipelineState:
 
 
 def _fragments(state: PipelineState, options: Any) -> PipelineState:
-    from fracture_cli.checks import fragment_fault_shape, fragment_invariants
+    from fracture_cli.checks import fragment_fault_shape, fragment_invariants, require_sound, written_fragments
     from fracture_cli.stages.fragments import fragments
 
     surface = state.need("surface", "fragments")
     frags = fragments(surface, state.need("regions", "fragments"), options)
-    checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags))
+    # Checked as they will be written (float32 about each pivot); a broken fragment stops the bake here.
+    frags, written = written_fragments(frags)
+    checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written))
+    require_sound(written, checks)
     checks["input_volume"] = float(frags.input_volume * surface.normalization.scale**3)
     # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
     shape = fragment_fault_shape(frags)
@@ -195,7 +201,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("load", "Read a mesh (OBJ, PLY, STL, OFF, GLB, glTF).", "fracture_cli.io.read:LoadOptions",
           _load, consumes=("source",), produces=("loaded", "surface", "source_sha256")),
     Stage("repair", "Make the surface a closed solid: weld, fix winding, close holes or thicken open sheets.",
-          "fracture_cli.stages.repair:RepairOptions", _repair, consumes=("surface",), produces=("surface",)),
+          "fracture_cli.stages.repair:RepairOptions", _repair, consumes=("surface",), produces=("surface", "repairs")),
     Stage("cage", "Build the nested cage: a coarse closed surface around the input.",
           "fracture_cli.stages.cage:CageOptions", _cage, consumes=("surface",), produces=("cage",), cached=True),
     Stage("tetra", "Tetrahedralize the cage (TetGen), keeping its surface.", "fracture_cli.stages.tetra:TetraOptions",
