@@ -156,7 +156,8 @@ def _modes(state: PipelineState, options: Any) -> PipelineState:
 def _pieces(state: PipelineState, options: Any) -> PipelineState:
     from fracture_cli.stages.pieces import pieces
 
-    result = pieces(state.need("tet_mesh", "pieces"), state.need("modes", "pieces"), options)
+    # Piece sizes are measured in asset volume: the repaired surface says what is material.
+    result = pieces(state.need("tet_mesh", "pieces"), state.need("modes", "pieces"), options, surface=state.surface)
     return dataclasses.replace(state, pieces=result)
 
 
@@ -212,7 +213,8 @@ STAGES: tuple[Stage, ...] = (
     Stage("modes", "Compute the fracture modes of the tet mesh.", "fracture_cli.stages.modes:ModesOptions", _modes,
           consumes=("tet_mesh",), uses=("eta",), produces=("modes",), cached=True, short={"num_modes": "-k"}),
     Stage("pieces", "Split the tet mesh into atomic pieces and build the piece graph.",
-          "fracture_cli.stages.pieces:PiecesOptions", _pieces, consumes=("tet_mesh", "modes"), produces=("pieces",)),
+          "fracture_cli.stages.pieces:PiecesOptions", _pieces, consumes=("tet_mesh", "modes"), uses=("surface",),
+          produces=("pieces",)),
     Stage("smooth", "Smooth the fault surfaces between pieces into closed piece regions.",
           "fracture_cli.stages.smooth:SmoothOptions", _smooth, consumes=("tet_mesh", "pieces"), uses=("surface",),
           produces=("regions",)),
