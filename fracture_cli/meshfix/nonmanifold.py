@@ -109,16 +109,38 @@ def _pair_fan(sides: np.ndarray, sign: np.ndarray) -> tuple[list[tuple[int, int]
     return pairs, walls
 
 
+def _pair_within_patches(sides: np.ndarray, sign: np.ndarray, patch: np.ndarray) -> list[tuple[int, int]] | None:
+    """Side pairs gluing each patch's own two faces at an edge, or None unless every patch has one of each sign.
+
+    Used where the wedges around an edge overlap (two closed bodies that
+    interpenetrate there, e.g. fragments of a baked GLB after rounding): each
+    body stays closed on its own and the union resolves the overlap.
+    """
+    pairs = []
+    for p in np.unique(patch).tolist():
+        mine = patch == p
+        if mine.sum() != 2 or sign[mine].sum() != 0:
+            return None
+        a, b = sides[mine]
+        pairs.append((int(a), int(b)))
+    return pairs
+
+
 def _glue(V: np.ndarray, F: np.ndarray, table: EdgeTable):
     """Glued side pairs (g, 2) of every edge, the wall faces found, and the unresolved many-face edges."""
     glued = [table.manifold_pairs()]
     order, start = table.sides_of_edges()
+    patch = face_bodies(table)
     walls: set[int] = set()
     unresolved = []
     for e in np.flatnonzero(table.count > 2).tolist():
         sides, sign = _edge_fan(V, F, table, order[start[e]:start[e + 1]])
         pairs, wall_sides = _pair_fan(sides, sign)
         if wall_sides:
+            own = _pair_within_patches(sides, sign, patch[table.face[sides]])
+            if own is not None:
+                glued.append(np.array(own, dtype=np.int64))
+                continue
             walls.update(int(table.face[s]) for s in wall_sides)
             unresolved.append(e)
         elif pairs:

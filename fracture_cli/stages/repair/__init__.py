@@ -238,11 +238,11 @@ def _weld_and_clean(surface: SurfaceMesh, records: list[RepairRecord]) -> tuple[
                                     "split normals)", count=num_welded))
     snapped = np.any(props[weld, POS] != props[:, POS], axis=1)
     props[:, POS] = props[weld, POS]  # vertices merged within manifold3d's tolerance get one position
-    weld, num_snapped = snap_between_bodies(props, F, weld, SNAP_TOLERANCE)
+    num_snapped = snap_between_bodies(props, F, weld, SNAP_TOLERANCE)
     if snapped.any() or num_snapped:
         count = int(snapped.sum()) + num_snapped
         records.append(RepairRecord("snapped_vertices", f"snapped {count} nearly coincident vertices together "
-                                    "(touching bodies, or open edges a rounding step apart)", count=count))
+                                    "(bodies touching, or open edges, a rounding step apart)", count=count))
     W = weld[F]
     degenerate = collapsed(W)
     if degenerate.any():

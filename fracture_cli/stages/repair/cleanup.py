@@ -12,15 +12,14 @@ from fracture_cli.stages._solids import POS
 _FLAT = 1e-9
 
 
-def snap_between_bodies(props: np.ndarray, faces: np.ndarray, weld: np.ndarray,
-                        tolerance: float) -> tuple[np.ndarray, int]:
-    """Weld vertices of different bodies that lie within ``tolerance`` of each other (in place for positions).
+def snap_between_bodies(props: np.ndarray, faces: np.ndarray, weld: np.ndarray, tolerance: float) -> int:
+    """Move vertices of different bodies that lie within ``tolerance`` of each other onto one position (in place).
 
     Parameters
     ----------
     props : (n, c) float64
         Split-vertex properties; columns :data:`POS` are moved (in place) onto
-        their group's representative.
+        the position of their group's lowest welded vertex.
     faces : (m, 3) int64
         Triangles over split vertices.
     weld : (n,) int64
@@ -30,40 +29,38 @@ def snap_between_bodies(props: np.ndarray, faces: np.ndarray, weld: np.ndarray,
 
     Returns
     -------
-    weld : (n,) int64
-        The new representatives (lowest id of each snapped group).
-    snapped : int
-        How many welded vertices were moved onto another body's vertex.
+    int
+        How many welded vertices moved.
 
     Notes
     -----
     A baked output GLB stores each fragment in float32 about its own pivot, so
     the faces two neighbours share are a few float32 steps apart when read
-    back. Only vertices of *different* bodies (faces connected through shared
-    vertices) are snapped, so small features within one body are never
-    collapsed; the bodies then share exactly coincident faces, which the
-    non-manifold split pairs and the union merges.
+    back, and their union would keep hairline gaps. Snapping makes those faces
+    coincide exactly; the bodies stay topologically separate (nothing is
+    welded across them), so each stays a closed solid and the union merges
+    them. Only vertices of *different* bodies (faces connected through shared
+    vertices) move, so small features within one body are never collapsed.
     """
     welded = weld[faces]
     reps = np.unique(welded)
     if len(reps) < 2 or tolerance <= 0:
-        return weld, 0
+        return 0
     local = np.searchsorted(reps, welded)
     body = components(len(reps), np.vstack([local[:, [0, 1]], local[:, [1, 2]]]))  # per welded vertex
     pairs = cKDTree(props[reps, POS]).query_pairs(tolerance, output_type="ndarray")
     pairs = pairs[body[pairs[:, 0]] != body[pairs[:, 1]]] if len(pairs) else pairs
     if not len(pairs):
-        return weld, 0
+        return 0
     group = components(len(reps), pairs)
     lowest = np.full(int(group.max()) + 1, len(reps), dtype=np.int64)
     np.minimum.at(lowest, group, np.arange(len(reps)))
     target = reps[lowest[group]]
-    moved = target != reps
-    new_rep = np.arange(len(weld))
-    new_rep[reps] = target
-    weld = new_rep[weld]
-    props[:, POS] = props[weld, POS]
-    return weld, int(moved.sum())
+    moved = np.any(props[target, POS] != props[reps, POS], axis=1)
+    position = np.arange(len(weld))
+    position[reps] = target
+    props[:, POS] = props[position[weld], POS]
+    return int(moved.sum())
 
 
 def is_flat(P: np.ndarray) -> bool:
