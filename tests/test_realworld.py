@@ -15,7 +15,6 @@ xfail must then be removed.
 from __future__ import annotations
 
 import fcntl
-import importlib
 import json
 import os
 import sys
@@ -29,21 +28,17 @@ from fracture_cli.cli import cli
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from invariants import check_glb, input_box, read_glb_fragments
 
+from conftest import SPLITS_BODIES
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 CORPUS = os.path.join(HERE, "data", "realworld")
 with open(os.path.join(CORPUS, "expected.toml"), "rb") as _fh:
     CASES = {c["file"]: c for c in tomllib.load(_fh)["case"]}
 SMALL = ("cage.target_faces=500", "modes.num_modes=4")
 
-# Fragments of several bodies (bodies touching along an edge or at a point, a region crossing a thin part twice)
-# are split into one fragment per body by the gameready work (fracture_cli/gameready/components.py). Where that
-# split is not in the tree, these files are expected to fail: a pinched fragment stops the bake (exit 1), a
-# fragment of separate bodies is reported `connected: false`.
-try:
-    importlib.import_module("fracture_cli.gameready.components")
-    SPLITS_BODIES = True
-except ImportError:
-    SPLITS_BODIES = False
+# Fragments of several bodies (bodies touching along an edge or at a point) are split into one fragment per body
+# where the tree has that split (conftest.SPLITS_BODIES); without it, these files are expected to fail: a pinched
+# fragment stops the bake (exit 1).
 NEEDS_BODY_SPLIT = {
     "gear_edge_contact.glb": "teeth touch the hub along an edge: the solid keeps the 4-face edge, and a fragment "
     "holding a tooth and the hub is two bodies sharing it (pinched), which only splitting the fragment into its "
