@@ -83,15 +83,14 @@ def written_summary(checks: list[MeshCheck]) -> dict:
     }
 
 
-def require_sound(checks: list[MeshCheck], report: dict) -> None:
-    """Raise unless every written fragment is watertight and the volumes add up; warn on multi-body fragments.
+def require_sound(checks: list[MeshCheck]) -> None:
+    """Raise unless every written fragment is watertight; warn about fragments of several bodies.
 
     Raises
     ------
     StageError
         Naming the first fragment that is not watertight (``fragment_NNN``, as
-        written) and what is wrong with it, or the volume error when it is
-        above :data:`VOLUME_TOLERANCE`. Nothing has been written yet, so
+        written) and what is wrong with it. Nothing has been written yet, so
         earlier outputs stay as they were.
     """
     from fracture_cli.io.write import fragment_name
@@ -103,14 +102,18 @@ def require_sound(checks: list[MeshCheck], report: dict) -> None:
         raise StageError(f"{fragment_name(i)} would be written as a broken mesh: {', '.join(checks[i].problems())}"
                          f"{more}; the input may have parts touching along an edge or too thin to cut; rerun with "
                          "-v for the repair log", stage="fragments")
-    error = report.get("volume_error", 0.0)
-    if not error <= VOLUME_TOLERANCE:
-        raise StageError(f"the fragments' volumes add up to the input's only within {error:.3g} (tolerance "
-                         f"{VOLUME_TOLERANCE:g}): some of the input is missing from the fragments", stage="fragments")
     multi = [i for i, c in enumerate(checks) if c.bodies > 1]
     if multi:
         log.warning("fragments: %d fragment(s) consist of several separate bodies (up to %d, e.g. %s)", len(multi),
                     max(checks[i].bodies for i in multi), fragment_name(multi[0]))
+
+
+def require_volume(report: dict) -> None:
+    """Raise when the fragments' volumes differ from the input's by more than :data:`VOLUME_TOLERANCE`."""
+    error = report.get("volume_error", 0.0)
+    if not error <= VOLUME_TOLERANCE:
+        raise StageError(f"the fragments' volumes add up to the input's only within {error:.3g} (tolerance "
+                         f"{VOLUME_TOLERANCE:g}): some of the input is missing from the fragments", stage="fragments")
 
 
 def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs: int = 2000,

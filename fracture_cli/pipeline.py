@@ -169,15 +169,22 @@ def _smooth(state: PipelineState, options: Any) -> PipelineState:
 
 
 def _fragments(state: PipelineState, options: Any) -> PipelineState:
-    from fracture_cli.checks import fragment_fault_shape, fragment_invariants, require_sound, written_fragments
+    from fracture_cli.checks import (
+        fragment_fault_shape,
+        fragment_invariants,
+        require_sound,
+        require_volume,
+        written_fragments,
+    )
     from fracture_cli.stages.fragments import fragments
 
     surface = state.need("surface", "fragments")
     frags = fragments(surface, state.need("regions", "fragments"), options)
     # Checked as they will be written (float32 about each pivot); a broken fragment stops the bake here.
     frags, written = written_fragments(frags)
+    require_sound(written)
     checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written))
-    require_sound(written, checks)
+    require_volume(checks)
     checks["input_volume"] = float(frags.input_volume * surface.normalization.scale**3)
     # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
     shape = fragment_fault_shape(frags)

@@ -248,3 +248,49 @@ def test_edges_shared_by_three_faces_are_refused():
     F = np.vstack([box.faces, [[a, b, len(box.vertices)]]])
     with pytest.raises(StageError, match="shared by more than two faces"):
         repair(surface(fin, F))
+
+
+def test_two_bodies_one_hollow():
+    """A hollow box (with a cavity) next to a second body: the union subtracts the cavity (once an internal error:
+    manifold3d's read-only buffers were passed back to it)."""
+    outer = trimesh.creation.box(extents=(2, 2, 2))
+    inner = trimesh.creation.box(extents=(1, 1, 1))
+    inner.invert()
+    other = trimesh.creation.box(extents=(1, 1, 1))
+    other.apply_translation((1.2, 0.0, 0.0))  # partly inside the hollow box's wall, not touching its cavity
+    parts = trimesh.util.concatenate([outer, inner, other])
+    s = surface(parts.vertices, parts.faces)
+    r = repair_surface(s)
+    assert trimesh.Trimesh(r.surface.vertices, r.surface.faces).volume == pytest.approx(
+        (8 - 1 + 0.7) / s.normalization.scale**3, rel=1e-9)
+    assert any(rec.what == "unioned_bodies" and rec.extra["cavities"] == 1 for rec in r.records)
+
+
+def test_bodies_a_rounding_step_apart_are_snapped_and_united():
+    """Two boxes sharing a face, one moved by 1e-9 of the diagonal (a baked GLB's fragments read back): snapped
+    and united into one closed body, no hairline gap."""
+    from fracture_cli.meshfix.weld_check import check_mesh
+
+    a = trimesh.creation.box(extents=(1, 1, 1))
+    b = trimesh.creation.box(extents=(1, 1, 1))
+    b.apply_translation((1.0 + 2e-9, 1e-9, 0.0))
+    both = trimesh.util.concatenate([a, b])
+    s = surface(both.vertices, both.faces)
+    r = repair_surface(s)
+    assert [rec for rec in r.records if rec.what == "snapped_vertices"][0].count == 4
+    check = check_mesh(r.surface.vertices, r.surface.faces)
+    assert check.closed and check.pinched_vertices == 0, check.problems()
+    assert check.volume == pytest.approx(2 / s.normalization.scale**3, rel=1e-6)
+
+
+def test_shell_stays_inside_the_input_box(vase):
+    r = repair(vase, RepairOptions(open_surface="shell"))
+    lo, hi = vase.vertices.min(axis=0), vase.vertices.max(axis=0)
+    assert np.all(r.vertices >= lo - 1e-6) and np.all(r.vertices <= hi + 1e-6)  # unit diagonal: 1e-6 of it
+
+
+def test_repairs_are_warned_with_the_override(vase, caplog):
+    with caplog.at_level(logging.WARNING, logger="fracture_cli.stages.repair"):
+        repair(vase, RepairOptions(open_surface="shell"))
+    warnings = [r.message for r in caplog.records if r.levelno == logging.WARNING]
+    assert any("thickened" in m and "--set repair.open_surface=fill" in m for m in warnings), warnings

@@ -43,9 +43,9 @@ def unique_faces(W: np.ndarray) -> UniqueFaces:
     repeats faces with either winding; a closed object listed twice has no
     such edge at all): one copy of each face is kept and winding propagation
     orients it. A patch whose rim edges each lead to exactly two faces is a
-    wall between two solids touching face to face: both copies stay, one per
-    solid (the non-manifold split separates the solids and the union joins
-    them, which also copes with walls that are not quite flat on both sides).
+    wall between two solids touching face to face (or overlapping there, when
+    both copies have one winding): both copies stay, one per solid (the
+    non-manifold split separates the solids and the union joins them).
     Otherwise (a free double-sided card), copies of opposite winding in equal
     numbers enclose nothing and all go; an unbalanced group keeps one copy of
     its majority winding.
@@ -65,8 +65,9 @@ def unique_faces(W: np.ndarray) -> UniqueFaces:
     parity = np.where(rotated[:, 1] < rotated[:, 2], 1, -1)
     net = np.bincount(group, weights=parity, minlength=len(uniq))
     surface_face, wall = _repeated_patches(uniq, counts > 1)
-    # A wall between two solids keeps both copies: each belongs to one solid, and the union joins them.
-    wall &= (counts == 2) & (net == 0)
+    # A wall between two solids keeps both copies: each belongs to one solid (touching, or overlapping where both
+    # have the same winding), and the union joins them.
+    wall &= counts == 2
     keep_group = surface_face | (net != 0)
     # One copy per kept group: the first face with the group's majority winding (any face for a surface face).
     wanted = np.where(net[group] == 0, True, np.sign(net[group]) == parity) | surface_face[group]

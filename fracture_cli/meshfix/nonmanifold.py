@@ -228,13 +228,14 @@ def _assemble(V: np.ndarray, F: np.ndarray, source_corner: np.ndarray, table: Ed
     records = []
     if split_edges:
         records.append(RepairRecord("split_nonmanifold_edges", f"split {split_edges} edges shared by more than two "
-                                    "faces by pairing the faces around them", count=split_edges))
+                                    "faces (bodies touching along an edge) into closed bodies", count=split_edges))
     if (copies > 1).any():
-        records.append(RepairRecord("split_nonmanifold_vertices", f"gave {int((copies > 1).sum())} vertices shared "
-                                    "by several fans of faces one copy per fan", count=int((copies > 1).sum())))
+        records.append(RepairRecord("split_nonmanifold_vertices", f"separated bodies touching at "
+                                    f"{int((copies > 1).sum())} vertices (one copy of each per body)",
+                                    count=int((copies > 1).sum())))
     if doubled:
         records.append(RepairRecord("doubled_wall_faces", f"doubled {doubled} faces of internal walls (material on "
-                                    "both sides), one copy per cell", count=doubled))
+                                    "both sides): one copy for each cell", count=doubled))
     for i in np.flatnonzero(~body_closed).tolist():
         where = tuple(float(x) for x in vertices_out[np.unique(faces_out[body == i])].mean(axis=0))
         records.append(RepairRecord("unclosed_body", f"body {i} ({int((body == i).sum())} faces) is not closed after "

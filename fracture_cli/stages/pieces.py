@@ -23,7 +23,7 @@ class PiecesOptions:
     """Options of :func:`pieces`."""
 
     min_fragment_fraction: float = option(
-        0.01,
+        0.0,
         "merge pieces holding less than this fraction of the asset's volume into their largest-interface "
         "neighbour, so fragments have a size relative to the asset, not to its tessellation (0 = only pieces "
         "holding none of the asset are merged)",
@@ -86,7 +86,8 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
         Fracture modes; ``modes.U`` is (k, t, d) and ``modes.cut`` is (k, f) bool
         over ``tet_mesh.interior_faces``.
     options : PiecesOptions, optional
-        ``min_fragment_fraction`` (default 0.01 of the asset's volume) and
+        ``min_fragment_fraction`` (default 0.0: only pieces holding none of the
+        asset merge; the recipes set it) and
         ``deviation_warning`` (default 1e-2).
     surface : SurfaceMesh, optional
         The repaired input the fragments will be cut from: piece sizes are

@@ -317,8 +317,9 @@ def _refuse_without_inside(split: NonManifoldSplit, normalization: Normalization
     where = ", ".join(f"({x:.4g}, {y:.4g}, {z:.4g})" for x, y, z in P[:3])
     raise StageError(
         f"{len(ends)} edges are shared by more than two faces that do not pair into closed bodies (fins or sheets "
-        f"hinged on a solid, at {where}), so the mesh has no inside there; remove those "
-        "faces or give them thickness in your modelling tool", stage=STAGE)
+        f"hinged on a solid, or identical faces of two overlapping parts; at {where}), so the mesh has no clear "
+        "inside there; remove those faces, give them thickness or separate the parts in your modelling tool",
+        stage=STAGE)
 
 
 def _close_open(mesh: SplitMesh, flat: bool, options: RepairOptions, materials: tuple[Material, ...],
