@@ -7,9 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from fracture_cli.errors import StageError
+from fracture_cli.meshfix.edges import components, renumber_by_first
 from fracture_cli.options import option
 from fracture_cli.types import Modes, Pieces, SurfaceMesh, TetMesh
 
@@ -120,7 +120,7 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
     U, cut = _checked_modes(tet_mesh, modes)
 
     glued = ~cut.any(axis=0)
-    tet_piece = _components(t, face_tets[glued])
+    tet_piece = components(t, face_tets[glued])
     volumes_t = np.abs(tet_mesh.tet_volumes)
     k = U.shape[0]
 
@@ -211,21 +211,6 @@ def _checked_modes(tet_mesh: TetMesh, modes: Modes) -> tuple[np.ndarray, np.ndar
     return U, cut
 
 
-def _components(t: int, pairs: np.ndarray) -> np.ndarray:
-    """Connected components (t,) of ``t`` nodes joined by ``pairs`` (e, 2), numbered by lowest member."""
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(t, t))
-    _, labels = connected_components(graph, directed=False)
-    return _renumber_by_first(labels)
-
-
-def _renumber_by_first(labels: np.ndarray) -> np.ndarray:
-    """Relabel so that labels appear in increasing order of their lowest index."""
-    _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
-    rank = np.empty(len(first), dtype=np.int64)
-    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
-    return rank[inverse.reshape(-1)].astype(np.int64)
-
-
 def _merge_small(tet_piece, face_tets, face_areas, volumes_t, fraction):
     """Merge pieces below ``fraction`` of the total of ``volumes_t`` (t,) into their largest-interface neighbour.
 
@@ -253,7 +238,7 @@ def _merge_small(tet_piece, face_tets, face_areas, volumes_t, fraction):
         Q = int(np.argmax(shared))  # argmax takes the lowest id on ties
         log.debug("%s: merging piece of volume %.3g into its neighbour (interface %.3g)", STAGE, vol[P], shared[Q])
         labels[labels == P] = Q
-        labels = _renumber_by_first(labels)
+        labels = renumber_by_first(labels)
         stuck = set()
     return labels
 
