@@ -151,6 +151,8 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
     ``recipe`` names the recipe; the parameters are those the stages ran with
     (``runner.options``), so a chain with changed flags reports what it did.
     """
+    from fracture_cli.stages.repair.report import records_for_report
+
     loaded, surface = state.need("loaded", "export"), state.need("surface", "export")
     frags, data = state.need("fragments", "export"), state.need("runtime", "export")
     used = dataclasses.replace(recipe, options={**recipe.options, **runner.options})
@@ -176,6 +178,7 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
             "contact_sites": int(data.num_sites),
         },
         "checks": dict(state.checks or {}),
+        "repairs": records_for_report(state.repairs, surface.normalization),
         "fragments": fragment_summary(frags),
         "outputs": [f"{stem}.glb", f"{stem}.fracture.json", f"{stem}.fracture.bin", f"{stem}.report.json"],
     }

@@ -6,6 +6,7 @@ pipeline's report and by the tests.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 import manifold3d
@@ -13,13 +14,110 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fracture_cli import parallel, trigeom
+from fracture_cli.errors import StageError
+from fracture_cli.meshfix.weld_check import MeshCheck, as_written, check_mesh, collapsed, weld_by_position
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, Regions, SurfaceMesh
 
 log = logging.getLogger(__name__)
 
+# A bake fails when the fragments' volumes differ from the input solid's by more than this fraction
+# (they are exact booleans of it: the error is rounding, ~1e-9, plus zero-volume slivers dropped).
+VOLUME_TOLERANCE = 1e-5
+
+
+def written_fragments(fragments: Fragments) -> tuple[Fragments, list[MeshCheck]]:
+    """Check every fragment on its positions exactly as the GLB stores them, dropping faces rounding collapses.
+
+    Parameters
+    ----------
+    fragments : Fragments
+
+    Returns
+    -------
+    fragments : Fragments
+        The same fragments, except that faces with two corners at one position
+        once written (float32, relative to the fragment's pivot, as
+        :func:`~fracture_cli.io.write.write_fragments_glb` does) are left out:
+        they have no area, and removing them collapses their short edge as the
+        writer's rounding already did.
+    checks : list of MeshCheck
+        One per fragment, welded by exact written position (see
+        :func:`~fracture_cli.meshfix.weld_check.check_mesh`).
+    """
+    from fracture_cli.io.write import node_origin
+
+    out, checks = [], []
+    for frag in fragments.fragments:
+        world = fragments.normalization.to_world(frag.vertices)
+        stored = as_written(world, node_origin(world))
+        _, index = weld_by_position(stored)
+        degenerate = collapsed(index[frag.faces])
+        if degenerate.any():
+            frag = dataclasses.replace(frag, faces=frag.faces[~degenerate], material_ids=frag.material_ids[~degenerate])
+        out.append(frag)
+        checks.append(check_mesh(stored, frag.faces))
+    return dataclasses.replace(fragments, fragments=tuple(out)), checks
+
+
+def written_summary(checks: list[MeshCheck]) -> dict:
+    """The report's verdict on the written fragments (:func:`written_fragments`).
+
+    Returns
+    -------
+    dict
+        ``watertight`` (every fragment: every edge in exactly two faces of
+        opposite orientation, no degenerate face, positive volume),
+        ``connected`` (every fragment one body: faces connected across
+        two-face edges), ``open_edges``, ``pinched_edges`` (more than two
+        faces), ``misoriented_edges`` and ``degenerate_faces`` summed over the
+        fragments, and ``fragment_bodies_max``.
+    """
+    return {
+        "watertight": bool(all(c.watertight for c in checks)),
+        "connected": bool(all(c.bodies == 1 for c in checks)),
+        "open_edges": int(sum(c.open_edges for c in checks)),
+        "pinched_edges": int(sum(c.pinched_edges for c in checks)),
+        "misoriented_edges": int(sum(c.misoriented_edges for c in checks)),
+        "degenerate_faces": int(sum(c.degenerate_faces for c in checks)),
+        "fragment_bodies_max": int(max((c.bodies for c in checks), default=0)),
+    }
+
+
+def require_sound(checks: list[MeshCheck]) -> None:
+    """Raise unless every written fragment is watertight; warn about fragments of several bodies.
+
+    Raises
+    ------
+    StageError
+        Naming the first fragment that is not watertight (``fragment_NNN``, as
+        written) and what is wrong with it. Nothing has been written yet, so
+        earlier outputs stay as they were.
+    """
+    from fracture_cli.io.write import fragment_name
+
+    bad = [i for i, c in enumerate(checks) if not c.watertight]
+    if bad:
+        i = bad[0]
+        more = f" (and {len(bad) - 1} more fragments)" if len(bad) > 1 else ""
+        raise StageError(f"{fragment_name(i)} would be written as a broken mesh: {', '.join(checks[i].problems())}"
+                         f"{more}; the input may have parts touching along an edge or too thin to cut; rerun with "
+                         "-v for the repair log", stage="fragments")
+    multi = [i for i, c in enumerate(checks) if c.bodies > 1]
+    if multi:
+        log.warning("fragments: %d fragment(s) consist of several separate bodies (up to %d, e.g. %s)", len(multi),
+                    max(checks[i].bodies for i in multi), fragment_name(multi[0]))
+
+
+def require_volume(report: dict) -> None:
+    """Raise when the fragments' volumes differ from the input's by more than :data:`VOLUME_TOLERANCE`."""
+    error = report.get("volume_error", 0.0)
+    if not error <= VOLUME_TOLERANCE:
+        raise StageError(f"the fragments' volumes add up to the input's only within {error:.3g} (tolerance "
+                         f"{VOLUME_TOLERANCE:g}): some of the input is missing from the fragments", stage="fragments")
+
 
 def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs: int = 2000,
-                        jobs: int | None = None) -> dict:
+                        written: list[MeshCheck] | None = None, jobs: int | None = None) -> dict:
     """Measure what ALGORITHM.md section 6 promises of the fragments.
 
     Parameters
@@ -33,21 +131,23 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
         overlap estimate (closest centroids first).
     jobs : int, optional (default :func:`fracture_cli.parallel.current_jobs`)
         Processes for the pairwise booleans; the result does not depend on it.
+    written : list of MeshCheck, optional
+        The checks of :func:`written_fragments` (computed when not given).
 
     Returns
     -------
     dict
-        ``fragments`` count; ``watertight`` (every fragment, welded by
-        position, has every edge in exactly two faces of opposite orientation,
-        or in an even number of faces with balanced orientation where a
-        fragment touches itself); ``pinched_edges`` (edges of the latter kind);
-        ``volume_error`` (|sum of fragment volumes - input volume| / input
-        volume, input volume = ``fragments.input_volume``);
+        ``fragments`` count; the keys of :func:`written_summary`
+        (``watertight``, ``connected``, edge counts: checked on the positions
+        as written); ``volume_error`` (|sum of fragment volumes - input volume|
+        / input volume, input volume = ``fragments.input_volume``);
         ``max_outer_distance`` (largest distance from a vertex of a non-interior
         face to the input surface, in units of the bounding-box diagonal);
         ``max_overlap`` (largest intersection volume of two neighbouring
         fragments, those sharing a fault (:func:`fragment_neighbours`), relative
-        to the smaller one); ``min_fragment_volume`` relative to the input.
+        to the smaller one); the fragment volumes relative to the input:
+        ``min_fragment_volume`` (= ``fragment_volume_min``),
+        ``fragment_volume_median``, ``fragment_volume_max``.
 
     Notes
     -----
@@ -56,30 +156,30 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
     would also show as a volume error (the volumes sum to more than the
     input's) or a fragment reaching outside the input (``max_outer_distance``).
     """
+    if written is None:
+        written = written_fragments(fragments)[1]
     interior = [i for i, m in enumerate(fragments.materials) if m.name == INTERIOR_MATERIAL_NAME]
     interior_id = interior[-1] if interior else -1
-    watertight = True
-    pinched = 0
     volume_list: list[float] = []
     outer_points = []
     for frag in fragments.fragments:
-        ok, pinch = _closed_by_position(frag.vertices, frag.faces)
-        watertight &= ok
-        pinched += pinch
         volume_list.append(trigeom.signed_volume(frag.vertices, frag.faces))
         outer = frag.faces[frag.material_ids != interior_id]
         outer_points.append(frag.vertices[np.unique(outer)])
     volumes = np.array(volume_list)
     reference = fragments.input_volume
     points = np.concatenate(outer_points) if outer_points else np.zeros((0, 3))
+    relative = np.sort(volumes) / reference if len(volumes) and reference > 0 else np.zeros(1)
     return {
         "fragments": len(fragments.fragments),
-        "watertight": bool(watertight),
-        "pinched_edges": int(pinched),
+        **written_summary(written),
         "volume_error": float(abs(volumes.sum() - reference) / reference) if reference > 0 else float("nan"),
         "max_outer_distance": float(_max_distance_to_surface(points, surface.vertices, surface.faces)),
         "max_overlap": float(_max_overlap(fragments, volumes, max_pairs, jobs)),
-        "min_fragment_volume": float(volumes.min() / reference) if len(volumes) and reference > 0 else 0.0,
+        "min_fragment_volume": float(relative[0]),
+        "fragment_volume_min": float(relative[0]),
+        "fragment_volume_median": float(np.median(relative)),
+        "fragment_volume_max": float(relative[-1]),
     }
 
 
@@ -321,19 +421,6 @@ def fragment_fault_roughness(fragments: Fragments) -> float:
 def fragment_fault_shape(fragments: Fragments) -> dict:
     """:func:`fault_shape` of the fragments' interior faces (what a player sees of the faults)."""
     return fault_shape(*fragment_faults(fragments))
-
-
-def _closed_by_position(vertices: np.ndarray, faces: np.ndarray):
-    _, pos = np.unique(vertices, axis=0, return_inverse=True)
-    F = pos.reshape(-1)[faces]
-    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    key = np.sort(directed, axis=1)
-    forward = (directed[:, 0] < directed[:, 1]).astype(np.int64)
-    uniq, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    n_forward = np.bincount(inverse.reshape(-1), weights=forward, minlength=len(uniq))
-    balanced = 2 * n_forward == counts
-    ok = bool(np.all(balanced & (counts >= 2)))
-    return ok, int(np.sum(counts > 2))
 
 
 def _solid(V: np.ndarray, F: np.ndarray):
