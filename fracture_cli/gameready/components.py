@@ -145,6 +145,50 @@ def interface_areas(meshes, candidates=None, tolerance: float | None = None):
     coarsely than the other (big faces whose centroids fall on a third mesh)
     cannot hide an interface.
     """
+    match = coincident_faces(meshes, candidates, tolerance)
+    n = len(meshes)
+    one_sided = np.zeros((n, n))
+    np.add.at(one_sided, (match.owner, match.other), match.area)
+    both = np.maximum(one_sided, one_sided.T)
+    i, j = np.nonzero(np.triu(both, 1))
+    return np.stack([i, j], axis=1).astype(np.int64), both[i, j]
+
+
+@dataclass(frozen=True)
+class FaceMatches:
+    """Faces lying on another mesh's surface (see :func:`coincident_faces`).
+
+    Attributes
+    ----------
+    owner, other : (q,) int64
+        Mesh of each matched face and the mesh it lies on.
+    area : (q,) float64
+    normal : (q, 3) float64
+        Unit outward normal (from ``owner`` into ``other``).
+    centroid : (q, 3) float64
+    """
+
+    owner: np.ndarray
+    other: np.ndarray
+    area: np.ndarray
+    normal: np.ndarray
+    centroid: np.ndarray
+
+
+def coincident_faces(meshes, candidates=None, tolerance: float | None = None) -> FaceMatches:
+    """Faces of each mesh that lie on the surface of another mesh, facing it.
+
+    Parameters
+    ----------
+    meshes, candidates, tolerance
+        As in :func:`interface_areas`.
+
+    Returns
+    -------
+    FaceMatches
+        One entry per matched face (each face matches at most one other mesh),
+        in the order of the meshes and their candidate faces.
+    """
     tris, owner = [], []
     for i, (V, F) in enumerate(meshes):
         F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
@@ -153,9 +197,10 @@ def interface_areas(meshes, candidates=None, tolerance: float | None = None):
         tris.append(np.asarray(V, dtype=np.float64)[F])
         owner.append(np.full(len(F), i, dtype=np.int64))
     T = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
-    owner = np.concatenate(owner) if owner else np.zeros(0, dtype=np.int64)
+    owner_all = np.concatenate(owner) if owner else np.zeros(0, dtype=np.int64)
     if len(T) == 0:
-        return np.zeros((0, 2), dtype=np.int64), np.zeros(0)
+        empty = np.zeros(0, dtype=np.int64)
+        return FaceMatches(empty, empty, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
     if tolerance is None:
         tolerance = INTERFACE_TOLERANCE * float(np.linalg.norm(np.ptp(T.reshape(-1, 3), axis=0)))
     normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
@@ -165,7 +210,7 @@ def interface_areas(meshes, candidates=None, tolerance: float | None = None):
     boxes = np.stack([T.min(axis=1), T.max(axis=1)], axis=1)
     grid = BoxGrid(boxes, default_cell(boxes))
     q, g = grid.query(np.stack([centroid, centroid], axis=1), pad=tolerance)
-    keep = (owner[q] != owner[g]) & (np.einsum("ij,ij->i", unit[q], unit[g]) < _OPPOSITE_COS)
+    keep = (owner_all[q] != owner_all[g]) & (np.einsum("ij,ij->i", unit[q], unit[g]) < _OPPOSITE_COS)
     q, g = q[keep], g[keep]
     keep = np.abs(np.einsum("ij,ij->i", unit[g], centroid[q] - T[g, 0])) <= tolerance
     q, g = q[keep], g[keep]
@@ -173,12 +218,7 @@ def interface_areas(meshes, candidates=None, tolerance: float | None = None):
     q, g = q[keep], g[keep]
     q, first = np.unique(q, return_index=True)  # one match per face: it lies on one other mesh
     g = g[first]
-    n = len(meshes)
-    one_sided = np.zeros((n, n))
-    np.add.at(one_sided, (owner[q], owner[g]), area[q])
-    both = np.maximum(one_sided, one_sided.T)
-    i, j = np.nonzero(np.triu(both, 1))
-    return np.stack([i, j], axis=1).astype(np.int64), both[i, j]
+    return FaceMatches(owner_all[q], owner_all[g], area[q], unit[q], centroid[q])
 
 
 def _inside(points: np.ndarray, triangles: np.ndarray, tolerance: float) -> np.ndarray:
