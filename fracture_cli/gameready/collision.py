@@ -521,7 +521,8 @@ def _best_plane(overlap: manifold3d.Manifold, material_a, material_b, mass_a, ma
     O, OF = _mesh(overlap)
     towards_b = mass_b.center - mass_a.center
     # Largest principal moment of inertia = smallest second moment: the overlap's thinnest direction.
-    candidates = [mass_properties(O, OF).principal()[1][:, 2], towards_b]
+    moments, axes = mass_properties(O, OF).principal()
+    candidates = [axes[:, int(np.argmax(moments))], towards_b]
     if interface_normal is not None:
         candidates.insert(0, interface_normal)
     volume_a, volume_b = max(mass_a.volume, 1e-300), max(mass_b.volume, 1e-300)

@@ -36,14 +36,26 @@ class MassProperties:
     center: np.ndarray
     inertia: np.ndarray
 
+    def to_world(self, normalization) -> "MassProperties":
+        """The same body in the input's units: volume * s^3, centre mapped, inertia * s^5 (``s`` the scale).
+
+        Parameters
+        ----------
+        normalization : Normalization
+            The bake's map from normalized coordinates (a similarity: no rotation).
+        """
+        s = float(normalization.scale)
+        return MassProperties(self.volume * s ** 3, normalization.to_world(self.center[None, :])[0],
+                              self.inertia * s ** 5)
+
     def inertia6(self) -> np.ndarray:
         """The tensor's six distinct entries (6,) ``[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`` (entries, sign included)."""
         return inertia6(self.inertia)
 
     def principal(self) -> tuple[np.ndarray, np.ndarray]:
-        """Principal moments (3,) ascending and the rotation (3, 3) whose columns are the principal axes.
+        """Principal moments (3,) and the rotation (3, 3) whose columns are the principal axes.
 
-        The rotation is proper (determinant +1), so ``inertia = R diag(moments) R^T``.
+        See :func:`principal_axes`: ``inertia = R diag(moments) R^T``, ``det R = +1``.
         """
         return principal_axes(self.inertia)
 
@@ -109,17 +121,29 @@ def inertia6(inertia: np.ndarray) -> np.ndarray:
 
 
 def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Principal moments (3,) ascending and a proper rotation (3, 3) whose columns are the axes.
+    """Principal moments (3,) and a proper rotation (3, 3) whose columns are the principal axes.
 
-    Each axis is signed so its largest component is positive (a deterministic
-    choice), then the last axis is flipped if needed to make ``det = +1``.
+    ``inertia = R diag(moments) R^T``. The axes are ordered and signed to
+    follow the coordinate axes as closely as possible (column ``c`` is the
+    principal axis nearest to axis ``c``, pointing its way), so a body aligned
+    with its model axes gets the identity; the last column is flipped if
+    needed for ``det R = +1``. Entries below 1e-12 of the tensor's largest are
+    rounding and are zeroed first, so equal moments (a cube) keep the
+    identity.
     """
-    moments, axes = np.linalg.eigh((np.asarray(inertia, dtype=np.float64) + np.asarray(inertia).T) / 2.0)
-    rows = np.argmax(np.abs(axes), axis=0)
-    axes = axes * np.sign(axes[rows, np.arange(3)])[None, :]
+    I = np.asarray(inertia, dtype=np.float64)
+    I = (I + I.T) / 2.0
+    I = np.where(np.abs(I) > 1e-12 * max(float(np.abs(I).max()), 1e-300), I, 0.0)
+    moments, axes = np.linalg.eigh(I)
+    best = max(_PERMUTATIONS, key=lambda perm: (float(np.abs(axes[np.arange(3), list(perm)]).sum()), perm))
+    axes, moments = axes[:, list(best)], moments[list(best)]
+    axes = axes * np.where(np.diag(axes) < 0, -1.0, 1.0)[None, :]
     if np.linalg.det(axes) < 0:
         axes[:, 2] = -axes[:, 2]
     return moments, axes
+
+
+_PERMUTATIONS = ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0))
 
 
 def quaternion_xyzw(rotation: np.ndarray) -> np.ndarray:
