@@ -46,7 +46,7 @@ log = logging.getLogger(__name__)
 
 # Vertices of different fragments closer than this (normalized units) are one point.
 WELD_TOLERANCE = 1e-6
-# Rounds of re-simplifying the patches of fragments that came out self-intersecting (tolerance / 4 each).
+# Rounds of re-simplifying the patches of fragments that came out invalid (tolerance / 4 each, then none).
 _RETRIES = 3
 # A collapse may not turn a triangle by more than this (cosine of the angle between old and new normal).
 _MIN_NORMAL_COS = 0.5
@@ -105,20 +105,48 @@ def simplify_faults(fragments: Fragments, tolerance: float = 1e-3, uv_scale: flo
     patches, unmatched = _match_patches(faults)
     locked = _locked_vertices(fragments, gid, offsets, interior, patches, faults, unmatched)
     tolerances = {key: tolerance for key in patches}
-    simplified = {key: _decimate(welded, patches[key], locked, tolerance) for key in sorted(patches)}
+    simplified = dict(patches)
+    taken = _LockedEdges(locked)
+    for k, frag in enumerate(fragments.fragments):
+        taken.add(gid[frag.faces[frag.material_ids != interior] + offsets[k]])
+        taken.add(faults[k][unmatched[k]])
+    for key in sorted(patches):
+        taken.add(patches[key])
+
+    def redo(key):
+        taken.remove(simplified[key])
+        simplified[key] = (_decimate(welded, patches[key], locked, tolerances[key], taken.count)
+                           if tolerances[key] > 0 else patches[key])
+        taken.add(simplified[key])
+
+    for key in sorted(patches):
+        redo(key)
+    def rebuild(k: int) -> Fragment:
+        return _rebuild(fragments.fragments[k], k, gid[offsets[k]:offsets[k + 1]], welded, faults[k], unmatched[k],
+                        simplified, interior, fragments, uv_scale)
+
+    # Fragments failing the check with every patch as it was (e.g. read back from float32, then welded) are
+    # not held against the simplification.
+    current = dict(simplified)
+    simplified.update(patches)
+    exempt = {k for k in range(len(fragments.fragments)) if not _valid(rebuild(k))}
+    simplified.update(current)
+    results = [rebuild(k) for k in range(len(fragments.fragments))]
     for attempt in range(_RETRIES + 1):
-        results = [_rebuild(frag, k, gid[offsets[k]:offsets[k + 1]], welded, faults[k], unmatched[k], simplified,
-                            interior, fragments, uv_scale) for k, frag in enumerate(fragments.fragments)]
-        broken = [k for k, frag in enumerate(results) if not _valid(frag)]
-        if not broken:
+        culprits = set()
+        for k, frag in enumerate(results):
+            bad = None if k in exempt else _bad_faces(frag)
+            if bad is not None:
+                culprits.update(_patches_of(k, bad, frag, interior, unmatched[k], simplified))
+        if not culprits:
             break
-        # Patches of a fragment that self-intersects or is not closed: simplify again, more gently (the last
-        # time not at all).
-        for key in sorted(patches):
-            if key[0] in broken or key[1] in broken:
-                tolerances[key] = tolerances[key] / 4.0 if attempt < _RETRIES - 1 else 0.0
-                simplified[key] = (_decimate(welded, patches[key], locked, tolerances[key]) if tolerances[key] > 0
-                                   else patches[key])
+        log.debug("faults: attempt %d, %d patch(es) make a fragment invalid", attempt, len(culprits))
+        # Simplify those patches again, more gently, the last time not at all (the original faces are valid).
+        for key in sorted(culprits):
+            tolerances[key] = tolerances[key] / 4.0 if attempt < _RETRIES else 0.0
+            redo(key)
+        for k in sorted({k for key in culprits for k in key}):
+            results[k] = rebuild(k)
     before = sum(len(f.faces) for f in fragments.fragments)
     after = sum(len(f.faces) for f in results)
     fault_before = sum(len(t) for t in faults)
@@ -133,9 +161,17 @@ def simplify_faults(fragments: Fragments, tolerance: float = 1e-3, uv_scale: flo
 
 def _valid(fragment: Fragment) -> bool:
     """Closed, manifold and free of self-intersections once vertices at one position are welded."""
+    return _bad_faces(fragment) is None
+
+
+def _bad_faces(fragment: Fragment):
+    """None if the fragment is valid (see :func:`_valid`); else the faces (k,) at fault, all if it is not closed."""
     V, weld = np.unique(fragment.vertices, axis=0, return_inverse=True)
     W = weld.reshape(-1)[fragment.faces]
-    return edge_manifold_closed(W) and vertex_manifold(W) and len(self_intersections(V, W)) == 0
+    if not (edge_manifold_closed(W) and vertex_manifold(W)):
+        return np.arange(len(W))
+    pairs = self_intersections(V, W)
+    return np.unique(pairs) if len(pairs) else None
 
 
 def _interior_slot(fragments: Fragments) -> int:
@@ -226,9 +262,35 @@ def _locked_vertices(fragments, gid, offsets, interior, patches, faults, unmatch
     return locked
 
 
-def _decimate(V: np.ndarray, faces: np.ndarray, locked: set, tolerance: float) -> np.ndarray:
-    """Half-edge-collapse decimation of one patch with its boundary locked; returns the new faces (m', 3)."""
-    mesh = _PatchMesh(V, faces, locked)
+class _LockedEdges:
+    """How many faces use each edge between two locked vertices (a multiset, updated as patches change)."""
+
+    def __init__(self, locked: set):
+        self.locked = locked
+        self.count: dict[tuple[int, int], int] = {}
+
+    def _edges(self, faces: np.ndarray):
+        for f in np.asarray(faces, dtype=np.int64).reshape(-1, 3).tolist():
+            for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])):
+                if a in self.locked and b in self.locked:
+                    yield (min(a, b), max(a, b))
+
+    def add(self, faces: np.ndarray) -> None:
+        for edge in self._edges(faces):
+            self.count[edge] = self.count.get(edge, 0) + 1
+
+    def remove(self, faces: np.ndarray) -> None:
+        for edge in self._edges(faces):
+            self.count[edge] -= 1
+
+
+def _decimate(V: np.ndarray, faces: np.ndarray, locked: set, tolerance: float, taken: dict) -> np.ndarray:
+    """Half-edge-collapse decimation of one patch with its boundary locked; returns the new faces (m', 3).
+
+    ``taken`` counts the edges between two locked vertices used by faces elsewhere (outer faces, other
+    patches): a collapse may not create one of them again, or the fragment would get an edge of four faces.
+    """
+    mesh = _PatchMesh(V, faces, locked, taken)
     heap: list = []
     for u in sorted(mesh.vertex_faces):
         mesh.push(heap, u)
@@ -239,16 +301,15 @@ def _decimate(V: np.ndarray, faces: np.ndarray, locked: set, tolerance: float) -
         if mesh.collapse(u, v, tolerance):
             for w in sorted(mesh.neighbours(v) | {v}):
                 mesh.push(heap, w)
-        else:
-            mesh.stamp[u] = mesh.stamp.get(u, 0) + 1  # this vertex's best collapse failed: try it again later
     return mesh.faces_array()
 
 
 class _PatchMesh:
     """A mutable triangle patch for half-edge collapses (vertex ids are global; positions never change)."""
 
-    def __init__(self, V: np.ndarray, faces: np.ndarray, locked: set):
+    def __init__(self, V: np.ndarray, faces: np.ndarray, locked: set, taken: dict):
         self.V = V
+        self.taken = taken
         self.faces = {t: tuple(int(x) for x in f) for t, f in enumerate(faces)}
         self.vertex_faces: dict[int, set] = {}
         for t, f in self.faces.items():
@@ -275,18 +336,17 @@ class _PatchMesh:
         return {x for t in self.vertex_faces.get(u, ()) for x in self.faces[t]} - {u}
 
     def push(self, heap: list, u: int) -> None:
-        """Queue the cheapest collapse of ``u`` into a neighbour (quadric error), if ``u`` may move."""
+        """Queue every collapse of ``u`` into a neighbour, by quadric error, if ``u`` may move.
+
+        A new stamp makes the entries queued for ``u`` before obsolete; when the cheapest collapse is
+        refused, the next one of the same stamp is tried.
+        """
         if u in self.locked or u not in self.vertex_faces:
             return
         stamp = self.stamp[u] = self.stamp.get(u, 0) + 1
-        best = None
         for v in sorted(self.neighbours(u)):
             p = np.append(self.V[v], 1.0)
-            cost = float(p @ self.quadric[u] @ p)
-            if best is None or cost < best[0]:
-                best = (cost, v)
-        if best is not None:
-            heapq.heappush(heap, (best[0], u, u, best[1], stamp))
+            heapq.heappush(heap, (float(p @ self.quadric[u] @ p), u, u, v, stamp))
 
     def collapse(self, u: int, v: int, tolerance: float) -> bool:
         """Merge ``u`` into ``v`` if topology, orientation and the error bound allow; True if done."""
@@ -297,8 +357,9 @@ class _PatchMesh:
         opposite = {x for t in removed for x in self.faces[t]} - {u, v}
         if self.neighbours(u) & self.neighbours(v) != opposite:
             return False  # link condition: the collapse would pinch the surface
-        if v in self.locked and any(x in self.locked for x in self.neighbours(u) - self.neighbours(v) - {v}):
-            return False  # a new edge between two locked vertices may already be an edge of another patch
+        if v in self.locked and any(self.taken.get((min(v, x), max(v, x)), 0) > 0
+                                    for x in self.neighbours(u) - self.neighbours(v) - {v} if x in self.locked):
+            return False  # the new edge between two locked vertices is already an edge of another surface
         kept = sorted(t for t in fan if t not in removed)
         new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
         for t, f in new_faces.items():
@@ -334,6 +395,21 @@ class _PatchMesh:
 
     def faces_array(self) -> np.ndarray:
         return np.array([self.faces[t] for t in sorted(self.faces)], dtype=np.int64).reshape(-1, 3)
+
+
+def _patches_of(k: int, faces: np.ndarray, frag: Fragment, interior: int, unmatched: np.ndarray,
+                simplified: dict) -> set:
+    """The patches (keys) that faces of fragment ``k`` as built by :func:`_rebuild` belong to.
+
+    Faces of no patch (outer, unmatched) do not name one; if only such faces are listed, every patch of the
+    fragment is named (the fault of a topology failure is not local).
+    """
+    keys = [key for key in sorted(simplified) if k in key]
+    start = int(np.sum(frag.material_ids != interior)) + int(unmatched.sum())
+    bounds = start + np.cumsum([0] + [len(simplified[key]) for key in keys])
+    index = np.searchsorted(bounds, faces, side="right") - 1
+    named = {keys[i] for i in index[(index >= 0) & (index < len(keys))].tolist()}
+    return named if named else set(keys)
 
 
 def _rebuild(frag: Fragment, k: int, frag_gid: np.ndarray, welded: np.ndarray, fault: np.ndarray,
