@@ -7,8 +7,15 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli.gameready.collision import (CollisionOptions, collision_shapes, hull_mesh, max_overlap_fraction,
-                                              separate_parts, simplify_hull, volume_beyond)
+from fracture_cli.gameready.collision import (
+    CollisionOptions,
+    collision_shapes,
+    hull_mesh,
+    max_overlap_fraction,
+    separate_parts,
+    simplify_hull,
+    volume_beyond,
+)
 from fracture_cli.gameready.mass import mass_properties
 
 

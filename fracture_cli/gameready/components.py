@@ -292,7 +292,7 @@ def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> 
     piece graph.
     """
     interior = _interior_slot(fragments)
-    bodies = []  # (fragment index, face indices)
+    bodies: list[tuple[int, np.ndarray]] = []  # (fragment index, face indices)
     counts = []
     for i, frag in enumerate(fragments.fragments):
         found = body_faces(frag.vertices, frag.faces)
@@ -336,7 +336,7 @@ def _merge_tiny(volumes: np.ndarray, pairs: np.ndarray, areas: np.ndarray, min_v
     n = len(volumes)
     root = list(range(n))
     volume = [float(v) for v in volumes]
-    adjacency: list[dict[int, float]] = [dict() for _ in range(n)]
+    adjacency: list[dict[int, float]] = [{} for _ in range(n)]
     for (i, j), area in zip(pairs.tolist(), areas.tolist()):
         adjacency[i][j] = adjacency[i].get(j, 0.0) + area
         adjacency[j][i] = adjacency[j].get(i, 0.0) + area

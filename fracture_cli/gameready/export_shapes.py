@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -134,7 +135,7 @@ def physics_extender(physics: Sequence[FragmentPhysics], collision: str = "omi",
             for k, corners in enumerate(body.parts):
                 name = _part_name(node["name"], k, collision)
                 meshes.append({"name": name, "primitives": [_hull_primitive(corners, body.origin, buffer)]})
-                child = {"name": name}
+                child: dict[str, Any] = {"name": name}
                 if collision == "omi":
                     shapes.append({"type": "convex", "convex": {"mesh": len(meshes) - 1}})
                     child["extensions"] = {OMI_BODY: {"collider": {"shape": len(shapes) - 1}}}

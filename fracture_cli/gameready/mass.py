@@ -36,7 +36,7 @@ class MassProperties:
     center: np.ndarray
     inertia: np.ndarray
 
-    def to_world(self, normalization) -> "MassProperties":
+    def to_world(self, normalization) -> MassProperties:
         """The same body in the input's units: volume * s^3, centre mapped, inertia * s^5 (``s`` the scale).
 
         Parameters
