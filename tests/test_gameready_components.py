@@ -23,12 +23,9 @@ def _box(lo, hi, subdivisions=0):
 
 
 def _concat(*meshes):
-    V, F, n = [], [], 0
-    for v, f in meshes:
-        V.append(v)
-        F.append(f + n)
-        n += len(v)
-    return np.vstack(V), np.vstack(F)
+    """One mesh (V, F) of several, faces renumbered."""
+    starts = np.cumsum([0] + [len(v) for v, _ in meshes])
+    return np.vstack([v for v, _ in meshes]), np.vstack([f + s for (_, f), s in zip(meshes, starts)])
 
 
 def _fragment(mesh, piece, interior_planes=()):

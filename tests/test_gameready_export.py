@@ -123,3 +123,31 @@ def test_runtime_arrays_are_offsets_into_flat_arrays():
 def test_unknown_format_is_refused():
     with pytest.raises(ValueError, match="not one of"):
         physics_extender([], "bullet")
+
+
+def test_fragments_glb_has_centre_of_mass_pivots_and_mass_extras(tmp_path):
+    """The bake's GLB writer: node origins at the centre of mass (or the box centre on request), mass in extras."""
+    from fracture_cli.io.gltf import read_glb
+    from fracture_cli.io.write import write_fragments_glb
+    from fracture_cli.types import Fragment, Fragments, Normalization
+
+    wedge = trimesh.creation.cone(radius=1.0, height=2.0, sections=16)  # centre of mass off the box centre
+    V, F = np.asarray(wedge.vertices), np.asarray(wedge.faces)
+    frag = Fragment(vertices=V, faces=F, uvs=None, normals=np.asarray(wedge.vertex_normals),
+                    material_ids=np.zeros(len(F), dtype=np.int32), piece=0)
+    norm = Normalization(center=np.array([10.0, 0.0, 0.0]), scale=2.0)
+    fragments = Fragments((frag,), (Material("outer"),), norm, 1.0)
+    world = mass_properties(norm.to_world(V), F)
+    for pivot, expected in (("center_of_mass", world.center),
+                            ("bbox", (norm.to_world(V).min(axis=0) + norm.to_world(V).max(axis=0)) / 2)):
+        path = tmp_path / f"{pivot}.glb"
+        write_fragments_glb(path, fragments, pivot=pivot)
+        doc, _ = read_glb_chunks(str(path))
+        node = doc["nodes"][0]
+        assert np.allclose(node["translation"], expected)
+        extras = node["extras"]["fracture"]
+        assert extras["volume"] == pytest.approx(world.volume, rel=1e-8)
+        assert extras["center_of_mass"] == pytest.approx(world.center.tolist(), rel=1e-8)
+        assert extras["inertia"] == pytest.approx(world.inertia6().tolist(), rel=1e-7, abs=1e-12)
+        (mesh,), _ = read_glb(str(path))
+        assert np.allclose(mesh.primitives[0].positions, norm.to_world(V), atol=1e-5)
