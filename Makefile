@@ -10,22 +10,44 @@ STAMP      := $(VENV)/.installed
 PYTEST_ARGS ?=
 
 .SECONDEXPANSION:
-.PHONY: install test demo bench goldens assets asset-reports gltf-validator check clean
+.PHONY: install web test lint demo bench goldens assets asset-reports gltf-validator check clean
 
 PACKAGE_SOURCES := $(shell find fracture_cli -name '*.py' -not -path '*/__pycache__/*' | sort)
 
 install: $(STAMP)
+	@$(MAKE) --no-print-directory web || echo "note: 'fracture view' needs its web files: run 'make web' (needs npm)"
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON_SYS) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test,batch]'
 	@touch $(STAMP)
+
+# `fracture view`'s browser files: three.js (npm, pinned by web/package-lock.json) and the
+# runtime reader, copied into the package's gitignored static/vendor/; playwright-core (for
+# the browser test) stays in build/web/. Nothing from npm is committed.
+WEB_VENDOR  := fracture_cli/view/static/vendor
+WEB_MODULES := build/web/node_modules/.package-lock.json
+
+web: $(WEB_VENDOR)/BUILD.json
+
+$(WEB_MODULES): web/package.json web/package-lock.json
+	@command -v npm >/dev/null 2>&1 || { echo "npm not found: 'make web' needs Node.js and npm (apt-get install npm)"; exit 1; }
+	@mkdir -p build/web && cp web/package.json web/package-lock.json build/web/
+	npm ci --silent --no-audit --no-fund --prefix build/web
+
+$(WEB_VENDOR)/BUILD.json: $(WEB_MODULES) web/build.mjs engines/web/fracture_runtime.js
+	node web/build.mjs build/web/node_modules $(WEB_VENDOR)
 
 GLTF_VALIDATOR := build/node/node_modules/gltf-validator/package.json
 
-test: install gltf-validator
+test: install gltf-validator lint
 	$(PY) -m pytest -n 2 -q $(PYTEST_ARGS)
+
+# The lint and type gate (configured in pyproject.toml), run by `make test` before the tests.
+lint: install
+	$(VENV)/bin/ruff check fracture_cli tests
+	$(VENV)/bin/mypy
 
 # The Khronos glTF validator (npm) checks every GLB the tests bake. Optional:
 # without npm the tests validate the GLB structure themselves and skip this.
@@ -64,5 +86,5 @@ build/assets.mk: sample_assets/manifest.toml scripts/assets_mk.py $(wildcard rec
 	$(PYTHON_SYS) scripts/assets_mk.py > $@
 
 clean:
-	rm -rf build bench/out .pytest_cache
+	rm -rf build bench/out .pytest_cache .mypy_cache .ruff_cache
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -1,8 +1,14 @@
-"""Benchmark of the fracture-modes stage: seconds per mode against the paper's table.
+"""Benchmark of the fracture-modes stage: seconds per mode against the paper's table, and the mode-count sweep.
 
 Tet meshes of about 3k, 6k and 12k tets are made with TetGen (switches
 ``pq1.5a<vol>Y``) from a fixed non-convex solid (two spheres, a rod and a bar,
 unioned with manifold3d), so the numbers are reproducible without assets.
+
+The sweep (k = 8 ... 32) reports CPU time (``time.process_time``: the machine is
+shared, wall time is noisy) per mode index, so a cost that grows with the mode
+index (the "cliff" of issue #16) shows up; plus the ``glass`` recipe (k = 24) on
+the sample vase. Targets: k = 24 at 6k tets under 10 s of modes with no mode
+over 3x the median mode; ``glass`` on the vase well under 20 s.
 """
 
 from __future__ import annotations
@@ -52,17 +58,90 @@ def bench_tetmesh(target_tets: int) -> TetMesh:
 
 
 def _time_modes(mesh: TetMesh, solver: str, num_modes: int, max_flow: str = "auto"):
-    from fracture_cli import discontinuity
+    from fracture_cli.discontinuity import mincut as discontinuity
 
     saved = discontinuity.MAX_FLOW_BACKEND
     discontinuity.MAX_FLOW_BACKEND = max_flow
     try:
         start = time.perf_counter()
-        result = modes(mesh, ModesOptions(num_modes=num_modes, solver=solver))
+        result = modes(mesh, ModesOptions(num_modes=num_modes, solver=solver, jobs=1))
         seconds = time.perf_counter() - start
     finally:
         discontinuity.MAX_FLOW_BACKEND = saved
     return seconds, result
+
+
+def _cpu_modes(mesh: TetMesh, num_modes: int, options: ModesOptions | None = None):
+    """Modes with CPU-time figures: (total CPU s, eigensolver wall s, per-mode CPU s (k,), result)."""
+    options = options or ModesOptions(num_modes=num_modes, jobs=1)
+    start = time.process_time()
+    result = modes(mesh, options)
+    total = time.process_time() - start
+    per_mode = np.array([m["cpu_seconds"] for m in result.stats["per_mode"]])
+    return total, result.stats["eigensolver_seconds"], per_mode, result
+
+
+def _vase_glass():
+    """The tet mesh and modes options of the ``glass`` recipe on sample_assets/vase.obj."""
+    import os
+
+    from fracture_cli.io.read import load_surface
+    from fracture_cli.recipe import load_recipe
+    from fracture_cli.stages.cage import cage
+    from fracture_cli.stages.repair import repair
+    from fracture_cli.stages.tetra import tetra
+
+    recipe = load_recipe("glass")
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "sample_assets", "vase.obj")
+    surface = repair(load_surface(path, recipe["load"]), recipe["repair"])
+    return tetra(cage(surface, recipe["cage"]), recipe["tetra"]), recipe["modes"]
+
+
+SWEEP_K = (8, 12, 16, 24, 32)
+
+
+def sweep(quick: bool = False) -> str:
+    """Markdown: CPU seconds of the modes stage for k = 8 ... 32 and per mode index; glass on the vase."""
+    targets = [3000] if quick else [3000, 6000, 12000]
+    k_max = 12 if quick else max(SWEEP_K)
+    ks = [k for k in SWEEP_K if k <= k_max]
+    runs = []
+    for target in targets:
+        mesh = bench_tetmesh(target)
+        total, eig, per_mode, result = _cpu_modes(mesh, k_max)
+        runs.append((f"{mesh.num_tets:,} tets", total, eig, per_mode, result))
+    if not quick:
+        mesh, options = _vase_glass()
+        import dataclasses
+
+        total, eig, per_mode, result = _cpu_modes(mesh, options.num_modes, dataclasses.replace(options, jobs=1))
+        runs.append((f"vase, glass ({mesh.num_tets:,} tets)", total, eig, per_mode, result))
+    lines = [
+        "### Mode-count sweep (CPU seconds, `time.process_time`)",
+        "",
+        (f"One run with k = {k_max} per mesh; the figure for a smaller k is the CPU time of that run's first k "
+         "modes (a k-mode run solves the same first k subproblem sequences, from start vectors equal up to the "
+         "eigensolver's round-off). 'median' / 'max' are over the first k modes; the eigensolver is not included."),
+        "",
+        "| mesh | k | modes CPU s | s/mode | median mode s | max mode s | max/median | max-flows |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for name, _, _, per_mode, result in runs:
+        flows = np.cumsum(result.stats["inner_iterations"])
+        for k in ([len(per_mode)] if name.startswith("vase") else ks):
+            head = per_mode[:k]
+            median = float(np.median(head))
+            lines.append(f"| {name} | {k} | {head.sum():.2f} | {head.mean():.3f} | {median:.3f} | {head.max():.3f} "
+                         f"| {head.max() / max(median, 1e-9):.1f} | {int(flows[k - 1])} |")
+    lines += ["", "Per-mode CPU seconds by mode index (ICCM rounds in brackets):", "",
+              "| mode | " + " | ".join(name for name, *_ in runs) + " |",
+              "|---:|" + "---:|" * len(runs)]
+    for i in range(max(len(r[3]) for r in runs)):
+        cells = [f"{r[3][i]:.3f} ({r[4].iterations[i]})" if i < len(r[3]) else "" for r in runs]
+        lines.append(f"| {i} | " + " | ".join(cells) + " |")
+    lines += ["", "Whole stage (CPU s, eigensolver included): " + ", ".join(f"{name} {total:.1f}"
+                                                                         for name, total, *_ in runs) + "."]
+    return "\n".join(lines) + "\n"
 
 
 def _have_ortools() -> bool:
@@ -118,7 +197,7 @@ def run(quick: bool = False) -> str:
         (t0, s0), (t1, s1) = measured[0], measured[-1]
         exponent = np.log(s1 / s0) / np.log(t1 / t0)
         lines += ["", f"Cost growth (fast): s/mode ~ t^{exponent:.2f} between {t0:,} and {t1:,} tets."]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n\n" + sweep(quick)
 
 
 if __name__ == "__main__":

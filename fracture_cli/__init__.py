@@ -2,8 +2,9 @@
 
 Implements "Breaking Good: Fracture Modes for Realtime Destruction" (Sellan et al.,
 ACM TOG 2023). Each stage is a plain function ``stage(data, options) -> data``
-living in :mod:`fracture_cli.stages`; the CLI in :mod:`fracture_cli.cli` only
-parses options and calls them.
+living in :mod:`fracture_cli.stages`; :mod:`fracture_cli.pipeline` lists them in
+one table that ``bake``, the recipes and the CLI (:mod:`fracture_cli.cli`, which
+only parses options) are generated from.
 """
 
 __version__ = "0.1.0"

@@ -6,61 +6,62 @@ For input ``<stem>`` a bake writes, into the output folder:
 * ``<stem>.fracture.json``  + ``<stem>.fracture.bin``: the runtime file (docs/FORMAT.md);
 * ``<stem>.report.json``    what was done: versions, recipe, counts, checks, seconds.
 
-Everything is first written into a temporary folder beside the outputs and then
-renamed into place, so a failed or interrupted bake leaves the previous outputs
-untouched and no partial files. The meshes and the runtime file are
-byte-identical for the same input, recipe and tool version; the report is too,
-except for its ``seconds`` block.
+The stages come from :data:`fracture_cli.pipeline.STAGES`. The four files are
+replaced as one set (:mod:`fracture_cli.io.outputs`, docs/OUTPUTS.md): the
+output folder is checked before any work, the files are written into a staging
+folder and published under a per-stem lock, the report last with the other
+files' hashes; a failed or interrupted bake leaves the previous set. Meshes and runtime file are
+byte-identical for the same input, recipe and tool version; so is the report,
+except for its ``seconds`` block. :func:`bake_many` bakes a batch.
 """
 
 from __future__ import annotations
 
-import contextlib
-import hashlib
-import json
+import dataclasses
 import logging
 import os
-import shutil
-import tempfile
-import time
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any
 
-import numpy as np
-
-from fracture_cli import __version__
-from fracture_cli.errors import FractureError, StageError
+from fracture_cli import __version__, trigeom
+from fracture_cli.cache import file_sha256
+from fracture_cli.errors import FractureError, UsageError
+from fracture_cli.io.inputs import estimate_output_bytes, input_files
+from fracture_cli.io.outputs import output_names, output_set
+from fracture_cli.io.preflight import check_inputs_untouched, preflight, refuse_inputs_as_outputs
+from fracture_cli.pipeline import STAGE_NAMES, STEPS, PipelineState, Runner
 from fracture_cli.recipe import Recipe
 from fracture_cli.types import Fragments
 
+__all__ = ["STAGES", "BakeResult", "BatchItem", "bake", "bake_many", "describe_error", "file_sha256",
+           "fragment_summary", "run_pipeline", "write_outputs"]
+
 log = logging.getLogger(__name__)
 
-STAGES = ("load", "repair", "cage", "tetra", "material", "modes", "pieces", "smooth", "fragments", "runtime",
-          "export")
+# The steps of a bake, in order (the report's ``seconds`` keys).
+STAGES = STEPS
 
 
 @dataclass(frozen=True)
 class BakeResult:
     """What a bake produced: the report and the paths of the files written."""
 
-    report: dict
+    report: dict[str, Any]
     outputs: tuple[str, ...]
 
 
-def file_sha256(path: str) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+@dataclass(frozen=True)
+class BatchItem:
+    """The outcome of one input of :func:`bake_many`: a result, or an error line naming the input."""
+
+    input_path: str
+    result: BakeResult | None = None
+    error: str | None = None
+    exception: BaseException | None = None
 
 
-def _signed_volume(V: np.ndarray, F: np.ndarray) -> float:
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
-
-
-def fragment_summary(fragments: Fragments) -> list[dict]:
+def fragment_summary(fragments: Fragments) -> list[dict[str, Any]]:
     """Per-fragment summary for reports and golden files (input units, rounded)."""
     out = []
     scale = fragments.normalization.scale
@@ -70,21 +71,16 @@ def fragment_summary(fragments: Fragments) -> list[dict]:
             "name": f"fragment_{i:03d}",
             "piece": int(frag.piece),
             "triangles": int(len(frag.faces)),
-            "volume": float(_signed_volume(frag.vertices, frag.faces) * scale**3),
+            "volume": float(trigeom.signed_volume(frag.vertices, frag.faces) * scale**3),
             "bbox_min": [float(x) for x in world.min(axis=0)],
             "bbox_max": [float(x) for x in world.max(axis=0)],
         })
     return out
 
 
-@contextlib.contextmanager
-def _staging_dir(out_dir: str, stem: str):
-    os.makedirs(out_dir, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=f".{stem}.bake-", dir=out_dir)
-    try:
-        yield tmp
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+def stem_of(path: str) -> str:
+    """The output name of an input file: its base name without the extension."""
+    return os.path.splitext(os.path.basename(path))[0]
 
 
 def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = None) -> BakeResult:
@@ -110,131 +106,166 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
     ------
     FractureError
         On bad input or a stage that cannot finish; no output is then written.
-        Every error names the input file (stage errors get its path), so a
-        batch log says which asset failed.
+        Every error names the input file, so a batch log says which asset
+        failed. Any other exception is a bug; it carries the input file and
+        stage as attributes for :func:`describe_error`.
     """
     try:
-        return _bake(input_path, out_dir, recipe, cache_dir)
+        stem = stem_of(input_path)
+        depends = input_files(input_path)
+        preflight(out_dir, stem, inputs=depends, estimate_bytes=estimate_output_bytes(depends))
+        cache = None
+        if cache_dir is not None:
+            from fracture_cli.cache import StageCache
+
+            cache = StageCache(cache_dir)
+        runner = Runner(f"bake {stem}", total=len(STEPS), cache=cache)
+        state = run_pipeline(input_path, recipe, runner)
+        report = build_report(state, recipe, runner)
+        outputs = write_outputs(out_dir, stem, state, report, runner)
+        return BakeResult(report=report, outputs=outputs)
     except FractureError as exc:
         if exc.path is None:
             exc.path = input_path
         raise
+    except Exception as exc:
+        exc.fracture_input = input_path  # type: ignore[attr-defined]
+        raise
 
 
-def _bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) -> BakeResult:
-    """The body of :func:`bake`; errors are labelled with the input file by the caller."""
-    from fracture_cli.io.read import load_surface
-    from fracture_cli.io.write import fragment_name, write_fragments_glb
-    from fracture_cli.runtime.format import write_runtime
-    from fracture_cli.stages.cage import cage
-    from fracture_cli.stages.checks import fragment_fault_shape, fragment_invariants
-    from fracture_cli.stages.fragments import fragments as cut_fragments
-    from fracture_cli.stages.material import material
-    from fracture_cli.stages.modes import modes as solve_modes
-    from fracture_cli.stages.pieces import pieces as atomic_pieces
-    from fracture_cli.stages.repair import repair
-    from fracture_cli.stages.runtime import runtime as precompute_runtime
-    from fracture_cli.stages.smooth import smooth
-    from fracture_cli.stages.tetra import tetra
+def run_pipeline(input_path: str, recipe: Recipe, runner: Runner) -> PipelineState:
+    """Every stage of :data:`~fracture_cli.pipeline.STAGES` on one input, with the recipe's options."""
+    state = PipelineState(source=input_path)
+    for name in STAGE_NAMES:
+        state = runner.run(name, state, recipe[name])
+    return state
 
-    stem = os.path.splitext(os.path.basename(input_path))[0]
-    seconds: dict[str, float] = {}
-    step = [0]
 
-    @contextlib.contextmanager
-    def timed(name):
-        step[0] += 1
-        log.info("bake %s: [%d/%d] %s ...", stem, step[0], len(STAGES), name)
-        t0 = time.perf_counter()
-        yield
-        seconds[name] = round(time.perf_counter() - t0, 3)
-        log.info("bake %s: [%d/%d] %s done in %.2f s", stem, step[0], len(STAGES), name, seconds[name])
+def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[str, Any]:
+    """The bake report (without ``seconds``) of a finished pipeline ``state``.
 
-    with timed("load"):
-        loaded = load_surface(input_path, recipe["load"])
-    with timed("repair"):
-        # Cage and fragments both use the repaired solid, so they agree on what is inside.
-        surface = repair(loaded, recipe["repair"])
-    input_hash = file_sha256(input_path)
-    stage_cache = None
-    if cache_dir is not None:
-        from fracture_cli.cache import StageCache, cache_key
-
-        stage_cache = StageCache(cache_dir)
-        cage_key = cache_key("cage", input_hash, recipe["load"], recipe["repair"], recipe["cage"], recipe["tetra"])
-        modes_key = cache_key("modes", cage_key, recipe["material"], recipe["modes"])
-    cached = stage_cache.get_cage(cage_key, surface.normalization) if stage_cache else None
-    with timed("cage"):
-        cage_result = cached[0] if cached else cage(surface, recipe["cage"])
-    with timed("tetra"):
-        tet_mesh = cached[1] if cached else tetra(cage_result, recipe["tetra"])
-    if stage_cache and not cached:
-        stage_cache.put_cage(cage_key, cage_result, tet_mesh)
-    with timed("material"):
-        eta = material(tet_mesh, surface, recipe["material"])
-    with timed("modes"):
-        modes = stage_cache.get_modes(modes_key) if stage_cache else None
-        if modes is None:
-            modes = solve_modes(tet_mesh, recipe["modes"], eta=eta)
-            if stage_cache:
-                stage_cache.put_modes(modes_key, modes)
-    with timed("pieces"):
-        pieces = atomic_pieces(tet_mesh, modes, recipe["pieces"])
-    with timed("smooth"):
-        regions = smooth(tet_mesh, pieces, recipe["smooth"], surface=surface)
-    with timed("fragments"):
-        frags = cut_fragments(surface, regions, recipe["fragments"])
-        checks = fragment_invariants(surface, frags)
-        checks["input_volume"] = float(frags.input_volume * surface.normalization.scale**3)
-        # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
-        shape = fragment_fault_shape(frags)
-        checks["fault_mean_dihedral_degrees"] = round(shape["mean_dihedral_degrees"], 6)
-        checks["fault_crease_density"] = round(shape["crease_density"], 6)
-    if not frags.fragments:
-        raise StageError("no fragment intersects the input; is the asset empty?", stage="fragments", path=input_path)
-    with timed("runtime"):
-        fragment_pieces = [int(f.piece) for f in frags.fragments]
-        names = tuple(fragment_name(i) for i in range(len(frags.fragments)))
-        runtime_data = precompute_runtime(tet_mesh, modes, pieces, recipe["runtime"],
-                                          fragment_pieces=fragment_pieces, fragment_names=names)
-
-    report = {
+    ``recipe`` names the recipe; the parameters are those the stages ran with
+    (``runner.options``), so a chain with changed flags reports what it did.
+    """
+    loaded, surface = state.need("loaded", "export"), state.need("surface", "export")
+    frags, data = state.need("fragments", "export"), state.need("runtime", "export")
+    used = dataclasses.replace(recipe, options={**recipe.options, **runner.options})
+    cage, tet_mesh, modes, pieces = state.cage, state.tet_mesh, state.modes, state.pieces
+    stem = stem_of(state.need("source", "export"))
+    return {
         "tool": "fracture",
         "version": __version__,
-        "input": {"name": os.path.basename(input_path), "sha256": input_hash,
+        "input": {"name": os.path.basename(state.need("source", "export")), "sha256": state.source_sha256,
                   "triangles": loaded.num_faces, "vertices": loaded.num_vertices,
                   "scale": surface.normalization.scale},
         "recipe": {"name": recipe.name, "chain": list(recipe.chain), "description": recipe.description,
-                   "parameters": recipe.to_dict()},
+                   "parameters": used.to_dict()},
         "counts": {
-            "cage_faces": int(len(cage_result.faces)),
-            "cage_offset": float(cage_result.offset),
-            "tets": tet_mesh.num_tets,
-            "modes": modes.num_modes,
-            "mode_pieces": [int(c) for c in modes.piece_counts],
-            "pieces": pieces.num_pieces,
+            "cage_faces": int(len(cage.faces)) if cage is not None else None,
+            "cage_offset": float(cage.offset) if cage is not None else None,
+            "tets": tet_mesh.num_tets if tet_mesh is not None else None,
+            "modes": modes.num_modes if modes is not None else None,
+            "mode_pieces": [int(c) for c in modes.piece_counts] if modes is not None else None,
+            "pieces": pieces.num_pieces if pieces is not None else None,
             "fragments": len(frags.fragments),
-            "bonds": int(runtime_data.num_edges),
-            "contact_sites": int(runtime_data.num_sites),
+            "bonds": int(data.num_edges),
+            "contact_sites": int(data.num_sites),
         },
-        "checks": checks,
+        "checks": dict(state.checks or {}),
         "fragments": fragment_summary(frags),
         "outputs": [f"{stem}.glb", f"{stem}.fracture.json", f"{stem}.fracture.bin", f"{stem}.report.json"],
     }
 
-    with timed("export"), _staging_dir(out_dir, stem) as staging:
-        write_fragments_glb(os.path.join(staging, f"{stem}.glb"), frags)
-        write_runtime(runtime_data, os.path.join(staging, f"{stem}.fracture.json"))
-        report["seconds"] = dict(seconds)
-        if stage_cache:
-            report["cache"] = dict(stage_cache.events)
-        with open(os.path.join(staging, f"{stem}.report.json"), "w") as fh:
-            json.dump(report, fh, indent=2, sort_keys=True)
-            fh.write("\n")
-        # Data files first, the report last: a report on disk means a complete bake.
-        outputs = []
-        for name in (f"{stem}.fracture.bin", f"{stem}.fracture.json", f"{stem}.glb", f"{stem}.report.json"):
-            os.replace(os.path.join(staging, name), os.path.join(out_dir, name))
-            outputs.append(os.path.join(out_dir, name))
-    report["seconds"] = dict(seconds)
-    return BakeResult(report=report, outputs=tuple(outputs))
+
+def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[str, Any],
+                  runner: Runner) -> tuple[str, ...]:
+    """Write the fragments, the runtime file and the report as the ``export`` step; returns the paths.
+
+    The files are written into a staging folder and published as one set
+    (:func:`fracture_cli.io.outputs.output_set`), the report last with the
+    other files' hashes. ``report`` gets its ``seconds`` (and ``cache``) block.
+    """
+    from fracture_cli.io.write import write_fragments_glb
+    from fracture_cli.runtime.format import write_runtime
+
+    check_inputs_untouched(out_dir, [stem], input_files(state.need("source", "export")))  # also for a chain
+    with runner.step("export"), output_set(out_dir, stem) as staging:
+        write_fragments_glb(staging.file(f"{stem}.glb"), state.need("fragments", "export"))
+        write_runtime(state.need("runtime", "export"), staging.file(f"{stem}.fracture.json"))
+        report["seconds"] = dict(runner.seconds)
+        if runner.cache is not None:
+            report["cache"] = dict(runner.cache.events)
+        staging.write_report(report)
+    report["seconds"] = dict(runner.seconds)
+    return tuple(os.path.join(out_dir, name) for name in output_names(stem))
+
+
+def check_batch(inputs: Sequence[str], out_dir: str) -> None:
+    """Refuse a batch in which two inputs would write the same outputs, or an output would replace an input."""
+    stems: dict[str, str] = {}
+    for path in inputs:
+        stem = stem_of(path)
+        if stem in stems:
+            raise UsageError(f"{stems[stem]} and {path} would both write {stem}.* into {out_dir}; "
+                             "bake them into different folders")
+        stems[stem] = path
+    refuse_inputs_as_outputs(out_dir, inputs)
+
+
+def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir: str | None = None,
+              keep_going: bool = False, preview: bool = False,
+              preview_size: tuple[int, int] = (1600, 1000)) -> Iterator[BatchItem]:
+    """Bake several inputs into one folder, yielding each one's outcome as it finishes.
+
+    Parameters
+    ----------
+    inputs : sequence of str
+        Asset paths; no two may share a stem (checked before any work).
+    out_dir, recipe, cache_dir
+        As for :func:`bake`.
+    keep_going : bool, optional (default False)
+        With several inputs, an input that fails (any error, bugs included) is
+        yielded with its error line and the others are still baked; without
+        it (or with one input) the first error is raised.
+    preview : bool, optional (default False)
+        Also render ``<stem>.preview.png`` for each bake; without it a
+        ``<stem>.preview.png`` left by an earlier bake is removed (it would show
+        other fragments than the files beside it).
+    preview_size : (int, int), optional (default (1600, 1000))
+        Width and height of the preview in pixels.
+
+    Yields
+    ------
+    BatchItem
+        One per input, in order.
+    """
+    check_batch(inputs, out_dir)
+    for path in inputs:
+        try:
+            result = bake(path, out_dir, recipe, cache_dir=cache_dir)
+            preview_png = os.path.join(out_dir, f"{stem_of(path)}.preview.png")
+            if preview:
+                from fracture_cli.preview import render_preview
+
+                render_preview(os.path.join(out_dir, f"{stem_of(path)}.fracture.json"), preview_png,
+                               width=preview_size[0], height=preview_size[1])
+            elif os.path.exists(preview_png):
+                os.remove(preview_png)
+                log.info("bake: removed %s (from an earlier bake; pass --preview for a new one)", preview_png)
+        except Exception as exc:
+            if not keep_going or len(inputs) == 1:
+                raise
+            yield BatchItem(path, error=describe_error(exc, path), exception=exc)
+            continue
+        yield BatchItem(path, result=result)
+
+
+def describe_error(exc: BaseException, path: str | None = None) -> str:
+    """One line for an error: a FractureError's own message, or an internal error naming file and stage."""
+    if isinstance(exc, FractureError):
+        return str(exc)
+    path = getattr(exc, "fracture_input", None) or path
+    stage = getattr(exc, "fracture_stage", None)
+    first = str(exc).splitlines()[0] if str(exc) else ""
+    where = "".join(x for x in (f"{stage}: " if stage else "", f"{path}: " if path else ""))
+    return f"{where}internal error ({type(exc).__name__}: {first}); rerun with --debug for a traceback"

@@ -7,9 +7,16 @@ and is shown with a traceback only under ``--debug``.
 
 from __future__ import annotations
 
+import os
+
 EXIT_OK = 0
 EXIT_FAILURE = 1  # bad input or a stage that could not finish
 EXIT_USAGE = 2  # wrong command line (click's own convention)
+
+
+def printable(path: str | os.PathLike) -> str:
+    """``path`` for a message: a file name that is not UTF-8 (surrogate-escaped by Python) gets ``\\xNN`` escapes."""
+    return os.fsencode(path).decode("utf-8", "backslashreplace")
 
 
 class FractureError(Exception):
@@ -38,12 +45,32 @@ class FractureError(Exception):
         if self.stage:
             prefix += f"{self.stage}: "
         if self.path:
-            prefix += f"{self.path}: "
+            prefix += printable(self.path) + ": "
         return prefix + self.message
 
 
 class InputError(FractureError):
     """An input file (mesh, recipe, runtime file) is missing, unreadable or unusable."""
+
+
+class RuntimeFileError(InputError, ValueError):
+    """A runtime file (``.fracture.json`` + ``.bin``) is missing, damaged, of another version or inconsistent.
+
+    Also a :class:`ValueError`, so code that reads runtime files without the
+    rest of the tool can catch it as one.
+    """
+
+
+class ImpactArgumentError(InputError, ValueError):
+    """:func:`~fracture_cli.runtime.impact.project_impact` got an unusable argument.
+
+    A point or impulse that is not three finite numbers, or a threshold that
+    is NaN or negative. Also a :class:`ValueError`.
+    """
+
+
+class OutputError(FractureError):
+    """The outputs cannot be written: folder not writable, disk full, would overwrite an input, locked."""
 
 
 class RecipeError(InputError):

@@ -10,6 +10,7 @@ or a range.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import field
 from typing import Any
 
@@ -47,12 +48,14 @@ def check_value(options_cls, name: str, value: Any) -> str | None:
         return f"unknown option '{name}'; valid: {', '.join(sorted(fields))}"
     f = fields[name]
     meta = f.metadata
-    default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+    default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[operator]
     if meta["choices"] is not None and value not in meta["choices"]:
         return f"{name} = {value!r} is not one of {', '.join(map(repr, meta['choices']))}"
     if isinstance(default, list):
         if not isinstance(value, list):
             return f"{name} = {value!r} must be a list"
+        if not _all_finite(value):
+            return f"{name} = {_show(value)} must contain finite numbers only (no nan or inf)"
         if default and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in default):
             # A fixed-size vector of numbers (e.g. a colour): same length, each in range.
             if len(value) != len(default) or not all(
@@ -70,13 +73,40 @@ def check_value(options_cls, name: str, value: Any) -> str | None:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             return f"{name} = {value!r} must be a number"
         if isinstance(default, int) and not isinstance(value, int):
-            return f"{name} = {value!r} must be a whole number"
+            return f"{name} = {_show(value)} must be a whole number"
+        if not math.isfinite(value):
+            # NaN passes every comparison and inf is never a usable size or weight: both would end up as
+            # invalid JSON in the report or GLB, or as a failure after the whole bake.
+            return f"{name} = {_show(value)} must be a finite number (not nan or inf)"
         lo, hi = meta["min"], meta["max"]
         bad_lo = lo is not None and (value <= lo if meta["min_exclusive"] else value < lo)
         bad_hi = hi is not None and value > hi
         if bad_lo or bad_hi:
             left = "(" if meta["min_exclusive"] else "["
-            return f"{name} = {value!r} is out of range {left}{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
+            low, high = lo if lo is not None else "-inf", hi if hi is not None else "inf"
+            return f"{name} = {value!r} is out of range {left}{low}, {high}]"
     if isinstance(default, str) and not isinstance(value, str):
         return f"{name} = {value!r} must be a string"
     return None
+
+
+def _show(value: Any) -> str:
+    """``value`` as the user would type it in TOML (``nan``, ``inf``), for messages."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    if isinstance(value, list):
+        return "[" + ", ".join(_show(x) for x in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_show(v)}" for k, v in value.items()) + " }"
+    return repr(value)
+
+
+def _all_finite(value: Any) -> bool:
+    """False if a float anywhere inside ``value`` (lists, dicts: e.g. material boxes) is nan or inf."""
+    if isinstance(value, float):
+        return math.isfinite(value)
+    if isinstance(value, (list, tuple)):
+        return all(_all_finite(x) for x in value)
+    if isinstance(value, dict):
+        return all(_all_finite(x) for x in value.values())
+    return True

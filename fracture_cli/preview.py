@@ -11,6 +11,7 @@ import json
 import logging
 import os
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -157,7 +158,7 @@ def draw_triangles(ax, tris: np.ndarray, colors: np.ndarray, *, center: np.ndarr
     order = np.argsort(-depth, kind="stable")  # far first
     shade = 0.35 + 0.65 * np.clip(normals @ LIGHT, 0.0, 1.0)
     rgb = np.clip(colors * shade[:, None], 0.0, 1.0)
-    coll = PolyCollection(xy[order], facecolors=rgb[order], edgecolors="none", linewidths=0.0, antialiased=False)
+    coll = PolyCollection(list(xy[order]), facecolors=rgb[order], edgecolors="none", linewidths=0.0, antialiased=False)
     ax.add_collection(coll, autolim=False)  # limits are set above; autolim costs seconds
 
 
@@ -172,7 +173,7 @@ def palette(n: int) -> np.ndarray:
     """``n`` distinct, deterministic RGB colours."""
     import matplotlib
 
-    base = np.asarray(matplotlib.colormaps["tab20"].colors)
+    base = np.asarray(matplotlib.colormaps["tab20"].colors)  # type: ignore[attr-defined]  # a ListedColormap
     if n <= len(base):
         return base[:n]
     hues = (np.arange(n) * 0.61803398875) % 1.0
@@ -235,7 +236,6 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
 
     from fracture_cli.io.atomic import atomic_path
     from fracture_cli.runtime.format import load_runtime
-    from fracture_cli.runtime.impact import project_impact
 
     if not json_path.endswith(".fracture.json"):
         raise InputError("expected a <stem>.fracture.json runtime file", path=json_path)
@@ -252,74 +252,20 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
 
     all_pts = np.concatenate([np.concatenate([f.outer, f.inner]).reshape(-1, 3) for f in frags])
     lo, hi = all_pts.min(axis=0), all_pts.max(axis=0)
-    center = (lo + hi) / 2.0
-    radius = float(np.linalg.norm(hi - lo)) / 2.0
-    centroids = np.array([f.centroid for f in frags])
-    colors = palette(len(frags))
+    view = _View(center=(lo + hi) / 2.0, radius=float(np.linalg.norm(hi - lo)) / 2.0,
+                 centroids=np.array([f.centroid for f in frags]))
 
     fig = plt.figure(figsize=(width / 100.0, height / 100.0), dpi=100)
     fig.patch.set_facecolor("white")
     grid = fig.add_gridspec(2, 4, height_ratios=[1.0, 1.0], hspace=0.12, wspace=0.02,
                             left=0.01, right=0.99, top=0.9, bottom=0.02)
-
-    # (a) the asset as it looks (outer faces only, its own materials)
-    ax = fig.add_subplot(grid[0, 0])
-    tris = np.concatenate([f.outer for f in frags])
-    draw_triangles(ax, tris, np.concatenate([f.outer_colors for f in frags]), center=center, extent=radius * 1.05,
-                   pixels=height // 2)
-    ax.set_title("input", fontsize=11)
-
-    # (b) exploded fragments, interior faces tinted
-    ax = fig.add_subplot(grid[0, 1:3])
-    push = (centroids - center) * 0.6
-    tris, cols = [], []
-    for j, f in enumerate(frags):
-        tris += [f.outer + push[j], f.inner + push[j]]
-        cols += [np.repeat(colors[j][None], len(f.outer), 0), np.repeat((colors[j] * 0.55)[None], len(f.inner), 0)]
-    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.7,
-                   pixels=height // 2)
-    ax.set_title(f"{len(frags)} fragments (exploded; darker = interior faces)", fontsize=11)
-
-    # (d) example impact
-    ax = fig.add_subplot(grid[0, 3])
-    if impact is None:
-        point, impulse, result = pick_example_impact(data, center)
-    else:
-        point, impulse, threshold = impact
-        point, impulse = np.asarray(point, float), np.asarray(impulse, float)
-        result = project_impact(data, point, impulse, threshold)
-    group_ids, group_of = np.unique(result.groups, return_inverse=True)
-    gcol = palette(len(group_ids))
-    gcent = np.array([centroids[group_of == g].mean(axis=0) for g in range(len(group_ids))])
-    gpush = (gcent - center) * 0.35 if len(group_ids) > 1 else np.zeros_like(gcent)
-    tris = [np.concatenate([f.outer, f.inner]) + gpush[group_of[j]] for j, f in enumerate(frags)]
-    cols = [np.repeat(gcol[group_of[j]][None], len(tris[j]), 0) for j in range(len(frags))]
-    bias = [np.r_[np.zeros(len(f.outer)), np.full(len(f.inner), 0.02 * radius)] for f in frags]
-    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.35,
-                   pixels=height // 2, depth_bias=np.concatenate(bias))
-    p2 = project(point[None], center)[0]
-    tail = project((point - impulse / max(np.linalg.norm(impulse), 1e-12) * radius * 0.6)[None], center)[0]
-    ax.annotate("", xy=p2, xytext=tail, arrowprops=dict(arrowstyle="-|>", color="crimson", lw=2.5))
-    ax.plot([p2[0]], [p2[1]], "o", color="crimson", ms=7)
-    ax.set_title(f"impact |n|={np.linalg.norm(impulse):.3g}: {len(group_ids)} group(s)", fontsize=11)
-
-    # (c) the first modes, fragments coloured by their mode displacement
-    cmap = matplotlib.colormaps["coolwarm"]
+    _draw_input(fig.add_subplot(grid[0, 0]), frags, view, height // 2)
+    _draw_exploded(fig.add_subplot(grid[0, 1:3]), frags, view, height // 2)
+    groups = _draw_impact(fig.add_subplot(grid[0, 3]), data, frags, view, impact, height // 2)
     k = min(data.k, max_modes)
     sub = grid[1, :].subgridspec(1, max(k, 1), wspace=0.02)
-    W = np.asarray(data.W, dtype=np.float64)
     for i in range(k):
-        ax = fig.add_subplot(sub[0, i])
-        w = W[i, :, 0] if data.dim == 1 else np.linalg.norm(W[i], axis=1) * np.sign(W[i, :, 0] + 1e-30)
-        scale = max(np.abs(w).max(), 1e-30)
-        fc = cmap(0.5 + 0.5 * w / scale)[:, :3]
-        # Outer faces only: inner faces lie inside the assembled object and, with
-        # painter's ordering, would speckle through its surface.
-        tris = [f.outer for f in frags]
-        cols = [np.repeat(fc[j][None], len(tris[j]), 0) for j in range(len(frags))]
-        draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=center, extent=radius * 1.05,
-                       pixels=width // max(k, 1))
-        ax.set_title(f"mode {i + 1}", fontsize=10)
+        _draw_mode(fig.add_subplot(sub[0, i]), data, frags, view, i, width // max(k, 1))
 
     counts = report.get("counts", {})
     recipe = report.get("recipe", {}).get("name", "?")
@@ -330,4 +276,78 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
     with atomic_path(png_path) as tmp:
         fig.savefig(tmp, format="png", dpi=100, metadata={"Software": None})
     plt.close(fig)
-    return {"fragments": len(frags), "modes_drawn": k, "impact_groups": int(len(group_ids))}
+    return {"fragments": len(frags), "modes_drawn": k, "impact_groups": groups}
+
+
+@dataclass(frozen=True)
+class _View:
+    """Where the preview's panels look: the assembled asset's centre, radius and fragment centroids."""
+
+    center: np.ndarray
+    radius: float
+    centroids: np.ndarray
+
+
+def _draw_input(ax: Any, frags: list, view: _View, pixels: int) -> None:
+    """The asset as it looks: outer faces only, its own materials."""
+    tris = np.concatenate([f.outer for f in frags])
+    draw_triangles(ax, tris, np.concatenate([f.outer_colors for f in frags]), center=view.center,
+                   extent=view.radius * 1.05, pixels=pixels)
+    ax.set_title("input", fontsize=11)
+
+
+def _draw_exploded(ax: Any, frags: list, view: _View, pixels: int) -> None:
+    """Exploded fragments, interior faces tinted darker."""
+    colors = palette(len(frags))
+    push = (view.centroids - view.center) * 0.6
+    tris: list[np.ndarray] = []
+    cols: list[np.ndarray] = []
+    for j, f in enumerate(frags):
+        tris += [f.outer + push[j], f.inner + push[j]]
+        cols += [np.repeat(colors[j][None], len(f.outer), 0), np.repeat((colors[j] * 0.55)[None], len(f.inner), 0)]
+    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=view.center, extent=view.radius * 1.7,
+                   pixels=pixels)
+    ax.set_title(f"{len(frags)} fragments (exploded; darker = interior faces)", fontsize=11)
+
+
+def _draw_impact(ax: Any, data: Any, frags: list, view: _View, impact: tuple | None, pixels: int) -> int:
+    """An impact (given, or :func:`pick_example_impact`) and the groups it breaks into; returns their number."""
+    from fracture_cli.runtime.impact import project_impact
+
+    if impact is None:
+        point, impulse, result = pick_example_impact(data, view.center)
+    else:
+        point, impulse, threshold = impact
+        point, impulse = np.asarray(point, float), np.asarray(impulse, float)
+        result = project_impact(data, point, impulse, threshold)
+    group_ids, group_of = np.unique(result.groups, return_inverse=True)
+    gcol = palette(len(group_ids))
+    gcent = np.array([view.centroids[group_of == g].mean(axis=0) for g in range(len(group_ids))])
+    gpush = (gcent - view.center) * 0.35 if len(group_ids) > 1 else np.zeros_like(gcent)
+    tris = [np.concatenate([f.outer, f.inner]) + gpush[group_of[j]] for j, f in enumerate(frags)]
+    cols = [np.repeat(gcol[group_of[j]][None], len(tris[j]), 0) for j in range(len(frags))]
+    bias = [np.r_[np.zeros(len(f.outer)), np.full(len(f.inner), 0.02 * view.radius)] for f in frags]
+    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=view.center, extent=view.radius * 1.35,
+                   pixels=pixels, depth_bias=np.concatenate(bias))
+    p2 = project(point[None], view.center)[0]
+    tail = project((point - impulse / max(np.linalg.norm(impulse), 1e-12) * view.radius * 0.6)[None], view.center)[0]
+    ax.annotate("", xy=p2, xytext=tail, arrowprops=dict(arrowstyle="-|>", color="crimson", lw=2.5))
+    ax.plot([p2[0]], [p2[1]], "o", color="crimson", ms=7)
+    ax.set_title(f"impact |n|={np.linalg.norm(impulse):.3g}: {len(group_ids)} group(s)", fontsize=11)
+    return int(len(group_ids))
+
+
+def _draw_mode(ax: Any, data: Any, frags: list, view: _View, i: int, pixels: int) -> None:
+    """Mode ``i``: fragments coloured by their mode displacement (outer faces only: inner faces lie inside
+    the assembled object and, with painter's ordering, would speckle through its surface)."""
+    import matplotlib
+
+    W = np.asarray(data.W, dtype=np.float64)
+    w = W[i, :, 0] if data.dim == 1 else np.linalg.norm(W[i], axis=1) * np.sign(W[i, :, 0] + 1e-30)
+    scale = max(np.abs(w).max(), 1e-30)
+    fc = matplotlib.colormaps["coolwarm"](0.5 + 0.5 * w / scale)[:, :3]
+    tris = [f.outer for f in frags]
+    cols = [np.repeat(fc[j][None], len(tris[j]), 0) for j in range(len(frags))]
+    draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=view.center, extent=view.radius * 1.05,
+                   pixels=pixels)
+    ax.set_title(f"mode {i + 1}", fontsize=10)

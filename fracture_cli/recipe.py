@@ -22,43 +22,57 @@ value and the allowed range.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import os
 import tomllib
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
 from typing import Any
 
 from fracture_cli.errors import RecipeError
 from fracture_cli.options import check_value, option_fields
+from fracture_cli.pipeline import STAGE_NAMES, stage
 
-# Section -> (module, options class). Order is the pipeline order.
-SECTIONS: dict[str, tuple[str, str]] = {
-    "load": ("fracture_cli.io.read", "LoadOptions"),
-    "repair": ("fracture_cli.stages.repair", "RepairOptions"),
-    "cage": ("fracture_cli.stages.cage", "CageOptions"),
-    "tetra": ("fracture_cli.stages.tetra", "TetraOptions"),
-    "material": ("fracture_cli.stages.material", "MaterialOptions"),
-    "modes": ("fracture_cli.stages.modes", "ModesOptions"),
-    "pieces": ("fracture_cli.stages.pieces", "PiecesOptions"),
-    "smooth": ("fracture_cli.stages.smooth", "SmoothOptions"),
-    "fragments": ("fracture_cli.stages.fragments", "FragmentOptions"),
-    "runtime": ("fracture_cli.stages.runtime", "RuntimeOptions"),
-}
+# The recipe sections, in pipeline order: one per stage of the pipeline table.
+SECTIONS: tuple[str, ...] = STAGE_NAMES
 TOP_LEVEL_KEYS = {"description", "extends"}
+# Environment variable naming a folder of the user's own recipes.
+RECIPES_ENV = "FRACTURE_RECIPES"
 
 
-def recipes_dir() -> str:
-    """Folder of the built-in recipes (``recipes/`` at the repo root, or $FRACTURE_RECIPES)."""
-    env = os.environ.get("FRACTURE_RECIPES")
-    if env:
-        return env
-    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "recipes")
+def builtin_recipes_dir() -> Path:
+    """Folder of the built-in recipes: package data in a wheel, the top-level ``recipes/`` in a checkout."""
+    packaged = resources.files("fracture_cli") / "recipes"
+    if packaged.is_dir():
+        return Path(str(packaged))
+    return Path(__file__).resolve().parent.parent / "recipes"
 
 
-def options_class(section: str):
+def search_path(recipes_dir: str | None = None, assets: Iterable[str] = ()) -> list[Path]:
+    """Folders searched for a recipe given by name, first match wins.
+
+    In order: ``recipes_dir`` (the ``--recipes`` flag), ``$FRACTURE_RECIPES``,
+    a ``recipes/`` folder beside each asset (in the order given), ``./recipes``
+    in the working directory, then the built-in recipes.
+    """
+    folders: list[Path] = []
+    if recipes_dir:
+        folders.append(Path(recipes_dir))
+    if os.environ.get(RECIPES_ENV):
+        folders.append(Path(os.environ[RECIPES_ENV]))
+    folders += [Path(os.path.dirname(os.path.abspath(a))) / "recipes" for a in assets]
+    folders += [Path.cwd() / "recipes", builtin_recipes_dir()]
+    unique: list[Path] = []
+    for folder in folders:
+        if folder.resolve() not in [f.resolve() for f in unique]:
+            unique.append(folder)
+    return unique
+
+
+def options_class(section: str) -> type:
     """The options dataclass of a recipe section."""
-    module, name = SECTIONS[section]
-    return getattr(importlib.import_module(module), name)
+    return stage(section).options_class
 
 
 @dataclass(frozen=True)
@@ -79,42 +93,59 @@ class Recipe:
 
     name: str
     description: str
-    options: dict = field(default_factory=dict)
+    options: dict[str, Any] = field(default_factory=dict)
     chain: tuple[str, ...] = ()
 
-    def __getitem__(self, section: str):
+    def __getitem__(self, section: str) -> Any:
         return self.options[section]
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         """Resolved parameters as plain data (for reports and ``recipes show``)."""
-        out = {}
+        out: dict[str, dict[str, Any]] = {}
         for section, opts in self.options.items():
             out[section] = {f.name: getattr(opts, f.name) for f in option_fields(type(opts))}
         return out
 
 
-def find_recipe(name_or_path: str) -> str:
-    """Path of a recipe given by name (``recipes/<name>.toml``) or by path."""
+def find_recipe(name_or_path: str, search: Sequence[Path] | None = None, *, base: str | None = None,
+                asked_by: str | None = None) -> str:
+    """Path of a recipe given by name (first ``<folder>/<name>.toml`` on the search path) or by path.
+
+    Parameters
+    ----------
+    name_or_path : str
+        A name, or a path to a .toml file (relative paths resolve against ``base``).
+    search : sequence of Path, optional (default :func:`search_path`)
+    base : str, optional (default the working directory)
+        Folder that relative paths are relative to (an ``extends`` resolves against its recipe's folder).
+    asked_by : str, optional
+        The recipe file that names this one (for errors).
+    """
+    folders = search_path() if search is None else list(search)
     if name_or_path.endswith(".toml") or os.sep in name_or_path or "/" in name_or_path:
-        if not os.path.isfile(name_or_path):
-            raise RecipeError("no such recipe file", path=name_or_path)
-        return name_or_path
-    path = os.path.join(recipes_dir(), f"{name_or_path}.toml")
-    if not os.path.isfile(path):
-        raise RecipeError(f"unknown recipe '{name_or_path}'; pick one of {', '.join(list_recipes()) or '(none)'}"
-                          " or give a path to a .toml file")
-    return path
+        path = os.path.join(base, name_or_path) if base and not os.path.isabs(name_or_path) else name_or_path
+        if not os.path.isfile(path):
+            raise RecipeError(f"extends = {name_or_path!r}: no such recipe file {path}" if asked_by
+                              else "no such recipe file", path=asked_by or path)
+        return path
+    for folder in folders:
+        candidate = folder / f"{name_or_path}.toml"
+        if candidate.is_file():
+            return str(candidate)
+    names = ", ".join(list_recipes(folders)) or "(none)"
+    where = f"extends = {name_or_path!r}: " if asked_by else ""
+    raise RecipeError(f"{where}unknown recipe '{name_or_path}'; pick one of {names} or give a path to a .toml file",
+                      path=asked_by)
 
 
-def list_recipes() -> list[str]:
-    """Names of the built-in recipes, sorted."""
-    folder = recipes_dir()
-    if not os.path.isdir(folder):
-        return []
-    return sorted(f[:-5] for f in os.listdir(folder) if f.endswith(".toml"))
+def list_recipes(search: Sequence[Path] | None = None) -> list[str]:
+    """Names of the recipes on the search path (user folders and built-ins), sorted."""
+    folders = search_path() if search is None else search
+    names = {p.stem for folder in folders if folder.is_dir() for p in folder.glob("*.toml")}
+    return sorted(names)
 
 
-def _read_toml(path: str) -> dict:
+def _read_toml(path: str) -> dict[str, Any]:
     try:
         with open(path, "rb") as fh:
             return tomllib.load(fh)
@@ -124,8 +155,9 @@ def _read_toml(path: str) -> dict:
         raise RecipeError(f"cannot be read: {exc.strerror}", path=path) from None
 
 
-def _raw_chain(name_or_path: str, seen: tuple[str, ...] = ()) -> list[tuple[str, str, dict]]:
-    path = find_recipe(name_or_path)
+def _raw_chain(name_or_path: str, search: Sequence[Path], seen: tuple[str, ...] = (), base: str | None = None,
+               asked_by: str | None = None) -> list[tuple[str, str, dict[str, Any]]]:
+    path = find_recipe(name_or_path, search, base=base, asked_by=asked_by)
     key = os.path.realpath(path)
     if key in seen:
         raise RecipeError(f"'extends' forms a cycle through {os.path.basename(path)}", path=path)
@@ -140,7 +172,8 @@ def _raw_chain(name_or_path: str, seen: tuple[str, ...] = ()) -> list[tuple[str,
         return [entry]
     if not isinstance(parent, str):
         raise RecipeError(f"extends = {parent!r} must be a recipe name or path", path=path)
-    return [entry] + _raw_chain(parent, seen + (key,))
+    return [entry] + _raw_chain(parent, search, seen + (key,), base=os.path.dirname(os.path.abspath(path)),
+                                asked_by=path)
 
 
 def _coerce(section: str, key: str, value: Any, where: str | None) -> Any:
@@ -170,7 +203,8 @@ def parse_override(text: str) -> tuple[str, str, Any]:
     return section, key, value
 
 
-def load_recipe(name_or_path: str = "default", overrides: list[str] | tuple[str, ...] = ()) -> Recipe:
+def load_recipe(name_or_path: str = "default", overrides: Sequence[str] = (), *,
+                search: Sequence[Path] | None = None) -> Recipe:
     """Resolve a recipe, its ``extends`` chain and ``--set`` overrides.
 
     Parameters
@@ -179,6 +213,8 @@ def load_recipe(name_or_path: str = "default", overrides: list[str] | tuple[str,
         A built-in recipe name or a path to a .toml file.
     overrides : sequence of str, optional
         ``section.key=value`` strings applied last.
+    search : sequence of Path, optional (default :func:`search_path`)
+        Folders searched for recipe names (also for names in ``extends``).
 
     Returns
     -------
@@ -189,7 +225,7 @@ def load_recipe(name_or_path: str = "default", overrides: list[str] | tuple[str,
     RecipeError
         Unknown recipe, section or key; wrong type; value out of range; cycle.
     """
-    chain = _raw_chain(name_or_path)
+    chain = _raw_chain(name_or_path, search_path() if search is None else search)
     values: dict[str, dict[str, Any]] = {s: {} for s in SECTIONS}
     for _, path, data in reversed(chain):  # base first, derived last
         for section in SECTIONS:
@@ -205,5 +241,6 @@ def load_recipe(name_or_path: str = "default", overrides: list[str] | tuple[str,
         values[section][key] = _coerce(section, key, value, None)
     options = {s: dataclasses.replace(options_class(s)(), **values[s]) for s in SECTIONS}
     name, _, data = chain[0]
-    description = data.get("description") or next((d.get("description") for _, _, d in chain if d.get("description")), "")
+    description = data.get("description") or next(
+        (d.get("description") for _, _, d in chain if d.get("description")), "")
     return Recipe(name=name, description=str(description), options=options, chain=tuple(c[0] for c in chain))

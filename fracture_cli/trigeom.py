@@ -1,11 +1,11 @@
-"""Vectorized checks on triangle meshes: manifoldness and triangle intersections.
+"""Vectorized geometry of triangle meshes: measures, manifoldness and intersections.
 
-Used by the cage stage to reject a candidate cage that is not a closed manifold,
-that intersects itself, or that crosses the input surface. Every test errs on
-the side of reporting a problem (touching counts as intersecting, degenerate
-triangles are never proven separate), because a false alarm only costs the cage
-search one more iteration while a missed intersection breaks TetGen or the
-containment guarantee.
+The one home of the triangle-mesh helpers every stage shares: signed volume,
+vertex normals, winding numbers, closest points, and the checks the cage stage
+uses to reject a candidate cage (not closed, self-intersecting, crossing the
+input). The intersection tests err on the side of reporting a problem: a false
+alarm only costs the cage search one more iteration, while a missed
+intersection breaks TetGen or the containment guarantee.
 """
 
 from __future__ import annotations
@@ -19,6 +19,123 @@ from scipy.sparse.csgraph import connected_components
 SEPARATION_EPS = 1e-12
 
 _PAIR_CHUNK = 20_000
+# Point-triangle pairs per chunk of :func:`winding_numbers` (bounds its memory).
+_WINDING_CHUNK = 2_000_000
+
+
+def compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Drop the vertices (n, c) no face (m, 3) uses, keeping the order of the rest; faces renumbered."""
+    used = np.unique(faces)
+    if len(used) == len(vertices):
+        return vertices, faces
+    remap = np.full(len(vertices), -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    return vertices[used], remap[faces]
+
+
+def face_signed_volumes(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Signed volumes (m,) of the tets joining the origin to each triangle ``F`` (m, 3) over ``V`` (n, 3).
+
+    Their sum over a closed mesh is its enclosed volume (positive when outward).
+    """
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    return np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+
+
+def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
+    """Enclosed volume of a closed triangle mesh ``F`` (m, 3) over ``V`` (n, 3); negative when inside out."""
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    # Summed before the division (not face_signed_volumes().sum()): the bake's volumes are compared bit for bit.
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def vertex_normals(V: np.ndarray, F: np.ndarray, n: int | None = None, unit: bool = True) -> np.ndarray:
+    """Area-weighted vertex normals (n, 3): the sum of the (twice-area) normals of the faces at each vertex.
+
+    Parameters
+    ----------
+    V : (k, 3) float
+        Vertex positions.
+    F : (m, 3) int
+        Triangles; their ids index the output (e.g. welded ids), not necessarily ``V``'s rows.
+    n : int, optional (default len(V))
+        Number of output rows.
+    unit : bool, optional (default True)
+        Normalize to unit length (vertices without faces stay 0).
+    """
+    n = len(V) if n is None else n
+    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    acc = np.zeros((n, 3))
+    for k in range(3):
+        np.add.at(acc, F[:, k], fn)
+    if not unit:
+        return acc
+    return acc / np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-300)
+
+
+def _solid_angle_fraction(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Signed solid angle / 4 pi of triangles ``(a, b, c)`` seen from the origin (arrays (..., 3)).
+
+    Van Oosterom and Strackee's formula, tan(omega / 2) = det / dot.
+    """
+    la, lb, lc = (np.sqrt(np.einsum("...j,...j->...", x, x)) for x in (a, b, c))
+    det = np.einsum("...j,...j->...", a, np.cross(b, c))
+    dot = (la * lb * lc + np.einsum("...j,...j->...", a, b) * lc + np.einsum("...j,...j->...", b, c) * la
+           + np.einsum("...j,...j->...", c, a) * lb)
+    return np.arctan2(det, dot) / (2.0 * np.pi)
+
+
+def triangle_winding(P: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Winding-number contribution (k,) of triangle ``(A[i], B[i], C[i])`` at ``P[i]`` (all (k, 3))."""
+    return _solid_angle_fraction(A - P, B - P, C - P)
+
+
+def winding_numbers(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Generalized winding numbers (k,) of ``points`` (k, 3) w.r.t. triangles ``F`` (m, 3) over ``V``.
+
+    1 inside and 0 outside a closed outward mesh; about 0.5 on it; fractional for open meshes.
+    """
+    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    out = np.zeros(len(points))
+    chunk = max(1, _WINDING_CHUNK // max(len(F), 1))
+    for s in range(0, len(points), chunk):
+        q = points[s:s + chunk, None, :]
+        out[s:s + chunk] = _solid_angle_fraction(A[None] - q, B[None] - q, C[None] - q).sum(axis=1)
+    return out
+
+
+def closest_points(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Closest points (k, 3) to ``p`` on triangles ``(a, b, c)`` (each (k, 3)), by Voronoi regions (Ericson).
+
+    A degenerate triangle whose formula gives no finite point falls back to its corner ``a``.
+    """
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = np.einsum("ij,ij->i", ab, ap), np.einsum("ij,ij->i", ac, ap)
+    bp, cp = p - b, p - c
+    d3, d4 = np.einsum("ij,ij->i", ab, bp), np.einsum("ij,ij->i", ac, bp)
+    d5, d6 = np.einsum("ij,ij->i", ab, cp), np.einsum("ij,ij->i", ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        denom = va + vb + vc
+        out = a + ab * (vb / denom)[:, None] + ac * (vc / denom)[:, None]
+        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        t_ac = d2 / (d2 - d6)
+        t_ab = d1 / (d1 - d3)
+    # Later regions override earlier ones (vertex regions last).
+    out = np.where(np.isfinite(out), out, a)
+    out = np.where(((va <= 0) & (d4 >= d3) & (d5 >= d6))[:, None], b + (c - b) * t_bc[:, None], out)
+    out = np.where(((vb <= 0) & (d2 >= 0) & (d6 <= 0))[:, None], a + ac * t_ac[:, None], out)
+    out = np.where(((vc <= 0) & (d1 >= 0) & (d3 <= 0))[:, None], a + ab * t_ab[:, None], out)
+    out = np.where(((d6 >= 0) & (d5 <= d6))[:, None], c, out)
+    out = np.where(((d3 >= 0) & (d4 <= d3))[:, None], b, out)
+    out = np.where(((d1 <= 0) & (d2 <= 0))[:, None], a, out)
+    return np.where(np.isfinite(out), out, a)
+
+
+def point_triangle_distance(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Distances (k,) from points (k, 3) to triangles (k, 3, 3), float64."""
+    closest = closest_points(points, triangles[:, 0], triangles[:, 1], triangles[:, 2])
+    return np.linalg.norm(points - closest, axis=1)
 
 
 def edge_manifold_closed(F: np.ndarray) -> bool:

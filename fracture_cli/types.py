@@ -35,11 +35,11 @@ class Normalization:
     scale: float
 
     @classmethod
-    def identity(cls) -> "Normalization":
+    def identity(cls) -> Normalization:
         return cls(center=np.zeros(3), scale=1.0)
 
     @classmethod
-    def from_points(cls, points: np.ndarray) -> "Normalization":
+    def from_points(cls, points: np.ndarray) -> Normalization:
         """Normalization that centres ``points`` (n, 3) and gives them a unit diagonal."""
         lo, hi = points.min(axis=0), points.max(axis=0)
         diagonal = float(np.linalg.norm(hi - lo))

@@ -95,8 +95,28 @@ def test_corpus_outcome(entry, tmp_path):
         pytest.xfail(entry["known_issue"])
 
 
+def signed_volume_and_bbox(V: np.ndarray, F: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    used = V[np.unique(F)]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0), used.min(axis=0), used.max(axis=0)
+
+
+def check_loaded(entry):
+    """A reader case: the loaded triangles have the known volume and bounding box (no bake: milliseconds)."""
+    from fracture_cli.io.read import load_surface
+
+    surface = load_surface(os.path.join(CORPUS, entry["file"]))
+    volume, lo, hi = signed_volume_and_bbox(surface.world_vertices(), surface.faces)
+    assert volume == pytest.approx(entry["volume"], rel=1e-6)
+    np.testing.assert_allclose(lo, entry["bbox"][0], atol=1e-6)
+    np.testing.assert_allclose(hi, entry["bbox"][1], atol=1e-6)
+
+
 def check_outcome(entry, tmp_path):
     path = os.path.join(CORPUS, entry["file"])
+    if entry["outcome"] == "ok" and entry.get("check") == "load":
+        check_loaded(entry)
+        return
     out = str(tmp_path / "out")
     result = bake(path, out, entry.get("overrides", ()))
     assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
@@ -132,7 +152,7 @@ def check_outcome(entry, tmp_path):
     meshes, material_names = read_glb(os.path.join(out, stem + ".glb"))
     assert len(meshes) == report["counts"]["fragments"] >= 1
     interior = material_names.index("interior")
-    tris = raw_triangles(path)
+    tris = raw_triangles(os.path.join(CORPUS, entry["reference"]) if entry.get("reference") else path)
     diagonal = float(np.linalg.norm(tris.reshape(-1, 3).max(axis=0) - tris.reshape(-1, 3).min(axis=0)))
     total = 0.0
     outer_points = []
@@ -150,6 +170,10 @@ def check_outcome(entry, tmp_path):
     tolerance = 1e-3 if entry["file"] != "offset_1e6.glb" else 5e-2
     assert total == pytest.approx(expected_volume, rel=tolerance)
     assert checks["input_volume"] == pytest.approx(expected_volume, rel=tolerance)
+    if entry.get("bbox"):
+        every = np.concatenate([p.positions for mesh in meshes for p in mesh.primitives])
+        np.testing.assert_allclose(every.min(axis=0), entry["bbox"][0], atol=1e-5)
+        np.testing.assert_allclose(every.max(axis=0), entry["bbox"][1], atol=1e-5)
     if outer_points:
         d = distance_to_triangles(np.concatenate(outer_points), tris)
         limit = 1e-5 if entry["file"] != "offset_1e6.glb" else 2e-2

@@ -112,7 +112,7 @@ def test_failed_bake_leaves_previous_outputs_untouched(chair_bake, tmp_path, mon
         shutil.copy(out / name, tmp_path / name)
     before = {name: (tmp_path / name).read_bytes() for name in os.listdir(tmp_path)}
 
-    import fracture_cli.stages.runtime as runtime_stage
+    import fracture_cli.stages.precompute as runtime_stage
 
     def explode(*args, **kwargs):
         raise RuntimeError("injected failure")
@@ -155,7 +155,8 @@ def test_khronos_gltf_validator_accepts_output(chair_bake):
 
     modules = os.path.join(REPO, "build", "node", "node_modules")
     if not shutil.which("node") or not os.path.isdir(os.path.join(modules, "gltf-validator")):
-        pytest.skip("gltf-validator not installed (needs npm); structure is checked by test_glb_structure_is_valid_gltf")
+        pytest.skip("gltf-validator not installed (needs npm); structure is checked by "
+                    "test_glb_structure_is_valid_gltf")
     out, _ = chair_bake
     proc = subprocess.run(["node", os.path.join(REPO, "scripts", "validate_gltf.cjs"), modules, str(out / "chair.glb")],
                           capture_output=True, text=True, timeout=120)
@@ -169,22 +170,22 @@ def test_stage_cache_reuses_modes_and_gives_identical_output(tmp_path):
     first, second, third = tmp_path / "a", tmp_path / "b", tmp_path / "c"
     r1 = bake(CHAIR, "-o", str(first), *FAST, "--cache", str(cache), "--json")
     assert r1.exit_code == 0, r1.output
-    assert json.loads(r1.stdout)["cache"] == {"cage": "miss", "modes": "miss"}
+    assert json.loads(r1.stdout)["cache"] == {"cage": "miss", "tetra": "miss", "modes": "miss"}
     r2 = bake(CHAIR, "-o", str(second), *FAST, "--cache", str(cache), "--json")
-    assert json.loads(r2.stdout)["cache"] == {"cage": "hit", "modes": "hit"}
+    assert json.loads(r2.stdout)["cache"] == {"cage": "hit", "tetra": "hit", "modes": "hit"}
     for name in ("chair.glb", "chair.fracture.json", "chair.fracture.bin"):
         assert (first / name).read_bytes() == (second / name).read_bytes()
     # Changing only a later stage's option keeps the cached modes.
     r3 = bake(CHAIR, "-o", str(third), *FAST, "--cache", str(cache), "--set", "smooth.smoothing=0", "--json")
-    assert json.loads(r3.stdout)["cache"] == {"cage": "hit", "modes": "hit"}
+    assert json.loads(r3.stdout)["cache"] == {"cage": "hit", "tetra": "hit", "modes": "hit"}
     # Changing the modes recomputes them but keeps the cage.
     r4 = bake(CHAIR, "-o", str(third), *FAST[:2], "--set", "modes.num_modes=3", "--cache", str(cache), "--json")
-    assert json.loads(r4.stdout)["cache"] == {"cage": "hit", "modes": "miss"}
+    assert json.loads(r4.stdout)["cache"] == {"cage": "hit", "tetra": "hit", "modes": "miss"}
     # A damaged entry is recomputed, not trusted.
     for entry in cache.iterdir():
         entry.write_bytes(b"garbage")
     r5 = bake(CHAIR, "-o", str(third), *FAST, "--cache", str(cache), "--json")
-    assert r5.exit_code == 0 and json.loads(r5.stdout)["cache"] == {"cage": "miss", "modes": "miss"}
+    assert r5.exit_code == 0 and json.loads(r5.stdout)["cache"] == {"cage": "miss", "tetra": "miss", "modes": "miss"}
 
 
 def test_keep_going_bakes_the_others_and_fails_at_the_end(tmp_path):

@@ -282,7 +282,6 @@ def test_self_intersections_and_manifold_checks():
     V[0] = -1.1 * V[0]  # pull one vertex through the sphere
     assert len(trigeom.self_intersections(V, F)) > 0
     # Two spheres sharing one vertex: edge-manifold, not vertex-manifold.
-    W = np.vstack([sphere.vertices, sphere.vertices + [2.0, 0, 0]])
     G = np.vstack([F, F + len(sphere.vertices)])
     a, b = int(np.argmax(sphere.vertices[:, 0])), int(np.argmin(sphere.vertices[:, 0])) + len(sphere.vertices)
     G[G == b] = a

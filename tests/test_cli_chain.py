@@ -10,24 +10,36 @@ from click.testing import CliRunner
 
 from fracture_cli.cli import cli
 from fracture_cli.io.cage_io import load_tetmesh
+from fracture_cli.pipeline import STEPS
 
 from conftest import SAMPLE_ASSETS
 
+SMALL = ["--set", "cage.target_faces=600", "--set", "modes.num_modes=3", "--set", "material.grain_axis=y",
+         "--set", "material.grain_strength=4"]
+BYTES = ("chair.glb", "chair.fracture.json", "chair.fracture.bin")
 
-def test_full_chain_writes_inspection_files_and_outputs(tmp_path):
+
+def test_chain_of_every_stage_writes_what_bake_writes_byte_for_byte(tmp_path):
     chair = os.path.join(SAMPLE_ASSETS, "chair.glb")
-    args = ["load", chair, "repair", "cage", "--target-faces", "600", "save-cage", str(tmp_path / "cage.obj"),
-            "tetra", "save-tets", str(tmp_path / "tets.npz"), "material", "--grain-axis", "y",
-            "--grain-strength", "4", "modes", "-k", "3", "pieces", "smooth", "--smoothing", "0",
-            "fragments", "export", str(tmp_path / "out")]
-    result = CliRunner().invoke(cli, args)
+    chain = SMALL + ["load", chair, "repair", "cage", "save-cage", str(tmp_path / "cage.obj"), "tetra", "save-tets",
+                     str(tmp_path / "tets.npz"), "material", "modes", "pieces", "smooth", "fragments", "runtime",
+                     "export", str(tmp_path / "chain")]
+    result = CliRunner().invoke(cli, chain)
     assert result.exit_code == 0, result.output
+    result = CliRunner().invoke(cli, ["bake", chair, "-o", str(tmp_path / "bake")] + SMALL)
+    assert result.exit_code == 0, result.output
+    for name in BYTES:
+        assert (tmp_path / "chain" / name).read_bytes() == (tmp_path / "bake" / name).read_bytes(), name
+    reports = [json.loads((tmp_path / d / "chair.report.json").read_text()) for d in ("chain", "bake")]
+    for report in reports:
+        report.pop("seconds")
+    assert reports[0] == reports[1]
+    # The written report times every stage (export is still running when it is written).
+    assert set(json.loads((tmp_path / "bake" / "chair.report.json").read_text())["seconds"]) == set(STEPS[:-1])
     assert (tmp_path / "cage.obj").stat().st_size > 0
     tets = load_tetmesh(str(tmp_path / "tets.npz"))
     assert tets.num_tets > 0 and np.all(tets.tet_volumes > 0)
-    for name in ("chair.glb", "chair.fracture.json", "chair.fracture.bin"):
-        assert (tmp_path / "out" / name).is_file()
-    header = json.loads((tmp_path / "out" / "chair.fracture.json").read_text())
+    header = json.loads((tmp_path / "chain" / "chair.fracture.json").read_text())
     assert header["counts"]["modes"] == 3
 
 
@@ -37,7 +49,8 @@ def test_chain_resumes_from_saved_tets(tmp_path):
     assert runner.invoke(cli, ["load", chair, "cage", "--target-faces", "500", "tetra", "save-tets",
                                str(tmp_path / "t.npz")]).exit_code == 0
     result = runner.invoke(cli, ["load", chair, "load-tets", str(tmp_path / "t.npz"), "modes", "-k", "2", "pieces",
-                                 "fragments", "export", str(tmp_path / "out")])
+                                 "smooth",
+                                 "fragments", "runtime", "export", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
     assert (tmp_path / "out" / "chair.glb").is_file()
 

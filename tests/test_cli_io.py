@@ -122,3 +122,45 @@ def test_normalization_is_unit_diagonal():
     np.testing.assert_allclose((lo + hi) / 2, 0.0, atol=1e-9)
     tm = trimesh.load_scene(os.path.join(SAMPLE_ASSETS, "chair.glb")).to_geometry()
     np.testing.assert_allclose(s.world_vertices().min(0), tm.vertices.min(0), atol=1e-9)
+
+
+@pytest.mark.parametrize("override, key", [
+    ("fragments.interior_color=[nan, 0.5, 0.5, 1.0]", "fragments.interior_color"),
+    ("smooth.smoothing=nan", "smooth.smoothing"),
+    ("fragments.uv_scale=inf", "fragments.uv_scale"),
+    ("runtime.threshold=nan", "runtime.threshold"),
+    ("runtime.threshold=inf", "runtime.threshold"),
+    ("material.boxes=[{name = \"a\", min = [0, 0, -inf], max = [1, 1, 1], strength = 2.0}]", "material.boxes"),
+])
+def test_non_finite_options_are_refused_before_any_work(tmp_path, monkeypatch, override, key):
+    monkeypatch.setattr("fracture_cli.io.read.load_surface", lambda *a: pytest.fail("loaded before the check"))
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["bake", os.path.join(SAMPLE_ASSETS, "vase.obj"), "-o", str(out),
+                                      "--set", override])
+    assert result.exit_code == 1, result.output
+    errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and key in errors[0] and "finite" in errors[0], result.stderr
+    assert not out.exists()
+
+
+def test_non_finite_flag_is_a_usage_error(tmp_path):
+    result = CliRunner().invoke(cli, ["load", os.path.join(SAMPLE_ASSETS, "vase.obj"), "smooth", "--smoothing", "nan"])
+    assert result.exit_code == 2
+    assert "--smoothing nan must be a finite number" in result.output
+
+
+@pytest.mark.parametrize("threshold", ["nan", "-1"])
+def test_impact_threshold_must_be_a_number_at_least_zero(tmp_path, threshold):
+    from test_runtime import slab_bar
+
+    from fracture_cli.runtime.format import write_runtime
+    from fracture_cli.stages.precompute import RuntimeOptions, runtime
+
+    path, _ = write_runtime(runtime(*slab_bar(k=3), RuntimeOptions()), tmp_path / "bar.fracture.json")
+    result = CliRunner().invoke(cli, ["impact", str(path), "--point", "0", "0", "0", "--impulse", "1", "0", "0",
+                                      "--threshold", threshold])
+    assert result.exit_code == 1
+    assert result.output.strip().startswith("error:") and "threshold must be a number >= 0" in result.output
+    result = CliRunner().invoke(cli, ["impact", str(path), "--point", "0", "0", "0", "--impulse", "1", "0", "0",
+                                      "--threshold", "inf"])
+    assert result.exit_code == 0 and "0 of" in result.output  # unbreakable: nothing breaks

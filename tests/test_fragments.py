@@ -9,8 +9,8 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
+from fracture_cli.checks import fragment_invariants
 from fracture_cli.errors import StageError
-from fracture_cli.stages.checks import fragment_invariants
 from fracture_cli.stages.fragments import FragmentOptions, fragments
 from fracture_cli.stages.pieces import pieces
 from fracture_cli.stages.repair import RepairOptions, repair

@@ -65,12 +65,14 @@ def summarize(out_dir: str, stem: str) -> dict:
 
 def compare(expected: dict, got: dict, asset: str) -> list[str]:
     problems = []
-    diag = float(np.linalg.norm(np.subtract(expected["fragments"][0]["bbox_max"], expected["fragments"][0]["bbox_min"])))
+    first = expected["fragments"][0]
+    diag = float(np.linalg.norm(np.subtract(first["bbox_max"], first["bbox_min"])))
     for key, value in expected["counts"].items():
         if got["counts"].get(key) != value:
             problems.append(f"{asset}: counts.{key}: expected {value}, got {got['counts'].get(key)}")
     if len(expected["fragments"]) != len(got["fragments"]):
-        return problems + [f"{asset}: fragment count: expected {len(expected['fragments'])}, got {len(got['fragments'])}"]
+        return problems + [f"{asset}: fragment count: expected {len(expected['fragments'])}, "
+                           f"got {len(got['fragments'])}"]
     if not np.isclose(expected["input_volume"], got["input_volume"], rtol=VOLUME_RTOL):
         problems.append(f"{asset}: input_volume: expected {expected['input_volume']}, got {got['input_volume']}")
     for key, value in expected.get("faults", {}).items():

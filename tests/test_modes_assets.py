@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 
 import pytest
+from test_modes import _record_subproblems, compare_with_baseline
 
 from fracture_cli.io.read import load_surface
 from fracture_cli.stages.cage import CageOptions, cage
@@ -18,7 +19,6 @@ from fracture_cli.stages.repair import RepairOptions, repair
 from fracture_cli.stages.tetra import TetraOptions, tetra
 
 from conftest import SAMPLE_ASSETS
-from test_modes import _record_subproblems, compare_with_baseline
 
 
 @pytest.mark.parametrize("asset", ["chair.glb", "pillar.glb", "vase.obj"])

@@ -66,7 +66,7 @@ def test_piece_graph_matches_face_adjacency(grid):
     towards = P.centroids[P.edges[:, 1]] - P.centroids[P.edges[:, 0]]
     assert np.all(np.einsum("ij,ij->i", towards, P.edge_normals) > 0)
     # Interfaces here are planar, so the centroid lies on the plane the normal spans.
-    for e, (p, q) in enumerate(P.edges):
+    for e in range(len(P.edges)):
         axis = np.argmax(np.abs(P.edge_normals[e]))
         assert abs(P.edge_normals[e][axis]) == pytest.approx(1.0)
 

@@ -13,10 +13,10 @@ import sys
 import numpy as np
 import pytest
 
-from fracture_cli.errors import InputError
+from fracture_cli.errors import ImpactArgumentError, InputError, RuntimeFileError
 from fracture_cli.runtime.format import RuntimeData, encode, load_runtime, write_runtime
 from fracture_cli.runtime.impact import _SpanningForest, components, project_impact
-from fracture_cli.stages.runtime import RuntimeOptions, runtime
+from fracture_cli.stages.precompute import RuntimeOptions, runtime
 from fracture_cli.testing import grid_tetmesh
 from fracture_cli.types import Modes, Normalization, Pieces, TetMesh
 
@@ -226,7 +226,7 @@ def test_components_match_a_reference_union_find():
             broken = rng.random(len(pairs)) < rng.random()
             parent = list(range(p))
 
-            def find(a):
+            def find(a, parent=parent):
                 while parent[a] != a:
                     a = parent[a]
                 return a
@@ -247,13 +247,57 @@ def test_impact_module_imports_numpy_only():
     assert out.stdout.strip() == "[]"
 
 
-def test_bad_arguments_are_input_errors(bar_data):
-    with pytest.raises(InputError):
-        project_impact(bar_data, (0, 0), (1, 0, 0))
-    with pytest.raises(InputError):
-        project_impact(bar_data, (0, 0, 0), (1, 0, float("nan")))
-    with pytest.raises(InputError):
-        project_impact(bar_data, (0, 0, 0), (1, 0, 0), threshold=-1)
+@pytest.mark.parametrize("point, impulse, threshold", [
+    ((0, 0), (1, 0, 0), None),
+    ((0, 0, 0), (1, 0, float("nan")), None),
+    ((0, 0, 0), (1, 0, float("inf")), None),
+    ((float("inf"), 0, 0), (1, 0, 0), None),
+    ((0, 0, 0), (1, 0, 0), -1.0),
+    ((0, 0, 0), (1, 0, 0), float("nan")),
+    ((0, 0, 0), (1, 0, 0), float("-inf")),
+    ((0, 0, 0), (1, 0, 0), "hard"),
+])
+def test_bad_arguments_are_the_readers_own_value_error(bar_data, point, impulse, threshold):
+    with pytest.raises(ImpactArgumentError) as info:
+        project_impact(bar_data, point, impulse, threshold)
+    assert isinstance(info.value, ValueError) and isinstance(info.value, InputError)
+
+
+@pytest.mark.parametrize("fixture", ["bar_data", "bar_data_3d"])
+def test_projection_is_scale_invariant_down_to_subnormal_and_up_to_overflow(fixture, request):
+    """Only impulse / threshold matters, for every magnitude a double can hold (FORMAT.md section 4)."""
+    data = request.getfixturevalue(fixture)
+    points, impulses = random_hits(data, 25, seed=11)
+    seen = set()
+    for point, impulse in zip(points, impulses):
+        for T in (0.1, 0.5, 2.0):
+            reference = project_impact(data, point, impulse, T)
+            seen.add(tuple(reference.groups.tolist()))
+            for scale in (1e-300, 1e-170, 1e-100, 1e100, 1e155, 1e200, 1e300):
+                scaled = project_impact(data, point, impulse * scale, T * scale)
+                assert scaled.groups.tolist() == reference.groups.tolist(), (scale, T)
+                assert scaled.broken.tolist() == reference.broken.tolist()
+                np.testing.assert_allclose(scaled.displacement / scale, reference.displacement, rtol=1e-12)
+    assert len(seen) > 2
+
+
+def test_threshold_limits(bar_data_3d):
+    data = bar_data_3d
+    point = data.sites[0]
+    everything = project_impact(data, point, (0.3, -1.0, 0.2), 0.0)
+    assert everything.broken.sum() == np.count_nonzero(
+        np.linalg.norm(everything.displacement[data.edges[:, 0]] - everything.displacement[data.edges[:, 1]], axis=1))
+    assert everything.broken.any()
+    # T / m underflows to 0: every nonzero jump breaks, like T = 0.
+    tiny = project_impact(data, point, (0.3e300, -1.0e300, 0.2e300), 1e-300)
+    assert tiny.broken.tolist() == everything.broken.tolist()
+    # T / m overflows to inf, or T is inf: nothing breaks.
+    for impulse, T in (((0.3e-300, -1e-300, 0.2e-300), 1e300), ((1e300, 1e300, -1e300), float("inf"))):
+        result = project_impact(data, point, impulse, T)
+        assert not result.broken.any() and result.groups.tolist() == [0] * data.p
+    # A zero impulse breaks nothing, even with T = 0.
+    zero = project_impact(data, point, (0.0, -0.0, 0.0), 0.0)
+    assert not zero.broken.any() and not zero.displacement.any()
 
 
 # ---------------------------------------------------------------- the precomputation stage
@@ -367,8 +411,50 @@ def test_load_reports_damaged_files(bar_data, tmp_path, damage, message):
         bin_path.write_bytes(bytes(raw))
     elif damage == "no_arrays":
         _break(json_path, lambda h: h.pop("arrays"))
-    with pytest.raises(InputError, match=message):
+    with pytest.raises(RuntimeFileError, match=message):
         load_runtime(json_path)
+
+
+_JUNK = [None, True, -1, 0, 3, 2**63, 2**64 + 5, 10**30, 1.5, float("inf"), float("nan"), "x", "..", "a\u0000b",
+         [], [2**40, 2**40], [-1, 3], [1e300], {}, {"a": 1}]
+
+
+def _mutations(header):
+    """(path, junk) for every value in the header (recursively) and every junk value."""
+    def walk(node, path):
+        if isinstance(node, dict):
+            for key, value in node.items():
+                yield from walk(value, path + (key,))
+        elif isinstance(node, list) and node and not isinstance(node[0], (int, float)):
+            for i, value in enumerate(node):
+                yield from walk(value, path + (i,))
+        if path:
+            yield path
+
+    for path in walk(header, ()):
+        for junk in _JUNK:
+            yield path, junk
+
+
+def test_tampered_headers_raise_only_the_readers_format_error(bar_data, tmp_path):
+    """Every header value replaced by junk (huge, negative, wrong type, inf): RuntimeFileError or a valid load."""
+    json_path, _ = write_runtime(bar_data, tmp_path / "x.fracture.json")
+    original = json.loads(json_path.read_text())
+    tried = 0
+    for path, junk in _mutations(original):
+        header = json.loads(json.dumps(original))
+        node = header
+        for key in path[:-1]:
+            node = node[key]
+        node[path[-1]] = junk
+        json_path.write_text(json.dumps(header))
+        tried += 1
+        try:
+            loaded = load_runtime(json_path)
+        except RuntimeFileError:
+            continue
+        project_impact(loaded, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0))  # whatever loads must also be usable
+    assert tried > 300
 
 
 # ---------------------------------------------------------------- regrouped GLB

@@ -5,7 +5,7 @@ then it is smoothed with lambda = 0 (tet-aligned faults) and with the recipe's
 lambda, cut into fragments, and checked with the independent invariant checks
 of ``test_fragments.check_invariants`` (trimesh, manifold3d, open3d). With
 smoothing on, the faults must look smoother: their mean dihedral angle and
-their crease density (:func:`fracture_cli.stages.checks.fault_shape`) drop.
+their crease density (:func:`fracture_cli.checks.fault_shape`) drop.
 """
 
 from __future__ import annotations
@@ -15,11 +15,12 @@ import os
 import tomllib
 
 import pytest
+from test_fragments import check_invariants
 
+from fracture_cli.checks import fragment_fault_shape
 from fracture_cli.io.read import load_surface
 from fracture_cli.recipe import load_recipe
 from fracture_cli.stages.cage import cage
-from fracture_cli.stages.checks import fragment_fault_shape
 from fracture_cli.stages.fragments import fragments
 from fracture_cli.stages.material import material
 from fracture_cli.stages.modes import modes
@@ -29,7 +30,6 @@ from fracture_cli.stages.smooth import smooth
 from fracture_cli.stages.tetra import tetra
 
 from conftest import SAMPLE_ASSETS
-from test_fragments import check_invariants
 
 with open(os.path.join(SAMPLE_ASSETS, "manifest.toml"), "rb") as _fh:
     MANIFEST = sorted(tomllib.load(_fh)["assets"].items())

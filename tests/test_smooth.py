@@ -8,14 +8,18 @@ import manifold3d
 import numpy as np
 import pytest
 
-from fracture_cli.stages.checks import fault_roughness, point_triangle_distance, region_fault_roughness
-from fracture_cli.stages.pieces import pieces
 from fracture_cli import tetgeom
-from fracture_cli.stages.smooth import (SmoothOptions, _smoothed_field, _smoothed_vertices, _Topology, _union_regions,
-                                        _winning_field, smooth)
+from fracture_cli.checks import fault_roughness, region_fault_roughness
+from fracture_cli.stages.pieces import pieces
+from fracture_cli.stages.smooth import SmoothOptions, smooth
+from fracture_cli.stages.smooth.cells import union_regions as _union_regions
+from fracture_cli.stages.smooth.field import smoothed_field as _smoothed_field
+from fracture_cli.stages.smooth.field import winning_field as _winning_field
+from fracture_cli.stages.smooth.geometric import smoothed_vertices as _smoothed_vertices
+from fracture_cli.stages.smooth.topology import Topology as _Topology
 from fracture_cli.testing import grid_tetmesh, jittered_grid_tetmesh
+from fracture_cli.trigeom import point_triangle_distance
 from fracture_cli.types import Modes, Regions, TetMesh
-
 
 # The field method at the strength it was tuned for (the stage's default is the geometric method), on the cage
 # tets themselves: these tests are about the level-set regions, not the refinement.
@@ -210,7 +214,7 @@ def test_vanishing_piece_is_raised_to_about_its_volume():
 
 
 def test_vanishing_piece_keeps_its_tets(caplog, monkeypatch):
-    import fracture_cli.stages.smooth as smooth_module
+    import fracture_cli.stages.smooth.field as smooth_module
 
     tm, P, lonely, lonely_piece = lonely_piece_case()
     # When no raise within bounds brings the piece back (here: no raise allowed), it keeps its tet.
@@ -464,8 +468,8 @@ def test_sliding_deterministic():
 
 
 def test_sliding_on_a_sample_asset(chair_case):
+    from fracture_cli.checks import fragment_invariants
     from fracture_cli.recipe import load_recipe
-    from fracture_cli.stages.checks import fragment_invariants
     from fracture_cli.stages.fragments import fragments
 
     surface, tm, P = chair_case
@@ -511,7 +515,7 @@ def test_red_refinement_is_a_conforming_positive_split():
 
 
 def test_refined_field_partitions_the_cage_and_flattens_creases():
-    from fracture_cli.stages.checks import fault_shape, region_faults
+    from fracture_cli.checks import fault_shape, region_faults
 
     tm = jittered_grid(5, seed=2)
     P = plane_pieces(tm)
@@ -522,7 +526,8 @@ def test_refined_field_partitions_the_cage_and_flattens_creases():
         assert closed_by_position(V, F)
     check_partition(tm, R, 1e-9)
     shape0, shape = fault_shape(*region_faults(R0)), fault_shape(*region_faults(R))
-    print(f"refined field: mean dihedral {shape0['mean_dihedral_degrees']:.1f} -> {shape['mean_dihedral_degrees']:.1f}, "
+    print(f"refined field: mean dihedral {shape0['mean_dihedral_degrees']:.1f} -> "
+          f"{shape['mean_dihedral_degrees']:.1f}, "
           f"creases {shape0['crease_density']:.2f} -> {shape['crease_density']:.2f}")
     assert shape["mean_dihedral_degrees"] < 0.5 * shape0["mean_dihedral_degrees"]
     assert shape["crease_density"] < 0.5 * shape0["crease_density"]
@@ -537,7 +542,7 @@ def test_refinement_respects_the_tet_budget(caplog):
 
 
 def test_fault_shape_counts_creases_not_fans():
-    from fracture_cli.stages.checks import fault_shape
+    from fracture_cli.checks import fault_shape
 
     # A flat square fanned into 4 triangles: no dihedral, no crease.
     V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0]], float)

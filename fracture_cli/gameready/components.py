@@ -20,10 +20,10 @@ import manifold3d
 import numpy as np
 
 from fracture_cli.gameready.mass import mass_properties
-from fracture_cli.stages._solids import shell_mask
+from fracture_cli.meshtopo import manifold_patches
+from fracture_cli.stages._solids import SplitMesh, from_manifold, shell_mask, to_manifold
 from fracture_cli.stages.fragments import _stable_order
-from fracture_cli.stages.repair import _from_manifold, _manifold, _manifold_patches
-from fracture_cli.trigeom import BoxGrid, default_cell
+from fracture_cli.trigeom import BoxGrid, default_cell, face_signed_volumes
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments
 
 log = logging.getLogger(__name__)
@@ -87,14 +87,11 @@ def body_faces(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
         return []
     _, weld = np.unique(V, axis=0, return_inverse=True)
     W = weld.reshape(-1)[F]
-    patch = _manifold_patches(W)[0]
+    patch = manifold_patches(W)[0]
     _, patch = np.unique(patch, return_inverse=True)
     patch = patch.reshape(-1)
     num = int(patch.max()) + 1
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    origin = V.mean(axis=0)
-    tet = np.einsum("ij,ij->i", a - origin, np.cross(b - origin, c - origin)) / 6.0
-    volume = np.bincount(patch, weights=tet, minlength=num)
+    volume = np.bincount(patch, weights=face_signed_volumes(V - V.mean(axis=0), F), minlength=num)
     lo = np.full((num, 3), np.inf)
     hi = np.full((num, 3), -np.inf)
     for k in range(3):
@@ -389,12 +386,12 @@ def _group_fragment(fragments: Fragments, members: list, piece: int) -> Fragment
         uvs = frag.uvs[used] if frag.uvs is not None else np.zeros((len(used), 2))
         props = np.column_stack([frag.vertices[used], uvs, frag.normals[used]])
         _, first, weld = np.unique(props[:, :3], axis=0, return_index=True, return_inverse=True)
-        solid, ids = _manifold(props, local.reshape(-1, 3), frag.material_ids[faces], first[weld.reshape(-1)],
-                               len(fragments.materials))
+        body = SplitMesh(props, local.reshape(-1, 3), frag.material_ids[faces], first[weld.reshape(-1)])
+        solid, ids = to_manifold(body, len(fragments.materials))
         solids.append(solid)
         id_to_material.update(ids)
     union = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add)
-    props, F, material_ids = _from_manifold(union, id_to_material)
+    props, F, material_ids = from_manifold(union, id_to_material)
     keep = shell_mask(union.to_mesh64(), _SHELL_VOLUME * fragments.input_volume)
     F, material_ids = F[keep], material_ids[keep]
     used, local = np.unique(F, return_inverse=True)

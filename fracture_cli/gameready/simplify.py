@@ -35,9 +35,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fracture_cli.stages.checks import point_triangle_distance
 from fracture_cli.stages.fragments import _box_uvs
-from fracture_cli.trigeom import edge_manifold_closed, self_intersections, vertex_manifold
+from fracture_cli.trigeom import edge_manifold_closed, point_triangle_distance, self_intersections, vertex_manifold
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments
 
 log = logging.getLogger(__name__)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import json
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +27,25 @@ _FLOAT = 5126
 _UINT32 = 5125
 _ARRAY_BUFFER = 34962
 _ELEMENT_ARRAY_BUFFER = 34963
+
+
+@dataclass(frozen=True)
+class MaterialSource:
+    """What :func:`glb_bytes` carries over from an input material besides its name and colour.
+
+    The readers of this package fill it (trimesh's material objects have the
+    same attributes, so they are carried over as well).
+
+    Attributes
+    ----------
+    baseColorTexture : PIL.Image.Image or None
+        Written as an embedded PNG.
+    metallicFactor, roughnessFactor : float
+    """
+
+    baseColorTexture: object = None
+    metallicFactor: float = 1.0
+    roughnessFactor: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -111,7 +131,8 @@ class GlbBuffer:
         return len(self.accessors) - 1
 
 
-def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Material, ...], extend=None) -> bytes:
+def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Primitive], np.ndarray]],
+              materials: tuple[Material, ...], extend=None) -> bytes:
     """Encode meshes as a GLB file, one node per mesh.
 
     Parameters
@@ -134,7 +155,9 @@ def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Materi
     buffer = GlbBuffer()
     add_view, add_accessor = buffer.add_view, buffer.add_accessor
 
-    images, textures, samplers = [], [], []
+    images: list[dict] = []
+    textures: list[dict] = []
+    samplers: list[dict] = []
     material_json = []
     for material in materials:
         png = _texture_png(material)
@@ -164,7 +187,8 @@ def glb_bytes(meshes: list[tuple[str, list[Primitive]]], materials: tuple[Materi
             if prim.uvs is not None:
                 uv = np.array(prim.uvs, dtype=np.float64)
                 uv[:, 1] = 1.0 - uv[:, 1]
-                attributes["TEXCOORD_0"] = add_accessor(np.ascontiguousarray(uv, dtype="<f4"), "VEC2", _FLOAT, _ARRAY_BUFFER)
+                attributes["TEXCOORD_0"] = add_accessor(np.ascontiguousarray(uv, dtype="<f4"), "VEC2", _FLOAT,
+                                                        _ARRAY_BUFFER)
             idx = np.ascontiguousarray(prim.indices, dtype="<u4").reshape(-1)
             indices = add_accessor(idx, "SCALAR", _UINT32, _ELEMENT_ARRAY_BUFFER)
             prims.append({"attributes": attributes, "indices": indices, "material": int(prim.material), "mode": 4})

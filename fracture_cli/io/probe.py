@@ -13,11 +13,11 @@ import os
 import struct
 
 from fracture_cli.errors import InputError
+from fracture_cli.io.gltf_read import buffer_file, check_required_extensions
+from fracture_cli.io.inputs import external_uri
 
 _GLB_MAGIC = b"glTF"
 _GLB_JSON = 0x4E4F534A
-_STL_HEADER = 84
-_STL_RECORD = 50
 _CHUNK = 1 << 24
 # glTF primitive modes: points, lines, line loop, line strip, triangles, strip, fan.
 _TRIANGLE_MODES = {4: "list", 5: "strip", 6: "fan"}
@@ -106,6 +106,7 @@ def _probe_glb(path: str) -> int:
             raise InputError(f"has a corrupt JSON chunk ({exc})", path=path) from exc
     if not isinstance(doc, dict):
         raise InputError("has a corrupt JSON chunk (not an object)", path=path)
+    check_required_extensions(doc, path)
     binary = size - (20 + chunk_length + (-chunk_length % 4))
     needed = sum(int(b.get("byteLength", 0)) for b in doc.get("buffers", [])[:1] if "uri" not in b)
     if needed and binary - 8 < needed:
@@ -122,35 +123,35 @@ def _probe_gltf(path: str) -> int:
         raise InputError(f"is not valid glTF JSON ({str(exc)[:120]})", path=path) from exc
     if not isinstance(doc, dict):
         raise InputError("is not valid glTF JSON (not an object)", path=path)
+    check_required_extensions(doc, path)
     folder = os.path.dirname(os.path.abspath(path))
-    for buffer in doc.get("buffers", []):
-        uri = buffer.get("uri", "") if isinstance(buffer, dict) else ""
-        if uri and not uri.startswith("data:"):
-            from urllib.parse import unquote
-
-            if not os.path.isfile(os.path.join(folder, unquote(uri))):
+    for index, buffer in enumerate(doc.get("buffers", [])):
+        if isinstance(buffer, dict) and external_uri(buffer.get("uri")) is not None:
+            uri = buffer["uri"]
+            if not os.path.isfile(buffer_file(folder, uri, index, path)):
                 raise InputError(f"references the buffer file '{uri}', which is missing (keep it beside the .gltf, "
                                  "or export a single .glb)", path=path)
     return _gltf_triangles(doc)
 
 
 def _probe_stl(path: str) -> int:
+    """Triangles by the rules of :mod:`fracture_cli.io.stl` (binary by size, not by the word 'solid')."""
+    from fracture_cli.io.stl import HEADER, RECORD, header_count, not_stl, size_count
+
     size = os.path.getsize(path)
     with open(path, "rb") as fh:
-        head = fh.read(_STL_HEADER)
-    if len(head) == _STL_HEADER:
-        declared = struct.unpack_from("<I", head, 80)[0]
-        if size == _STL_HEADER + _STL_RECORD * declared:
-            return declared  # binary, even when its header starts with 'solid'
-    else:
-        declared = None
+        head = fh.read(HEADER)
+    declared = header_count(head)
+    if declared is not None and size == HEADER + RECORD * declared:
+        return declared
     if head.lstrip()[:5].lower() == b"solid":
-        return _count_bytes(path, b"endfacet")
-    expected = f" ({_STL_HEADER + _STL_RECORD * declared:,} bytes)" if declared is not None else ""
-    raise InputError(
-        f"could not be read as STL: not a valid STL file: it does not start with 'solid' (ASCII STL), and its size ({size:,} bytes) does "
-        "not match the triangle count in its binary header"
-        + (f" ({declared:,} triangles{expected})" if declared is not None else ""), path=path)
+        facets = _count_bytes(path, b"endfacet")
+        if facets:
+            return facets
+    fitted = size_count(size)
+    if fitted is not None:
+        return fitted
+    raise not_stl(path, size, declared)
 
 
 def _count_bytes(path: str, needle: bytes, line_start: bool = False) -> int:

@@ -1,9 +1,11 @@
 """Read a mesh file into a :class:`~fracture_cli.types.SurfaceMesh`.
 
-Every format trimesh reads goes through one function, :func:`load_surface`,
-which checks what the pipeline relies on (finite coordinates, at least one
-triangle) and reports problems as one-line :class:`InputError` messages that
-name the file.
+Every format goes through one function, :func:`load_surface`: it refuses what
+is over the triangle limit or mislabelled before decoding (:mod:`.probe`),
+reads the file's parts with the format's reader (:mod:`.parts`), joins them
+(one material slot per material of the file), checks what the pipeline relies
+on (finite coordinates, at least one triangle), and reports problems as
+one-line :class:`InputError` messages that name the file.
 """
 
 from __future__ import annotations
@@ -15,13 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli.errors import InputError
+from fracture_cli.io.parts import read_parts
 from fracture_cli.io.probe import probe_triangles
 from fracture_cli.options import option
 from fracture_cli.types import Material, Normalization, SurfaceMesh
 
 log = logging.getLogger(__name__)
 
-# Extension -> trimesh file type; the only formats we promise to read.
+# Extension -> file type; the only formats we promise to read.
 READERS = {
     ".obj": "obj",
     ".ply": "ply",
@@ -37,26 +40,6 @@ class LoadOptions:
     """Options of the ``load`` stage."""
 
     max_triangles: int = option(5_000_000, "refuse inputs with more triangles than this", min=1)
-
-
-def _material_from_trimesh(visual, fallback_name: str) -> Material:
-    mat = getattr(visual, "material", None)
-    if mat is None:
-        return Material(name=fallback_name)
-    name = getattr(mat, "name", None) or fallback_name
-    color = None
-    factor = getattr(mat, "baseColorFactor", None)
-    if factor is not None:
-        color = np.asarray(factor, dtype=np.float64).reshape(-1)
-    elif getattr(mat, "diffuse", None) is not None:
-        color = np.asarray(mat.diffuse, dtype=np.float64).reshape(-1)
-    if color is not None and color.size >= 3:
-        if color.max() > 1.0:
-            color = color / 255.0
-        rgba = tuple(float(c) for c in np.append(color[:4], [1.0] * (4 - min(color.size, 4))))
-    else:
-        rgba = (0.8, 0.8, 0.8, 1.0)
-    return Material(name=str(name), base_color=rgba, source=mat)
 
 
 # Warn when 32-bit coordinates are coarser than this fraction of the model's bounding-box diagonal.
@@ -103,6 +86,64 @@ def smooth_normals_welded(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray
     return out
 
 
+def double_sided_back_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Which triangles (m,) bool are the second side of a double-sided surface.
+
+    Parameters
+    ----------
+    V : (n, 3) float
+    F : (m, 3) int
+
+    Returns
+    -------
+    (m,) bool
+        In every connected part (vertices welded by position) whose every
+        non-degenerate triangle has a coincident copy facing the other way,
+        all triangles but the first (in file order) on each set of three
+        corners. Elsewhere False: a face shared by two touching solids (two
+        stacked boxes) is such a pair too, but its part has unpaired faces,
+        and repair removes both copies there, as it should.
+
+    Notes
+    -----
+    Without this, the two sides cancel: repair drops coincident opposite
+    pairs as internal walls and nothing is left of a double-sided closed
+    surface (exported with "double-sided" baked into the geometry).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    drop = np.zeros(len(F), dtype=bool)
+    if len(F) < 2:
+        return drop
+    _, weld = np.unique(V, axis=0, return_inverse=True)
+    W = weld.reshape(-1)[F]
+    ok = (W[:, 0] != W[:, 1]) & (W[:, 1] != W[:, 2]) & (W[:, 0] != W[:, 2])
+    corners = np.sort(W, axis=1)
+    first = np.argmin(W, axis=1)  # rotate each triangle to start at its smallest corner: orientation = next < last
+    rows = np.arange(len(W))
+    facing = W[rows, (first + 1) % 3] < W[rows, (first + 2) % 3]
+    _, key = np.unique(corners, axis=0, return_inverse=True)
+    key = key.reshape(-1)
+    up = np.bincount(key[ok & facing], minlength=key.max() + 1)
+    down = np.bincount(key[ok & ~facing], minlength=key.max() + 1)
+    paired = (up[key] > 0) & (down[key] > 0)
+    n = int(weld.max()) + 1
+    edges = np.concatenate([W[:, [0, 1]], W[:, [1, 2]]])
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    _, part = connected_components(graph, directed=False)
+    face_part = part[W[:, 0]]
+    unpaired = np.bincount(face_part[ok & ~paired], minlength=part.max() + 1)
+    whole = unpaired[face_part] == 0
+    if not (whole & paired).any():
+        return drop
+    # Keep the first triangle of each corner set in the double-sided parts, drop the rest.
+    order = np.lexsort((rows, key))
+    repeat = np.zeros(len(F), dtype=bool)
+    repeat[order[1:]] = key[order[1:]] == key[order[:-1]]
+    return whole & ok & repeat
+
+
 def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) -> SurfaceMesh:
     """Read a mesh file into a normalized :class:`SurfaceMesh`.
 
@@ -126,8 +167,6 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
         Missing, empty or unreadable file; unsupported extension; no triangles;
         NaN or inf coordinates; more triangles than ``options.max_triangles``.
     """
-    import trimesh
-
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
     if ext not in READERS:
@@ -149,24 +188,10 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
             f"{options.max_triangles:,} (raise it with --max-triangles or --set load.max_triangles=N, or decimate "
             "the asset first)", path=path)
 
-    try:
-        scene = trimesh.load_scene(path, file_type=READERS[ext], process=False)
-    except Exception as exc:  # trimesh raises many types; all mean "unreadable"
-        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        if isinstance(exc, IndexError):
-            raise InputError(f"has faces that reference missing vertices ({reason[:200]})", path=path) from exc
-        raise InputError(f"could not be read as {READERS[ext].upper()}: {reason[:200]}", path=path) from exc
-
-    parts = []
-    for node in sorted(scene.graph.nodes_geometry):
-        transform, geom_name = scene.graph[node]
-        geom = scene.geometry.get(geom_name)
-        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
-            continue
-        parts.append((node, np.asarray(transform, dtype=np.float64), geom))
+    parts = read_parts(path, READERS[ext])
     if not parts:
         raise InputError("contains no triangles (a point cloud, lines, or an empty scene)", path=path)
-    total = sum(len(g.faces) for _, _, g in parts)
+    total = sum(len(p.faces) for p in parts)
     if total > options.max_triangles:
         raise InputError(
             f"has {total:,} triangles, more than the limit of {options.max_triangles:,} "
@@ -174,46 +199,38 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
             path=path,
         )
 
-    vertices, faces, uvs, normals, colors, mat_ids = [], [], [], [], [], []
+    vertices: list[np.ndarray] = []
+    faces: list[np.ndarray] = []
+    uvs: list[np.ndarray] = []
+    normals: list[np.ndarray] = []
+    colors: list[np.ndarray] = []
+    mat_ids: list[np.ndarray] = []
     materials: list[Material] = []
-    mat_index: dict[str, int] = {}
-    any_uv = any(getattr(g.visual, "uv", None) is not None for _, _, g in parts)
-    any_normals = all("vertex_normals" in g._cache.cache for _, _, g in parts)
-    any_colors = any(getattr(g.visual, "kind", None) == "vertex" for _, _, g in parts)
+    mat_index: dict = {}  # material_key -> slot: two glTF materials with one name stay two slots
+    any_uv = any(p.uvs is not None for p in parts)
+    any_normals = all(p.normals is not None for p in parts)
+    any_colors = any(p.colors is not None for p in parts)
     offset = 0
     worst_precision = (0.0, 0.0, 0.0)  # (relative step, step, largest coordinate)
-    for node, transform, geom in parts:
-        v = np.asarray(geom.vertices, dtype=np.float64)
+    for part in parts:
+        v = part.vertices
         if not np.all(np.isfinite(v)):
             raise InputError("has non-finite vertex coordinates (NaN or inf)", path=path)
-        worst_precision = max(worst_precision, _float32_precision(v))
-        f = np.asarray(geom.faces, dtype=np.int64)
-        if f.min() < 0 or f.max() >= len(v):
-            raise InputError("has faces that reference missing vertices", path=path)
-        v = v @ transform[:3, :3].T + transform[:3, 3]
-        flip = np.linalg.det(transform[:3, :3]) < 0
-        if flip:  # a mirroring node transform turns triangles inside out
-            f = f[:, ::-1]
+        worst_precision = max(worst_precision, _float32_precision(part.raw_vertices if part.raw_vertices is not None
+                                                                  else v))
         vertices.append(v)
-        faces.append(f + offset)
+        faces.append(part.faces + offset)
         offset += len(v)
-        uv = getattr(geom.visual, "uv", None)
         if any_uv:
-            uvs.append(np.asarray(uv, dtype=np.float64)[:, :2] if uv is not None and len(uv) == len(v) else np.zeros((len(v), 2)))
-        if any_normals:
-            n = np.asarray(geom.vertex_normals, dtype=np.float64) @ np.linalg.inv(transform[:3, :3])
-            nn = np.linalg.norm(n, axis=1, keepdims=True)
-            normals.append(np.divide(n, nn, out=np.zeros_like(n), where=nn > 0))
+            uvs.append(part.uvs if part.uvs is not None else np.zeros((len(v), 2)))
+        if any_normals and part.normals is not None:
+            normals.append(part.normals)
         if any_colors:
-            if getattr(geom.visual, "kind", None) == "vertex":
-                colors.append(np.asarray(geom.visual.vertex_colors, dtype=np.float64)[:, :4] / 255.0)
-            else:
-                colors.append(np.ones((len(v), 4)))
-        material = _material_from_trimesh(geom.visual, fallback_name=f"material_{len(materials)}")
-        if material.name not in mat_index:
-            mat_index[material.name] = len(materials)
-            materials.append(material)
-        mat_ids.append(np.full(len(f), mat_index[material.name], dtype=np.int32))
+            colors.append(part.colors if part.colors is not None else np.ones((len(v), 4)))
+        if part.material_key not in mat_index:
+            mat_index[part.material_key] = len(materials)
+            materials.append(part.material)
+        mat_ids.append(np.full(len(part.faces), mat_index[part.material_key], dtype=np.int32))
 
     if worst_precision[0] > _PRECISION_WARNING:
         relative, step, largest = worst_precision
@@ -223,6 +240,12 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
                     path, largest, step, relative)
     V = np.concatenate(vertices)
     F = np.concatenate(faces)
+    M = np.concatenate(mat_ids)
+    back = double_sided_back_faces(V, F)
+    if back.any():
+        log.warning("load: %s: %d triangles are the back sides of a double-sided surface (each has a coincident "
+                    "copy facing the other way); one side is kept", path, int(back.sum()))
+        F, M = F[~back], M[~back]
     used = np.unique(F)
     if not np.all(np.isfinite(V[used])):
         raise InputError("has non-finite vertex coordinates (NaN or inf)", path=path)
@@ -231,7 +254,7 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
         raise InputError("has no extent (all vertices at one point)", path=path)
     Vn = normalization.to_normalized(V)
     if normals:
-        N = np.concatenate(normals)
+        N: np.ndarray = np.concatenate(normals)
     else:
         N = smooth_normals_welded(Vn, F)
     surface = SurfaceMesh(
@@ -240,7 +263,7 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
         uvs=np.concatenate(uvs) if uvs else None,
         normals=N,
         colors=np.concatenate(colors) if colors else None,
-        material_ids=np.concatenate(mat_ids),
+        material_ids=M,
         materials=tuple(materials),
         normalization=normalization,
         name=os.path.basename(path),

@@ -12,6 +12,7 @@ Depends on numpy and the standard library only (see :mod:`fracture_cli.runtime`)
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 import zlib
@@ -20,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fracture_cli.errors import InputError
+from fracture_cli.errors import RuntimeFileError
 
 FORMAT_NAME = "fracture-modes-runtime"
 FORMAT_VERSION = 1
@@ -145,8 +146,10 @@ def check_runtime(data: RuntimeData) -> str | None:
             return f"array {name} has non-finite values"
     if not (np.isfinite(data.default_threshold) and data.default_threshold >= 0):
         return f"default threshold must be a finite number >= 0, got {data.default_threshold!r}"
-    if not np.asarray(data.transform).shape == (4, 4):
+    if np.asarray(data.transform).shape != (4, 4):
         return "transform must be a 4x4 matrix"
+    if not (np.all(np.isfinite(data.transform)) and np.isfinite(data.radius)):
+        return "transform and impact radius must be finite numbers"
     return None
 
 
@@ -208,6 +211,9 @@ def _write_atomic(path: Path, payload: bytes) -> None:
     # Temp file in the same directory so os.replace is an atomic rename.
     fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", suffix=".tmp", dir=path.parent)
     try:
+        umask = os.umask(0o022)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; readable like the GLB (0644 with the usual umask)
         with os.fdopen(fd, "wb") as handle:
             handle.write(payload)
         os.replace(tmp, path)
@@ -245,58 +251,91 @@ def write_runtime(data: RuntimeData, json_path: str | os.PathLike) -> tuple[Path
     return json_path, bin_path
 
 
-def _fail(message: str, path) -> InputError:
-    return InputError(message, path=str(path))
+def _fail(message: str, path) -> RuntimeFileError:
+    return RuntimeFileError(message, path=str(path))
+
+
+def _count(value, what: str) -> int:
+    """``value`` if it is a JSON integer >= 0 (not a bool, float or string), else ValueError naming ``what``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"{what} must be a whole number >= 0, got {value!r}")
+    return value
+
+
+MAX_JSON_DEPTH = 64
+
+
+def _reject_constant(name: str):
+    raise ValueError(f"{name} is not JSON")
+
+
+def parse_header(header_bytes: bytes):
+    """The header's JSON value, parsed strictly (docs/FORMAT.md section 1).
+
+    UTF-8, standard JSON only (``NaN``, ``Infinity`` rejected), nesting at most
+    :data:`MAX_JSON_DEPTH` levels (checked before parsing, so a hostile file
+    cannot make the parser recurse without bound).
+
+    Raises
+    ------
+    ValueError
+        With the reason (``UnicodeDecodeError`` and ``json.JSONDecodeError`` are ValueErrors).
+    """
+    text = header_bytes.decode("utf-8")
+    depth, in_string, escaped = 0, False, False
+    for char in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif char == "\\":
+                escaped = True
+            elif char == '"':
+                in_string = False
+        elif char == '"':
+            in_string = True
+        elif char in "[{":
+            depth += 1
+            if depth > MAX_JSON_DEPTH:
+                raise ValueError(f"nested deeper than {MAX_JSON_DEPTH} levels")
+        elif char in "]}":
+            depth -= 1
+    return json.loads(text, parse_constant=_reject_constant)
 
 
 def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> RuntimeData:
     """Parse a header and its binary payload (see :func:`load_runtime`)."""
     try:
-        header = json.loads(header_bytes.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        header = parse_header(header_bytes)
+    except ValueError as exc:
         raise _fail(f"not a JSON runtime file ({exc})", path) from None
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
         raise _fail(f"not a fracture runtime file (expected \"format\": \"{FORMAT_NAME}\")", path)
     version = header.get("version")
-    if not isinstance(version, int) or version < 1 or version > FORMAT_VERSION:
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1 or version > FORMAT_VERSION:
         raise _fail(f"runtime file version {version!r} is not supported (this reader knows 1..{FORMAT_VERSION}); "
                     "re-bake the asset or update fracture", path)
     try:
         buffer = header["buffer"]
         table = header["arrays"]
         names = tuple(str(x) for x in header["fragment_names"])
-        counts = header["counts"]
-        dim = int(header["dim"])
+        counts = dict(header["counts"])
+        dim = _count(header["dim"], "dim")
         transform = np.asarray(header["transform"], dtype=np.float64).reshape(4, 4)
         threshold = float(header["default_threshold"])
         radius = float(header["impact_radius"])
         units = str(header.get("units", ""))
-        byte_length = int(buffer["byte_length"])
-    except (KeyError, TypeError, ValueError) as exc:
+        byte_length = _count(buffer["byte_length"], "buffer.byte_length")
+        crc = _count(buffer["crc32"], "buffer.crc32") if "crc32" in buffer else None
+        if not isinstance(table, dict):
+            raise TypeError("arrays must be an object")
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise _fail(f"runtime header is missing or has a malformed entry ({exc!r})", path) from None
     if len(binary) != byte_length:
         raise _fail(f"binary file has {len(binary)} bytes but the header says {byte_length} "
                     "(truncated or from another bake); re-bake the asset", path)
-    if "crc32" in buffer and zlib.crc32(binary) != int(buffer["crc32"]):
+    if crc is not None and zlib.crc32(binary) != crc:
         raise _fail("binary file does not match its header (crc32 differs; from another bake?)", path)
-    arrays = {}
-    for name, (dtype, ndim) in ARRAY_LAYOUT.items():
-        entry = table.get(name)
-        if not isinstance(entry, dict):
-            raise _fail(f"runtime header has no entry for array '{name}'", path)
-        try:
-            shape = tuple(int(x) for x in entry["shape"])
-            offset, length = int(entry["byte_offset"]), int(entry["byte_length"])
-            if entry["dtype"] != dtype:
-                raise ValueError(f"dtype {entry['dtype']!r}, expected {dtype!r}")
-        except (KeyError, TypeError, ValueError) as exc:
-            raise _fail(f"array '{name}' entry is malformed ({exc})", path) from None
-        nbytes = int(np.prod(shape, dtype=np.int64)) * 4
-        if len(shape) != ndim or min(shape, default=0) < 0 or length != nbytes:
-            raise _fail(f"array '{name}' has shape {list(shape)} and {length} bytes, which do not agree", path)
-        if offset < 0 or offset % 4 or offset + length > len(binary):
-            raise _fail(f"array '{name}' lies outside the binary file (offset {offset}, length {length})", path)
-        arrays[name] = np.frombuffer(binary, dtype=_DTYPES[dtype], count=nbytes // 4, offset=offset).reshape(shape)
+    arrays = {name: _array(table, name, binary, path) for name in ARRAY_LAYOUT}
     data = RuntimeData(fragment_names=names, transform=transform, default_threshold=threshold,
                        radius=radius, units=units, **arrays)
     problem = check_runtime(data)
@@ -309,6 +348,35 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     if problem:
         raise _fail(f"inconsistent runtime file: {problem}", path)
     return data
+
+
+def _array(table: dict, name: str, binary: bytes, path) -> np.ndarray:
+    """The array ``name`` of the header's table, as a read-only view of ``binary``; RuntimeFileError if malformed.
+
+    Shapes, offsets and lengths are checked with Python integers (no int64
+    overflow), so a tampered header cannot reach numpy with a size it rejects.
+    """
+    dtype, ndim = ARRAY_LAYOUT[name]
+    entry = table.get(name)
+    if not isinstance(entry, dict):
+        raise _fail(f"runtime header has no entry for array '{name}'", path)
+    try:
+        if entry.get("dtype") != dtype:
+            raise ValueError(f"dtype {entry.get('dtype')!r}, expected {dtype!r}")
+        shape = entry["shape"]
+        if not isinstance(shape, list):
+            raise TypeError(f"shape must be a list, got {shape!r}")
+        shape = tuple(_count(x, "shape entry") for x in shape)
+        offset = _count(entry["byte_offset"], "byte_offset")
+        length = _count(entry["byte_length"], "byte_length")
+    except (KeyError, TypeError, ValueError) as exc:
+        raise _fail(f"array '{name}' entry is malformed ({exc})", path) from None
+    nbytes = math.prod(shape) * 4
+    if len(shape) != ndim or length != nbytes:
+        raise _fail(f"array '{name}' has shape {list(shape)} and {length} bytes, which do not agree", path)
+    if offset % ALIGNMENT or offset + length > len(binary):
+        raise _fail(f"array '{name}' lies outside the binary file (offset {offset}, length {length})", path)
+    return np.frombuffer(binary, dtype=_DTYPES[dtype], count=nbytes // 4, offset=offset).reshape(shape)
 
 
 def load_runtime(path: str | os.PathLike) -> RuntimeData:
@@ -327,8 +395,9 @@ def load_runtime(path: str | os.PathLike) -> RuntimeData:
 
     Raises
     ------
-    InputError
-        If either file is missing, truncated, of another format or version, or
+    RuntimeFileError
+        (an :class:`~fracture_cli.errors.InputError` and a :class:`ValueError`)
+        if either file is missing, truncated, of another format or version, or
         inconsistent (shapes, counts, indices, checksum).
     """
     path = Path(path)
@@ -339,10 +408,10 @@ def load_runtime(path: str | os.PathLike) -> RuntimeData:
     except OSError as exc:
         raise _fail(f"cannot read runtime file ({exc.strerror})", path) from None
     try:
-        uri = json.loads(header_bytes.decode("utf-8"))["buffer"]["uri"]
+        uri = parse_header(header_bytes)["buffer"]["uri"]
     except Exception:
         uri = None
-    if not isinstance(uri, str) or not uri or os.path.basename(uri) != uri:
+    if not isinstance(uri, str) or not uri or os.path.basename(uri) != uri or uri in (".", "..") or "\0" in uri:
         # Let decode() report what is wrong with the header itself.
         return decode(header_bytes, b"", str(path)) if uri is None else _raise_bad_uri(uri, path)
     bin_path = path.with_name(uri)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fracture_cli.errors import InputError
+from fracture_cli.errors import ImpactArgumentError
 from fracture_cli.runtime.format import RuntimeData
 
 
@@ -57,7 +57,7 @@ class _Prepared:
         # Columns stored separately and contiguous: three 1-D passes beat a (s, 3) reduction.
         self.sx, self.sy, self.sz = (np.ascontiguousarray(sites[:, c]) for c in range(3))
         self.B = np.ascontiguousarray(data.B, dtype=np.float64)  # (s, k, d)
-        self.B1 = np.ascontiguousarray(self.B[:, :, 0]) if d == 1 else None
+        self.B1 = np.ascontiguousarray(self.B[:, :, 0])  # (s, k): the d = 1 coefficients (unused for d = 3)
         W = np.asarray(data.W, dtype=np.float64)
         edges = np.asarray(data.edges, dtype=np.int64)
         self.edge_p = np.ascontiguousarray(edges[:, 0])
@@ -69,7 +69,7 @@ class _Prepared:
         self.forest = _SpanningForest(p, self.edge_p, self.edge_q)
 
 
-_PREPARED: "weakref.WeakKeyDictionary[RuntimeData, _Prepared]" = weakref.WeakKeyDictionary()
+_PREPARED: weakref.WeakKeyDictionary[RuntimeData, _Prepared] = weakref.WeakKeyDictionary()
 
 
 def prepare(data: RuntimeData) -> _Prepared:
@@ -246,10 +246,20 @@ def _vector3(value, name: str) -> tuple[float, float, float]:
     try:
         x, y, z = (float(c) for c in value)
     except (TypeError, ValueError):
-        raise InputError(f"{name} must be three numbers, got {value!r}") from None
+        raise ImpactArgumentError(f"{name} must be three numbers, got {value!r}") from None
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-        raise InputError(f"{name} must be finite, got {value!r}")
+        raise ImpactArgumentError(f"{name} must be finite, got {value!r}")
     return x, y, z
+
+
+def _threshold(value) -> float:
+    try:
+        threshold = float(value)
+    except (TypeError, ValueError):
+        raise ImpactArgumentError(f"threshold must be a number >= 0, got {value!r}") from None
+    if not threshold >= 0:  # also catches NaN
+        raise ImpactArgumentError(f"threshold must be a number >= 0 (inf: unbreakable), got {value!r}")
+    return threshold
 
 
 def project_impact(data: RuntimeData, point, impulse, threshold: float | None = None) -> ImpactResult:
@@ -261,34 +271,46 @@ def project_impact(data: RuntimeData, point, impulse, threshold: float | None = 
         A loaded runtime file (:func:`fracture_cli.runtime.format.load_runtime`).
     point : (3,) float
         Contact point in the asset's model space and units (the same space as
-        ``data.sites``).
+        ``data.sites``); finite.
     impulse : (3,) float
-        Impulse vector in model-space axes; any unit, the same as ``threshold``.
-        Only ``impulse / threshold`` matters.
+        Impulse vector in model-space axes; any unit, the same as ``threshold``;
+        finite. Only ``impulse / threshold`` matters.
     threshold : float, optional (default ``data.default_threshold``)
-        Toughness, >= 0: an edge breaks when the displacement jump across it
-        exceeds this.
+        Toughness, >= 0 (``inf``: nothing breaks): an edge breaks when the
+        displacement jump across it exceeds this.
 
     Returns
     -------
     ImpactResult
 
+    Raises
+    ------
+    ImpactArgumentError
+        (a :class:`ValueError`) if ``point`` or ``impulse`` is not three finite
+        numbers, or ``threshold`` is NaN or negative.
+
     Notes
     -----
     ALGORITHM.md section 4; the exact steps are in docs/FORMAT.md ("Runtime
-    algorithm"). The result depends only on ``impulse / threshold`` and a zero
-    impulse breaks nothing.
+    algorithm"). Scale-invariant: with ``m = max |n_i|`` the impulse is
+    normalised first (``n' = n / m``), the jumps computed from ``n'`` are
+    compared with ``T / m`` (in double: overflow to inf breaks nothing,
+    underflow to 0 breaks every nonzero jump), and the reported
+    displacements and coefficients are ``m`` times those of ``n'``. So
+    impulses of 1e-170 or 1e200 give the same groups as any other impulse
+    with the same ``impulse / threshold``; a zero impulse breaks nothing.
     """
     prep = prepare(data)
     x, y, z = _vector3(point, "point")
     nx, ny, nz = _vector3(impulse, "impulse")
-    if threshold is None:
-        threshold = data.default_threshold
-    threshold = float(threshold)
-    if not (threshold >= 0 and math.isfinite(threshold)):
-        raise InputError(f"threshold must be a finite number >= 0, got {threshold!r}")
+    threshold = _threshold(data.default_threshold if threshold is None else threshold)
 
     site = _nearest(prep, x, y, z)
+    m = max(abs(nx), abs(ny), abs(nz))
+    if m == 0.0:
+        return ImpactResult(groups=prep.forest.whole.astype(np.int32), displacement=np.zeros((prep.p, prep.d)),
+                            broken=np.zeros(prep.e, dtype=bool), site=site, alpha=np.zeros(prep.k))
+    nx, ny, nz = nx / m, ny / m, nz / m
     if prep.d == 1:
         alpha = prep.B1[site] * math.sqrt(nx * nx + ny * ny + nz * nz)
     else:
@@ -296,11 +318,13 @@ def project_impact(data: RuntimeData, point, impulse, threshold: float | None = 
     out = alpha @ prep.WdW
     displacement = out[: prep.split].reshape(prep.p, prep.d)
     jumps = out[prep.split:]
+    limit = threshold / m  # Python floats: overflow gives inf (nothing breaks), underflow 0.0
     if prep.d == 1:
-        broken = np.abs(jumps) > threshold
+        broken = np.abs(jumps) > limit
     else:
-        jumps = jumps.reshape(prep.e, 3)
-        broken = np.einsum("ij,ij->i", jumps, jumps) > threshold * threshold
+        j = jumps.reshape(prep.e, 3)
+        # The same order of operations as docs/FORMAT.md (and the engine readers): sqrt(j0^2 + j1^2 + j2^2).
+        broken = np.sqrt(j[:, 0] * j[:, 0] + j[:, 1] * j[:, 1] + j[:, 2] * j[:, 2]) > limit
     labels = prep.forest.labels(broken)
-    return ImpactResult(groups=labels.astype(np.int32), displacement=displacement, broken=broken,
-                        site=site, alpha=alpha)
+    return ImpactResult(groups=labels.astype(np.int32), displacement=m * displacement, broken=broken,
+                        site=site, alpha=m * alpha)

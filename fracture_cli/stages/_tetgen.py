@@ -19,11 +19,15 @@ import atexit
 import logging
 import os
 import pickle
+import re
+import shutil
+import signal
 import struct
 import subprocess
 import sys
 import tempfile
 import threading
+import time
 
 import numpy as np
 
@@ -70,6 +74,9 @@ def _write_frame(stream, obj) -> None:
 
 def _serve() -> None:
     """Worker loop: read ``(vertices, faces, switches)`` frames, write result frames."""
+    # Ctrl-C (SIGINT to the whole process group) is for the parent, which stops the worker itself;
+    # dying here would look like a TetGen crash and print a traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # TetGen's C++ code prints to stdout: keep the real stdout for the protocol
     # and send everything else to stderr.
     protocol_out = os.fdopen(os.dup(1), "wb")
@@ -88,61 +95,142 @@ def _serve() -> None:
         try:
             tgen = tetgen.TetGen(vertices, faces)
             nodes, elems, _, _ = tgen.tetrahedralize(switches=switches)
-            reply = ("ok", np.asarray(nodes, dtype=np.float64), np.asarray(elems, dtype=np.int64))
+            reply: tuple = ("ok", np.asarray(nodes, dtype=np.float64), np.asarray(elems, dtype=np.int64))
         except Exception as exc:  # reported to the parent, which decides what it means
             reply = ("error", f"{type(exc).__name__}: {exc}", None)
         _write_frame(protocol_out, reply)
 
 
+_WORKDIR_PREFIX = "fracture-tetgen-"
+_WORKDIR_RE = re.compile(re.escape(_WORKDIR_PREFIX) + r"(\d+)-\w+")
+_LEGACY_WORKDIR_RE = re.compile(re.escape(_WORKDIR_PREFIX) + r"\w{8}")
+_LEGACY_AGE_SECONDS = 24 * 3600
+
+
+def _pid_running(pid: int) -> bool:
+    if os.name == "nt":
+        return True  # os.kill(pid, 0) would send a Ctrl-C event there; keep such folders
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def clean_stale_workdirs(folder: str | None = None) -> list[str]:
+    """Remove worker folders of fracture processes that no longer run (e.g. killed with SIGKILL).
+
+    Each worker folder is named ``fracture-tetgen-<pid>-<random>`` after the
+    process that made it; folders of the older unnumbered form are removed
+    once a day old.
+
+    Parameters
+    ----------
+    folder : str, optional (default the system temporary folder)
+
+    Returns
+    -------
+    list of str
+        The folders removed.
+    """
+    folder = folder or tempfile.gettempdir()
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return []
+    removed = []
+    for name in names:
+        match = _WORKDIR_RE.fullmatch(name)
+        path = os.path.join(folder, name)
+        if match:
+            stale = int(match.group(1)) != os.getpid() and not _pid_running(int(match.group(1)))
+        elif _LEGACY_WORKDIR_RE.fullmatch(name):
+            try:
+                stale = time.time() - os.stat(path).st_mtime > _LEGACY_AGE_SECONDS
+            except OSError:
+                stale = False
+        else:
+            continue
+        if stale and os.path.isdir(path) and not os.path.islink(path):
+            shutil.rmtree(path, ignore_errors=True)
+            removed.append(path)
+    if removed:
+        log.info("removed %d stale TetGen worker folder(s) from %s", len(removed), folder)
+    return removed
+
+
 class _Worker:
     """One child process running :func:`_serve`, restarted after a crash or timeout."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self._process: subprocess.Popen | None = None
         self._workdir: tempfile.TemporaryDirectory | None = None
         self._lock = threading.Lock()
 
-    def _start(self) -> None:
+    def _start(self) -> subprocess.Popen:
         package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH", "")) if p)
         # TetGen writes debug files (tetgen-tmpfile_skipped.*) into its working
         # directory on bad input: give it a private one, never the user's.
-        self._workdir = tempfile.TemporaryDirectory(prefix="fracture-tetgen-")
+        clean_stale_workdirs()
+        self._workdir = tempfile.TemporaryDirectory(prefix=f"{_WORKDIR_PREFIX}{os.getpid()}-")
         self._process = subprocess.Popen(
             [sys.executable, "-m", "fracture_cli.stages._tetgen"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
             cwd=self._workdir.name,
         )
+        return self._process
 
     def _kill(self) -> None:
         process, self._process = self._process, None
-        if process is None:
-            return
-        if process.poll() is None:
-            process.kill()
-        process.wait(timeout=10)
-        for stream in (process.stdin, process.stdout):
-            try:
-                stream.close()
-            except OSError:
-                pass
         workdir, self._workdir = self._workdir, None
-        if workdir is not None:
-            workdir.cleanup()
+        try:
+            if process is None:
+                return
+            if process.poll() is None:
+                process.kill()
+            process.wait(timeout=10)
+            for stream in (process.stdin, process.stdout):
+                try:
+                    if stream is not None:
+                        stream.close()
+                except OSError:
+                    pass
+        finally:
+            if workdir is not None:
+                workdir.cleanup()
 
     def stop(self) -> None:
+        """Ask the worker to exit, kill it if it does not within 2 s, and remove its folder.
+
+        Also the ``atexit`` hook: a second Ctrl-C while it waits kills the
+        worker at once instead of printing a traceback.
+        """
         with self._lock:
             process = self._process
-            if process is not None and process.poll() is None:
-                try:
-                    _write_frame(process.stdin, None)
-                    process.wait(timeout=2)
-                except (OSError, subprocess.TimeoutExpired):
-                    pass
-            self._kill()
+            try:
+                if process is not None and process.poll() is None:
+                    try:
+                        _write_frame(process.stdin, None)
+                        process.wait(timeout=2)
+                    except (OSError, subprocess.TimeoutExpired):
+                        pass
+            except KeyboardInterrupt:
+                pass
+            finally:
+                while True:
+                    try:
+                        self._kill()
+                        break
+                    except KeyboardInterrupt:
+                        continue
 
     def _exit_reason(self) -> str:
+        if self._process is None:
+            return "not running"
         try:
             code = self._process.wait(timeout=2)
         except subprocess.TimeoutExpired:
@@ -153,8 +241,9 @@ class _Worker:
         with self._lock:
             if self._process is None or self._process.poll() is not None:
                 self._kill()
-                self._start()
-            process = self._process
+                process = self._start()
+            else:
+                process = self._process
             try:
                 _write_frame(process.stdin, (vertices, faces, switches))
             except OSError:
@@ -172,7 +261,11 @@ class _Worker:
 
             reader = threading.Thread(target=read, daemon=True)
             reader.start()
-            reader.join(timeout)
+            try:
+                reader.join(timeout)
+            except BaseException:  # Ctrl-C while TetGen runs: its reply would answer the next request
+                self._kill()
+                raise
             if reader.is_alive():
                 self._kill()
                 reader.join(5)

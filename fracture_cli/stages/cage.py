@@ -11,6 +11,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -201,11 +202,6 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, target: int, decimator: s
     return vertices[used], inverse.reshape(-1, 3).astype(np.int64)
 
 
-def _signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
-
-
 class _ContainmentCheck:
     """Strict containment of the input in a candidate cage, independent of how the cage was built.
 
@@ -262,7 +258,7 @@ class _ContainmentCheck:
 
 
 def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
-    """Build a nested cage: a closed, manifold surface of about ``target_faces`` triangles strictly containing the input.
+    """Build a nested cage: a closed manifold surface of about ``target_faces`` triangles strictly containing the input.
 
     Parameters
     ----------
@@ -321,77 +317,91 @@ def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
     # About the edge length of the target cage on a unit-area surface: the broad-phase cell.
     cage_edge = diagonal * math.sqrt(4.0 / (math.sqrt(3.0) * options.target_faces))
     check = _ContainmentCheck(vertices, faces, scene, 0.5 * cage_edge)
-    min_offset = 0.25 * spacing
     log.info("cage: %d input triangles, grid spacing %.4g (resolution %d), target %d faces",
              len(faces), spacing / diagonal, resolution, options.target_faces)
+    search = _Search(vertices, faces, scene, spacing, diagonal, options, check)
+    d, cage_vertices, cage_faces = search.run()
+    log.info("cage: offset %.4f, %d faces, %d tries, %.2f s (%d exact distances)", d / diagonal,
+             len(cage_faces), len(search.entries), time.perf_counter() - started,
+             search.field.exact_count if search.field else 0)
+    return Cage(vertices=cage_vertices, faces=cage_faces, offset=d / diagonal, log=tuple(search.entries),
+                normalization=surface.normalization)
 
-    field: _DistanceField | None = None
-    entries: list[dict] = []
-    best = None  # (d, vertices, faces)
 
-    def attempt(d: float):
-        nonlocal field, best
+class _Search:
+    """The offset search of :func:`cage`: bracket upward from the initial offset, then bisect."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, scene: Any, spacing: float, diagonal: float,
+                 options: CageOptions, check: _ContainmentCheck):
+        self.vertices, self.faces, self.scene = vertices, faces, scene
+        self.spacing, self.diagonal, self.options, self.check = spacing, diagonal, options, check
+        self.field: _DistanceField | None = None
+        self.entries: list[dict] = []
+        self.best: tuple[float, np.ndarray, np.ndarray] | None = None  # (d, vertices, faces)
+
+    def attempt(self, d: float) -> bool:
+        """Try offset ``d`` (logged in :attr:`entries`); whether it gave a valid cage."""
         seconds = {"distance": 0.0, "marching_cubes": 0.0, "decimation": 0.0,
                    "self_intersection": 0.0, "check": 0.0, "tetgen": 0.0}
-        entry = {"offset": d / diagonal, "faces": 0, "tets": 0, "ok": False, "reason": "", "seconds": seconds}
+        entry = {"offset": d / self.diagonal, "faces": 0, "tets": 0, "ok": False, "reason": "", "seconds": seconds}
         tick = time.perf_counter()
-        if field is None or not field.covers(d):
+        if self.field is None or not self.field.covers(d):
             # Large offsets give smooth surfaces: a coarser grid (at most d / 4)
             # keeps the padded grid's memory bounded.
-            field_spacing = spacing if field is None else max(spacing, 0.25 * d)
-            field = _DistanceField(vertices, faces, scene, field_spacing, max(4.0 * d, 8.0 * field_spacing))
-        values = field.values(d)
+            field_spacing = self.spacing if self.field is None else max(self.spacing, 0.25 * d)
+            self.field = _DistanceField(self.vertices, self.faces, self.scene, field_spacing,
+                                        max(4.0 * d, 8.0 * field_spacing))
+        values = self.field.values(d)
         seconds["distance"] = time.perf_counter() - tick
         result = None
         try:
-            result = _try_offset(d, values, field, options, check, seconds, entry)
+            result = _try_offset(d, values, self.field, self.options, self.check, seconds, entry)
         finally:
-            entries.append(entry)
-            t = entry["tets"]
-            log.info("cage: iteration %d offset %.4f faces %d tets %d %s", len(entries), d / diagonal,
-                     entry["faces"], t, "ok" if entry["ok"] else f"failed: {entry['reason']}")
-        if result is not None and (best is None or d < best[0]):
-            best = (d, result[0], result[1])
+            self.entries.append(entry)
+            log.info("cage: iteration %d offset %.4f faces %d tets %d %s", len(self.entries), d / self.diagonal,
+                     entry["faces"], entry["tets"], "ok" if entry["ok"] else f"failed: {entry['reason']}")
+        if result is not None and (self.best is None or d < self.best[0]):
+            self.best = (d, result[0], result[1])
         return result is not None
 
-    d = options.initial_offset * diagonal
-    max_offset = options.max_offset * diagonal
-    lo = None  # largest offset known to fail below the best success
-    # Ascending bracket: double until something works.
-    while len(entries) < options.max_iterations and d <= max_offset:
-        if attempt(d):
-            break
-        lo = d
-        d *= 2.0
-    if best is None:
-        reasons = "; ".join(f"{e['offset']:.4f}: {e['reason']}" for e in entries)
-        raise StageError(
-            f"no valid cage found in {len(entries)} tries (offset: reason) {reasons}. "
-            "Try a larger target_faces, initial_offset or max_offset, or repair the input", stage=STAGE)
-    if lo is None:
-        # The first offset worked: halve until one fails (or the grid cannot resolve smaller offsets).
-        d = best[0] / 2.0
-        while len(entries) < options.max_iterations and d >= min_offset:
-            if not attempt(d):
-                lo = d
-                break
-            d /= 2.0
-        if lo is None:
-            lo = best[0]  # nothing failed down to the grid's limit: no bisection
-    hi = best[0]
-    # Bisection between the largest failure and the smallest success.
-    while len(entries) < options.max_iterations and hi - lo > options.tolerance * diagonal:
-        mid = 0.5 * (lo + hi)
-        if attempt(mid):
-            hi = mid
-        else:
-            lo = mid
+    def run(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """The tightest offset that passed, and its cage's vertices and faces.
 
-    d, cage_vertices, cage_faces = best
-    log.info("cage: offset %.4f, %d faces, %d tries, %.2f s (%d exact distances)", d / diagonal,
-             len(cage_faces), len(entries), time.perf_counter() - started, field.exact_count if field else 0)
-    return Cage(vertices=cage_vertices, faces=cage_faces, offset=d / diagonal, log=tuple(entries),
-                normalization=surface.normalization)
+        Containment is not monotone in ``d``, so the search brackets upward
+        (doubling) until something works, then bisects between the largest
+        failure and the smallest success, keeping the tightest success seen.
+        """
+        options, diagonal = self.options, self.diagonal
+        d = options.initial_offset * diagonal
+        lo = None  # largest offset known to fail below the best success
+        while len(self.entries) < options.max_iterations and d <= options.max_offset * diagonal:
+            if self.attempt(d):
+                break
+            lo = d
+            d *= 2.0
+        if self.best is None:
+            reasons = "; ".join(f"{e['offset']:.4f}: {e['reason']}" for e in self.entries)
+            raise StageError(
+                f"no valid cage found in {len(self.entries)} tries (offset: reason) {reasons}. "
+                "Try a larger target_faces, initial_offset or max_offset, or repair the input", stage=STAGE)
+        if lo is None:
+            # The first offset worked: halve until one fails (or the grid cannot resolve smaller offsets).
+            d = self.best[0] / 2.0
+            while len(self.entries) < options.max_iterations and d >= 0.25 * self.spacing:
+                if not self.attempt(d):
+                    lo = d
+                    break
+                d /= 2.0
+            if lo is None:
+                lo = self.best[0]  # nothing failed down to the grid's limit: no bisection
+        hi = self.best[0]
+        while len(self.entries) < options.max_iterations and hi - lo > options.tolerance * diagonal:
+            mid = 0.5 * (lo + hi)
+            if self.attempt(mid):
+                hi = mid
+            else:
+                lo = mid
+        return self.best
 
 
 def _try_offset(d, values, field, options, check, seconds, entry):
@@ -418,7 +428,7 @@ def _try_offset(d, values, field, options, check, seconds, entry):
     elif not trigeom.vertex_manifold(F):
         reason = "decimation left non-manifold vertices"
     else:
-        if _signed_volume(V, F) < 0:
+        if trigeom.signed_volume(V, F) < 0:
             F = F[:, ::-1].copy()
         crossing = trigeom.self_intersections(V, F)
         if len(crossing):

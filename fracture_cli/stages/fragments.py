@@ -8,10 +8,10 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
+from fracture_cli import trigeom
 from fracture_cli.errors import StageError
 from fracture_cli.options import option
-from fracture_cli.stages._solids import shell_mask
-from fracture_cli.stages.repair import surface_solid
+from fracture_cli.stages._solids import SHELL_VOLUME, shell_mask, surface_solid
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Regions, SurfaceMesh
 
 log = logging.getLogger(__name__)
@@ -22,9 +22,6 @@ STAGE = "fragments"
 _UV = slice(3, 5)
 _NORMAL = slice(5, 8)
 _NUM_COLUMNS = 8
-# Connected parts of a fragment below this fraction of the input volume are
-# boolean artefacts (zero-volume shells where faces coincide), not material.
-_SHELL_VOLUME = 1e-9
 # Rounding of fragment centroids for the export order (normalized units).
 _ORDER_DECIMALS = 6
 
@@ -81,7 +78,7 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     ALGORITHM.md section 6. The input is made a solid by the repair stage
     (welding, hole filling or shelling, union of overlapping bodies), so that
     the cage and the fragments agree on it; here it is only converted to a
-    manifold3d solid (:func:`~fracture_cli.stages.repair.surface_solid`:
+    manifold3d solid (:func:`~fracture_cli.stages._solids.surface_solid`:
     vertices at one position welded topologically, attributes kept).
 
     Each fragment is ``input ^ region`` in manifold3d with UV and normal as
@@ -98,16 +95,7 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     input_volume = float(solid.volume())
     if input_volume <= 0:
         raise StageError("the input encloses no volume; fragments need a solid (closed) mesh", stage=STAGE)
-    # The repair stage may already have given the surface an interior slot (faces closing its holes):
-    # reuse it, with the recipe's colour, so the asset has one interior material.
-    interior = Material(INTERIOR_MATERIAL_NAME, base_color=tuple(float(c) for c in options.interior_color))
-    names = [m.name for m in surface.materials]
-    if INTERIOR_MATERIAL_NAME in names:
-        interior_index = names.index(INTERIOR_MATERIAL_NAME)
-        materials = tuple(interior if i == interior_index else m for i, m in enumerate(surface.materials))
-    else:
-        interior_index = len(names)
-        materials = tuple(surface.materials) + (interior,)
+    interior_index, materials = _with_interior(surface.materials, options.interior_color)
     region_id = manifold3d.Manifold.reserve_ids(1)
     id_to_material = dict(id_to_material)
     id_to_material[region_id] = interior_index
@@ -118,11 +106,11 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
         region = _region_manifold(rv, rf, region_id, piece)
         part = solid ^ region
         volume = part.volume()
-        if part.is_empty() or volume <= _SHELL_VOLUME * input_volume:
+        if part.is_empty() or volume <= SHELL_VOLUME * input_volume:
             empty.append(piece)
             continue
         results.append(_to_fragment(part, piece, id_to_material, interior_index, surface, options,
-                                    _SHELL_VOLUME * input_volume))
+                                    SHELL_VOLUME * input_volume))
     if empty:
         log.warning("%s: %d piece(s) do not reach the input and give no fragment: %s", STAGE, len(empty),
                     ", ".join(map(str, empty[:20])) + (" ..." if len(empty) > 20 else ""))
@@ -130,7 +118,7 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
         raise StageError("no piece region intersects the input; the regions do not belong to this mesh", stage=STAGE)
 
     order = _stable_order(results)
-    total = sum(_mesh_volume(f.vertices, f.faces) for f in results)
+    total = sum(trigeom.signed_volume(f.vertices, f.faces) for f in results)
     log.info("%s: %d fragments from %d regions, volume %.6g of input %.6g (error %.2g)", STAGE, len(results),
              len(regions.meshes), total, input_volume, abs(total - input_volume) / input_volume)
     return Fragments(
@@ -139,6 +127,21 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
         normalization=surface.normalization,
         input_volume=input_volume,
     )
+
+
+def _with_interior(materials: tuple[Material, ...], color: list) -> tuple[int, tuple[Material, ...]]:
+    """The interior material's slot and the materials with it (the recipe's colour).
+
+    The repair stage may already have given the surface an interior slot (faces
+    closing its holes): it is reused, so the asset has one interior material.
+    """
+    r, g, b, a = (float(c) for c in color)
+    interior = Material(INTERIOR_MATERIAL_NAME, base_color=(r, g, b, a))
+    names = [m.name for m in materials]
+    if INTERIOR_MATERIAL_NAME in names:
+        index = names.index(INTERIOR_MATERIAL_NAME)
+        return index, tuple(interior if i == index else m for i, m in enumerate(materials))
+    return len(names), tuple(materials) + (interior,)
 
 
 def _region_manifold(vertices: np.ndarray, faces: np.ndarray, region_id: int, piece: int):
@@ -242,14 +245,9 @@ def _box_uvs(world: np.ndarray, normals: np.ndarray, uv_scale: float) -> np.ndar
     return np.column_stack([u, v]) / uv_scale
 
 
-def _mesh_volume(V: np.ndarray, F: np.ndarray) -> float:
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
-
-
 def _mesh_centroid(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    vol = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    vol = trigeom.face_signed_volumes(V, F)
     total = vol.sum()
     if abs(total) < 1e-300:
         return V.mean(axis=0)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import time
 from dataclasses import dataclass
 
@@ -20,6 +21,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import eigsh
 
+from fracture_cli import progress
 from fracture_cli.discontinuity import (
     ConicSubproblemSolver,
     CutSubproblemSolver,
@@ -60,6 +62,8 @@ class ModesOptions:
     inner_max_iter: int = option(1000, "subproblem iterations at most (max-flows or interior-point steps)", min=1,
                                  max=1000000)
     seed: int = option(0, "seed of the eigensolver's start vector (fixed: results are reproducible)", min=0)
+    jobs: int = option(0, "worker processes for independent ICCM chains (vector modes with per-axis material "
+                       "weights); 0 = all cores. Results do not depend on it", min=0, max=256)
 
 
 def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.ndarray | None = None) -> Modes:
@@ -111,6 +115,12 @@ def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.nda
     its max-flow/min-cut condition), its solution is piecewise constant, so the
     pieces do not depend on ``sigma``. ``stats["max_gap"]`` is the largest
     primal-dual gap over all subproblems.
+
+    Parallelism (``options.jobs``): mode ``i`` is constrained by modes ``< i``,
+    so one ICCM chain is sequential; only chains that share nothing (``d = 3``
+    with per-axis weights) run in worker processes. BLAS is single-threaded in
+    every chain (threadpoolctl), so results are the same bytes for any ``jobs``
+    and a pool of bakes does not oversubscribe the cores.
     """
     opts = options
     t = tet_mesh.num_tets
@@ -298,10 +308,12 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
 
     ``solve(c, earlier_modes) -> SubproblemResult``.
     """
-    found = []
-    per_mode = []
+    found: list[np.ndarray] = []
+    per_mode: list[dict] = []
+    progress.items(count, f"mode{label}")
     for i in range(count):
         mode_start = time.perf_counter()
+        mode_cpu = time.process_time()
         c = inner.orthonormalize(starts[i], inner.translations + found)
         attempts = 0
         while c is None:  # the start vector lies in the span of the earlier modes
@@ -332,41 +344,97 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
         found.append(c)
         seconds = time.perf_counter() - mode_start
         per_mode.append({"rounds": rounds, "converged": converged, "inner_iterations": inner_iterations,
-                         "seconds": seconds, "max_gap": float(max(gaps)), "last_gap": float(gaps[-1])})
+                         "seconds": seconds, "cpu_seconds": time.process_time() - mode_cpu, "max_gap": float(max(gaps)),
+                         "last_gap": float(gaps[-1])})
         log.info("%s: mode %d%s: %d ICCM rounds, %d inner iterations, %.3f s", STAGE, i, label, rounds,
                  inner_iterations, seconds)
+        progress.advance()
     return found, per_mode
 
 
 def _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
-    """Scalar modes per distinct axis weight (see the Notes of :func:`modes`)."""
-    t = len(volumes)
-    inner = _MInner(volumes, 1)
-    rng = np.random.default_rng(opts.seed + 1)
+    """Scalar modes per distinct axis weight (see the Notes of :func:`modes`).
+
+    Axes with equal weights share one ICCM chain; distinct chains are independent and run in
+    ``opts.jobs`` worker processes. Each chain has its own random generator and BLAS runs
+    single-threaded in every chain, so the result does not depend on the number of workers.
+    """
     axis_count = [len(range(a, k, d)) for a in range(d)]
-    per_axis_modes = [None] * d
-    per_axis_stats = [None] * d
+    chains = []  # (axis that runs the chain, axes it serves, modes to compute)
+    served: set[int] = set()
     for a in range(d):
-        if per_axis_modes[a] is not None:
-            continue
-        same = [b for b in range(a, d) if np.array_equal(eta2[:, b], eta2[:, a])]
-        count = max(axis_count[b] for b in same)
-        solver = CutSubproblemSolver(face_tets, areas * eta2[:, a], volumes, tol=opts.inner_tol,
-                                     max_iter=opts.inner_max_iter, weight_scale=float(areas.mean()))
-        label = "" if d == 1 else f" (axis {'xyz'[a]})"
-        found, stats = _iccm(lambda c, fixed: solver.solve(c, fixed), scalar_init[:, :, None], count, inner, opts,
-                             label, lambda n: rng.standard_normal((t, 1)))
+        if a not in served:
+            same = [b for b in range(a, d) if np.array_equal(eta2[:, b], eta2[:, a])]
+            served.update(same)
+            chains.append((a, same, max(axis_count[b] for b in same)))
+    scale = float(areas.mean())
+    tasks = [(face_tets, areas * eta2[:, a], scale, volumes, scalar_init, count, opts, a, d) for a, _, count in chains]
+    results = _run_chains(tasks, _jobs(opts.jobs))
+    per_axis_modes: list = [None] * d
+    per_axis_stats: list = [None] * d
+    backend = results[0][2]
+    for (a, same, _), (found, stats, _backend) in zip(chains, results):
         for b in same:
             per_axis_modes[b] = found
             per_axis_stats[b] = stats if b == a else [dict(m, seconds=0.0, replicated=True) for m in stats]
-        backend = solver.max_flow_backend
+    t = len(volumes)
     U = np.zeros((k, t, d))
     per_mode = []
     for i in range(k):
         a, j = i % d, i // d
         U[i, :, a] = per_axis_modes[a][j][:, 0]
         per_mode.append(dict(per_axis_stats[a][j]))
-    return U, {**_summary(per_mode), "max_flow_backend": backend, "lp_backend": lp_backend()}
+    return U, {**_summary(per_mode), "max_flow_backend": backend, "lp_backend": lp_backend(),
+               "chains": len(chains), "workers": min(len(chains), _jobs(opts.jobs))}
+
+
+def _jobs(jobs: int) -> int:
+    """Worker count: ``jobs``, or the cores this process may use when 0."""
+    if jobs > 0:
+        return jobs
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _run_chains(tasks, jobs: int):
+    """``_axis_chain(*task)`` for every task, in order; in a process pool when there are several and ``jobs > 1``."""
+    if jobs <= 1 or len(tasks) <= 1:
+        return [_axis_chain(*task) for task in tasks]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context(method),
+                             initializer=_quiet_worker) as pool:
+        return list(pool.map(_axis_chain, *zip(*tasks)))
+
+
+def _quiet_worker() -> None:
+    """Workers report no progress (the parent process owns the terminal)."""
+    progress.configure(None)
+
+
+def _axis_chain(face_tets, weights, weight_scale: float, volumes, scalar_init, count, opts, axis: int, d: int):
+    """One ICCM chain of scalar modes with face weights ``weights`` (in units of ``weight_scale``).
+
+    Returns the modes, their stats and the max-flow backend. Runs in the caller or in a worker
+    process (BLAS single-threaded either way).
+    """
+    from threadpoolctl import threadpool_limits
+
+    t = len(volumes)
+    inner = _MInner(volumes, 1)
+    # Axis 0 keeps the generator of the scalar case; other axes get their own stream.
+    rng = np.random.default_rng(opts.seed + 1 if axis == 0 else (opts.seed + 1, axis))
+    solver = CutSubproblemSolver(face_tets, weights, volumes, tol=opts.inner_tol, max_iter=opts.inner_max_iter,
+                                 weight_scale=weight_scale)
+    label = "" if d == 1 else f" (axis {'xyz'[axis]})"
+    with threadpool_limits(limits=1, user_api="blas"):
+        found, stats = _iccm(lambda c, fixed: solver.solve(c, fixed), scalar_init[:, :, None], count, inner, opts,
+                             label, lambda n: rng.standard_normal((t, 1)))
+    return found, stats, solver.max_flow_backend
 
 
 def _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):

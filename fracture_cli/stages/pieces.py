@@ -67,43 +67,22 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
 
     Notes
     -----
-    ALGORITHM.md section 3. Each mode is constant on an atomic piece up to the
-    solver's tolerance: ``max_deviation`` is the worst deviation of any tet
-    from its atomic piece's volume-weighted mean, relative to the mode's
-    largest magnitude, measured before any merging (a warning is logged above
-    ``deviation_warning``). Merging tiny pieces (``min_volume_fraction > 0``)
-    trades piecewise-constant modes for fewer slivers: a merged piece moves as
-    one, and its ``W`` is the volume-weighted mean of the modes over all its
-    tets (equivalently, of its atomic pieces' ``W`` weighted by their volumes).
+    ALGORITHM.md section 3; section 8 says what merging small pieces trades.
+    ``max_deviation`` is the worst deviation of any tet's mode value from its
+    atomic piece's volume-weighted mean (relative to the mode's largest
+    magnitude), measured before merging.
     """
     t = tet_mesh.num_tets
     face_tets = tet_mesh.interior_face_tets
-    U = np.asarray(modes.U, dtype=np.float64)
-    cut = np.asarray(modes.cut, dtype=bool)
-    if U.ndim != 3 or U.shape[1] != t:
-        raise StageError(f"modes have shape {U.shape}, expected (k, {t}, d) for this tet mesh", stage=STAGE)
-    if cut.ndim != 2 or cut.shape[1] != len(face_tets) or cut.shape[0] != U.shape[0]:
-        raise StageError(
-            f"modes.cut has shape {cut.shape}, expected ({U.shape[0]}, {len(face_tets)}): "
-            "the modes were computed on another tet mesh",
-            stage=STAGE,
-        )
+    U, cut = _checked_modes(tet_mesh, modes)
 
     glued = ~cut.any(axis=0)
     tet_piece = _components(t, face_tets[glued])
     volumes_t = np.abs(tet_mesh.tet_volumes)
     k = U.shape[0]
 
-    # The modes are piecewise constant on the atomic pieces (up to the solver's tolerance); check that before
-    # merging, which makes them non-constant on merged pieces by design.
     atomic = int(tet_piece.max()) + 1 if t else 0
-    _, max_deviation = _piece_means(U, tet_piece, volumes_t, atomic)
-    if max_deviation > options.deviation_warning:
-        log.warning(
-            "%s: a mode deviates from its atomic piece's mean by %.3g of its largest value (> %.3g): the modes are "
-            "not piecewise constant on the atomic pieces; the modes' solver tolerance or cut threshold may be too "
-            "loose", STAGE, max_deviation, options.deviation_warning,
-        )
+    max_deviation = _atomic_deviation(U, tet_piece, volumes_t, atomic, options.deviation_warning)
 
     if options.min_volume_fraction > 0:
         tet_piece = _merge_small(tet_piece, face_tets, tet_mesh.interior_face_areas, volumes_t,
@@ -140,6 +119,22 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
     )
 
 
+def _atomic_deviation(U: np.ndarray, tet_piece: np.ndarray, volumes_t: np.ndarray, atomic: int,
+                      warn_above: float) -> float:
+    """How far the modes are from constant on the atomic pieces (logged when above ``warn_above``).
+
+    Checked before merging, which makes them non-constant on merged pieces by design.
+    """
+    _, max_deviation = _piece_means(U, tet_piece, volumes_t, atomic)
+    if max_deviation > warn_above:
+        log.warning(
+            "%s: a mode deviates from its atomic piece's mean by %.3g of its largest value (> %.3g): the modes are "
+            "not piecewise constant on the atomic pieces; the modes' solver tolerance or cut threshold may be too "
+            "loose", STAGE, max_deviation, warn_above,
+        )
+    return max_deviation
+
+
 def _piece_means(U: np.ndarray, tet_piece: np.ndarray, volumes_t: np.ndarray, p: int):
     """Volume-weighted mean of every mode per piece, ``W`` (k, p, d), and the worst relative deviation from it.
 
@@ -158,6 +153,19 @@ def _piece_means(U: np.ndarray, tet_piece: np.ndarray, volumes_t: np.ndarray, p:
         if scale > 0:
             deviation = max(deviation, float(np.linalg.norm(U[i] - W[i][tet_piece], axis=1).max()) / scale)
     return W, deviation
+
+
+def _checked_modes(tet_mesh: TetMesh, modes: Modes) -> tuple[np.ndarray, np.ndarray]:
+    """``modes.U`` (k, t, d) float64 and ``modes.cut`` (k, f) bool, checked against the tet mesh."""
+    t, f = tet_mesh.num_tets, len(tet_mesh.interior_face_tets)
+    U = np.asarray(modes.U, dtype=np.float64)
+    cut = np.asarray(modes.cut, dtype=bool)
+    if U.ndim != 3 or U.shape[1] != t:
+        raise StageError(f"modes have shape {U.shape}, expected (k, {t}, d) for this tet mesh", stage=STAGE)
+    if cut.ndim != 2 or cut.shape[1] != f or cut.shape[0] != U.shape[0]:
+        raise StageError(f"modes.cut has shape {cut.shape}, expected ({U.shape[0]}, {f}): the modes were computed "
+                         "on another tet mesh", stage=STAGE)
+    return U, cut
 
 
 def _components(t: int, pairs: np.ndarray) -> np.ndarray:

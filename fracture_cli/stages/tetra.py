@@ -73,7 +73,7 @@ def _run_tetgen(vertices: np.ndarray, faces: np.ndarray, switches: str, timeout:
     return None, nodes, tets, volumes
 
 
-def _face_set(F: np.ndarray) -> set:
+def _face_set(F: np.ndarray) -> set[tuple[int, ...]]:
     return set(map(tuple, np.sort(np.asarray(F), axis=1).tolist()))
 
 
@@ -115,8 +115,7 @@ def tetra(cage: Cage, options: TetraOptions = TetraOptions()) -> TetMesh:
     faces = np.asarray(cage.faces, dtype=np.int64)
     if len(faces) < 4:
         raise StageError(f"the cage has {len(faces)} faces; a closed surface needs at least 4", stage=STAGE)
-    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
-    cage_volume = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+    cage_volume = trigeom.signed_volume(vertices, faces)
     if cage_volume <= 0:
         raise StageError("the cage encloses no volume (inside-out or open); rebuild it with the cage stage",
                          stage=STAGE)
@@ -138,7 +137,6 @@ def tetra(cage: Cage, options: TetraOptions = TetraOptions()) -> TetMesh:
     # tets can remain where four cage vertices are nearly coplanar, because the
     # boundary may not be split; report the worst so later stages can be judged.
     tets, peeled = _peel_flat_boundary_tets(nodes, tets)
-    volumes = tetgeom.tet_volumes(nodes, tets)
     if peeled:
         log.info("tetra: removed %d flat tet(s) lying on the cage surface (the surface keeps its shape)", peeled)
     shape = _shape(nodes, tets)
@@ -167,7 +165,7 @@ def _peel_flat_boundary_tets(nodes: np.ndarray, tets: np.ndarray):
     Returns the remaining tets (t', 4) and how many were removed.
     """
     removed = 0
-    blocked: set[int] = set()
+    blocked: set[tuple[int, ...]] = set()
     while True:
         shape = _shape(nodes, tets)
         boundary_tets = set(TetMesh(vertices=nodes, tets=tets).boundary_face_tets.tolist())

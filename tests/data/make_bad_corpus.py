@@ -148,6 +148,105 @@ def glb(primitive_sets, materials) -> bytes:
     return glb_bytes(meshes, tuple(materials))
 
 
+class Gltf:
+    """A hand-built glTF document: one binary buffer, views and accessors added in order."""
+
+    def __init__(self):
+        self.binary = bytearray()
+        self.doc = {"asset": {"version": "2.0"}, "bufferViews": [], "accessors": [], "meshes": [], "nodes": []}
+
+    def view(self, data: bytes, stride: int | None = None) -> int:
+        while len(self.binary) % 4:
+            self.binary.append(0)
+        entry = {"buffer": 0, "byteOffset": len(self.binary), "byteLength": len(data)}
+        if stride:
+            entry["byteStride"] = stride
+        self.binary.extend(data)
+        self.doc["bufferViews"].append(entry)
+        return len(self.doc["bufferViews"]) - 1
+
+    def accessor(self, array, component: int, kind: str, normalized: bool = False, view: bool = True, **extra) -> int:
+        array = np.asarray(array)
+        entry = {"componentType": component, "count": int(len(array)), "type": kind, **extra}
+        if view:
+            entry["bufferView"] = self.view(np.ascontiguousarray(array).tobytes())
+        if normalized:
+            entry["normalized"] = True
+        if kind == "VEC3" and component == 5126 and view:
+            entry["min"] = [float(x) for x in array.min(axis=0)]
+            entry["max"] = [float(x) for x in array.max(axis=0)]
+        self.doc["accessors"].append(entry)
+        return len(self.doc["accessors"]) - 1
+
+    def mesh(self, primitives: list[dict]) -> int:
+        self.doc["meshes"].append({"primitives": primitives})
+        return len(self.doc["meshes"]) - 1
+
+    def node(self, **fields) -> int:
+        self.doc["nodes"].append(fields)
+        return len(self.doc["nodes"]) - 1
+
+    def glb(self, roots: list[int]) -> bytes:
+        from fracture_cli.io.gltf import pack_glb
+
+        while len(self.binary) % 4:
+            self.binary.append(0)
+        doc = dict(self.doc, scenes=[{"nodes": roots}], scene=0, buffers=[{"byteLength": len(self.binary)}])
+        return pack_glb(doc, bytes(self.binary))
+
+    def gltf(self, roots: list[int], uri: str, length: int | None = None) -> tuple[str, bytes]:
+        doc = dict(self.doc, scenes=[{"nodes": roots}], scene=0,
+                   buffers=[{"uri": uri, "byteLength": len(self.binary) if length is None else length}])
+        return json.dumps(doc, indent=1), bytes(self.binary)
+
+
+def box_primitive(g: Gltf, extents=(1.0, 1.0, 1.0), centre=(0.0, 0.0, 0.0), material: int | None = None) -> dict:
+    V, F = box(extents, centre)
+    prim = {"attributes": {"POSITION": g.accessor(V.astype("<f4"), 5126, "VEC3")},
+            "indices": g.accessor(F.reshape(-1).astype("<u2"), 5123, "SCALAR")}
+    if material is not None:
+        prim["material"] = material
+    return prim
+
+
+def strip_triangles(strip) -> list[list[int]]:
+    """Triangles of one strip, as the PLY/OpenGL convention defines them: every second one swapped."""
+    return [[strip[i], strip[i + 1], strip[i + 2]] if i % 2 == 0 else [strip[i + 1], strip[i], strip[i + 2]]
+            for i in range(len(strip) - 2)]
+
+
+def tristrip_box_ply() -> bytes:
+    """A unit box as binary PLY triangle strips of different lengths, separated by -1 (as scanners write)."""
+    V, F = box()
+    # The four sides around z as one strip zig-zagging between z = -0.5 and z = +0.5 (corner id x*4 + y*2 + z).
+    ring = [(0, 0), (1, 0), (1, 1), (0, 1), (0, 0)]
+    wall = [c for x, y in ring for c in (x * 4 + y * 2 + 1, x * 4 + y * 2)]
+    # The two caps (z = -0.5 and +0.5), each a 4-vertex strip b, c, a, d of its quad's triangles (a, b, c), (a, c, d).
+    caps = [[F[k][1], F[k][2], F[k][0], F[k + 1][2]] for k in (4, 10)]
+    rows = [wall, caps[0] + [-1] + caps[1]]
+    tris = [t for row in rows for part in " ".join(map(str, row)).split("-1") for t in strip_triangles(
+        [int(w) for w in part.split()])]
+    volume = sum(np.dot(V[a], np.cross(V[b], V[c])) for a, b, c in tris) / 6.0
+    assert len(tris) == 12 and abs(volume - 1.0) < 1e-12, (len(tris), volume)  # the strips really are the box
+    header = ("ply\nformat binary_little_endian 1.0\ncomment fracture corpus: triangle strips\n"
+              f"element vertex {len(V)}\nproperty float x\nproperty float y\nproperty float z\n"
+              f"element tristrips {len(rows)}\nproperty list int int vertex_indices\nend_header\n").encode()
+    body = V.astype("<f4").tobytes()
+    for row in rows:
+        body += struct.pack("<i", len(row)) + np.asarray(row, dtype="<i4").tobytes()
+    return header + body
+
+
+def relative_obj() -> str:
+    """Two unit boxes, each object's faces with negative indices written right after its own vertices."""
+    lines = []
+    for centre in ((0.0, 0.0, 0.0), (3.0, 0.0, 0.0)):
+        V, F = box((1, 1, 1), centre)
+        lines += ["o box", *("v " + " ".join(fmt(c) for c in v) for v in V)]
+        lines += ["f " + " ".join(str(i - len(V)) for i in f) for f in F]
+    return "\n".join(lines) + "\n"
+
+
 # ----------------------------------------------------------------------------
 # The corpus
 
@@ -155,14 +254,22 @@ CASES: list[dict] = []
 
 
 def case(file: str, data, *, outcome: str, why: str, message: str | None = None, volume: float | None = None,
-         overrides: tuple[str, ...] = (), known_issue: str | None = None):
+         overrides: tuple[str, ...] = (), known_issue: str | None = None, check: str = "bake",
+         bbox: tuple | None = None, reference: str | None = None, companions: dict | None = None):
     """Register one corpus file: its bytes (or text) and what a bake must do with it.
 
     ``known_issue`` marks an expected outcome the tool does not reach yet (the
-    test reports it as an expected failure, naming the issue).
+    test reports it as an expected failure, naming the issue). ``check =
+    "load"`` checks an "ok" file at the reader (volume and bounding box of the
+    loaded triangles against the known geometry, in milliseconds) instead of
+    baking it. ``reference`` names an OBJ of the intended triangles, for files
+    that trimesh (the tests' independent reader) misreads. ``companions`` are
+    extra files written beside it (``{name: bytes}``).
     """
     CASES.append(dict(file=file, data=data, outcome=outcome, why=why, message=message, volume=volume,
-                      overrides=list(overrides), known_issue=known_issue))
+                      overrides=list(overrides), known_issue=known_issue, check=check,
+                      bbox=[list(map(float, b)) for b in bbox] if bbox is not None else None,
+                      reference=reference, companions=companions or {}))
 
 
 def build() -> None:
@@ -198,8 +305,11 @@ def build() -> None:
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
         "nodes": [{"mesh": 0}], "scenes": [{"nodes": [0]}], "scene": 0,
     }), outcome="error", message="missing_buffer.bin", why="glTF whose .bin buffer file is missing")
-    case("stl_count_lies.stl", stl_binary(V, F, count=2_000_000_000), outcome="error",
-         message="does not match the triangle count", why="binary STL whose header claims 2e9 triangles")
+    case("stl_count_lies.stl", stl_binary(V, F, count=2_000_000_000), outcome="ok", check="load", volume=1.0,
+         bbox=((-0.5,) * 3, (0.5,) * 3),
+         why="binary STL whose header claims 2e9 triangles: its size (84 + 50 * 12) says 12; read with a warning")
+    case("stl_truncated.stl", stl_binary(V, F)[:-7], outcome="error", message="does not match the triangle count",
+         why="binary STL cut off mid-record: its size fits no triangle count")
     case("limit.stl", stl_binary(V, F), outcome="error", message="has 12 triangles, more than the limit",
          overrides=("load.max_triangles=10",), why="binary STL over load.max_triangles (refused from its header)")
     case("limit.glb", glb([("box", [(V, F, None, None, 0)]), ("copy", [(V + 3, F, None, None, 0)])],
@@ -304,6 +414,98 @@ def build() -> None:
                                   [Material("lid", (0.8, 0.2, 0.2, 1.0)), Material("body", (0.2, 0.2, 0.8, 1.0))]),
          outcome="ok", volume=float(trimesh.Trimesh(TV, TF, process=False).volume),
          why="one mesh, two primitives with two materials (the primitives' vertices are split)")
+    reader_cases(V, F, SV, SF, sphere_volume)
+
+
+def reader_cases(V, F, SV, SF, sphere_volume) -> None:
+    """Files that only a reader following the format's specification reads right (issue 13)."""
+    unit = ((-0.5,) * 3, (0.5,) * 3)
+    # glTF sparse accessor: the dense positions are a box squashed flat; the sparse part restores the top corners.
+    g = Gltf()
+    flat = V.copy()
+    top = np.flatnonzero(V[:, 2] > 0)
+    flat[top, 2] = -0.5
+    pos = g.accessor(flat.astype("<f4"), 5126, "VEC3", sparse={
+        "count": len(top), "indices": {"bufferView": g.view(top.astype("<u2").tobytes()), "componentType": 5123},
+        "values": {"bufferView": g.view(V[top].astype("<f4").tobytes())}})
+    idx = g.accessor(F.reshape(-1).astype("<u1"), 5121, "SCALAR")
+    g.node(mesh=g.mesh([{"attributes": {"POSITION": pos}, "indices": idx}]))
+    case("sparse.glb", g.glb([0]), outcome="ok", volume=1.0, bbox=unit, reference="sparse.ref.obj",
+         companions={"sparse.ref.obj": obj_text(V, F)},
+         why="positions in a sparse accessor (dense values flat, the sparse values lift four corners)")
+    # KHR_mesh_quantization: normalized int16 positions and int8 normals, dequantized by the node's scale.
+    g = Gltf()
+    extent = np.array([4.0, 2.0, 1.0])
+    q = np.round(V / 0.5 * 32767).astype("<i2")  # corners at +-32767 = +-1.0 normalized
+    nrm = np.round(V / np.linalg.norm(V, axis=1, keepdims=True) * 127).astype("i1")
+    prim = {"attributes": {"POSITION": g.accessor(q, 5122, "VEC3", normalized=True, min=[-32767] * 3,
+                                                  max=[32767] * 3),
+                           "NORMAL": g.accessor(np.pad(nrm, ((0, 0), (0, 1))), 5120, "VEC4", normalized=True)},
+            "indices": g.accessor(F.reshape(-1).astype("<u2"), 5123, "SCALAR")}
+    prim["attributes"]["NORMAL"] = prim["attributes"]["NORMAL"]
+    g.doc["accessors"][prim["attributes"]["NORMAL"]]["type"] = "VEC4"
+    g.node(mesh=g.mesh([prim]), scale=list(extent / 2))
+    g.doc["extensionsUsed"] = g.doc["extensionsRequired"] = ["KHR_mesh_quantization"]
+    case("quantized.glb", g.glb([0]), outcome="ok", check="load", volume=8.0, bbox=(-extent / 2, extent / 2),
+         why="KHR_mesh_quantization: normalized int16 positions scaled by the node (a 4 x 2 x 1 box, not 65534 wide)")
+    # Node hierarchy: one box mesh, instanced under a mirroring parent (scale -1 on x) and a rotated, moved node.
+    g = Gltf()
+    mesh = g.mesh([box_primitive(g, (1.0, 2.0, 1.0), (1.0, 0.0, 0.0))])
+    child = g.node(mesh=mesh, translation=[2.0, 0.0, 0.0])
+    mirror = g.node(children=[child], scale=[-1.0, 1.0, 1.0])
+    turned = g.node(mesh=mesh, matrix=[0, 1, 0, 0, -1, 0, 0, 0, 0, 0, 1, 0, 0, 5, 0, 1])  # 90 deg about z, y += 5
+    case("mirrored_nodes.glb", g.glb([mirror, turned]), outcome="ok", check="load", volume=4.0,
+         bbox=((-3.5, -1.0, -0.5), (1.0, 6.5, 0.5)),
+         why="node hierarchy: a box under a mirroring parent (winding must flip) and one placed by a matrix")
+    # extensionsRequired that cannot be read.
+    g = Gltf()
+    g.node(mesh=g.mesh([box_primitive(g)]))
+    g.doc["extensionsUsed"] = g.doc["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+    case("draco_required.glb", g.glb([0]), outcome="error", message="KHR_draco_mesh_compression",
+         why="requires Draco decompression (refused by the extension's name, never read as an empty or flat mesh)")
+    g.doc["extensionsUsed"] = g.doc["extensionsRequired"] = ["EXT_made_up_geometry"]
+    text, _ = g.gltf([0], "unused.bin")
+    case("unknown_required.gltf", text, outcome="error", message="EXT_made_up_geometry",
+         why="requires an extension nobody knows")
+    # A percent-encoded uri, and a short external buffer.
+    g = Gltf()
+    g.node(mesh=g.mesh([box_primitive(g)]))
+    text, binary = g.gltf([0], "box%20data%231.bin")
+    case("percent_uri.gltf", text, outcome="ok", check="load", volume=1.0, bbox=unit,
+         companions={"box data#1.bin": binary}, why="buffer uri 'box%20data%231.bin' (percent-encoded file name)")
+    text, binary = g.gltf([0], "short_buffer.bin")
+    case("short_buffer.gltf", text, outcome="error", message="has 40 bytes but buffer 0 needs",
+         companions={"short_buffer.bin": binary[:40]}, why="the external .bin is shorter than its byteLength")
+    # Two materials with one name.
+    g = Gltf()
+    g.doc["materials"] = [{"name": "paint", "pbrMetallicRoughness": {"baseColorFactor": [1, 0, 0, 1]}},
+                          {"name": "paint", "pbrMetallicRoughness": {"baseColorFactor": [0, 0, 1, 1]}}]
+    g.node(mesh=g.mesh([box_primitive(g, material=0), box_primitive(g, centre=(2.0, 0.0, 0.0), material=1)]))
+    case("shared_material_name.glb", g.glb([0]), outcome="ok", check="load", volume=2.0,
+         bbox=((-0.5,) * 3, (2.5, 0.5, 0.5)), why="two materials named 'paint' (red and blue) stay two materials")
+    # OBJ relative indices, index 0, a relative index before the first vertex.
+    case("obj_relative.obj", relative_obj(), outcome="ok", check="load", volume=2.0,
+         bbox=((-0.5,) * 3, (3.5, 0.5, 0.5)), reference="obj_relative.ref.obj",
+         companions={"obj_relative.ref.obj": obj_text(*concat(box(), box((1, 1, 1), (3, 0, 0))))},
+         why="two boxes, each with faces -8..-1 right after its own vertices (relative to that line)")
+    case("obj_index_zero.obj", obj_text(V, F).replace("f 1 2 4", "f 0 2 4"), outcome="error", message="face index 0",
+         why="OBJ index 0 does not exist (indices start at 1)")
+    case("obj_relative_too_far.obj", obj_text(V, F) + "f -1 -2 -9\n", outcome="error",
+         message="reaches before the first vertex", why="relative index -9 with 8 vertices above")
+    # PLY triangle strips.
+    case("tristrips.ply", tristrip_box_ply(), outcome="ok", volume=1.0, bbox=unit, reference="tristrips.ref.obj",
+         companions={"tristrips.ref.obj": obj_text(V, F)}, check="load",
+         why="PLY 'element tristrips' (two strips of different lengths, -1 restarts), as scan archives store meshes")
+    # Binary STL whose header starts with 'solid' and whose count is wrong.
+    solid = stl_binary(SV, SF, count=0)
+    solid = b"solid exported by a CAD tool".ljust(80, b" ") + solid[80:]
+    case("stl_solid_header.stl", solid, outcome="ok", check="load", volume=sphere_volume,
+         bbox=(SV.min(axis=0), SV.max(axis=0)),
+         why="binary STL with 320 triangles whose header starts with 'solid' and whose count field says 0")
+    # A double-sided closed surface.
+    case("double_sided_sphere.obj", obj_text(*concat((SV, SF), (SV, SF[:, ::-1]))), outcome="ok",
+         volume=sphere_volume, bbox=(SV.min(axis=0), SV.max(axis=0)),
+         why="a sphere stored twice, once facing in (double-sided export): one side is kept, not 'flat'")
 
 
 def write_toml(cases: list[dict]) -> str:
@@ -323,6 +525,14 @@ def write_toml(cases: list[dict]) -> str:
         lines.append(f"why = {json.dumps(c['why'])}")
         if c["known_issue"]:
             lines.append(f"known_issue = {json.dumps(c['known_issue'])}")
+        if c["check"] != "bake":
+            lines.append(f"check = {json.dumps(c['check'])}")
+        if c["bbox"] is not None:
+            lines.append(f"bbox = {json.dumps(c['bbox'])}")
+        if c["reference"]:
+            lines.append(f"reference = {json.dumps(c['reference'])}")
+        if c["companions"]:
+            lines.append(f"companions = {json.dumps(sorted(c['companions']))}")
         lines.append("")
     return "\n".join(lines)
 
@@ -332,10 +542,11 @@ def main() -> None:
     os.makedirs(OUT, exist_ok=True)
     total = 0
     for c in CASES:
-        data = c["data"].encode() if isinstance(c["data"], str) else c["data"]
-        with open(os.path.join(OUT, c["file"]), "wb") as fh:
-            fh.write(data)
-        total += len(data)
+        for name, data in [(c["file"], c["data"]), *c["companions"].items()]:
+            data = data.encode() if isinstance(data, str) else data
+            with open(os.path.join(OUT, name), "wb") as fh:
+                fh.write(data)
+            total += len(data)
     with open(os.path.join(OUT, "expected.toml"), "w") as fh:
         fh.write(write_toml(CASES))
     print(f"wrote {len(CASES)} files ({total / 1024:.1f} KiB) and expected.toml to {OUT}")

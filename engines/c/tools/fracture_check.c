@@ -1,0 +1,227 @@
+/*
+ * fracture_check - conformance driver of the C reader (used by the fracture tests).
+ *
+ *   fracture_check HEADER BINARY [--names] [--skip-crc] < impacts
+ *   fracture_check --sweep HEADER BINARY
+ *
+ * Impacts, one per line: the IEEE-754 bits of point x y z, impulse x y z and the
+ * threshold as 16 hex digits each ("-" for the file's default threshold). Answers:
+ *   ok <site> <num_groups> g <groups...> b <broken edges...> a <alpha bits...> d <displacement bits...>
+ *   error <status>
+ * A file that does not load prints "load-error <message>" and exits with status 2.
+ *
+ * --sweep loads every truncation of the header, many of the binary, and thousands of deterministic
+ * mutations, projecting a few hits on whatever loads: run under AddressSanitizer
+ * and UBSan, it shows a damaged file is an error code and never a bad memory access.
+ *
+ * MIT licence, Copyright (c) fracture developers.
+ */
+#include "../fracture_runtime.h"
+#include "tool_common.h"
+
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static void print_bits(double v)
+{
+    uint64_t u;
+    memcpy(&u, &v, sizeof u);
+    printf(" %016" PRIx64, u);
+}
+
+static int answer(const fr_runtime *rt, char *line)
+{
+    fr_info info = fr_get_info(rt);
+    char *tokens[7];
+    int n = 0, j;
+    double point[3], impulse[3], threshold;
+    fr_impact out;
+    fr_status status;
+    int32_t *groups = (int32_t *)malloc(sizeof(int32_t) * (size_t)info.fragments);
+    uint8_t *broken = (uint8_t *)malloc((size_t)info.edges + 1);
+    double *alpha = (double *)malloc(sizeof(double) * (size_t)info.modes);
+    double *disp = (double *)malloc(sizeof(double) * (size_t)info.fragments * (size_t)info.dim);
+    char *token;
+    for (token = strtok(line, " \t\r\n"); token != NULL && n < 7; token = strtok(NULL, " \t\r\n"))
+        tokens[n++] = token;
+    if (n < 7 || groups == NULL || broken == NULL || alpha == NULL || disp == NULL) {
+        free(groups), free(broken), free(alpha), free(disp);
+        return n == 0 ? 0 : -1;
+    }
+    for (j = 0; j < 3; j++) {
+        point[j] = from_bits(tokens[j]);
+        impulse[j] = from_bits(tokens[3 + j]);
+    }
+    threshold = strcmp(tokens[6], "-") == 0 ? info.default_threshold : from_bits(tokens[6]);
+    memset(&out, 0, sizeof out);
+    out.groups = groups;
+    out.broken = broken;
+    out.alpha = alpha;
+    out.displacement = disp;
+    status = fr_project(rt, point, impulse, threshold, NULL, &out);
+    if (status != FR_OK) {
+        printf("error %s\n", fr_status_string(status));
+    } else {
+        printf("ok %ld %ld g", (long)out.site, (long)out.num_groups);
+        for (j = 0; j < info.fragments; j++)
+            printf(" %ld", (long)groups[j]);
+        printf(" b");
+        for (j = 0; j < info.edges; j++)
+            if (broken[j])
+                printf(" %d", j);
+        printf(" a");
+        for (j = 0; j < info.modes; j++)
+            print_bits(alpha[j]);
+        printf(" d");
+        for (j = 0; j < info.fragments * info.dim; j++)
+            print_bits(disp[j]);
+        printf("\n");
+    }
+    free(groups), free(broken), free(alpha), free(disp);
+    return 1;
+}
+
+/* Load a private, exactly sized copy (so a sanitizer sees any read past its end). */
+static fr_status load_copy(const unsigned char *h, size_t hn, const unsigned char *b, size_t bn, unsigned flags,
+                           fr_runtime **rt)
+{
+    unsigned char *hc = (unsigned char *)malloc(hn ? hn : 1), *bc = (unsigned char *)malloc(bn ? bn : 1);
+    fr_status status = FR_ERR_MEMORY;
+    char message[FR_MESSAGE_SIZE];
+    if (hc != NULL && bc != NULL) {
+        memcpy(hc, h, hn);
+        memcpy(bc, b, bn);
+        status = fr_load(hc, hn, bn ? bc : NULL, bn, flags, NULL, rt, message, sizeof message);
+    }
+    free(hc);
+    free(bc);
+    return status;
+}
+
+static void poke_projections(const fr_runtime *rt)
+{
+    static const double POINTS[3][3] = {{0, 0, 0}, {1e6, -1e6, 3}, {0.25, -0.5, 0.125}};
+    static const double IMPULSES[3][3] = {{1, 2, 3}, {-1e155, 0, 1e155}, {1e-170, 0, 0}};
+    fr_info info = fr_get_info(rt);
+    int32_t *groups = (int32_t *)malloc(sizeof(int32_t) * (size_t)info.fragments);
+    double *disp = (double *)malloc(sizeof(double) * (size_t)info.fragments * (size_t)info.dim);
+    int i;
+    for (i = 0; i < 3 && groups != NULL && disp != NULL; i++) {
+        fr_impact out;
+        memset(&out, 0, sizeof out);
+        out.groups = groups;
+        out.displacement = disp;
+        (void)fr_project(rt, POINTS[i], IMPULSES[i], i == 2 ? 1e-171 : info.default_threshold, NULL, &out);
+    }
+    free(groups);
+    free(disp);
+}
+
+static unsigned long long rng_state = 0x9E3779B97F4A7C15ull;
+
+static unsigned rng(void)
+{
+    rng_state = rng_state * 6364136223846793005ull + 1442695040888963407ull;
+    return (unsigned)(rng_state >> 33);
+}
+
+static int sweep(const unsigned char *h, size_t hn, const unsigned char *b, size_t bn)
+{
+    static const unsigned char INTERESTING[] = "0123456789-+.eE\"\\{}[],: \xff\x80u";
+    unsigned char *copy = (unsigned char *)malloc((hn > bn ? hn : bn) + 1);
+    size_t i, loads = 0, ok = 0;
+    int round, pass;
+    fr_runtime *rt;
+    if (copy == NULL)
+        return 1;
+    for (i = 0; i <= hn; i++, loads++)
+        if (load_copy(h, i, b, bn, 0, &rt) == FR_OK) {
+            ok++;
+            poke_projections(rt);
+            fr_free(rt);
+        }
+    for (i = 0; i <= bn; i += (i < 512 || bn - i < 64) ? 1 : 1 + bn / 512, loads++)
+        if (load_copy(h, hn, b, i, 0, &rt) == FR_OK) {
+            ok++;
+            fr_free(rt);
+        }
+    for (pass = 0; pass < 2; pass++) /* pass 0: header bytes, pass 1: binary bytes (CRC not checked) */
+        for (round = 0; round < 3000; round++, loads++) {
+            size_t n = pass == 0 ? hn : bn;
+            int edits = 1 + (int)(rng() % 3), e;
+            if (n == 0)
+                break;
+            memcpy(copy, pass == 0 ? h : b, n);
+            for (e = 0; e < edits; e++)
+                copy[rng() % n] = pass == 0 ? INTERESTING[rng() % (sizeof INTERESTING - 1)] : (unsigned char)rng();
+            if (load_copy(pass == 0 ? copy : h, pass == 0 ? hn : hn, pass == 1 ? copy : b, bn,
+                          pass == 1 ? FR_LOAD_SKIP_CRC : 0, &rt) == FR_OK) {
+                ok++;
+                poke_projections(rt);
+                fr_free(rt);
+            }
+        }
+    free(copy);
+    printf("sweep loads=%lu ok=%lu\n", (unsigned long)loads, (unsigned long)ok);
+    return 0;
+}
+
+int main(int argc, char **argv)
+{
+    const char *paths[2] = {NULL, NULL};
+    int i, names = 0, do_sweep = 0, count = 0;
+    unsigned flags = 0;
+    unsigned char *h, *b;
+    size_t hn = 0, bn = 0;
+    fr_runtime *rt;
+    char message[FR_MESSAGE_SIZE], line[4096];
+    for (i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "--names") == 0) names = 1;
+        else if (strcmp(argv[i], "--skip-crc") == 0) flags |= FR_LOAD_SKIP_CRC;
+        else if (strcmp(argv[i], "--sweep") == 0) do_sweep = 1;
+        else if (count < 2) paths[count++] = argv[i];
+    }
+    if (count != 2) {
+        fprintf(stderr, "usage: fracture_check [--names] [--skip-crc] [--sweep] HEADER BINARY < impacts\n");
+        return 64;
+    }
+    h = read_file(paths[0], &hn);
+    b = read_file(paths[1], &bn);
+    if (h == NULL || b == NULL || do_sweep || load_copy(h, hn, b, bn, flags, &rt) != FR_OK) {
+        int status = 2;
+        if (h == NULL || b == NULL) {
+            printf("load-error cannot read the files\n");
+        } else if (do_sweep) {
+            status = sweep(h, hn, b, bn);
+        } else {
+            (void)fr_load(h, hn, b, bn, flags, NULL, &rt, message, sizeof message);
+            printf("load-error %s\n", message);
+        }
+        free(h);
+        free(b);
+        return status;
+    }
+    if (names) {
+        printf("names");
+        for (i = 0; i < fr_get_info(rt).fragments; i++) {
+            const unsigned char *s = (const unsigned char *)fr_fragment_name(rt, i);
+            printf(" ");
+            if (*s == 0)
+                printf("-");
+            for (; *s; s++)
+                printf("%02x", *s);
+        }
+        printf("\n");
+    }
+    while (fgets(line, sizeof line, stdin) != NULL)
+        if (answer(rt, line) < 0) {
+            fprintf(stderr, "bad impact line\n");
+            return 64;
+        }
+    fr_free(rt);
+    free(h);
+    free(b);
+    return 0;
+}

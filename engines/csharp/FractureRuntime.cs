@@ -1,0 +1,1106 @@
+// FractureRuntime.cs - reader of the `fracture` impact-projection file, one file, no dependencies.
+//
+// C# 7.2 subset, so it builds with Unity (.NET Standard 2.1 / C# 8 and later), .NET and Mono's mcs.
+// Loads `<stem>.fracture.json` + `<stem>.fracture.bin` from bytes, validates them, and answers
+// "which fragments break off" for a hit without allocating. Specification: docs/FORMAT.md of the
+// fracture repository (format version 1).
+//
+// MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
+//
+//   var runtime = FractureRuntime.Load(File.ReadAllBytes(jsonPath), File.ReadAllBytes(binPath));
+//   var impact = new FractureImpact(runtime);          // reusable result + scratch, one per thread
+//   runtime.Project(px, py, pz, nx, ny, nz, runtime.DefaultThreshold, impact);
+//   // fragments j with equal impact.Groups[j] move together; impact.Groups[j] == j starts a group
+
+using System;
+using System.Collections.Generic;
+using System.Globalization;
+using System.Runtime.InteropServices;
+using System.Text;
+
+namespace Fracture
+{
+    /// <summary>Why a file did not load or an impact was refused.</summary>
+    public enum FractureStatus
+    {
+        Ok = 0,
+        Argument,  // a null argument or an impact object of another runtime
+        Json,      // the header is not valid JSON (or not UTF-8)
+        Format,    // not a fracture runtime file, or a version this reader does not know
+        Header,    // a header entry is missing or has the wrong type or value
+        Size,      // binary size, array sizes, offsets or shapes disagree
+        Crc,       // the binary's CRC-32 differs from the header's
+        Data,      // a non-finite value or an edge index out of range in the binary
+        Input,     // Project: non-finite point or impulse, NaN or negative threshold
+    }
+
+    /// <summary>A runtime file that cannot be used; <see cref="Status"/> says which check failed.</summary>
+    public sealed class FractureRuntimeException : Exception
+    {
+        public readonly FractureStatus Status;
+
+        public FractureRuntimeException(FractureStatus status, string message) : base(message)
+        {
+            Status = status;
+        }
+    }
+
+    /// <summary>
+    /// Result arrays and scratch memory of <see cref="FractureRuntime.Project"/>: allocate one per
+    /// runtime and thread, reuse it for every hit (Project itself never allocates).
+    /// </summary>
+    public sealed class FractureImpact
+    {
+        /// <summary>[p] group of each fragment: the smallest fragment index in it.</summary>
+        public readonly int[] Groups;
+        /// <summary>[e] whether each edge broke.</summary>
+        public readonly bool[] Broken;
+        /// <summary>[k] mode coefficients.</summary>
+        public readonly double[] Alpha;
+        /// <summary>[p * d] fragment displacements, row-major, model axes (dimensionless).</summary>
+        public readonly double[] Displacement;
+        public int Site, NumGroups, NumBroken;
+        /// <summary>Fill <see cref="Displacement"/> (costs k*p*d multiply-adds when nothing breaks).</summary>
+        public bool ComputeDisplacement = true;
+
+        internal readonly FractureRuntime Owner;
+        internal readonly double[] ScaledAlpha, ScaledDisp;
+        internal readonly bool[] Head;
+        internal readonly int[] Piece, UnionFind, First;
+        internal readonly int[] KdIds = new int[FractureRuntime.KdStack];
+        internal readonly double[] KdBounds = new double[FractureRuntime.KdStack];
+
+        public FractureImpact(FractureRuntime runtime)
+        {
+            if (runtime == null)
+                throw new ArgumentNullException("runtime");
+            Owner = runtime;
+            Groups = new int[runtime.Fragments];
+            Broken = new bool[runtime.Edges];
+            Alpha = new double[runtime.Modes];
+            Displacement = new double[runtime.Fragments * runtime.Dim];
+            ScaledAlpha = new double[runtime.Modes];
+            ScaledDisp = new double[runtime.Fragments * runtime.Dim];
+            Head = new bool[runtime.Fragments];
+            Piece = new int[runtime.Fragments];
+            UnionFind = new int[runtime.Fragments];
+            First = new int[runtime.Fragments];
+        }
+    }
+
+    /// <summary>A loaded, validated runtime file (immutable: Project may run on several threads).</summary>
+    public sealed class FractureRuntime
+    {
+        public const int FormatVersion = 1;
+        const double BoundSlack = 1e-9;
+        const int KdLeaf = 8;
+
+        public readonly int Sites, Modes, Fragments, Edges, Dim;
+        public readonly double DefaultThreshold, ImpactRadius;
+        readonly double[] transform = new double[16];
+        readonly string[] names;
+        readonly float[] sites, B, edgeAreas;
+        readonly double[] W;
+        readonly int[] edges;
+        // k-d tree (sites in tree order) and the spanning forest of FractureRuntime.BuildForest.
+        readonly double[] kdPoints, kdBoxes;
+        readonly int[] kdIndex, kdNodes;
+        readonly int[] whole, pos, parentPos, order, ends, endPos, childAt;
+        readonly bool[] rootHead;
+        readonly double[] edgeBound;
+        readonly int wholeGroups, numTree;
+
+        /// <summary>Row-major 4x4 matrix, normalized bake coordinates to model space (informational).</summary>
+        public double[] Transform { get { return (double[])transform.Clone(); } }
+        public string FragmentName(int fragment) { return names[fragment]; }
+        public IList<string> FragmentNames { get { return Array.AsReadOnly(names); } }
+        /// <summary>(e, 2) fragment pairs (P, Q), P &lt; Q.</summary>
+        public int EdgeFragment(int edge, int end) { return edges[2 * edge + end]; }
+        public float EdgeArea(int edge) { return edgeAreas[edge]; }
+        public float SiteCoordinate(int site, int axis) { return sites[3 * site + axis]; }
+
+        /// <summary>Parse and validate; throws <see cref="FractureRuntimeException"/> for a bad file.</summary>
+        public static FractureRuntime Load(byte[] header, byte[] binary, bool checkCrc = true)
+        {
+            if (header == null || binary == null)
+                throw new FractureRuntimeException(FractureStatus.Argument, "null header or binary");
+            return new FractureRuntime(Header.Parse(header), binary, checkCrc);
+        }
+
+        /// <summary>Like <see cref="Load"/>, returning false and a one-line reason instead of throwing.</summary>
+        public static bool TryLoad(byte[] header, byte[] binary, out FractureRuntime runtime, out string error,
+                                   bool checkCrc = true)
+        {
+            try
+            {
+                runtime = Load(header, binary, checkCrc);
+                error = null;
+                return true;
+            }
+            catch (FractureRuntimeException exception)
+            {
+                runtime = null;
+                error = exception.Message;
+                return false;
+            }
+        }
+
+        /// <summary>The binary file name (buffer.uri) a header points to: a plain name in its folder.</summary>
+        public static string HeaderUri(byte[] header)
+        {
+            Header h = Header.Parse(header);
+            h.CheckUri();
+            return h.Uri;
+        }
+
+        FractureRuntime(Header h, byte[] binary, bool checkCrc)
+        {
+            h.CheckKeys();
+            h.CheckUri();
+            if (h.ByteLength != binary.LongLength)
+                throw Fail(FractureStatus.Size, "binary file has " + binary.LongLength + " bytes but the header says " +
+                                                h.ByteLength + " (truncated or from another bake)");
+            if (h.HasCrc && (h.Crc < 0 || h.Crc > 0xFFFFFFFFL))
+                throw Fail(FractureStatus.Header, "buffer.crc32 must be a 32-bit unsigned integer");
+            if (h.HasCrc && checkCrc && Crc32(binary) != (uint)h.Crc)
+                throw Fail(FractureStatus.Crc, "binary file does not match its header (crc32 differs; from another bake?)");
+            h.CheckArrays(binary.LongLength);
+            long[] s = h.Arrays[0].Shape, b = h.Arrays[1].Shape, w = h.Arrays[2].Shape;
+            long[] e = h.Arrays[3].Shape, a = h.Arrays[4].Shape;
+            long d = w[2];
+            if (d != 1 && d != 3)
+                throw Fail(FractureStatus.Size, "W must have d = 1 or 3, got " + d);
+            if (s[1] != 3 || b[0] != s[0] || b[1] != w[0] || b[2] != d || e[1] != 2 || a[0] != e[0])
+                throw Fail(FractureStatus.Size, "array shapes do not agree with each other");
+            if (s[0] < 1 || w[0] < 1 || w[1] < 1)
+                throw Fail(FractureStatus.Size, "need at least one site, mode and fragment");
+            if (s[0] > int.MaxValue || w[0] > int.MaxValue || w[1] > int.MaxValue || e[0] > int.MaxValue)
+                throw Fail(FractureStatus.Size, "counts beyond 2^31");
+            if (h.Dim != d)
+                throw Fail(FractureStatus.Size, "header says dim = " + h.Dim + " but W has d = " + d);
+            if (h.Counts == null || h.Counts[0] != s[0] || h.Counts[1] != w[0] || h.Counts[2] != w[1] || h.Counts[3] != e[0])
+                throw Fail(FractureStatus.Size, "header counts do not match the arrays");
+            if (h.Names == null || h.Names.Length != w[1])
+                throw Fail(FractureStatus.Header, "fragment_names must be " + w[1] + " strings");
+            if (!IsFinite(h.DefaultThreshold) || h.DefaultThreshold < 0)
+                throw Fail(FractureStatus.Header, "default_threshold must be a finite number >= 0");
+            if (!IsFinite(h.ImpactRadius))
+                throw Fail(FractureStatus.Header, "impact_radius must be finite");
+            for (int i = 0; i < 16; i++)
+                if (!IsFinite(h.Transform[i]))
+                    throw Fail(FractureStatus.Header, "transform must be 16 finite numbers");
+            Sites = (int)s[0];
+            Modes = (int)w[0];
+            Fragments = (int)w[1];
+            Dim = (int)d;
+            Edges = (int)e[0];
+            DefaultThreshold = h.DefaultThreshold;
+            ImpactRadius = h.ImpactRadius;
+            Array.Copy(h.Transform, transform, 16);
+            names = h.Names;
+            sites = ReadFloats(binary, h.Arrays[0], "sites");
+            B = ReadFloats(binary, h.Arrays[1], "B");
+            float[] w32 = ReadFloats(binary, h.Arrays[2], "W");
+            W = new double[w32.Length];
+            for (int i = 0; i < w32.Length; i++)
+                W[i] = w32[i];
+            edgeAreas = ReadFloats(binary, h.Arrays[4], "edge_areas");
+            edges = new int[2 * Edges];
+            for (int m = 0; m < 2 * Edges; m++)
+                edges[m] = ReadInt(binary, h.Arrays[3].Offset + 4 * m);
+            for (int m = 0; m < Edges; m++)
+                if (edges[2 * m] < 0 || edges[2 * m] >= edges[2 * m + 1] || edges[2 * m + 1] >= Fragments)
+                    throw Fail(FractureStatus.Data, "edge " + m + " is (" + edges[2 * m] + ", " + edges[2 * m + 1] +
+                                                    "): edges must be (P, Q) with 0 <= P < Q < " + Fragments);
+            kdIndex = new int[Sites];
+            kdPoints = new double[3 * Sites];
+            kdNodes = new int[4 * (Sites / 2 + 2)];
+            kdBoxes = new double[6 * (Sites / 2 + 2)];
+            BuildKdTree();
+            whole = new int[Fragments];
+            pos = new int[Fragments];
+            parentPos = new int[Fragments];
+            rootHead = new bool[Fragments];
+            order = new int[Edges];
+            ends = new int[2 * Edges];
+            endPos = new int[2 * Edges];
+            childAt = new int[Edges];
+            edgeBound = new double[Edges];
+            numTree = BuildForest();
+            wholeGroups = WholeGraph();
+            EdgeBounds();
+        }
+
+        static FractureRuntimeException Fail(FractureStatus status, string message)
+        {
+            return new FractureRuntimeException(status, message);
+        }
+
+        static bool IsFinite(double x) { return !double.IsNaN(x) && !double.IsInfinity(x); }
+
+        [StructLayout(LayoutKind.Explicit)]
+        struct Bits32
+        {
+            [FieldOffset(0)] public int Int;
+            [FieldOffset(0)] public float Float;
+        }
+
+        static int ReadInt(byte[] data, long at)
+        {
+            return data[at] | data[at + 1] << 8 | data[at + 2] << 16 | data[at + 3] << 24;
+        }
+
+        static float[] ReadFloats(byte[] data, ArrayEntry entry, string name)
+        {
+            var values = new float[entry.Length / 4];
+            var bits = new Bits32();
+            for (int i = 0; i < values.Length; i++)
+            {
+                bits.Int = ReadInt(data, entry.Offset + 4L * i);
+                if ((bits.Int & 0x7F800000) == 0x7F800000)
+                    throw Fail(FractureStatus.Data, "array '" + name + "' has non-finite values");
+                values[i] = bits.Float;
+            }
+            return values;
+        }
+
+        static uint Crc32(byte[] data)
+        {
+            var table = new uint[256];
+            for (uint i = 0; i < 256; i++)
+            {
+                uint c = i;
+                for (int k = 0; k < 8; k++)
+                    c = (c & 1) != 0 ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+                table[i] = c;
+            }
+            uint crc = 0xFFFFFFFFu;
+            foreach (byte x in data)
+                crc = table[(crc ^ x) & 0xFF] ^ (crc >> 8);
+            return crc ^ 0xFFFFFFFFu;
+        }
+
+        // ------------------------------------------------------------------ nearest site (k-d tree)
+
+        void BuildKdTree()
+        {
+            for (int i = 0; i < Sites; i++)
+                kdIndex[i] = i;
+            int count = 0;
+            KdBuild(0, Sites, ref count);
+            for (int i = 0; i < Sites; i++)
+                for (int c = 0; c < 3; c++)
+                    kdPoints[3 * i + c] = sites[3 * kdIndex[i] + c];
+        }
+
+        // Node n: kdNodes[4n..] = begin, end, left, right (left < 0: a leaf); kdBoxes[6n..] = lo, hi.
+        int KdBuild(int begin, int end, ref int count)
+        {
+            int id = count++, axis = 0;
+            for (int c = 0; c < 3; c++)
+            {
+                double lo = sites[3 * kdIndex[begin] + c], hi = lo;
+                for (int i = begin + 1; i < end; i++)
+                {
+                    double v = sites[3 * kdIndex[i] + c];
+                    lo = Math.Min(lo, v);
+                    hi = Math.Max(hi, v);
+                }
+                kdBoxes[6 * id + c] = lo;
+                kdBoxes[6 * id + 3 + c] = hi;
+                if (hi - lo > kdBoxes[6 * id + 3 + axis] - kdBoxes[6 * id + axis])
+                    axis = c;
+            }
+            kdNodes[4 * id] = begin;
+            kdNodes[4 * id + 1] = end;
+            kdNodes[4 * id + 2] = kdNodes[4 * id + 3] = -1;
+            if (end - begin <= KdLeaf)
+                return id;
+            int mid = begin + (end - begin) / 2;
+            Select(begin, end - 1, mid, axis);
+            kdNodes[4 * id + 2] = KdBuild(begin, mid, ref count);
+            kdNodes[4 * id + 3] = KdBuild(mid, end, ref count);
+            return id;
+        }
+
+        // Quickselect on kdIndex[lo..hi] by coordinate `axis`; any split is correct (boxes are exact).
+        void Select(int lo, int hi, int nth, int axis)
+        {
+            while (hi > lo)
+            {
+                float pivot = sites[3 * kdIndex[lo + (hi - lo) / 2] + axis];
+                int i = lo, j = hi;
+                while (i <= j)
+                {
+                    while (sites[3 * kdIndex[i] + axis] < pivot) i++;
+                    while (sites[3 * kdIndex[j] + axis] > pivot) j--;
+                    if (i <= j)
+                    {
+                        int t = kdIndex[i];
+                        kdIndex[i++] = kdIndex[j];
+                        kdIndex[j--] = t;
+                    }
+                }
+                if (nth <= j) hi = j;
+                else if (nth >= i) lo = i;
+                else break;
+            }
+        }
+
+        // Squared distance to a node's box, computed like a site's so it never exceeds one inside.
+        double BoxDistance2(int node, double x, double y, double z)
+        {
+            int b = 6 * node;
+            double dx = x < kdBoxes[b] ? kdBoxes[b] - x : x > kdBoxes[b + 3] ? x - kdBoxes[b + 3] : 0.0;
+            double dy = y < kdBoxes[b + 1] ? kdBoxes[b + 1] - y : y > kdBoxes[b + 4] ? y - kdBoxes[b + 4] : 0.0;
+            double dz = z < kdBoxes[b + 2] ? kdBoxes[b + 2] - z : z > kdBoxes[b + 5] ? z - kdBoxes[b + 5] : 0.0;
+            return dx * dx + dy * dy + dz * dz;
+        }
+
+        internal const int KdStack = 96; // deeper than any tree of at most 2^31 sites
+
+        [ThreadStatic] static int[] threadIds;
+        [ThreadStatic] static double[] threadBounds;
+
+        /// <summary>Nearest contact site (smallest index on exact ties, docs/FORMAT.md section 4 step 1).</summary>
+        public int NearestSite(double x, double y, double z)
+        {
+            if (!IsFinite(x) || !IsFinite(y) || !IsFinite(z))
+                return -1;
+            if (threadIds == null)
+            {
+                threadIds = new int[KdStack];
+                threadBounds = new double[KdStack];
+            }
+            return NearestSiteCore(x, y, z, threadIds, threadBounds);
+        }
+
+        // A box is skipped only when strictly farther than the best site, so ties keep the smallest index.
+        int NearestSiteCore(double x, double y, double z, int[] ids, double[] bounds)
+        {
+            int top = 1, bestIndex = int.MaxValue;
+            double best = double.PositiveInfinity;
+            ids[0] = 0;
+            bounds[0] = BoxDistance2(0, x, y, z);
+            while (top > 0)
+            {
+                top--;
+                if (bounds[top] > best)
+                    continue;
+                int node = ids[top], left = kdNodes[4 * node + 2], right = kdNodes[4 * node + 3];
+                if (left < 0)
+                {
+                    for (int i = kdNodes[4 * node]; i < kdNodes[4 * node + 1]; i++)
+                    {
+                        double dx = kdPoints[3 * i] - x, dy = kdPoints[3 * i + 1] - y, dz = kdPoints[3 * i + 2] - z;
+                        double d2 = dx * dx + dy * dy + dz * dz;
+                        if (d2 < best || (d2 == best && kdIndex[i] < bestIndex))
+                        {
+                            best = d2;
+                            bestIndex = kdIndex[i];
+                        }
+                    }
+                    continue;
+                }
+                double a = BoxDistance2(left, x, y, z), b = BoxDistance2(right, x, y, z);
+                bool leftNear = a <= b;
+                ids[top] = leftNear ? right : left; // pushed first: the nearer box is searched first
+                bounds[top++] = leftNear ? b : a;
+                ids[top] = leftNear ? left : right;
+                bounds[top++] = leftNear ? a : b;
+            }
+            return bestIndex;
+        }
+
+        // ------------------------------------------------------------------ fragment graph
+
+        // Breadth-first spanning forest (small subtrees) numbered in depth-first preorder, so a parent
+        // precedes its children; edges get a test order with the tree edges first. Returns their number.
+        int BuildForest()
+        {
+            int p = Fragments, e = Edges;
+            var start = new int[p + 1];
+            for (int m = 0; m < e; m++)
+            {
+                start[edges[2 * m] + 1]++;
+                start[edges[2 * m + 1] + 1]++;
+            }
+            for (int v = 0; v < p; v++)
+                start[v + 1] += start[v];
+            var adjacency = new int[4 * e];
+            var next = (int[])start.Clone();
+            for (int m = 0; m < e; m++)
+            {
+                int P = edges[2 * m], Q = edges[2 * m + 1];
+                adjacency[2 * next[P]] = Q;
+                adjacency[2 * next[P]++ + 1] = m;
+                adjacency[2 * next[Q]] = P;
+                adjacency[2 * next[Q]++ + 1] = m;
+            }
+            var parentEdge = new int[p]; // -2 unvisited, -1 root, else the edge to the parent
+            var queue = new int[p];
+            var children = new List<int>[p];
+            for (int v = 0; v < p; v++)
+            {
+                parentEdge[v] = -2;
+                children[v] = new List<int>();
+            }
+            for (int v = 0; v < p; v++)
+            {
+                if (parentEdge[v] != -2)
+                    continue;
+                parentEdge[v] = -1;
+                queue[0] = v;
+                for (int head = 0, tail = 1; head < tail; head++)
+                {
+                    int u = queue[head];
+                    for (int a = start[u]; a < start[u + 1]; a++)
+                        if (parentEdge[adjacency[2 * a]] == -2)
+                        {
+                            parentEdge[adjacency[2 * a]] = adjacency[2 * a + 1];
+                            children[u].Add(adjacency[2 * a]);
+                            queue[tail++] = adjacency[2 * a];
+                        }
+                }
+            }
+            var treeChild = new int[e];
+            for (int m = 0; m < e; m++)
+                treeChild[m] = -1;
+            var stack = new Stack<int>();
+            int counter = 0;
+            for (int v = 0; v < p; v++)
+            {
+                if (parentEdge[v] != -1)
+                    continue;
+                stack.Push(v);
+                while (stack.Count > 0)
+                {
+                    int u = stack.Pop();
+                    pos[u] = counter;
+                    rootHead[counter] = parentEdge[u] < 0;
+                    parentPos[counter] = counter;
+                    if (parentEdge[u] >= 0)
+                    {
+                        int P = edges[2 * parentEdge[u]], Q = edges[2 * parentEdge[u] + 1];
+                        treeChild[parentEdge[u]] = counter;
+                        parentPos[counter] = pos[P == u ? Q : P];
+                    }
+                    counter++;
+                    for (int c = children[u].Count - 1; c >= 0; c--)
+                        stack.Push(children[u][c]);
+                }
+            }
+            int tree = 0;
+            for (int m = 0; m < e; m++)
+                if (treeChild[m] >= 0)
+                {
+                    childAt[tree] = treeChild[m];
+                    order[tree++] = m;
+                }
+            for (int m = 0, r = tree; m < e; m++)
+                if (treeChild[m] < 0)
+                    order[r++] = m;
+            for (int r = 0; r < e; r++)
+            {
+                ends[2 * r] = edges[2 * order[r]];
+                ends[2 * r + 1] = edges[2 * order[r] + 1];
+                endPos[2 * r] = pos[ends[2 * r]];
+                endPos[2 * r + 1] = pos[ends[2 * r + 1]];
+            }
+            return tree;
+        }
+
+        static int Root(int[] parent, int a)
+        {
+            while (parent[a] != a)
+                a = parent[a] = parent[parent[a]]; // path halving
+            return a;
+        }
+
+        // Groups when nothing breaks; returns how many.
+        int WholeGraph()
+        {
+            for (int v = 0; v < Fragments; v++)
+                whole[v] = v;
+            for (int m = 0; m < Edges; m++)
+            {
+                int a = Root(whole, edges[2 * m]), b = Root(whole, edges[2 * m + 1]);
+                whole[Math.Max(a, b)] = Math.Min(a, b); // roots stay the smallest member
+            }
+            int count = 0;
+            for (int v = 0; v < Fragments; v++)
+            {
+                whole[v] = Root(whole, v);
+                count += whole[v] == v ? 1 : 0;
+            }
+            return count;
+        }
+
+        // Per edge (test order) c with |jump'| <= |alpha'| * c for the computed jump: Cauchy-Schwarz on
+        // W[:, P] - W[:, Q] plus slack for the rounding of both displacements.
+        void EdgeBounds()
+        {
+            int n = Fragments * Dim;
+            for (int r = 0; r < Edges; r++)
+            {
+                int P = ends[2 * r], Q = ends[2 * r + 1];
+                double diff2 = 0, wp2 = 0, wq2 = 0;
+                for (int i = 0; i < Modes; i++)
+                    for (int c = 0; c < Dim; c++)
+                    {
+                        double wp = W[i * n + P * Dim + c], wq = W[i * n + Q * Dim + c];
+                        diff2 += (wp - wq) * (wp - wq);
+                        wp2 += wp * wp;
+                        wq2 += wq * wq;
+                    }
+                edgeBound[r] = (Math.Sqrt(diff2) + BoundSlack * (Math.Sqrt(wp2) + Math.Sqrt(wq2))) * (1.0 + BoundSlack);
+            }
+        }
+
+        // ------------------------------------------------------------------ projection
+
+        /// <summary>
+        /// Project a hit (docs/FORMAT.md section 4): point in model space, impulse in model axes (any
+        /// unit), threshold in the impulse's unit (double.PositiveInfinity: unbreakable). Fills
+        /// <paramref name="result"/> without allocating; returns Input for a non-finite point or
+        /// impulse or a NaN or negative threshold (result untouched).
+        /// </summary>
+        public FractureStatus Project(double px, double py, double pz, double nx, double ny, double nz, double threshold,
+                                      FractureImpact result)
+        {
+            if (result == null || result.Owner != this)
+                return FractureStatus.Argument;
+            if (!IsFinite(px) || !IsFinite(py) || !IsFinite(pz) || !IsFinite(nx) || !IsFinite(ny) || !IsFinite(nz))
+                return FractureStatus.Input;
+            if (double.IsNaN(threshold) || threshold < 0)
+                return FractureStatus.Input;
+            double m = Math.Max(Math.Abs(nx), Math.Max(Math.Abs(ny), Math.Abs(nz)));
+            double[] alpha = result.ScaledAlpha, disp = result.ScaledDisp;
+            result.Site = NearestSiteCore(px, py, pz, result.KdIds, result.KdBounds);
+            bool breaks = false;
+            if (m == 0)
+            {
+                Array.Clear(alpha, 0, alpha.Length);
+            }
+            else
+            {
+                ModeCoefficients(result.Site, nx / m, ny / m, nz / m, alpha);
+                breaks = AnyEdgeMayBreak(alpha, threshold / m);
+            }
+            if (breaks || result.ComputeDisplacement)
+                Displacements(alpha, disp);
+            if (breaks)
+            {
+                result.NumGroups = BreakAndGroup(threshold / m, result);
+            }
+            else
+            {
+                Array.Clear(result.Broken, 0, Edges);
+                Array.Copy(whole, result.Groups, Fragments);
+                result.NumGroups = wholeGroups;
+                result.NumBroken = 0;
+            }
+            if (result.ComputeDisplacement)
+                for (int i = 0; i < disp.Length; i++)
+                    result.Displacement[i] = m * disp[i];
+            for (int i = 0; i < Modes; i++)
+                result.Alpha[i] = m * alpha[i];
+            return FractureStatus.Ok;
+        }
+
+        void ModeCoefficients(int site, double n0, double n1, double n2, double[] alpha)
+        {
+            int b = site * Modes * Dim;
+            if (Dim == 1)
+            {
+                double length = Math.Sqrt(n0 * n0 + n1 * n1 + n2 * n2);
+                for (int i = 0; i < Modes; i++)
+                    alpha[i] = (double)B[b + i] * length;
+            }
+            else
+            {
+                for (int i = 0; i < Modes; i++)
+                    alpha[i] = (double)B[b + 3 * i] * n0 + (double)B[b + 3 * i + 1] * n1 + (double)B[b + 3 * i + 2] * n2;
+            }
+        }
+
+        bool AnyEdgeMayBreak(double[] alpha, double t)
+        {
+            double norm2 = 0;
+            for (int i = 0; i < Modes; i++)
+                norm2 += alpha[i] * alpha[i];
+            double norm = Math.Sqrt(norm2) * (1.0 + BoundSlack);
+            for (int r = 0; r < Edges; r++)
+                if (!(norm * edgeBound[r] <= t))
+                    return true;
+            return false;
+        }
+
+        // disp'[j, c] = sum over i of alpha'[i] W[i, j, c], each sum in mode order.
+        void Displacements(double[] alpha, double[] disp)
+        {
+            int n = Fragments * Dim;
+            Array.Clear(disp, 0, n);
+            for (int i = 0; i < Modes; i++)
+            {
+                double a = alpha[i];
+                int row = i * n;
+                for (int j = 0; j < n; j++)
+                    disp[j] += a * W[row + j];
+            }
+        }
+
+        double JumpNorm(double[] disp, int P, int Q)
+        {
+            if (Dim == 1)
+                return Math.Abs(disp[P] - disp[Q]);
+            double j0 = disp[3 * P] - disp[3 * Q], j1 = disp[3 * P + 1] - disp[3 * Q + 1], j2 = disp[3 * P + 2] - disp[3 * Q + 2];
+            return Math.Sqrt(j0 * j0 + j1 * j1 + j2 * j2);
+        }
+
+        // Steps 5-6: tree edges first mark subtree heads; one forward pass labels each position with its
+        // subtree's head (parents precede children); unbroken non-tree edges join subtrees; a fragment's
+        // group is the first fragment met in its component in increasing order.
+        int BreakAndGroup(double t, FractureImpact result)
+        {
+            double[] disp = result.ScaledDisp;
+            bool[] broken = result.Broken, head = result.Head;
+            int[] piece = result.Piece, uf = result.UnionFind, first = result.First, groups = result.Groups;
+            int count = 0, groupCount = 0, r = 0;
+            Array.Copy(rootHead, head, Fragments);
+            for (; r < numTree; r++)
+            {
+                bool cut = JumpNorm(disp, ends[2 * r], ends[2 * r + 1]) > t;
+                broken[order[r]] = cut;
+                head[childAt[r]] = cut;
+                count += cut ? 1 : 0;
+            }
+            for (int j = 0; j < Fragments; j++)
+            {
+                piece[j] = head[j] ? j : piece[parentPos[j]];
+                uf[j] = j;
+                first[j] = -1;
+            }
+            for (; r < Edges; r++)
+            {
+                bool cut = JumpNorm(disp, ends[2 * r], ends[2 * r + 1]) > t;
+                broken[order[r]] = cut;
+                if (cut)
+                {
+                    count++;
+                    continue;
+                }
+                int a = Root(uf, piece[endPos[2 * r]]), b = Root(uf, piece[endPos[2 * r + 1]]);
+                uf[Math.Max(a, b)] = Math.Min(a, b);
+            }
+            for (int v = 0; v < Fragments; v++)
+            {
+                int c = Root(uf, piece[pos[v]]);
+                if (first[c] < 0)
+                {
+                    first[c] = v;
+                    groupCount++;
+                }
+                groups[v] = first[c];
+            }
+            result.NumBroken = count;
+            return groupCount;
+        }
+
+        // ------------------------------------------------------------------ header
+
+        internal sealed class ArrayEntry
+        {
+            public string DType;
+            public long[] Shape;
+            public long Offset = -1, Length = -1;
+            public bool ShapeOk = true;
+        }
+
+        static readonly string[] ArrayNames = { "sites", "B", "W", "edges", "edge_areas" };
+        static readonly int[] ArrayRanks = { 2, 3, 3, 2, 1 };
+
+        internal sealed class Header
+        {
+            public bool HasDim, HasThreshold, HasRadius, HasTransform, HasLength, HasCrc, HasBuffer, HasArrays;
+            public long Dim, ByteLength, Crc;
+            public long[] Counts;
+            public string[] Names;
+            public string Uri;
+            public double DefaultThreshold, ImpactRadius;
+            public readonly double[] Transform = new double[16];
+            public readonly ArrayEntry[] Arrays = new ArrayEntry[5];
+
+            public static Header Parse(byte[] bytes)
+            {
+                string text;
+                try
+                {
+                    text = new UTF8Encoding(false, true).GetString(bytes);
+                }
+                catch (ArgumentException)
+                {
+                    throw Fail(FractureStatus.Json, "header is not UTF-8");
+                }
+                object root = new Json(text).ParseDocument();
+                var top = root as Dictionary<string, object>;
+                if (top == null)
+                    throw Fail(FractureStatus.Json, "header is not a JSON object");
+                object value;
+                if (!top.TryGetValue("format", out value) || !"fracture-modes-runtime".Equals(value))
+                    throw Fail(FractureStatus.Format, "not a fracture runtime file (expected \"format\": \"fracture-modes-runtime\")");
+                long version;
+                if (!top.TryGetValue("version", out value) || !Json.AsInteger(value, out version) || version < 1 ||
+                    version > FormatVersion)
+                    throw Fail(FractureStatus.Format, "runtime file version is not supported (this reader knows 1.." +
+                                                      FormatVersion + ")");
+                var h = new Header();
+                h.Read(top);
+                return h;
+            }
+
+            void Read(Dictionary<string, object> top)
+            {
+                object value;
+                HasDim = top.TryGetValue("dim", out value) && Json.AsInteger(value, out Dim);
+                HasThreshold = top.TryGetValue("default_threshold", out value) && Json.AsNumber(value, out DefaultThreshold);
+                HasRadius = top.TryGetValue("impact_radius", out value) && Json.AsNumber(value, out ImpactRadius);
+                var list = top.TryGetValue("transform", out value) ? value as List<object> : null;
+                HasTransform = list != null && list.Count == 16;
+                for (int i = 0; HasTransform && i < 16; i++)
+                    HasTransform = Json.AsNumber(list[i], out Transform[i]);
+                var counts = top.TryGetValue("counts", out value) ? value as Dictionary<string, object> : null;
+                if (counts != null)
+                {
+                    string[] keys = { "sites", "modes", "fragments", "edges" };
+                    Counts = new long[4];
+                    for (int i = 0; i < 4 && Counts != null; i++)
+                        if (!counts.TryGetValue(keys[i], out value) || !Json.AsInteger(value, out Counts[i]))
+                            Counts = null;
+                }
+                var names = top.TryGetValue("fragment_names", out value) ? value as List<object> : null;
+                if (names != null)
+                {
+                    Names = new string[names.Count];
+                    for (int i = 0; i < names.Count && Names != null; i++)
+                        if ((Names[i] = names[i] as string) == null || Names[i].IndexOf('\0') >= 0)
+                            Names = null;
+                }
+                var buffer = top.TryGetValue("buffer", out value) ? value as Dictionary<string, object> : null;
+                HasBuffer = buffer != null;
+                if (HasBuffer)
+                {
+                    Uri = buffer.TryGetValue("uri", out value) ? value as string : null;
+                    HasLength = buffer.TryGetValue("byte_length", out value) && Json.AsInteger(value, out ByteLength);
+                    HasCrc = buffer.TryGetValue("crc32", out value) && Json.AsInteger(value, out Crc);
+                    if (buffer.ContainsKey("crc32") && !HasCrc)
+                        throw Fail(FractureStatus.Header, "buffer.crc32 must be a 32-bit unsigned integer");
+                }
+                var arrays = top.TryGetValue("arrays", out value) ? value as Dictionary<string, object> : null;
+                HasArrays = arrays != null;
+                for (int i = 0; HasArrays && i < 5; i++)
+                {
+                    var entry = arrays.TryGetValue(ArrayNames[i], out value) ? value as Dictionary<string, object> : null;
+                    if (entry != null)
+                        Arrays[i] = ReadEntry(entry);
+                }
+            }
+
+            static ArrayEntry ReadEntry(Dictionary<string, object> entry)
+            {
+                var a = new ArrayEntry();
+                object value;
+                a.DType = entry.TryGetValue("dtype", out value) ? value as string : null;
+                if (entry.TryGetValue("byte_offset", out value) && !Json.AsInteger(value, out a.Offset))
+                    a.Offset = -1;
+                if (entry.TryGetValue("byte_length", out value) && !Json.AsInteger(value, out a.Length))
+                    a.Length = -1;
+                var shape = entry.TryGetValue("shape", out value) ? value as List<object> : null;
+                if (shape != null)
+                {
+                    a.Shape = new long[shape.Count];
+                    for (int i = 0; i < shape.Count; i++)
+                        if (!Json.AsInteger(shape[i], out a.Shape[i]) || a.Shape[i] < 0)
+                            a.ShapeOk = false;
+                }
+                return a;
+            }
+
+            public void CheckKeys()
+            {
+                string missing = !HasDim ? "dim" : Counts == null ? "counts" : Names == null ? "fragment_names"
+                    : !HasTransform ? "transform (16 numbers)" : !HasThreshold ? "default_threshold"
+                    : !HasRadius ? "impact_radius" : !HasBuffer ? "buffer" : !HasLength ? "buffer.byte_length"
+                    : !HasArrays ? "arrays" : null;
+                if (missing != null)
+                    throw Fail(FractureStatus.Header, "runtime header is missing or has a malformed entry: " + missing);
+            }
+
+            public void CheckUri()
+            {
+                if (Uri == null || Uri.Length == 0 || Uri == "." || Uri == ".." || Uri.IndexOfAny(new[] { '/', '\\', ':', '\0' }) >= 0)
+                    throw Fail(FractureStatus.Header, "buffer.uri must be a plain file name next to the header");
+            }
+
+            public void CheckArrays(long binarySize)
+            {
+                for (int i = 0; i < 5; i++)
+                {
+                    ArrayEntry a = Arrays[i];
+                    string name = ArrayNames[i];
+                    if (a == null || a.DType == null || a.Shape == null)
+                        throw Fail(FractureStatus.Header, "array '" + name + "' entry is missing or malformed");
+                    if (a.DType != (i == 3 ? "int32" : "float32"))
+                        throw Fail(FractureStatus.Header, "array '" + name + "' has the wrong dtype");
+                    if (a.Shape.Length != ArrayRanks[i])
+                        throw Fail(FractureStatus.Size, "array '" + name + "' has " + a.Shape.Length +
+                                                        " dimensions, expected " + ArrayRanks[i]);
+                    if (!a.ShapeOk)
+                        throw Fail(FractureStatus.Size, "array '" + name + "' has a negative or non-integer size");
+                    long count = 1;
+                    foreach (long n in a.Shape) // saturate: a product beyond the file cannot match byte_length
+                        count = n != 0 && count > (1L << 40) / n ? (1L << 40) + 1 : count * n;
+                    if (a.Length < 0 || count * 4 != a.Length)
+                        throw Fail(FractureStatus.Size, "array '" + name + "': shape and byte_length do not agree");
+                    if (a.Offset < 0 || a.Offset % 16 != 0 || a.Offset > binarySize || a.Length > binarySize - a.Offset)
+                        throw Fail(FractureStatus.Size, "array '" + name +
+                                                        "' lies outside the binary file or is not 16-byte aligned");
+                }
+            }
+        }
+
+        // ------------------------------------------------------------------ JSON (RFC 8259, strict)
+
+        // Objects become Dictionary<string, object>, arrays List<object>, strings string, numbers
+        // JsonNumber, true/false bool, null null. Duplicate keys: the last one wins.
+        internal sealed class JsonNumber
+        {
+            public string Text;
+            public bool Integer;
+        }
+
+        internal sealed class Json
+        {
+            const int MaxDepth = 64;
+            readonly string text;
+            int at, depth;
+
+            public Json(string text)
+            {
+                this.text = text;
+            }
+
+            public static bool AsInteger(object value, out long result)
+            {
+                var number = value as JsonNumber;
+                result = 0;
+                return number != null && number.Integer &&
+                       long.TryParse(number.Text, NumberStyles.AllowLeadingSign, CultureInfo.InvariantCulture, out result);
+            }
+
+            public static bool AsNumber(object value, out double result)
+            {
+                var number = value as JsonNumber;
+                result = 0;
+                return number != null &&
+                       double.TryParse(number.Text, NumberStyles.Float, CultureInfo.InvariantCulture, out result);
+            }
+
+            FractureRuntimeException Error()
+            {
+                return Fail(FractureStatus.Json, "header is not valid JSON (near character " + at + ")");
+            }
+
+            void Space()
+            {
+                while (at < text.Length && (text[at] == ' ' || text[at] == '\t' || text[at] == '\n' || text[at] == '\r'))
+                    at++;
+            }
+
+            bool Eat(char c)
+            {
+                Space();
+                if (at < text.Length && text[at] == c)
+                {
+                    at++;
+                    return true;
+                }
+                return false;
+            }
+
+            public object ParseDocument()
+            {
+                object value = Value();
+                Space();
+                if (at != text.Length)
+                    throw Error();
+                return value;
+            }
+
+            object Value()
+            {
+                Space();
+                if (at >= text.Length)
+                    throw Error();
+                char c = text[at];
+                if (c == '{' || c == '[')
+                {
+                    if (++depth > MaxDepth)
+                        throw Error();
+                    object container = c == '{' ? (object)Object() : List();
+                    depth--;
+                    return container;
+                }
+                if (c == '"')
+                    return String();
+                if (c == '-' || (c >= '0' && c <= '9'))
+                    return Number();
+                foreach (string word in new[] { "true", "false", "null" })
+                    if (string.CompareOrdinal(text, at, word, 0, word.Length) == 0)
+                    {
+                        at += word.Length;
+                        return word == "null" ? null : (object)(word == "true");
+                    }
+                throw Error();
+            }
+
+            Dictionary<string, object> Object()
+            {
+                var result = new Dictionary<string, object>(StringComparer.Ordinal);
+                at++;
+                if (Eat('}'))
+                    return result;
+                do
+                {
+                    Space();
+                    if (at >= text.Length || text[at] != '"')
+                        throw Error();
+                    string key = String();
+                    if (!Eat(':'))
+                        throw Error();
+                    result[key] = Value();
+                } while (Eat(','));
+                if (!Eat('}'))
+                    throw Error();
+                return result;
+            }
+
+            List<object> List()
+            {
+                var result = new List<object>();
+                at++;
+                if (Eat(']'))
+                    return result;
+                do
+                    result.Add(Value());
+                while (Eat(','));
+                if (!Eat(']'))
+                    throw Error();
+                return result;
+            }
+
+            string String()
+            {
+                var builder = new StringBuilder();
+                at++;
+                while (true)
+                {
+                    if (at >= text.Length)
+                        throw Error();
+                    char c = text[at++];
+                    if (c == '"')
+                        return builder.ToString();
+                    if (c < 0x20)
+                        throw Error();
+                    if (char.IsSurrogate(c)) // from the UTF-8 decoder: always a valid pair
+                    {
+                        builder.Append(c);
+                        continue;
+                    }
+                    if (c != '\\')
+                    {
+                        builder.Append(c);
+                        continue;
+                    }
+                    if (at >= text.Length)
+                        throw Error();
+                    char escape = text[at++];
+                    int index = "\"\\/bfnrt".IndexOf(escape);
+                    if (index >= 0)
+                    {
+                        builder.Append("\"\\/\b\f\n\r\t"[index]);
+                        continue;
+                    }
+                    if (escape != 'u')
+                        throw Error();
+                    int unit = Hex4();
+                    if (unit >= 0xDC00 && unit <= 0xDFFF)
+                        throw Error(); // a lone low surrogate
+                    builder.Append((char)unit);
+                    if (unit >= 0xD800 && unit <= 0xDBFF)
+                    {
+                        if (at + 1 >= text.Length || text[at] != '\\' || text[at + 1] != 'u')
+                            throw Error();
+                        at += 2;
+                        int low = Hex4();
+                        if (low < 0xDC00 || low > 0xDFFF)
+                            throw Error();
+                        builder.Append((char)low);
+                    }
+                }
+            }
+
+            int Hex4()
+            {
+                if (at + 4 > text.Length)
+                    throw Error();
+                int value = 0;
+                for (int i = 0; i < 4; i++)
+                {
+                    int digit = "0123456789abcdef".IndexOf(char.ToLowerInvariant(text[at++]));
+                    if (digit < 0)
+                        throw Error();
+                    value = value * 16 + digit;
+                }
+                return value;
+            }
+
+            JsonNumber Number()
+            {
+                int begin = at;
+                bool integer = true;
+                if (text[at] == '-')
+                    at++;
+                if (at < text.Length && text[at] == '0')
+                    at++;
+                else if (!Digits())
+                    throw Error();
+                if (at < text.Length && text[at] == '.')
+                {
+                    integer = false;
+                    at++;
+                    if (!Digits())
+                        throw Error();
+                }
+                if (at < text.Length && (text[at] == 'e' || text[at] == 'E'))
+                {
+                    integer = false;
+                    at++;
+                    if (at < text.Length && (text[at] == '+' || text[at] == '-'))
+                        at++;
+                    if (!Digits())
+                        throw Error();
+                }
+                return new JsonNumber { Text = text.Substring(begin, at - begin), Integer = integer };
+            }
+
+            bool Digits()
+            {
+                int begin = at;
+                while (at < text.Length && text[at] >= '0' && text[at] <= '9')
+                    at++;
+                return at > begin;
+            }
+        }
+    }
+}

@@ -1,0 +1,284 @@
+# fracture_body.gd - a baked `fracture` asset that breaks where it is hit (Godot 3.x).
+#
+# Put the fragments scene (the baked <stem>.glb) under a FractureBody, set runtime_path to its
+# <stem>.fracture.json, and call hit() with a world-space point and impulse (from a collision, a
+# ray cast, an explosion). The fragments that break off become RigidBodies with the fragments'
+# collision shapes; the largest remaining piece stays static (or, with static_rest off, becomes
+# one more RigidBody). Hitting a detached piece again breaks that piece further.
+#
+# Collision shapes per fragment, first match wins: the fragment's imported "-convcolonly" parts
+# (StaticBody children Godot's importer makes from nodes named "<fragment>-convcolonly" or
+# "<fragment>_<nn>-convcolonly"), then Unreal-style "UCX_<fragment>_<nn>" meshes, then a convex
+# hull of the fragment's own mesh.
+#
+# MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
+extends Spatial
+class_name FractureBody
+
+signal fractured(new_bodies)
+
+const FractureRuntimeScript = preload("fracture_runtime.gd")
+
+export(String, FILE, "*.json") var runtime_path := ""
+export(float) var threshold := -1.0  # toughness in your impulse unit; < 0: the file's default_threshold
+export(bool) var static_rest := true  # the largest piece of the intact object stays static
+export(float) var density := 1000.0  # mass per cubic unit (bounding boxes of the fragment meshes)
+export(float) var impulse_scale := 1.0  # physics impulse per unit of hit impulse for detached pieces
+export(NodePath) var scene_path := NodePath("")  # the fragments scene; default: the first Spatial child
+
+var runtime = null  # FractureRuntime
+var error_message := ""
+
+var _scene: Spatial
+var _meshes := []  # MeshInstance of each fragment
+var _rest := []  # Transform of each fragment mesh in the model frame (the scene root at setup)
+var _shapes := []  # per fragment: Array of [Shape, Transform in the model frame]
+var _volumes := []  # per fragment: bounding-box volume of its mesh (for masses)
+var _body_of := []  # body index of each fragment
+var _bodies := []  # PhysicsBody nodes
+var _model_to_body := []  # per body: Transform from the model frame to the body's local frame
+
+
+func _ready() -> void:
+	if runtime == null and runtime_path != "":
+		if setup() != OK:
+			push_error("FractureBody: " + error_message)
+
+
+# Load the runtime file and turn the fragments scene into one body. OK or an error code.
+func setup() -> int:
+	runtime = FractureRuntimeScript.new()
+	var status: int = runtime.load_file(runtime_path)
+	if status != OK:
+		error_message = runtime.error_message
+		return status
+	_scene = get_node(scene_path) if not scene_path.is_empty() else _first_spatial_child()
+	if _scene == null:
+		error_message = "no fragments scene under the FractureBody"
+		return ERR_DOES_NOT_EXIST
+	for name in runtime.fragment_names:
+		var mesh := _find_named(_scene, name) as MeshInstance
+		if mesh == null:
+			error_message = "fragment '%s' of the runtime file is not in the scene" % name
+			return ERR_DOES_NOT_EXIST
+		_meshes.append(mesh)
+		_rest.append(_relative(mesh))
+		_shapes.append(_collect_shapes(mesh, name))
+		var box: AABB = mesh.get_aabb()
+		_volumes.append(box.size.x * box.size.y * box.size.z)
+		_body_of.append(0)
+	_remove_collision_helpers(_scene)
+	var intact: PhysicsBody = StaticBody.new() if static_rest else RigidBody.new()
+	intact.name = "intact"
+	_add_body(intact, _scene.global_transform, _scene.global_transform, range(_meshes.size()))
+	return OK
+
+
+func _first_spatial_child():
+	for child in get_children():
+		if child is Spatial and not child is PhysicsBody:
+			return child
+	return null
+
+
+func _find_named(node: Node, name: String):
+	if node.name == name:
+		return node
+	for child in node.get_children():
+		var found = _find_named(child, name)
+		if found != null:
+			return found
+	return null
+
+
+func _descendants(node: Node) -> Array:
+	var out := []
+	for child in node.get_children():
+		out.append(child)
+		out += _descendants(child)
+	return out
+
+
+# A node's transform in the model frame (relative to the scene root).
+func _relative(node: Spatial) -> Transform:
+	return _scene.global_transform.affine_inverse() * node.global_transform
+
+
+# "<fragment>" or "<fragment>_<digits>" (Godot's importer drops the "-convcolonly" suffix).
+func _is_part_name(node_name: String, fragment: String) -> bool:
+	if node_name == fragment:
+		return true
+	var rest := node_name.trim_prefix(fragment + "_")
+	return rest != node_name and rest.is_valid_integer()
+
+
+func _shapes_of(body: Node) -> Array:
+	var parts := []
+	for child in body.get_children():
+		if child is CollisionShape and child.shape != null:
+			parts.append([child.shape, _relative(child)])
+	return parts
+
+
+# [Shape, Transform in the model frame] for every collision part of one fragment.
+func _collect_shapes(mesh: MeshInstance, fragment: String) -> Array:
+	var parts := []
+	for child in mesh.get_children():  # "-convcolonly" children, imported as StaticBodies
+		if child is StaticBody:
+			parts += _shapes_of(child)
+	if parts.empty():  # "-convcolonly" nodes elsewhere in the scene
+		for node in _descendants(_scene):
+			if node is StaticBody and _is_part_name(node.name, fragment):
+				parts += _shapes_of(node)
+	if parts.empty():  # Unreal's UCX_<fragment>_<nn> meshes
+		for node in _descendants(_scene):
+			if node is MeshInstance and node.name.begins_with("UCX_") and _is_part_name(node.name.substr(4), fragment):
+				parts.append([node.mesh.create_convex_shape(), _relative(node)])
+	if parts.empty():  # no exported parts: the convex hull of the fragment
+		parts.append([mesh.mesh.create_convex_shape(), _relative(mesh)])
+	return parts
+
+
+# The imported collision-only nodes are replaced by the bodies' own CollisionShapes.
+func _remove_collision_helpers(node: Node) -> void:
+	for child in node.get_children():
+		if child is StaticBody or (child is MeshInstance and child.name.begins_with("UCX_")):
+			node.remove_child(child)
+			child.queue_free()
+		else:
+			_remove_collision_helpers(child)
+
+
+# Place `body` at `at` and give it the fragments `members`, whose model frame is at `model_frame`
+# in world space.
+func _add_body(body: PhysicsBody, at: Transform, model_frame: Transform, members: Array) -> void:
+	add_child(body)
+	body.global_transform = at
+	var index := _bodies.size()
+	var model_to_body: Transform = at.affine_inverse() * model_frame
+	_bodies.append(body)
+	_model_to_body.append(model_to_body)
+	var volume := 0.0
+	for j in members:
+		_body_of[j] = index
+		var mesh: MeshInstance = _meshes[j]
+		if mesh.get_parent() != null:
+			mesh.get_parent().remove_child(mesh)
+		body.add_child(mesh)
+		mesh.transform = model_to_body * _rest[j]
+		for part in _shapes[j]:
+			var shape := CollisionShape.new()
+			shape.shape = part[0]
+			shape.transform = model_to_body * part[1]
+			shape.set_meta("fragment", j)
+			body.add_child(shape)
+		volume += _volumes[j]
+	if body is RigidBody:
+		body.mass = max(volume * density, 0.001)
+
+
+# Fragments of body `index`, in increasing order.
+func members_of(index: int) -> Array:
+	var out := []
+	for j in range(_body_of.size()):
+		if _body_of[j] == index:
+			out.append(j)
+	return out
+
+
+# Every body, the intact one first.
+func bodies() -> Array:
+	return _bodies.duplicate()
+
+
+# Break where hit: world point and impulse (any unit; the threshold's). `body` is the piece that
+# was hit (default: the intact object). Returns the new RigidBodies (empty when nothing breaks).
+func hit(world_point: Vector3, world_impulse: Vector3, body: PhysicsBody = null, hit_threshold := -1.0) -> Array:
+	if runtime == null:
+		return []
+	var index := 0 if body == null else _bodies.find(body)
+	if index < 0:
+		return []
+	var target: PhysicsBody = _bodies[index]
+	var model_frame: Transform = target.global_transform * _model_to_body[index]
+	var to_model: Transform = model_frame.affine_inverse()
+	var point: Vector3 = to_model.xform(world_point)
+	var impulse: Vector3 = model_frame.basis.orthonormalized().xform_inv(world_impulse)  # rotate only
+	var t: float = hit_threshold if hit_threshold >= 0.0 else (threshold if threshold >= 0.0 else runtime.default_threshold)
+	var result: Dictionary = runtime.project(point.x, point.y, point.z, impulse.x, impulse.y, impulse.z, t)
+	if not result["ok"]:
+		error_message = result["error"]
+		return []
+	var pieces := _split(index, result["broken"])
+	var new_bodies := []
+	for k in range(1, pieces.size()):
+		_detach(index, pieces[k])
+		var piece_body := RigidBody.new()
+		piece_body.name = "piece_%d" % _bodies.size()
+		_add_body(piece_body, target.global_transform, model_frame, pieces[k])
+		piece_body.apply_impulse(world_point - piece_body.global_transform.origin,
+				world_impulse * impulse_scale / float(pieces.size() - 1))
+		new_bodies.append(piece_body)
+	if target is RigidBody and not new_bodies.empty():
+		var volume := 0.0
+		for j in pieces[0]:
+			volume += _volumes[j]
+		target.mass = max(volume * density, 0.001)
+	if not new_bodies.empty():
+		emit_signal("fractured", new_bodies)
+	return new_bodies
+
+
+# Fragments of body `index` grouped by the unbroken edges between them; the largest group first
+# (ties: the one with the smallest fragment), then the others by their smallest fragment.
+func _split(index: int, broken: Array) -> Array:
+	var parent := {}
+	for j in members_of(index):
+		parent[j] = j
+	for m in range(runtime.edges_count):
+		var P: int = runtime.edges[2 * m]
+		var Q: int = runtime.edges[2 * m + 1]
+		if broken[m] or not parent.has(P) or not parent.has(Q):
+			continue
+		var a := _root(parent, P)
+		var b := _root(parent, Q)
+		if a < b:  # not min()/max(): ints must stay ints as dictionary keys
+			parent[b] = a
+		elif b < a:
+			parent[a] = b
+	var groups := {}
+	var roots := []
+	for j in members_of(index):
+		var r := _root(parent, j)
+		if not groups.has(r):
+			groups[r] = []
+			roots.append(r)
+		groups[r].append(j)
+	var pieces := []
+	for r in roots:
+		pieces.append(groups[r])
+	pieces.sort_custom(self, "_larger_first")
+	return pieces
+
+
+func _root(parent: Dictionary, a: int) -> int:
+	while parent[a] != a:
+		a = parent[a]
+	return a
+
+
+func _larger_first(a: Array, b: Array) -> bool:
+	if a.size() != b.size():
+		return a.size() > b.size()
+	return a[0] < b[0]
+
+
+# Take the meshes and collision shapes of `members` out of body `index`.
+func _detach(index: int, members: Array) -> void:
+	var body: PhysicsBody = _bodies[index]
+	for child in body.get_children():
+		if child is CollisionShape and child.has_meta("fragment") and child.get_meta("fragment") in members:
+			body.remove_child(child)
+			child.queue_free()
+	for j in members:
+		body.remove_child(_meshes[j])

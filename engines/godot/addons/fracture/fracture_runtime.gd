@@ -1,0 +1,744 @@
+# fracture_runtime.gd - reader of the `fracture` impact-projection file (Godot 3.x GDScript).
+#
+# Loads `<stem>.fracture.json` + `<stem>.fracture.bin`, validates them and answers "which
+# fragments break off" for a hit (docs/FORMAT.md of the fracture repository, format version 1).
+# All arithmetic in GDScript floats (64-bit doubles); never through Vector3 (32-bit floats).
+#
+#   var runtime = FractureRuntime.new()
+#   if runtime.load_file("res://chair.fracture.json") != OK:
+#       push_error(runtime.error_message)
+#   var hit = runtime.project(x, y, z, nx, ny, nz, runtime.default_threshold)
+#   # hit.groups[j]: fragments with equal values move together; hit.groups[j] == j starts a group
+#
+# MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
+extends Reference
+class_name FractureRuntime
+
+const FORMAT_VERSION := 1
+const ARRAY_NAMES := ["sites", "B", "W", "edges", "edge_areas"]
+const ARRAY_RANKS := [2, 3, 3, 2, 1]
+const KD_LEAF := 8
+const MAX_DEPTH := 64
+
+var sites_count := 0
+var modes := 0
+var fragments := 0
+var edges_count := 0
+var dim := 1
+var default_threshold := 0.0
+var impact_radius := 0.0
+var transform_values := []  # 16 numbers, row-major (informational)
+var fragment_names := []
+var edges := PoolIntArray()   # (e, 2): P < Q
+var edge_areas := PoolRealArray()
+var sites := PoolRealArray()  # float32 values, exact
+var error_message := ""
+
+var _B := PoolRealArray()
+var _W := PoolRealArray()
+var _kd_points := []   # sites in tree order (doubles)
+var _kd_index := PoolIntArray()
+var _kd_nodes := []    # per node: [begin, end, left, right, lo0, lo1, lo2, hi0, hi1, hi2]
+var _whole := PoolIntArray()
+var _whole_groups := 0
+
+# JSON parsing state (a strict RFC 8259 parser over the header's bytes).
+var _json := PoolByteArray()
+var _at := 0
+var _depth := 0
+
+
+# ---------------------------------------------------------------- loading
+
+# Read the header and the binary file it names (in the same folder). OK or an error code.
+func load_file(json_path: String, check_crc := true) -> int:
+	var file := File.new()
+	if file.open(json_path, File.READ) != OK:
+		error_message = "%s: cannot read the runtime file" % json_path
+		return ERR_FILE_CANT_OPEN
+	var header := file.get_buffer(file.get_len())
+	file.close()
+	var uri = header_uri(header)
+	if uri == null:
+		return ERR_PARSE_ERROR
+	var bin_path: String = json_path.get_base_dir().plus_file(uri)
+	if file.open(bin_path, File.READ) != OK:
+		error_message = "%s: binary file '%s' not found next to the header" % [json_path, uri]
+		return ERR_FILE_NOT_FOUND
+	var binary := file.get_buffer(file.get_len())
+	file.close()
+	return load_bytes(header, binary, check_crc)
+
+
+# The binary file name (buffer.uri) of a header, or null (error_message says why).
+func header_uri(header: PoolByteArray):
+	var top = _parse_header(header)
+	if top == null:
+		return null
+	var buffer = top.get("buffer")
+	var uri = buffer.get("uri") if buffer is Dictionary else null
+	if not _uri_ok(uri):
+		return _fail("buffer.uri must be a plain file name next to the header")
+	return uri
+
+
+func _uri_ok(uri) -> bool:
+	if not uri is String or uri == "" or uri == "." or uri == "..":
+		return false
+	for bad in ["/", "\\", ":", char(0)]:
+		if bad in uri:
+			return false
+	return true
+
+
+func _fail(message: String):
+	error_message = message
+	return null
+
+
+# Parse, validate and prepare a runtime file from its two files' bytes. OK or ERR_INVALID_DATA.
+func load_bytes(header: PoolByteArray, binary: PoolByteArray, check_crc := true) -> int:
+	error_message = ""
+	var top = _parse_header(header)
+	if top == null or _check(top, binary, check_crc) == null:
+		return ERR_INVALID_DATA
+	_build_kd_tree()
+	_whole_graph()
+	return OK
+
+
+func _parse_header(header: PoolByteArray):
+	_json = header
+	_at = 0
+	_depth = 0
+	var top = _value()
+	_space()
+	if top == null or _at != _json.size() or not top is Dictionary:
+		return _fail("header is not valid JSON (near byte %d)" % _at)
+	if top.get("format") != "fracture-modes-runtime":
+		return _fail("not a fracture runtime file (expected \"format\": \"fracture-modes-runtime\")")
+	var version = _integer(top.get("version"))
+	if version == null or version < 1 or version > FORMAT_VERSION:
+		return _fail("runtime file version is not supported (this reader knows 1..%d)" % FORMAT_VERSION)
+	return top
+
+
+# JSON integers are parsed as {"int": value}; other numbers as floats.
+func _integer(value):
+	return value["int"] if value is Dictionary and value.size() == 1 and value.has("int") else null
+
+
+func _number(value):
+	if value is float:
+		return value
+	var i = _integer(value)
+	return float(i) if i != null else null
+
+
+func _check(top: Dictionary, binary: PoolByteArray, check_crc: bool):
+	var buffer = top.get("buffer")
+	var counts = top.get("counts")
+	var names = top.get("fragment_names")
+	var table = top.get("arrays")
+	var header_dim = _integer(top.get("dim"))
+	var threshold = _number(top.get("default_threshold"))
+	var radius = _number(top.get("impact_radius"))
+	var transform = top.get("transform")
+	if not buffer is Dictionary or not counts is Dictionary or not names is Array or not table is Dictionary \
+			or header_dim == null or threshold == null or radius == null or not transform is Array \
+			or transform.size() != 16:
+		return _fail("runtime header is missing or has a malformed entry")
+	if not _uri_ok(buffer.get("uri")):
+		return _fail("buffer.uri must be a plain file name next to the header")
+	var byte_length = _integer(buffer.get("byte_length"))
+	if byte_length == null or byte_length != binary.size():
+		return _fail("binary file has %d bytes but the header says %s (truncated or from another bake)" \
+				% [binary.size(), str(byte_length)])
+	if buffer.has("crc32"):
+		var crc = _integer(buffer.get("crc32"))
+		if crc == null or crc < 0 or crc > 0xFFFFFFFF:
+			return _fail("buffer.crc32 must be a 32-bit unsigned integer")
+		if check_crc and _crc32(binary) != crc:
+			return _fail("binary file does not match its header (crc32 differs; from another bake?)")
+	var shapes := []
+	for i in range(5):
+		var shape = _check_array(table.get(ARRAY_NAMES[i]), i, binary.size())
+		if shape == null:
+			return null
+		shapes.append(shape)
+	return _check_shapes(shapes, counts, names, header_dim, threshold, radius, transform, table, binary)
+
+
+# One arrays entry: dtype, rank, byte_length = 4 * product(shape), inside the file, 16-byte aligned.
+func _check_array(entry, i: int, size: int):
+	var name: String = ARRAY_NAMES[i]
+	if not entry is Dictionary or not entry.get("shape") is Array:
+		return _fail("array '%s' entry is missing or malformed" % name)
+	if entry.get("dtype") != ("int32" if i == 3 else "float32"):
+		return _fail("array '%s' has the wrong dtype" % name)
+	var shape := []
+	var count := 1
+	for n in entry["shape"]:
+		var v = _integer(n)
+		if v == null or v < 0:
+			return _fail("array '%s' has a negative or non-integer size" % name)
+		shape.append(v)
+		count = (1 << 40) + 1 if v != 0 and count > (1 << 40) / v else count * v  # saturate
+	if shape.size() != ARRAY_RANKS[i]:
+		return _fail("array '%s' has %d dimensions, expected %d" % [name, shape.size(), ARRAY_RANKS[i]])
+	var offset = _integer(entry.get("byte_offset"))
+	var length = _integer(entry.get("byte_length"))
+	if length == null or count * 4 != length:
+		return _fail("array '%s': shape and byte_length do not agree" % name)
+	if offset == null or offset < 0 or offset % 16 != 0 or offset > size or length > size - offset:
+		return _fail("array '%s' lies outside the binary file or is not 16-byte aligned" % name)
+	return shape
+
+
+func _check_shapes(shapes, counts, names, header_dim, threshold, radius, transform, table, binary):
+	var s = shapes[0]
+	var b = shapes[1]
+	var w = shapes[2]
+	var e = shapes[3]
+	var d = w[2]
+	if d != 1 and d != 3:
+		return _fail("W must have d = 1 or 3")
+	if s[1] != 3 or b[0] != s[0] or b[1] != w[0] or b[2] != d or e[1] != 2 or shapes[4][0] != e[0]:
+		return _fail("array shapes do not agree with each other")
+	if s[0] < 1 or w[0] < 1 or w[1] < 1:
+		return _fail("need at least one site, mode and fragment")
+	if header_dim != d:
+		return _fail("header says dim = %d but W has d = %d" % [header_dim, d])
+	var want := [s[0], w[0], w[1], e[0]]
+	var keys := ["sites", "modes", "fragments", "edges"]
+	for i in range(4):
+		if _integer(counts.get(keys[i])) != want[i]:
+			return _fail("header counts do not match the arrays")
+	if names.size() != w[1]:
+		return _fail("fragment_names must be %d strings" % w[1])
+	for name in names:
+		if not name is String or char(0) in name:
+			return _fail("fragment_names must be %d strings" % w[1])
+	if is_nan(threshold) or is_inf(threshold) or threshold < 0:
+		return _fail("default_threshold must be a finite number >= 0")
+	if is_nan(radius) or is_inf(radius):
+		return _fail("impact_radius must be finite")
+	for value in transform:
+		var v = _number(value)
+		if v == null or is_nan(v) or is_inf(v):
+			return _fail("transform must be 16 finite numbers")
+	var peer := StreamPeerBuffer.new()
+	peer.data_array = binary
+	var arrays := []
+	for i in range(5):
+		var entry: Dictionary = table[ARRAY_NAMES[i]]
+		var values = _read_array(peer, _integer(entry["byte_offset"]), _integer(entry["byte_length"]) / 4, i == 3)
+		if values == null:
+			return _fail("array '%s' has non-finite values" % ARRAY_NAMES[i])
+		arrays.append(values)
+	for m in range(e[0]):
+		var P: int = arrays[3][2 * m]
+		var Q: int = arrays[3][2 * m + 1]
+		if P < 0 or P >= Q or Q >= w[1]:
+			return _fail("edge %d is (%d, %d): edges must be (P, Q) with 0 <= P < Q < %d" % [m, P, Q, w[1]])
+	sites_count = s[0]
+	modes = w[0]
+	fragments = w[1]
+	dim = d
+	edges_count = e[0]
+	default_threshold = threshold
+	impact_radius = radius
+	transform_values = []
+	for value in transform:
+		transform_values.append(_number(value))
+	fragment_names = names
+	sites = arrays[0]
+	_B = arrays[1]
+	_W = arrays[2]
+	edges = arrays[3]
+	edge_areas = arrays[4]
+	return true
+
+
+func _read_array(peer: StreamPeerBuffer, offset: int, count: int, integers: bool):
+	var values = PoolIntArray() if integers else PoolRealArray()
+	values.resize(count)
+	peer.seek(offset)
+	for i in range(count):
+		var bits := peer.get_u32()
+		if integers:
+			values[i] = bits - 0x100000000 if bits >= 0x80000000 else bits
+		elif bits & 0x7F800000 == 0x7F800000:
+			return null
+		else:
+			peer.seek(offset + 4 * i)
+			values[i] = peer.get_float()
+	return values
+
+
+func _crc32(data: PoolByteArray) -> int:
+	var table := []  # an Array: PoolIntArray holds 32-bit signed values
+	table.resize(256)
+	for i in range(256):
+		var c := i
+		for _k in range(8):
+			c = (0xEDB88320 ^ (c >> 1)) if c & 1 else c >> 1
+		table[i] = c
+	var crc := 0xFFFFFFFF
+	for x in data:
+		crc = table[(crc ^ x) & 0xFF] ^ (crc >> 8)
+	return crc ^ 0xFFFFFFFF
+
+
+# ---------------------------------------------------------------- JSON (strict RFC 8259)
+
+func _space() -> void:
+	while _at < _json.size() and _json[_at] in [32, 9, 10, 13]:
+		_at += 1
+
+
+func _eat(c: int) -> bool:
+	_space()
+	if _at < _json.size() and _json[_at] == c:
+		_at += 1
+		return true
+	return false
+
+
+# A value, or null on a syntax error (JSON null is the string "__null__", which no key uses).
+func _value():
+	_space()
+	if _at >= _json.size():
+		return null
+	var c: int = _json[_at]
+	if c == 123 or c == 91:  # { [
+		_depth += 1
+		if _depth > MAX_DEPTH:
+			return null
+		var container = _object() if c == 123 else _list()
+		_depth -= 1
+		return container
+	if c == 34:
+		return _string()
+	if c == 45 or (c >= 48 and c <= 57):
+		return _number_token()
+	for word in ["true", "false", "null"]:
+		if _matches(word):
+			_at += word.length()
+			return true if word == "true" else (false if word == "false" else "__null__")
+	return null
+
+
+func _matches(word: String) -> bool:
+	if _at + word.length() > _json.size():
+		return false
+	for i in range(word.length()):
+		if _json[_at + i] != word.ord_at(i):
+			return false
+	return true
+
+
+func _object():
+	var result := {}
+	_at += 1
+	if _eat(125):
+		return result
+	while true:
+		_space()
+		if _at >= _json.size() or _json[_at] != 34:
+			return null
+		var key = _string()
+		if key == null or not _eat(58):
+			return null
+		var value = _value()
+		if value == null:
+			return null
+		result[key] = value
+		if _eat(44):
+			continue
+		return result if _eat(125) else null
+
+
+func _list():
+	var result := []
+	_at += 1
+	if _eat(93):
+		return result
+	while true:
+		var value = _value()
+		if value == null:
+			return null
+		result.append(value)
+		if _eat(44):
+			continue
+		return result if _eat(93) else null
+
+
+func _string():
+	var out := PoolByteArray()
+	_at += 1
+	while _at < _json.size():
+		var c: int = _json[_at]
+		_at += 1
+		if c == 34:
+			return out.get_string_from_utf8()
+		if c < 32:
+			return null
+		if c >= 128:
+			var n := _utf8_length(_at - 1)
+			if n == 0:
+				return null
+			for i in range(n):
+				out.append(_json[_at - 1 + i])
+			_at += n - 1
+		elif c != 92:
+			out.append(c)
+		else:
+			var decoded = _escape()  # returned, not appended: pool arrays are passed by value
+			if decoded == null:
+				return null
+			out.append_array(decoded)
+	return null
+
+
+# The UTF-8 bytes of the escape after a backslash, or null.
+func _escape():
+	if _at >= _json.size():
+		return null
+	var e: int = _json[_at]
+	_at += 1
+	var simple := {34: 34, 92: 92, 47: 47, 98: 8, 102: 12, 110: 10, 114: 13, 116: 9}
+	if simple.has(e):
+		return PoolByteArray([simple[e]])
+	if e != 117:
+		return null
+	var cp := _hex4()
+	if cp < 0 or (cp >= 0xDC00 and cp <= 0xDFFF):
+		return null
+	if cp >= 0xD800 and cp <= 0xDBFF:
+		if _at + 1 >= _json.size() or _json[_at] != 92 or _json[_at + 1] != 117:
+			return null
+		_at += 2
+		var low := _hex4()
+		if low < 0xDC00 or low > 0xDFFF:
+			return null
+		cp = 0x10000 + ((cp - 0xD800) << 10) + (low - 0xDC00)
+	if cp < 0x80:
+		return PoolByteArray([cp])
+	if cp < 0x800:
+		return PoolByteArray([0xC0 | (cp >> 6), 0x80 | (cp & 0x3F)])
+	if cp < 0x10000:
+		return PoolByteArray([0xE0 | (cp >> 12), 0x80 | ((cp >> 6) & 0x3F), 0x80 | (cp & 0x3F)])
+	return PoolByteArray([0xF0 | (cp >> 18), 0x80 | ((cp >> 12) & 0x3F), 0x80 | ((cp >> 6) & 0x3F),
+			0x80 | (cp & 0x3F)])
+
+
+func _hex4() -> int:
+	if _at + 4 > _json.size():
+		return -1
+	var value := 0
+	for _i in range(4):
+		var c: int = _json[_at]
+		_at += 1
+		var digit := -1
+		if c >= 48 and c <= 57:
+			digit = c - 48
+		elif c >= 97 and c <= 102:
+			digit = c - 87
+		elif c >= 65 and c <= 70:
+			digit = c - 55
+		if digit < 0:
+			return -1
+		value = value * 16 + digit
+	return value
+
+
+# Length of the valid UTF-8 sequence starting at byte i (first byte >= 0x80), 0 if invalid.
+func _utf8_length(i: int) -> int:
+	var c: int = _json[i]
+	var n := 0
+	var cp := 0
+	var low := 0
+	if c >= 0xC2 and c <= 0xDF:
+		n = 2
+		cp = c & 0x1F
+		low = 0x80
+	elif c >= 0xE0 and c <= 0xEF:
+		n = 3
+		cp = c & 0x0F
+		low = 0x800
+	elif c >= 0xF0 and c <= 0xF4:
+		n = 4
+		cp = c & 0x07
+		low = 0x10000
+	else:
+		return 0
+	if i + n > _json.size():
+		return 0
+	for k in range(1, n):
+		if _json[i + k] & 0xC0 != 0x80:
+			return 0
+		cp = (cp << 6) | (_json[i + k] & 0x3F)
+	if cp < low or cp > 0x10FFFF or (cp >= 0xD800 and cp <= 0xDFFF):
+		return 0
+	return n
+
+
+func _number_token():
+	var begin := _at
+	var integer := true
+	if _json[_at] == 45:
+		_at += 1
+	if _at < _json.size() and _json[_at] == 48:
+		_at += 1
+	elif not _digits():
+		return null
+	if _at < _json.size() and _json[_at] == 46:
+		integer = false
+		_at += 1
+		if not _digits():
+			return null
+	if _at < _json.size() and _json[_at] in [101, 69]:
+		integer = false
+		_at += 1
+		if _at < _json.size() and _json[_at] in [43, 45]:
+			_at += 1
+		if not _digits():
+			return null
+	var text := _json.subarray(begin, _at - 1).get_string_from_ascii()
+	if integer:
+		# Up to 18 digits fit a 64-bit int exactly; longer integers are out of any valid range.
+		return {"int": int(text)} if text.trim_prefix("-").length() <= 18 else {"int": -1 << 62}
+	return text.to_float()
+
+
+func _digits() -> bool:
+	var begin := _at
+	while _at < _json.size() and _json[_at] >= 48 and _json[_at] <= 57:
+		_at += 1
+	return _at > begin
+
+
+# ---------------------------------------------------------------- nearest site (k-d tree)
+
+func _build_kd_tree() -> void:
+	_kd_index.resize(sites_count)
+	for i in range(sites_count):
+		_kd_index[i] = i
+	_kd_nodes = []
+	_kd_build(0, sites_count)
+	_kd_points = []
+	for i in range(sites_count):
+		for c in range(3):
+			_kd_points.append(float(sites[3 * _kd_index[i] + c]))
+
+
+func _kd_build(begin: int, end: int) -> int:
+	var node := [begin, end, -1, -1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+	var id := _kd_nodes.size()
+	_kd_nodes.append(node)
+	var axis := 0
+	for c in range(3):
+		var lo: float = sites[3 * _kd_index[begin] + c]
+		var hi := lo
+		for i in range(begin + 1, end):
+			var v: float = sites[3 * _kd_index[i] + c]
+			if v < lo:  # not min()/max(): those round to 32-bit floats in Godot 3
+				lo = v
+			if v > hi:
+				hi = v
+		node[4 + c] = lo
+		node[7 + c] = hi
+		if hi - lo > node[7 + axis] - node[4 + axis]:
+			axis = c
+	if end - begin <= KD_LEAF:
+		return id
+	var mid := begin + (end - begin) / 2
+	_select(begin, end - 1, mid, axis)
+	node[2] = _kd_build(begin, mid)
+	node[3] = _kd_build(mid, end)
+	return id
+
+
+# Quickselect on _kd_index[lo..hi] by coordinate `axis` (any split is correct: boxes are exact).
+func _select(lo: int, hi: int, nth: int, axis: int) -> void:
+	while hi > lo:
+		var pivot: float = sites[3 * _kd_index[lo + (hi - lo) / 2] + axis]
+		var i := lo
+		var j := hi
+		while i <= j:
+			while sites[3 * _kd_index[i] + axis] < pivot:
+				i += 1
+			while sites[3 * _kd_index[j] + axis] > pivot:
+				j -= 1
+			if i <= j:
+				var t := _kd_index[i]
+				_kd_index[i] = _kd_index[j]
+				_kd_index[j] = t
+				i += 1
+				j -= 1
+		if nth <= j:
+			hi = j
+		elif nth >= i:
+			lo = i
+		else:
+			break
+
+
+func _box_distance2(node: Array, x: float, y: float, z: float) -> float:
+	var dx := 0.0
+	var dy := 0.0
+	var dz := 0.0
+	if x < node[4]:
+		dx = node[4] - x
+	elif x > node[7]:
+		dx = x - node[7]
+	if y < node[5]:
+		dy = node[5] - y
+	elif y > node[8]:
+		dy = y - node[8]
+	if z < node[6]:
+		dz = node[6] - z
+	elif z > node[9]:
+		dz = z - node[9]
+	return dx * dx + dy * dy + dz * dz
+
+
+# Nearest contact site, the smallest index on exact ties (a box is skipped only when strictly farther).
+func nearest_site(x: float, y: float, z: float) -> int:
+	var best := INF
+	var best_index := 1 << 62
+	var stack := [[0, _box_distance2(_kd_nodes[0], x, y, z)]]
+	while not stack.empty():
+		var top = stack.pop_back()
+		if top[1] > best:
+			continue
+		var node: Array = _kd_nodes[top[0]]
+		if node[2] < 0:
+			for i in range(node[0], node[1]):
+				var dx: float = _kd_points[3 * i] - x
+				var dy: float = _kd_points[3 * i + 1] - y
+				var dz: float = _kd_points[3 * i + 2] - z
+				var d2 := dx * dx + dy * dy + dz * dz
+				if d2 < best or (d2 == best and _kd_index[i] < best_index):
+					best = d2
+					best_index = _kd_index[i]
+			continue
+		var a := _box_distance2(_kd_nodes[node[2]], x, y, z)
+		var b := _box_distance2(_kd_nodes[node[3]], x, y, z)
+		if a <= b:
+			stack.append([node[3], b])
+			stack.append([node[2], a])
+		else:
+			stack.append([node[2], a])
+			stack.append([node[3], b])
+	return best_index
+
+
+# ---------------------------------------------------------------- projection
+
+func _root(parent: Array, a: int) -> int:
+	while parent[a] != a:
+		a = parent[a]
+	return a
+
+
+# Groups of the graph without the `broken` edges: the smallest fragment index of each group.
+func components(broken: Array) -> PoolIntArray:
+	var parent := []  # an Array, not a PoolIntArray: pool arrays are copied when passed to _root()
+	parent.resize(fragments)
+	for v in range(fragments):
+		parent[v] = v
+	for m in range(edges_count):
+		if not broken[m]:
+			var a := _root(parent, edges[2 * m])
+			var b := _root(parent, edges[2 * m + 1])
+			if a < b:
+				parent[b] = a
+			elif b < a:
+				parent[a] = b
+	var groups := PoolIntArray()
+	groups.resize(fragments)
+	for v in range(fragments):
+		parent[v] = parent[parent[v]]  # parent[v] <= v, so one increasing pass resolves every root
+		groups[v] = parent[v]
+	return groups
+
+
+func _whole_graph() -> void:
+	var none := []
+	none.resize(edges_count)
+	for m in range(edges_count):
+		none[m] = false
+	_whole = components(none)
+
+
+func _finite(x: float) -> bool:
+	return not is_nan(x) and not is_inf(x)
+
+
+# Project a hit (docs/FORMAT.md section 4). Point in model space, impulse in model axes (any unit),
+# threshold in the impulse's unit (INF: unbreakable). Returns a Dictionary: ok (bool), error (String),
+# site, groups (PoolIntArray), num_groups, broken (Array of bool), alpha (Array), displacement (Array, p*d).
+func project(px: float, py: float, pz: float, nx: float, ny: float, nz: float, threshold: float) -> Dictionary:
+	for value in [px, py, pz, nx, ny, nz]:
+		if not _finite(value):
+			return {"ok": false, "error": "point and impulse must be finite"}
+	if is_nan(threshold) or threshold < 0:
+		return {"ok": false, "error": "threshold must not be NaN or negative"}
+	var site := nearest_site(px, py, pz)
+	# Not max(): Godot 3's max() and min() compute in 32-bit floats (1e155 would become INF).
+	var m: float = abs(nx)
+	if abs(ny) > m:
+		m = abs(ny)
+	if abs(nz) > m:
+		m = abs(nz)
+	var alpha := []
+	var disp := []
+	alpha.resize(modes)
+	disp.resize(fragments * dim)
+	for i in range(modes):
+		alpha[i] = 0.0
+	for j in range(fragments * dim):
+		disp[j] = 0.0
+	var broken := []
+	broken.resize(edges_count)
+	for r in range(edges_count):
+		broken[r] = false
+	if m > 0.0:
+		var n := [nx / m, ny / m, nz / m]
+		var base := site * modes * dim
+		for i in range(modes):
+			if dim == 1:
+				alpha[i] = _B[base + i] * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+			else:
+				alpha[i] = _B[base + 3 * i] * n[0] + _B[base + 3 * i + 1] * n[1] + _B[base + 3 * i + 2] * n[2]
+		var count := fragments * dim
+		for i in range(modes):  # each sum in mode order
+			var a: float = alpha[i]
+			var row := i * count
+			for j in range(count):
+				disp[j] += a * _W[row + j]
+		var t := threshold / m  # overflow: INF, nothing breaks; underflow: 0, any nonzero jump breaks
+		for r in range(edges_count):
+			broken[r] = _jump(disp, edges[2 * r], edges[2 * r + 1]) > t
+	var groups = components(broken) if m > 0.0 else _whole
+	var num_groups := 0
+	for j in range(fragments):
+		if groups[j] == j:
+			num_groups += 1
+	for i in range(modes):
+		alpha[i] *= m
+	for j in range(fragments * dim):
+		disp[j] *= m
+	return {"ok": true, "site": site, "groups": groups, "num_groups": num_groups, "broken": broken,
+			"alpha": alpha, "displacement": disp}
+
+
+func _jump(disp: Array, P: int, Q: int) -> float:
+	if dim == 1:
+		return abs(disp[P] - disp[Q])
+	var j0: float = disp[3 * P] - disp[3 * Q]
+	var j1: float = disp[3 * P + 1] - disp[3 * Q + 1]
+	var j2: float = disp[3 * P + 2] - disp[3 * Q + 2]
+	return sqrt(j0 * j0 + j1 * j1 + j2 * j2)

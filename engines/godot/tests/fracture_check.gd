@@ -1,0 +1,89 @@
+# fracture_check.gd - conformance driver of the GDScript reader (used by the fracture tests).
+#
+#   godot3-server --path PROJECT --script res://fracture_check.gd -- JOBS
+#
+# JOBS has one job per line, tab-separated: name, header path, binary path, impacts path (or "-")
+# and flags ("--names", "--skip-crc", space-separated). For each job it prints "job <name>", then
+# the same lines as engines/c/tools/fracture_check.c ("load-error <message>", or an optional
+# "names ..." line and one answer per impact), then "end"; "done" after the last job. One Godot
+# start for all jobs: starting the engine costs more than the jobs.
+#
+# MIT licence, Copyright (c) fracture developers.
+extends SceneTree
+
+const FractureRuntimeScript = preload("res://addons/fracture/fracture_runtime.gd")
+const HexBits = preload("res://hex_bits.gd")
+
+
+func _read(path: String) -> PoolByteArray:
+	var file := File.new()
+	if file.open(path, File.READ) != OK:
+		return PoolByteArray()
+	var data := file.get_buffer(file.get_len())
+	file.close()
+	return data
+
+
+func _init() -> void:
+	var jobs_path := ""
+	var after_dashes := false
+	for arg in OS.get_cmdline_args():
+		if after_dashes and jobs_path == "":
+			jobs_path = arg
+		after_dashes = after_dashes or arg == "--"
+	var jobs := File.new()
+	if jobs.open(jobs_path, File.READ) == OK:
+		while not jobs.eof_reached():
+			var fields: PoolStringArray = jobs.get_line().split("\t")
+			if fields.size() >= 5:
+				print("job " + fields[0])
+				for line in _run_job(fields[1], fields[2], fields[3], fields[4].split(" ", false)):
+					print(line)
+				print("end")
+	print("done")
+	quit()
+
+
+func _run_job(header: String, binary: String, impacts_path: String, flags: PoolStringArray) -> Array:
+	var runtime = FractureRuntimeScript.new()
+	if runtime.load_bytes(_read(header), _read(binary), not "--skip-crc" in flags) != OK:
+		return ["load-error " + runtime.error_message]
+	var lines := []
+	if "--names" in flags:
+		var names := "names"
+		for name in runtime.fragment_names:
+			var hex: String = (name as String).to_utf8().hex_encode()
+			names += " " + (hex if hex != "" else "-")
+		lines.append(names)
+	var impacts := File.new()
+	if impacts_path != "-" and impacts.open(impacts_path, File.READ) == OK:
+		while not impacts.eof_reached():
+			var t: PoolStringArray = impacts.get_line().split(" ", false)
+			if t.size() < 7:
+				continue
+			var threshold: float = runtime.default_threshold if t[6] == "-" else HexBits.from_bits(t[6])
+			var v := []
+			for i in range(6):
+				v.append(HexBits.from_bits(t[i]))
+			var hit: Dictionary = runtime.project(v[0], v[1], v[2], v[3], v[4], v[5], threshold)
+			lines.append(_answer(hit))
+	return lines
+
+
+func _answer(hit: Dictionary) -> String:
+	if not hit["ok"]:
+		return "error " + hit["error"].replace(" ", "_")
+	var parts := PoolStringArray(["ok", str(hit["site"]), str(hit["num_groups"]), "g"])
+	for g in hit["groups"]:
+		parts.append(str(g))
+	parts.append("b")
+	for m in range(hit["broken"].size()):
+		if hit["broken"][m]:
+			parts.append(str(m))
+	parts.append("a")
+	for a in hit["alpha"]:
+		parts.append(HexBits.to_bits(a))
+	parts.append("d")
+	for x in hit["displacement"]:
+		parts.append(HexBits.to_bits(x))
+	return parts.join(" ")

@@ -1,0 +1,417 @@
+// fracture_runtime.js: a reader of the fracture-modes runtime file (version 1) and the
+// realtime impact projection, written from docs/FORMAT.md alone.
+//
+// A standalone ES module with no dependencies; it runs in browsers and in Node.js (>= 18).
+// MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
+//
+//   import { parseRuntime, loadRuntime } from './fracture_runtime.js';
+//   const rt = parseRuntime(headerJsonTextOrObject, binaryArrayBufferOrUint8Array);
+//   const hit = rt.project([x, y, z], [nx, ny, nz], threshold);  // threshold optional
+//   hit.groups  // Int32Array(p): smallest fragment index of each fragment's group
+//
+// Arithmetic is double precision. The projection is scale invariant (docs/FORMAT.md
+// section 4): with m = max(|n0|, |n1|, |n2|) the impulse is divided by m, the jumps are
+// compared with T / m, and reported values are multiplied back by m, so impulses near
+// the limits of double precision give the same groups as moderate ones.
+
+export const FORMAT_NAME = 'fracture-modes-runtime';
+export const FORMAT_VERSION = 1;
+
+// name -> [dtype, number of dimensions]; also the order of the arrays in the binary file.
+const ARRAY_LAYOUT = [
+  ['sites', 'float32', 2],
+  ['B', 'float32', 3],
+  ['W', 'float32', 3],
+  ['edges', 'int32', 2],
+  ['edge_areas', 'float32', 1],
+];
+
+/** A runtime file that is malformed, truncated, of another format or inconsistent. */
+export class RuntimeFileError extends Error {
+  constructor(message) {
+    super(message);
+    this.name = 'RuntimeFileError';
+  }
+}
+
+let crcTable = null;
+
+/** CRC-32 (zlib/PNG polynomial) of a Uint8Array, as an unsigned 32-bit number. */
+export function crc32(bytes) {
+  if (crcTable === null) {
+    crcTable = new Uint32Array(256);
+    for (let n = 0; n < 256; n++) {
+      let c = n;
+      for (let k = 0; k < 8; k++) c = c & 1 ? 0xedb88320 ^ (c >>> 1) : c >>> 1;
+      crcTable[n] = c >>> 0;
+    }
+  }
+  let crc = 0xffffffff;
+  for (let i = 0; i < bytes.length; i++) crc = crcTable[(crc ^ bytes[i]) & 0xff] ^ (crc >>> 8);
+  return (crc ^ 0xffffffff) >>> 0;
+}
+
+function fail(message) {
+  throw new RuntimeFileError(message);
+}
+
+function isCount(value) {
+  return Number.isInteger(value) && value >= 0;
+}
+
+function asBytes(binary) {
+  if (binary instanceof Uint8Array) return binary;
+  if (binary instanceof ArrayBuffer) return new Uint8Array(binary);
+  if (ArrayBuffer.isView(binary)) return new Uint8Array(binary.buffer, binary.byteOffset, binary.byteLength);
+  throw new TypeError('binary must be an ArrayBuffer or a typed array');
+}
+
+// FORMAT.md section 1: a runtime header nests 3 levels; deeper than this is refused
+// before parsing, so a hostile file cannot exhaust the parser's stack.
+const MAX_NESTING = 64;
+
+function nestingDepth(text) {
+  let depth = 0;
+  let deepest = 0;
+  let inString = false;
+  for (let i = 0; i < text.length; i++) {
+    const c = text.charCodeAt(i);
+    if (inString) {
+      if (c === 0x5c) i++; // backslash: skip the escaped character
+      else if (c === 0x22) inString = false;
+    } else if (c === 0x22) {
+      inString = true;
+    } else if (c === 0x5b || c === 0x7b) {
+      depth++;
+      if (depth > deepest) deepest = depth;
+    } else if (c === 0x5d || c === 0x7d) {
+      depth--;
+    }
+  }
+  return deepest;
+}
+
+function asHeader(header) {
+  if (typeof header === 'string' || header instanceof Uint8Array || header instanceof ArrayBuffer) {
+    let text = header;
+    try {
+      if (typeof header !== 'string') text = new TextDecoder('utf-8', { fatal: true }).decode(asBytes(header));
+    } catch (err) {
+      return fail(`not a JSON runtime file (${err.message})`);
+    }
+    if (nestingDepth(text) > MAX_NESTING) fail(`header nests deeper than ${MAX_NESTING} levels`);
+    try {
+      return JSON.parse(text);
+    } catch (err) {
+      return fail(`not a JSON runtime file (${err.message})`);
+    }
+  }
+  return header;
+}
+
+function checkHeader(h) {
+  if (h === null || typeof h !== 'object' || Array.isArray(h) || h.format !== FORMAT_NAME) {
+    fail(`not a fracture runtime file (expected "format": "${FORMAT_NAME}")`);
+  }
+  if (!Number.isInteger(h.version) || h.version < 1 || h.version > FORMAT_VERSION) {
+    fail(`runtime file version ${JSON.stringify(h.version)} is not supported (this reader knows 1..${FORMAT_VERSION})`);
+  }
+  if (h.dim !== 1 && h.dim !== 3) fail(`dim must be 1 or 3, got ${JSON.stringify(h.dim)}`);
+  const c = h.counts;
+  if (!c || typeof c !== 'object' || !['sites', 'modes', 'fragments', 'edges'].every((key) => isCount(c[key]))) {
+    fail('counts must hold non-negative integers sites, modes, fragments and edges');
+  }
+  if (c.sites < 1) fail('there are no contact sites');
+  if (c.modes < 1 || c.fragments < 1) fail(`need at least one mode and one fragment, got k = ${c.modes}, p = ${c.fragments}`);
+  if (!Array.isArray(h.fragment_names) || !h.fragment_names.every((name) => typeof name === 'string')) {
+    fail('fragment_names must be a list of strings');
+  }
+  if (h.fragment_names.length !== c.fragments) fail(`${h.fragment_names.length} fragment names for ${c.fragments} fragments`);
+  if (!Array.isArray(h.transform) || h.transform.length !== 16 || !h.transform.every(Number.isFinite)) {
+    fail('transform must be 16 finite numbers');
+  }
+  if (!Number.isFinite(h.default_threshold) || h.default_threshold < 0) {
+    fail(`default threshold must be a finite number >= 0, got ${JSON.stringify(h.default_threshold)}`);
+  }
+  if (!Number.isFinite(h.impact_radius)) fail('impact_radius must be a finite number');
+  const b = h.buffer;
+  if (!b || typeof b !== 'object' || !isCount(b.byte_length)) fail('buffer.byte_length must be a non-negative integer');
+  if (b.crc32 !== undefined && !(Number.isInteger(b.crc32) && b.crc32 >= 0 && b.crc32 <= 0xffffffff)) {
+    fail('buffer.crc32 must be an unsigned 32-bit integer');
+  }
+  checkUri(b.uri);
+  if (!h.arrays || typeof h.arrays !== 'object') fail('the header has no arrays table');
+}
+
+/** Throw unless uri is a plain file name in the header's folder (docs/FORMAT.md section 1). */
+export function checkUri(uri) {
+  if (typeof uri !== 'string' || uri === '' || uri === '.' || uri === '..' || /[/\\:]/.test(uri)) {
+    fail(`buffer.uri must be a plain file name next to the header, got ${JSON.stringify(uri)}`);
+  }
+}
+
+function expectedShapes(h) {
+  const { sites: s, modes: k, fragments: p, edges: e } = h.counts;
+  const d = h.dim;
+  return { sites: [s, 3], B: [s, k, d], W: [k, p, d], edges: [e, 2], edge_areas: [e] };
+}
+
+function readArray(name, dtype, ndim, entry, view, shapes) {
+  if (!entry || typeof entry !== 'object') fail(`runtime header has no entry for array '${name}'`);
+  if (entry.dtype !== dtype) fail(`array '${name}' has dtype ${JSON.stringify(entry.dtype)}, expected "${dtype}"`);
+  const shape = entry.shape;
+  if (!Array.isArray(shape) || shape.length !== ndim || !shape.every(isCount)) {
+    fail(`array '${name}' has shape ${JSON.stringify(shape)}, expected ${ndim} non-negative integers`);
+  }
+  const offset = entry.byte_offset;
+  const length = entry.byte_length;
+  const count = shape.reduce((a, n) => a * n, 1);
+  if (!isCount(offset) || !isCount(length) || length !== 4 * count) {
+    fail(`array '${name}' has shape ${JSON.stringify(shape)} and ${length} bytes, which do not agree`);
+  }
+  if (offset % 16 !== 0 || offset + length > view.byteLength) {
+    fail(`array '${name}' lies outside the binary file (offset ${offset}, length ${length})`);
+  }
+  if (shape.join(',') !== shapes[name].join(',')) {
+    fail(`array ${name} has shape ${JSON.stringify(shape)}, expected ${JSON.stringify(shapes[name])} from counts and dim`);
+  }
+  // DataView reads are little-endian whatever the platform; copying also drops any alignment concern.
+  if (dtype === 'int32') {
+    const out = new Int32Array(count);
+    for (let i = 0; i < count; i++) out[i] = view.getInt32(offset + 4 * i, true);
+    return out;
+  }
+  const out = new Float64Array(count);
+  for (let i = 0; i < count; i++) {
+    const value = view.getFloat32(offset + 4 * i, true);
+    if (!Number.isFinite(value)) fail(`array ${name} has non-finite values`);
+    out[i] = value;
+  }
+  return out;
+}
+
+/**
+ * Parse a runtime file from its header and binary bytes, validating both.
+ *
+ * @param {string|object|Uint8Array|ArrayBuffer} header  the .fracture.json text, bytes or parsed object
+ * @param {ArrayBuffer|Uint8Array} binary  the .fracture.bin bytes
+ * @param {{checkCrc?: boolean}} [options]  checkCrc (default true): compare buffer.crc32 when present
+ * @returns {FractureRuntime}
+ * @throws {RuntimeFileError} on any inconsistency (sizes, offsets, shapes, counts, indices, checksum)
+ */
+export function parseRuntime(header, binary, options = {}) {
+  const h = asHeader(header);
+  checkHeader(h);
+  const bytes = asBytes(binary);
+  if (bytes.byteLength !== h.buffer.byte_length) {
+    fail(`binary file has ${bytes.byteLength} bytes but the header says ${h.buffer.byte_length} (truncated or from another bake)`);
+  }
+  if (options.checkCrc !== false && h.buffer.crc32 !== undefined && crc32(bytes) !== h.buffer.crc32) {
+    fail('binary file does not match its header (crc32 differs; from another bake?)');
+  }
+  const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+  const shapes = expectedShapes(h);
+  const arrays = {};
+  for (const [name, dtype, ndim] of ARRAY_LAYOUT) arrays[name] = readArray(name, dtype, ndim, h.arrays[name], view, shapes);
+  const p = h.counts.fragments;
+  const edges = arrays.edges;
+  for (let m = 0; m < edges.length; m += 2) {
+    if (!(edges[m] >= 0 && edges[m] < edges[m + 1] && edges[m + 1] < p)) fail(`edges must be pairs (P, Q) with 0 <= P < Q < ${p}`);
+  }
+  return new FractureRuntime(h, arrays);
+}
+
+/**
+ * Fetch and parse a runtime file by the URL of its .fracture.json (browsers, or Node.js 18+ with fetch).
+ * The binary file is found through the header's buffer.uri, relative to the header's URL.
+ */
+export async function loadRuntime(jsonUrl, fetchFn = globalThis.fetch) {
+  const response = await fetchFn(jsonUrl);
+  if (!response.ok) throw new RuntimeFileError(`cannot fetch ${jsonUrl} (HTTP ${response.status})`);
+  const header = asHeader(await response.text());
+  const uri = header && header.buffer && header.buffer.uri;
+  checkUri(uri);
+  const base = new URL(jsonUrl, globalThis.location ? globalThis.location.href : undefined);
+  const binUrl = new URL(encodeURIComponent(uri), base);
+  binUrl.search = base.search;  // keep a cache-busting query
+  const binResponse = await fetchFn(binUrl.href);
+  if (!binResponse.ok) throw new RuntimeFileError(`cannot fetch ${binUrl.href} (HTTP ${binResponse.status})`);
+  return parseRuntime(header, await binResponse.arrayBuffer());
+}
+
+function vector3(value, name) {
+  let xyz = value;
+  if (value && !Array.isArray(value) && !ArrayBuffer.isView(value) && typeof value === 'object' && 'x' in value) {
+    xyz = [value.x, value.y, value.z];
+  }
+  if (!xyz || xyz.length !== 3) throw new TypeError(`${name} must be three numbers`);
+  const out = [Number(xyz[0]), Number(xyz[1]), Number(xyz[2])];
+  for (let c = 0; c < 3; c++) {
+    if (typeof xyz[c] !== 'number' || !Number.isFinite(out[c])) {
+      throw new RangeError(`${name} must be three finite numbers, got ${JSON.stringify(Array.from(xyz))}`);
+    }
+  }
+  return out;
+}
+
+/** A parsed runtime file: counts, names and arrays (float values widened to double), and the projection. */
+export class FractureRuntime {
+  constructor(header, arrays) {
+    this.header = header;
+    this.dim = header.dim;
+    this.numSites = header.counts.sites;
+    this.numModes = header.counts.modes;
+    this.numFragments = header.counts.fragments;
+    this.numEdges = header.counts.edges;
+    this.fragmentNames = header.fragment_names.slice();
+    this.defaultThreshold = header.default_threshold;
+    this.impactRadius = header.impact_radius;
+    this.transform = header.transform.slice();
+    this.sites = arrays.sites;        // (s, 3)
+    this.B = arrays.B;                // (s, k, d)
+    this.W = arrays.W;                // (k, p, d)
+    this.edges = arrays.edges;        // (e, 2) Int32Array
+    this.edgeAreas = arrays.edge_areas;  // (e,)
+  }
+
+  /** Index of the contact site nearest to point (ties: the smallest index). */
+  nearestSite(point) {
+    const [x, y, z] = vector3(point, 'point');
+    return this._nearest(x, y, z);
+  }
+
+  _nearest(x, y, z) {
+    const sites = this.sites;
+    let best = 0;
+    let bestD2 = Infinity;
+    for (let v = 0; v < this.numSites; v++) {
+      const dx = sites[3 * v] - x;
+      const dy = sites[3 * v + 1] - y;
+      const dz = sites[3 * v + 2] - z;
+      const d2 = dx * dx + dy * dy + dz * dz;
+      if (d2 < bestD2) {  // strictly smaller: the first minimum wins ties
+        bestD2 = d2;
+        best = v;
+      }
+    }
+    return best;
+  }
+
+  /** Mode coefficients (k) of the unit-max impulse nUnit at site v. */
+  _alpha(v, nUnit) {
+    const { numModes: k, dim: d, B } = this;
+    const alpha = new Float64Array(k);
+    const base = v * k * d;
+    if (d === 1) {
+      const norm = Math.sqrt(nUnit[0] * nUnit[0] + nUnit[1] * nUnit[1] + nUnit[2] * nUnit[2]);
+      for (let i = 0; i < k; i++) alpha[i] = B[base + i] * norm;
+    } else {
+      for (let i = 0; i < k; i++) {
+        const o = base + 3 * i;
+        alpha[i] = B[o] * nUnit[0] + B[o + 1] * nUnit[1] + B[o + 2] * nUnit[2];
+      }
+    }
+    return alpha;
+  }
+
+  /** Fragment displacements (p * d) for mode coefficients alpha. */
+  _displacement(alpha) {
+    const { numModes: k, numFragments: p, dim: d, W } = this;
+    const disp = new Float64Array(p * d);
+    for (let i = 0; i < k; i++) {
+      const a = alpha[i];
+      const row = i * p * d;
+      for (let q = 0; q < p * d; q++) disp[q] += a * W[row + q];
+    }
+    return disp;
+  }
+
+  /**
+   * Group labels (smallest fragment index per component) of the fragment graph without the broken edges.
+   * @param {ArrayLike<boolean|number>} [broken]  per edge; truthy = removed. Omitted: the whole graph.
+   */
+  groups(broken) {
+    const p = this.numFragments;
+    const parent = new Int32Array(p);
+    for (let j = 0; j < p; j++) parent[j] = j;
+    const find = (j) => {
+      while (parent[j] !== j) {
+        parent[j] = parent[parent[j]];  // path halving
+        j = parent[j];
+      }
+      return j;
+    };
+    const edges = this.edges;
+    for (let m = 0; m < this.numEdges; m++) {
+      if (broken && broken[m]) continue;
+      const a = find(edges[2 * m]);
+      const b = find(edges[2 * m + 1]);
+      // The smaller root always wins, so every root is the smallest index of its component.
+      if (a < b) parent[b] = a;
+      else if (b < a) parent[a] = b;
+    }
+    const labels = new Int32Array(p);
+    for (let j = 0; j < p; j++) labels[j] = find(j);
+    return labels;
+  }
+
+  /**
+   * Project an impact and group the fragments (docs/FORMAT.md section 4).
+   *
+   * @param {ArrayLike<number>|{x,y,z}} point  hit point, model space (finite)
+   * @param {ArrayLike<number>|{x,y,z}} impulse  impulse vector (finite); same unit as threshold
+   * @param {number} [threshold]  toughness >= 0 (+Infinity allowed); default: the file's default_threshold
+   * @returns {{site: number, alpha: Float64Array, displacement: Float64Array, jumps: Float64Array,
+   *            broken: Uint8Array, groups: Int32Array, numGroups: number}}
+   *   displacement is (p, d) row-major and jumps (e, d); both, like alpha, for the impulse as given.
+   */
+  project(point, impulse, threshold) {
+    const [x, y, z] = vector3(point, 'point');
+    const n = vector3(impulse, 'impulse');
+    let T = threshold === undefined || threshold === null ? this.defaultThreshold : threshold;
+    if (typeof T !== 'number' || Number.isNaN(T) || T < 0) {
+      throw new RangeError(`threshold must be a number >= 0 (Infinity allowed), got ${JSON.stringify(threshold)}`);
+    }
+    const { numEdges: e, dim: d, edges } = this;
+    const site = this._nearest(x, y, z);
+    const m = Math.max(Math.abs(n[0]), Math.abs(n[1]), Math.abs(n[2]));
+    const broken = new Uint8Array(e);
+    if (m === 0) {  // a zero impulse breaks nothing
+      const groups = this.groups(broken);
+      return { site, alpha: new Float64Array(this.numModes), displacement: new Float64Array(this.numFragments * d),
+        jumps: new Float64Array(e * d), broken, groups, numGroups: countGroups(groups) };
+    }
+    const alpha = this._alpha(site, [n[0] / m, n[1] / m, n[2] / m]);
+    const disp = this._displacement(alpha);
+    const limit = T / m;  // +Infinity: nothing breaks; 0 (underflow or T = 0): any nonzero jump breaks
+    const jumps = new Float64Array(e * d);
+    for (let q = 0; q < e; q++) {
+      const P = edges[2 * q] * d;
+      const Q = edges[2 * q + 1] * d;
+      if (d === 1) {
+        const jump = disp[P] - disp[Q];
+        jumps[q] = jump;
+        broken[q] = Math.abs(jump) > limit ? 1 : 0;
+      } else {
+        const j0 = disp[P] - disp[Q];
+        const j1 = disp[P + 1] - disp[Q + 1];
+        const j2 = disp[P + 2] - disp[Q + 2];
+        jumps[3 * q] = j0;
+        jumps[3 * q + 1] = j1;
+        jumps[3 * q + 2] = j2;
+        broken[q] = Math.sqrt(j0 * j0 + j1 * j1 + j2 * j2) > limit ? 1 : 0;
+      }
+    }
+    for (let i = 0; i < alpha.length; i++) alpha[i] *= m;
+    for (let i = 0; i < disp.length; i++) disp[i] *= m;
+    for (let i = 0; i < jumps.length; i++) jumps[i] *= m;
+    const groups = this.groups(broken);
+    return { site, alpha, displacement: disp, jumps, broken, groups, numGroups: countGroups(groups) };
+  }
+}
+
+function countGroups(groups) {
+  let count = 0;
+  for (let j = 0; j < groups.length; j++) if (groups[j] === j) count++;
+  return count;
+}

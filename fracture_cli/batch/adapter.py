@@ -1,0 +1,47 @@
+"""The one place the batch touches the bake API.
+
+Everything else in :mod:`fracture_cli.batch` goes through :func:`bake_asset`
+and :func:`output_names`, so when the bake moves to the pipeline table or
+publishes through the output-set protocol, only this module changes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fracture_cli.recipe import Recipe
+
+
+@dataclass(frozen=True)
+class BakeOutcome:
+    """What one bake published.
+
+    Attributes
+    ----------
+    report : dict
+        The bake report (as written to ``<stem>.report.json``).
+    outputs : tuple of str
+        Absolute paths of every file published, the report last.
+    """
+
+    report: dict
+    outputs: tuple[str, ...]
+
+
+def output_names(stem: str) -> tuple[str, ...]:
+    """File names a bake of ``stem`` publishes (checked against the inputs before any work)."""
+    return (f"{stem}.glb", f"{stem}.fracture.json", f"{stem}.fracture.bin", f"{stem}.report.json")
+
+
+def bake_asset(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) -> BakeOutcome:
+    """Bake one asset and publish its outputs as a set into ``out_dir``.
+
+    Raises
+    ------
+    FractureError
+        Bad input or a stage that could not finish; nothing is published then.
+    """
+    from fracture_cli.bake import bake
+
+    result = bake(input_path, out_dir, recipe, cache_dir=cache_dir)
+    return BakeOutcome(report=result.report, outputs=tuple(result.outputs))

@@ -1,0 +1,254 @@
+"""The master LP of the cut solver: the subproblem restricted to cell-constant displacements.
+
+Primal: ``min sum_e omega_e |x_P - x_Q| + cost(v) theta`` subject to ``G x + g
+theta = b`` (the constraint rows, scaled) and ``vol^T x = 0``, ``theta >= 0``.
+HiGHS solves its dual, which is smaller: edge flows ``|z_e| <= omega_e``,
+``lambda`` and ``mu`` free, one conservation row per cell ``B^T z - G^T lambda
+- mu vol = 0`` and ``g^T lambda <= cost(v)``; ``x`` and ``theta`` are that LP's
+row duals.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import linprog
+
+_highspy: Any
+try:  # HiGHS's own bindings allow warm starts; scipy's linprog (same HiGHS) is the fallback
+    import highspy as _highspy
+except ImportError:
+    _highspy = None
+
+log = logging.getLogger(__name__)
+
+# The master LP's duals are the pricing's supply: keep HiGHS's tolerances tight.
+# Serial dual simplex: deterministic.
+_HIGHS_SETTINGS = {"solver": "simplex", "simplex_strategy": 1, "primal_feasibility_tolerance": 1e-9,
+                   "dual_feasibility_tolerance": 1e-9, "threads": 1, "output_flag": False}
+# Cold retries when the warm-started solve does not end optimal (small masters with nearly dependent
+# constraint rows can leave HiGHS without a status): a fresh dual simplex, primal simplex, then IPM.
+_HIGHS_RETRIES: tuple[dict, ...] = ({}, {"simplex_strategy": 4}, {"solver": "ipm"})
+_LINPROG_OPTIONS = (("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9}),
+                    ("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9,
+                                  "presolve": False}),
+                    ("highs-ipm", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9}))
+_HIGHS_BANNER_SHOWN = False
+
+
+def lp_backend() -> str:
+    """'highspy' (warm-started HiGHS) or 'scipy' (HiGHS through scipy.optimize.linprog)."""
+    return "highspy" if _highspy is not None else "scipy"
+
+
+def _new_highs():
+    """A ``highspy.Highs`` whose one-time copyright banner does not reach our stdout.
+
+    HiGHS prints it from C++ on the first construction in a process, before any
+    option can be set; a library must not write to stdout (the CLI may stream data there).
+    """
+    global _HIGHS_BANNER_SHOWN
+    if _HIGHS_BANNER_SHOWN:
+        return _highspy.Highs()
+    import os
+    import sys
+
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 1)
+            highs = _highspy.Highs()
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+    _HIGHS_BANNER_SHOWN = True
+    return highs
+
+
+def _highs_model(A: sp.csc_matrix, cost, col_lower, col_upper, row_lower, row_upper, **extra):
+    """A ``highspy.Highs`` holding the LP, with the project's settings (and ``extra`` ones)."""
+    h = _new_highs()
+    for name, value in dict(_HIGHS_SETTINGS, **extra).items():
+        h.setOptionValue(name, value)
+    lp = _highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
+    lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, col_lower, col_upper
+    lp.row_lower_, lp.row_upper_ = row_lower, row_upper
+    lp.a_matrix_.format_ = _highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = A.indptr, A.indices, A.data
+    h.passModel(lp)
+    return h
+
+
+class MasterLP:
+    """The master LP over a partition of the tets into cells, warm-started across calls.
+
+    A new ``c`` on the same partition only edits one column of the (dual)
+    master, and HiGHS keeps its basis; after a refinement the previous optimal
+    basis is carried over to the split cells (:meth:`_inherited_basis`).
+    """
+
+    def __init__(self, volumes: np.ndarray):
+        self.vol = volumes
+        self._lp = None
+        self._lp_key = None
+        self._lp_G = None
+        self._lp_basis = None
+        self.retries = 0
+
+    def solve(self, cells: np.ndarray, version: int, cell_graph, Y: np.ndarray, b: np.ndarray, v_cost: float):
+        """Solve the master on the partition ``cells`` (t,) (``version`` changes with it).
+
+        ``cell_graph`` is ``(n, edges (E, 2), edge_omega (E,), indicator (n, t))``; ``Y`` (t, m)
+        the constraint vectors. Returns ``x`` (n,), ``theta``, the (unscaled) ``lambda`` (m,)
+        and the objective.
+        """
+        n, edges, edge_omega, indicator = cell_graph
+        G = np.asarray((indicator @ Y).T)  # (m, n): y_j^T M_T 1_P
+        # Row scaling for HiGHS (tet volumes are tiny in normalized units); lambda is scaled back.
+        row_scale = 1.0 / np.maximum(np.einsum("t,tj->j", self.vol, np.abs(Y)), 1e-300)
+        G = G * row_scale[:, None]
+        G[np.abs(G) < 1e-12] = 0.0  # round-off of sums that cancel; keeps HiGHS's matrix clean
+        b = b * row_scale
+        args = (cells, version, n, edges, edge_omega, indicator, G, b, row_scale[-1], v_cost)
+        if _highspy is None:
+            x, theta, lam, objective = self._solve_linprog(*args[2:])
+        else:
+            x, theta, lam, objective = self._solve_highs(*args)
+        return x, theta, lam * row_scale, objective
+
+    @staticmethod
+    def _dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+        """Matrix (n + 1, E + m + 1), costs, column bounds and row bounds of the dual master LP."""
+        E, m = len(edges), G.shape[0]
+        eidx = np.arange(E)
+        cell_vol = np.asarray(indicator.sum(axis=1)).reshape(-1)
+        Gs = sp.coo_matrix(G)
+        rows = np.concatenate([edges[:, 0], edges[:, 1], Gs.col, np.arange(n), [n]])
+        cols = np.concatenate([eidx, eidx, E + Gs.row, np.full(n, E + m), [E + m - 1]])
+        vals = np.concatenate([np.ones(E), -np.ones(E), -Gs.data, -cell_vol / cell_vol.sum(), [g_c]])
+        A = sp.csc_matrix((vals, (rows, cols)), shape=(n + 1, E + m + 1))
+        cost = np.concatenate([np.zeros(E), -b, [0.0]])
+        col_lower = np.concatenate([-edge_omega, np.full(m + 1, -np.inf)])
+        col_upper = np.concatenate([edge_omega, np.full(m + 1, np.inf)])
+        row_lower = np.concatenate([np.zeros(n), [-np.inf]])
+        row_upper = np.concatenate([np.zeros(n), [v_cost]])
+        return A, cost, col_lower, col_upper, row_lower, row_upper
+
+    def _solve_highs(self, cells, version, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+        E, m = len(edges), G.shape[0]
+        key = (version, m)
+        h = self._lp
+        if h is not None and self._lp_key == key and np.array_equal(self._lp_G[:-1], G[:-1]):
+            # Same partition and fixed rows: only c changed; HiGHS keeps its basis (warm start).
+            col = E + m - 1
+            for P in np.flatnonzero(self._lp_G[-1] != G[-1]):
+                h.changeCoeff(int(P), col, float(-G[-1, P]))
+            h.changeCoeff(n, col, float(g_c))
+            h.changeColCost(col, float(-b[-1]))
+            h.changeRowBounds(n, -_highspy.kHighsInf, float(v_cost))
+        else:
+            h = _highs_model(*self._dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost))
+            basis = self._inherited_basis(cells, n, edges, m)
+            if basis is not None:
+                h.setBasis(basis)
+        self._lp, self._lp_key, self._lp_G = h, key, G
+        h.run()
+        if h.getModelStatus() != _highspy.HighsModelStatus.kOptimal:
+            h = self._retry(n, edges, edge_omega, indicator, G, b, g_c, v_cost)
+        if h is None:  # rare numerical trouble: scipy's HiGHS chain (no presolve, IPM)
+            self._lp = self._lp_basis = None
+            return self._solve_linprog(n, edges, edge_omega, indicator, G, b, g_c, v_cost)
+        basis = h.getBasis()
+        self._lp_basis = (cells, edges, m, np.array([int(v) for v in basis.col_status]),
+                          np.array([int(v) for v in basis.row_status]))
+        solution = h.getSolution()
+        lam = np.asarray(solution.col_value)[E:E + m]
+        row_dual = np.asarray(solution.row_dual)
+        return row_dual[:n], max(-float(row_dual[n]), 0.0), lam, -float(h.getInfo().objective_function_value)
+
+    def _retry(self, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+        """Cold solves with other HiGHS settings after a warm-started one did not end optimal; None if all fail."""
+        self.retries += 1
+        lp = self._dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost)
+        for extra in _HIGHS_RETRIES:
+            h = _highs_model(*lp, **extra)
+            h.run()
+            if h.getModelStatus() == _highspy.HighsModelStatus.kOptimal:
+                self._lp = h
+                return h
+        log.debug("master LP: HiGHS ended without an optimal status %d times; trying scipy's chain",
+                  len(_HIGHS_RETRIES))
+        return None
+
+    def _inherited_basis(self, cells, n, edges, m):
+        """A starting basis for the master after a refinement, from the previous optimal basis.
+
+        Every new cell is part of an old one: its row inherits the old row's status
+        (the first child) or is basic (the others: one new basic per new row); an
+        edge between new cells inherits the status of the old edge between their
+        parents (its reduced cost is unchanged while children share the parent's
+        ``x``), a new edge inside an old cell starts at its lower bound. The
+        ``lambda``, ``mu`` columns and the ``theta`` row keep theirs. None if the
+        partition is not a refinement of the previous one.
+        """
+        if self._lp_basis is None:
+            return None
+        old_cells, old_edges, old_m, col_status, row_status = self._lp_basis
+        if old_m != m:
+            return None
+        first = np.unique(cells, return_index=True)[1]
+        parent = old_cells[first]  # new cell -> old cell
+        if not np.array_equal(parent[cells], old_cells):
+            return None
+        n_old = int(old_cells.max()) + 1
+        E_old = len(old_edges)
+        new_rows = np.full(n, int(_highspy.HighsBasisStatus.kBasic))
+        child_first = np.zeros(n, dtype=bool)
+        child_first[np.unique(parent, return_index=True)[1]] = True
+        new_rows[child_first] = row_status[parent[child_first]]
+        rows = np.concatenate([new_rows, row_status[n_old:]])
+        pa, pb = parent[edges[:, 0]], parent[edges[:, 1]]
+        lo, hi = np.minimum(pa, pb), np.maximum(pa, pb)
+        old_key = old_edges[:, 0] * n_old + old_edges[:, 1]
+        position = np.searchsorted(old_key, lo * n_old + hi)
+        position = np.minimum(position, E_old - 1) if E_old else position
+        found = (pa != pb) & (E_old > 0)
+        if E_old:
+            found &= old_key[position] == lo * n_old + hi
+        edge_status = np.full(len(edges), int(_highspy.HighsBasisStatus.kLower))
+        basic = int(_highspy.HighsBasisStatus.kBasic)
+        inherited = col_status[position[found]]
+        # Only one child edge may stay basic per old edge; the others start at a bound.
+        inherited = np.where(inherited == basic, int(_highspy.HighsBasisStatus.kLower), inherited)
+        edge_status[found] = inherited
+        idx = np.flatnonzero(found)
+        first_child = idx[np.unique(position[found], return_index=True)[1]]
+        edge_status[first_child] = col_status[position[first_child]]
+        cols = np.concatenate([edge_status, col_status[E_old:]])
+        if np.count_nonzero(cols == basic) + np.count_nonzero(rows == basic) != n + 1:
+            return None
+        status = list(_highspy.HighsBasisStatus.__members__.values())
+        by_code = {int(v): v for v in status}
+        result = _highspy.HighsBasis()
+        result.col_status = [by_code[int(v)] for v in cols]
+        result.row_status = [by_code[int(v)] for v in rows]
+        result.valid = True
+        return result
+
+    def _solve_linprog(self, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+        E, m = len(edges), G.shape[0]
+        A, cost, col_lower, col_upper, _, row_upper = self._dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost)
+        A = A.tocsr()
+        for method, options in _LINPROG_OPTIONS:  # dual simplex; without presolve or IPM + crossover if it fails
+            res = linprog(cost, A_ub=A[n:], b_ub=row_upper[n:], A_eq=A[:n], b_eq=np.zeros(n),
+                          bounds=np.column_stack([col_lower, col_upper]), method=method, options=options)
+            if res.status == 0:
+                break
+        else:
+            raise RuntimeError(f"master LP failed: {res.message}")
+        return res.eqlin.marginals, max(-float(res.ineqlin.marginals[0]), 0.0), res.x[E:E + m], -float(res.fun)

@@ -1,0 +1,307 @@
+"""The one table of pipeline stages and the runner that executes them.
+
+:data:`STAGES` says, for every stage, its name (the recipe section, the CLI
+command and the report's key), its options class, what it consumes from the
+:class:`PipelineState` and what it produces. ``bake``, the recipe sections,
+the CLI chain, its ``--help`` and the report's stage list are all generated
+from it, so they cannot disagree. :class:`Runner` runs one stage at a time:
+it logs, times, caches (``--cache``) and reports progress for each.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import importlib
+import logging
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fracture_cli import progress
+from fracture_cli.errors import UsageError
+from fracture_cli.types import Cage, Fragments, Modes, Pieces, Regions, SurfaceMesh, TetMesh
+
+if TYPE_CHECKING:
+    from fracture_cli.cache import StageCache
+    from fracture_cli.runtime.format import RuntimeData
+
+log = logging.getLogger(__name__)
+
+# Report values of the fragment checks: numbers and flags.
+CheckValue = float | int | bool
+
+
+@dataclass(frozen=True)
+class PipelineState:
+    """What the pipeline has produced so far; each stage fills its fields (see :data:`STAGES`)."""
+
+    source: str | None = None  # the input file
+    source_sha256: str | None = None
+    loaded: SurfaceMesh | None = None  # as read, before repair
+    surface: SurfaceMesh | None = None  # the solid every later stage uses
+    cage: Cage | None = None
+    tet_mesh: TetMesh | None = None
+    eta: np.ndarray | None = None  # (f,) or (f, d) material weights of the interior faces
+    modes: Modes | None = None
+    pieces: Pieces | None = None
+    regions: Regions | None = None
+    fragments: Fragments | None = None
+    checks: dict[str, CheckValue] | None = None  # what the report says of the fragments
+    runtime: RuntimeData | None = None
+
+    def need(self, name: str, stage: str) -> Any:
+        """The field ``name``, or a usage error naming the stage that produces it."""
+        value = getattr(self, name)
+        if value is None:
+            producer = next(s.name for s in STAGES if name in s.produces)
+            what = "load PATH" if producer == "load" else producer
+            raise UsageError(f"'{stage}' needs {_NOUNS.get(name, name)}: put '{what}' before it in the chain")
+        return value
+
+
+_NOUNS = {"surface": "a surface", "cage": "a cage", "tet_mesh": "a tet mesh", "modes": "modes",
+          "pieces": "pieces", "regions": "piece regions", "fragments": "fragments", "runtime": "runtime data"}
+
+StageFunction = Callable[[PipelineState, Any], PipelineState]
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One row of the pipeline table.
+
+    Attributes
+    ----------
+    name : str
+        Recipe section, CLI command and report key.
+    help : str
+        One line for ``--help``.
+    options : str
+        ``module:Class`` of the options dataclass (imported on demand, so the CLI starts fast).
+    run : callable
+        ``run(state, options) -> state``: calls the stage function with what it consumes.
+    consumes, uses, produces : tuple of str
+        :class:`PipelineState` fields it needs, reads when present, and fills.
+    cached : bool
+        Whether ``--cache`` stores its result (the expensive geometry: cage, tets, modes).
+    short : dict of str -> str
+        Short CLI flags for option fields.
+    """
+
+    name: str
+    help: str
+    options: str
+    run: StageFunction
+    consumes: tuple[str, ...]
+    produces: tuple[str, ...]
+    uses: tuple[str, ...] = ()
+    cached: bool = False
+    short: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def options_class(self) -> type:
+        module, name = self.options.split(":")
+        return getattr(importlib.import_module(module), name)
+
+
+# ---------------------------------------------------------------------------
+# What each stage calls. Imports are local so `fracture --help` does not load the geometry stack.
+
+def _load(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.cache import input_key
+    from fracture_cli.io.read import load_surface
+
+    path = state.need("source", "load")
+    surface = load_surface(path, options)
+    return dataclasses.replace(state, loaded=surface, surface=surface, source_sha256=input_key(path))
+
+
+def _repair(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.repair import repair
+
+    # Cage and fragments both use the repaired solid, so they agree on what is inside.
+    return dataclasses.replace(state, surface=repair(state.need("surface", "repair"), options))
+
+
+def _cage(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.cage import cage
+
+    return dataclasses.replace(state, cage=cage(state.need("surface", "cage"), options))
+
+
+def _tetra(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.tetra import tetra
+
+    return dataclasses.replace(state, tet_mesh=tetra(state.need("cage", "tetra"), options))
+
+
+def _material(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.material import material
+
+    return dataclasses.replace(state, eta=material(state.need("tet_mesh", "material"), state.surface, options))
+
+
+def _modes(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.modes import modes
+
+    return dataclasses.replace(state, modes=modes(state.need("tet_mesh", "modes"), options, eta=state.eta))
+
+
+def _pieces(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.pieces import pieces
+
+    result = pieces(state.need("tet_mesh", "pieces"), state.need("modes", "pieces"), options)
+    return dataclasses.replace(state, pieces=result)
+
+
+def _smooth(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.smooth import smooth
+
+    regions = smooth(state.need("tet_mesh", "smooth"), state.need("pieces", "smooth"), options, surface=state.surface)
+    return dataclasses.replace(state, regions=regions)
+
+
+def _fragments(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.checks import fragment_fault_shape, fragment_invariants
+    from fracture_cli.stages.fragments import fragments
+
+    surface = state.need("surface", "fragments")
+    frags = fragments(surface, state.need("regions", "fragments"), options)
+    checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags))
+    checks["input_volume"] = float(frags.input_volume * surface.normalization.scale**3)
+    # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
+    shape = fragment_fault_shape(frags)
+    checks["fault_mean_dihedral_degrees"] = round(shape["mean_dihedral_degrees"], 6)
+    checks["fault_crease_density"] = round(shape["crease_density"], 6)
+    return dataclasses.replace(state, fragments=frags, checks=checks)
+
+
+def _runtime(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.io.write import fragment_name
+    from fracture_cli.stages.precompute import runtime
+
+    frags = state.need("fragments", "runtime")
+    order = [int(f.piece) for f in frags.fragments]
+    names = tuple(fragment_name(i) for i in range(len(order)))
+    data = runtime(state.need("tet_mesh", "runtime"), state.need("modes", "runtime"), state.need("pieces", "runtime"),
+                   options, fragment_pieces=order, fragment_names=names)
+    return dataclasses.replace(state, runtime=data)
+
+
+STAGES: tuple[Stage, ...] = (
+    Stage("load", "Read a mesh (OBJ, PLY, STL, OFF, GLB, glTF).", "fracture_cli.io.read:LoadOptions",
+          _load, consumes=("source",), produces=("loaded", "surface", "source_sha256")),
+    Stage("repair", "Make the surface a closed solid: weld, fix winding, close holes or thicken open sheets.",
+          "fracture_cli.stages.repair:RepairOptions", _repair, consumes=("surface",), produces=("surface",)),
+    Stage("cage", "Build the nested cage: a coarse closed surface around the input.",
+          "fracture_cli.stages.cage:CageOptions", _cage, consumes=("surface",), produces=("cage",), cached=True),
+    Stage("tetra", "Tetrahedralize the cage (TetGen), keeping its surface.", "fracture_cli.stages.tetra:TetraOptions",
+          _tetra, consumes=("cage",), produces=("tet_mesh",), cached=True),
+    Stage("material", "Set material weights (grain, painted strength, boxes) on the tet faces.",
+          "fracture_cli.stages.material:MaterialOptions", _material, consumes=("tet_mesh",), uses=("surface",),
+          produces=("eta",)),
+    Stage("modes", "Compute the fracture modes of the tet mesh.", "fracture_cli.stages.modes:ModesOptions", _modes,
+          consumes=("tet_mesh",), uses=("eta",), produces=("modes",), cached=True, short={"num_modes": "-k"}),
+    Stage("pieces", "Split the tet mesh into atomic pieces and build the piece graph.",
+          "fracture_cli.stages.pieces:PiecesOptions", _pieces, consumes=("tet_mesh", "modes"), produces=("pieces",)),
+    Stage("smooth", "Smooth the fault surfaces between pieces into closed piece regions.",
+          "fracture_cli.stages.smooth:SmoothOptions", _smooth, consumes=("tet_mesh", "pieces"), uses=("surface",),
+          produces=("regions",)),
+    Stage("fragments", "Cut the input into one closed fragment per piece region, and check them.",
+          "fracture_cli.stages.fragments:FragmentOptions", _fragments, consumes=("surface", "regions"),
+          produces=("fragments", "checks")),
+    Stage("runtime", "Precompute the impact-projection data for the game (the runtime file).",
+          "fracture_cli.stages.precompute:RuntimeOptions", _runtime,
+          consumes=("tet_mesh", "modes", "pieces", "fragments"), produces=("runtime",)),
+)
+STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
+# The steps a bake reports seconds for: every stage, then writing the outputs.
+STEPS: tuple[str, ...] = STAGE_NAMES + ("export",)
+
+
+def stage(name: str) -> Stage:
+    """The row of :data:`STAGES` called ``name``."""
+    for s in STAGES:
+        if s.name == name:
+            return s
+    raise KeyError(name)
+
+
+class Runner:
+    """Runs stages one at a time: logs, times, caches and reports progress for each.
+
+    Parameters
+    ----------
+    label : str
+        Prefix of every log line (the input's stem).
+    total : int, optional
+        Number of steps this run will take, for "[i/n]" (default: unknown).
+    cache : StageCache, optional
+        Where results of :attr:`Stage.cached` stages are stored and found.
+
+    Attributes
+    ----------
+    seconds : dict of str -> float
+        Wall time of every step run, rounded to ms (the report's ``seconds``).
+    options : dict of str -> options dataclass
+        The options each stage ran with (the report's recipe parameters).
+    """
+
+    def __init__(self, label: str, total: int | None = None, cache: StageCache | None = None):
+        self.label = label
+        self.total = total
+        self.cache = cache
+        self.seconds: dict[str, float] = {}
+        self.options: dict[str, Any] = {}
+        self._step = 0
+        self._key: str | None = None  # cache key of everything run so far
+
+    def run(self, name: str, state: PipelineState, options: Any) -> PipelineState:
+        """Run stage ``name`` on ``state`` with ``options``; returns the new state."""
+        row = stage(name)
+        key = self._cache_key(row, state, options)
+        with self.step(name):
+            cache = self.cache if row.cached and key is not None else None
+            result = cache.get(name, key, state) if cache and key else None
+            if result is None:
+                result = row.run(state, options)
+                if cache and key:
+                    cache.put(name, key, result)
+        self.options[name] = options
+        return result
+
+    def step(self, name: str) -> contextlib.AbstractContextManager[progress.Task]:
+        """A context that logs, times and shows progress of one step (a stage or ``export``)."""
+        return _timed_step(self, name)
+
+    def _cache_key(self, row: Stage, state: PipelineState, options: Any) -> str | None:
+        if self.cache is None:
+            return None
+        from fracture_cli.cache import cache_key, input_key
+
+        if row.name == "load":
+            self._key = cache_key("load", input_key(state.need("source", "load")), options)
+        elif self._key is not None:
+            self._key = cache_key(row.name, self._key, options)
+        return self._key
+
+
+@contextlib.contextmanager
+def _timed_step(runner: Runner, name: str) -> Iterator[progress.Task]:
+    runner._step += 1
+    where = f"[{runner._step}/{runner.total}] " if runner.total else ""
+    log.info("%s: %s%s ...", runner.label, where, name)
+    t0 = time.perf_counter()
+    try:
+        with progress.task(f"{runner.label}: {where}{name}") as task:
+            yield task
+    except Exception as exc:
+        # Name the stage in a bug's one-line message (the CLI reads these; FractureErrors carry their own).
+        if not hasattr(exc, "fracture_stage"):
+            exc.fracture_stage = name  # type: ignore[attr-defined]
+        raise
+    runner.seconds[name] = round(time.perf_counter() - t0, 3)
+    log.info("%s: %s%s done in %.2f s", runner.label, where, name, runner.seconds[name])

@@ -1,0 +1,112 @@
+"""Geometric method, sliding: keep fault curves on the cage and the moved cage around the input."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from fracture_cli import trigeom
+from fracture_cli.types import SurfaceMesh
+
+# Sliding: a cage triangle next to a slid vertex must stay this far (unit bbox diagonal) from the input; the
+# triangle test is conservative (a separating-axis gap), so the true distance is at least this.
+_SLIDE_CLEARANCE = 1e-3
+
+
+class CageSurface:
+    """Closest points on the original cage surface (triangles ``F`` (b, 3) over ``V`` (n, 3))."""
+
+    def __init__(self, V: np.ndarray, F: np.ndarray):
+        self.V = V
+        self.F = np.asarray(F, dtype=np.int64)
+        self.tree = cKDTree(V[np.unique(self.F)])
+        boxes = trigeom.triangle_boxes(V, self.F)
+        self.grid = trigeom.BoxGrid(boxes, trigeom.default_cell(boxes))
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Closest points (k, 3) on the cage to ``points`` (k, 3) (lowest face id on ties)."""
+        if len(points) == 0:
+            return points.copy()
+        # The closest point is no farther than the nearest cage vertex: only triangles whose boxes come that
+        # near can hold it.
+        d0, _ = self.tree.query(points)
+        reach = d0 * (1.0 + 1e-9) + 1e-12
+        row, face = self.grid.query(np.stack([points - reach[:, None], points + reach[:, None]], axis=1))
+        tri = self.V[self.F[face]]
+        closest = trigeom.closest_points(points[row], tri[:, 0], tri[:, 1], tri[:, 2])
+        dist = np.sum((closest - points[row]) ** 2, axis=1)
+        best = np.lexsort((face, dist, row))
+        first = best[np.r_[True, row[best][1:] != row[best][:-1]]]
+        return closest[first]
+
+
+def _prism_winding(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Winding numbers (k,) of points ``P`` (k, 3) w.r.t. the prisms swept by triangles ``faces`` (k, 3).
+
+    Each triangle moves from ``V0`` to ``X``; its prism is the new triangle, the old one reversed and one
+    side quad per edge. Each quad is split along the diagonal from the edge's lower vertex id (old) to its
+    higher one (new), so the two triangles sharing an edge build the same wall with opposite orientations
+    and their walls cancel exactly in a sum.
+    """
+    total = trigeom.triangle_winding(P, X[faces[:, 0]], X[faces[:, 1]], X[faces[:, 2]])
+    total -= trigeom.triangle_winding(P, V0[faces[:, 0]], V0[faces[:, 1]], V0[faces[:, 2]])
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        p, q = faces[:, i], faces[:, j]
+        p0, q0, p1, q1 = V0[p], V0[q], X[p], X[q]
+        low_first = (p < q)[:, None]
+        # Quad (p0, q0, q1, p1), outward for a counter-clockwise triangle moving along its normal.
+        # Diagonal p0-q1 when p < q, else q0-p1.
+        t1 = (p0, q0, np.where(low_first, q1, p1))
+        t2 = (np.where(low_first, p0, q0), np.where(low_first, q1, q1), p1)
+        total += trigeom.triangle_winding(P, *t1)
+        total += trigeom.triangle_winding(P, *t2)
+    return total
+
+
+class Containment:
+    """Checks that a moved cage (same triangles ``F`` (b, 3), outward) still strictly contains ``surface``."""
+
+    def __init__(self, surface: SurfaceMesh, V0: np.ndarray, F: np.ndarray):
+        self.SV = np.asarray(surface.vertices, dtype=np.float64)
+        self.SF = np.asarray(surface.faces, dtype=np.int64)
+        boxes = trigeom.triangle_boxes(self.SV, self.SF)
+        self.grid = trigeom.BoxGrid(boxes, trigeom.default_cell(boxes))
+        self.V0 = V0
+        self.F = np.asarray(F, dtype=np.int64)
+
+    def offenders(self, X: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """Moved vertices (ascending ids) to send back: the cage over ``X`` (n, 3) near ``moved`` (n,) is unsafe.
+
+        Unsafe: a cage triangle at a moved vertex within ``_SLIDE_CLEARANCE`` of an input triangle (which also
+        catches crossings) or crossing another cage triangle; an input vertex near a moved vertex that the
+        moved cage no longer encloses (its triangles swept past it).
+        """
+        blame = np.zeros(len(X), dtype=bool)
+        touched = np.asarray(moved[self.F].any(axis=1))
+        if not touched.any():
+            return np.zeros(0, dtype=np.int64)
+        faces = self.F[touched]
+        qi, j = self.grid.query(trigeom.triangle_boxes(X, faces), pad=_SLIDE_CLEARANCE)
+        hit = trigeom.triangles_intersect(X[faces[qi]], self.SV[self.SF[j]], eps=_SLIDE_CLEARANCE)
+        blame[faces[np.unique(qi[hit])].reshape(-1)] = True
+        pairs = trigeom.self_intersections(X, self.F)
+        crossing = pairs[touched[pairs].any(axis=1)]
+        blame[self.F[crossing.reshape(-1)].reshape(-1)] = True
+        # Moving each touched triangle straight from its old to its new corners, the cage sweeps over a point
+        # (changing its winding number) only inside the box of some triangle's old and new corners.
+        swept = np.concatenate([self.V0[faces], X[faces]], axis=1)
+        boxes = np.stack([swept.min(axis=1), swept.max(axis=1)], axis=1)
+        grid = trigeom.BoxGrid(boxes, trigeom.default_cell(boxes))
+        qi, box = grid.query(np.stack([self.SV, self.SV], axis=1))
+        if len(qi):
+            # The input is strictly inside the original cage (winding number 1) and only the touched
+            # triangles changed: the winding number w.r.t. the moved cage is 1 plus the winding numbers of
+            # the prisms the touched triangles swept (their side walls cancel between neighbours), and a
+            # prism's winding number is 0 outside its box: only (point, box) pairs contribute.
+            change = np.bincount(qi, weights=_prism_winding(self.SV[qi], self.V0, X, faces[box]),
+                                 minlength=len(self.SV))
+            points = np.unique(qi)
+            outside = points[1.0 + change[points] < 0.5]
+            blame[faces[box[np.isin(qi, outside)]].reshape(-1)] = True
+        return np.flatnonzero(blame & moved)
+

@@ -1,0 +1,119 @@
+"""Bake every real-world corpus file and tabulate what happens (docs/notes/realworld-diagnosis.md).
+
+    .venv/bin/python tests/data/realworld/diagnose.py --recipe default --recipe glass --out build/realworld
+
+For each (file, recipe): the outcome (exit code, the error line), the
+independent invariant check of the written GLB (tests/invariants.py), what
+report.json claims (watertight, pinched_edges, volume_error), the repair
+decisions from the ``-v`` log, fragment and piece counts, pieces without a
+fragment, the modes stage's seconds and the bake's CPU seconds (user + system
+of the child process; wall-clock is noisy on a shared machine). Results are
+appended as JSON lines to ``<out>/results.jsonl`` and printed as a markdown
+table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import resource
+import subprocess
+import sys
+import tomllib
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(HERE)))
+sys.path.insert(0, os.path.join(REPO, "tests"))
+
+from invariants import check_glb, input_box  # noqa: E402  (after the sys.path line)
+
+
+def bake_one(path: str, out: str, recipe: str, overrides: list[str], reference: float | None) -> dict:
+    """Bake one file with the CLI in a child process and collect what it says and writes."""
+    stem = os.path.splitext(os.path.basename(path))[0]
+    fracture = os.path.join(REPO, ".venv", "bin", "fracture")
+    args = [fracture, "-v", "bake", path, "-o", out, "-r", recipe]
+    for o in overrides:
+        args += ["--set", o]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    proc = subprocess.run(args, capture_output=True, text=True, check=False)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    log = proc.stderr.splitlines()
+    row: dict = {"file": os.path.basename(path), "recipe": recipe, "overrides": overrides, "exit": proc.returncode,
+                 "cpu_s": round(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime, 1),
+                 "repair": [line.split(": ", 2)[-1] for line in log if line.startswith("repair:")],
+                 "warnings": [line for line in log if "warning" in line.lower() or "do not reach" in line]}
+    if proc.returncode != 0:
+        row["error"] = log[-1] if log else ""
+        return row
+    report_path = os.path.join(out, f"{stem}.report.json")
+    with open(report_path) as fh:
+        report = json.load(fh)
+    checks = report["checks"]
+    row["report"] = {k: checks.get(k) for k in ("watertight", "pinched_edges", "volume_error", "min_fragment_volume",
+                                                "max_outer_distance")}
+    counts = report["counts"]
+    row["counts"] = {k: counts.get(k) for k in ("fragments", "pieces", "tets", "modes", "cage_faces")}
+    row["input_volume"] = checks.get("input_volume")
+    row["modes_s"] = report["seconds"].get("modes")
+    empty = [line for line in log if "do not reach the input" in line]
+    row["empty_pieces"] = int(re.search(r"(\d+) piece", empty[0]).group(1)) if empty else 0
+    result = check_glb(os.path.join(out, f"{stem}.glb"), reference_volume=reference, volume_tolerance=1e-2,
+                       reference_box=input_box(path))
+    row["independent"] = result.summary()
+    row["independent"]["problems"] = result.problems[:6]
+    return row
+
+
+def table(rows: list[dict]) -> str:
+    """Markdown table of the rows (one per bake)."""
+    head = ("| file | recipe | outcome | independent check | report says | repair | fragments / pieces "
+            "(no fragment) | modes s | CPU s |")
+    lines = [head, "|" + "---|" * 9]
+    for r in rows:
+        if r["exit"] != 0:
+            lines.append(f"| {r['file']} | {r['recipe']} | **error**: {r.get('error', '')[-120:]} | | | "
+                         f"{'; '.join(r['repair'])[:120]} | | | {r['cpu_s']} |")
+            continue
+        ind = r["independent"]
+        bad = ", ".join(f"{k} {v}" for k, v in ind["fragments_with"].items())
+        vol = ind["volume_error"]
+        verdict = (f"{ind['failing']}/{ind['fragments']} fail" + (f" ({bad})" if bad else "")
+                   + (f"; vol err {vol:.2g}" if vol is not None else "")
+                   + (f"; bbox +{ind['bbox_excess']:.2g}" if ind["bbox_excess"] else ""))
+        rep = r["report"]
+        says = f"watertight {rep['watertight']}, pinched {rep['pinched_edges']}"
+        c = r["counts"]
+        lines.append(f"| {r['file']} | {r['recipe']} | ok | {verdict} | {says} | {'; '.join(r['repair'])[:160]} | "
+                     f"{c['fragments']} / {c['pieces']} ({r['empty_pieces']}) | {r['modes_s']} | {r['cpu_s']} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--recipe", action="append", default=None)
+    parser.add_argument("--set", dest="overrides", action="append", default=[])
+    parser.add_argument("--only", action="append", default=None, help="file names to bake (default: all)")
+    parser.add_argument("--out", default=os.path.join(REPO, "build", "realworld"))
+    args = parser.parse_args()
+    with open(os.path.join(HERE, "expected.toml"), "rb") as fh:
+        cases = tomllib.load(fh)["case"]
+    rows = []
+    os.makedirs(args.out, exist_ok=True)
+    for case in cases:
+        if args.only and case["file"] not in args.only:
+            continue
+        for recipe in args.recipe or ["default"]:
+            out = os.path.join(args.out, f"{os.path.splitext(case['file'])[0]}-{recipe}")
+            row = bake_one(os.path.join(HERE, case["file"]), out, recipe, args.overrides, case.get("volume"))
+            rows.append(row)
+            with open(os.path.join(args.out, "results.jsonl"), "a") as fh:
+                fh.write(json.dumps(row) + "\n")
+            print(table([row]).splitlines()[-1], flush=True)
+    print(table(rows))
+
+
+if __name__ == "__main__":
+    main()

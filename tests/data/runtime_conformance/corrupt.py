@@ -1,0 +1,368 @@
+"""Damaged and unusual-but-valid runtime files for the conformance set (``corrupt/``).
+
+Every case is a header + binary pair built from a valid file by one edit. When
+the edit is in the binary data (a NaN, an edge out of range), the header's
+crc32 is recomputed, so the case tests that check and not the checksum.
+``corrupt/index.json`` lists each case with ``"expect": "rejected"`` or ``"ok"``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import zlib
+
+INDEX_FORMAT = "fracture-runtime-conformance-files"
+
+
+def _header(header: dict) -> bytes:
+    return (json.dumps(header, sort_keys=True, indent=2) + "\n").encode("ascii")
+
+
+def _set_crc(header: dict, binary: bytes) -> dict:
+    if "crc32" in header["buffer"]:
+        header["buffer"]["crc32"] = zlib.crc32(binary)
+    header["buffer"]["byte_length"] = len(binary)
+    return header
+
+
+def _poke(header: dict, binary: bytes, array: str, index: int, fmt: str, value) -> tuple[dict, bytes]:
+    """Overwrite element ``index`` of ``array`` and fix the checksum."""
+    raw = bytearray(binary)
+    struct.pack_into("<" + fmt, raw, header["arrays"][array]["byte_offset"] + 4 * index, value)
+    return _set_crc(header, bytes(raw)), bytes(raw)
+
+
+def _edit(path: list, value):
+    """A header edit: set (or with value ``...`` delete) the entry at ``path``."""
+
+    def apply(header, binary):
+        node = header
+        for key in path[:-1]:
+            node = node[key]
+        if value is ...:
+            del node[path[-1]]
+        else:
+            node[path[-1]] = value
+        return header, binary
+
+    return apply
+
+
+def _text(transform):
+    """A case that edits the header's bytes (for JSON that cannot be produced by json.dumps)."""
+
+    def apply(header, binary):
+        return transform(_header(header)), binary
+
+    return apply
+
+
+def _relayout(order: list[str], align: int, gap_byte: int = 0):
+    """Rewrite the binary with the arrays in ``order``, each at a multiple of ``align``."""
+
+    def apply(header, binary):
+        out = bytearray()
+        arrays = header["arrays"]
+        chunks = {name: binary[e["byte_offset"] : e["byte_offset"] + e["byte_length"]] for name, e in arrays.items()}
+        for name in order:
+            out += bytes([gap_byte]) * (-len(out) % align)
+            arrays[name]["byte_offset"] = len(out)
+            out += chunks[name]
+        out += bytes([gap_byte]) * (-len(out) % align)
+        return _set_crc(header, bytes(out)), bytes(out)
+
+    return apply
+
+
+def _binary(transform):
+    def apply(header, binary):
+        return header, transform(binary)
+
+    return apply
+
+
+def _empty_array(name: str, axis: int):
+    """Make one count zero: the array ``name`` gets ``shape[axis] = 0`` and no bytes."""
+
+    def apply(header, binary):
+        entry = header["arrays"][name]
+        entry["shape"][axis] = 0
+        entry["byte_length"] = 0
+        return header, binary
+
+    return apply
+
+
+def _flip_padding(header, binary):
+    # A byte in the gap after `sites` (24 bytes, padded to 32): only the checksum notices.
+    raw = bytearray(binary)
+    raw[28] ^= 0x40
+    return header, bytes(raw)
+
+
+# Cases the numpy reference (fracture_cli/runtime/format.py) does not handle as the spec says yet.
+PYTHON_REFERENCE_BUGS: dict[str, str] = {}  # none left: the reference bounds the JSON depth
+
+UNICODE_NAMES = ["fr\u00e4gment_000", '\U0001f4a5 shard "1" \\ /', "tab\there\nnewline \u20ac"]
+
+# (name, base file, edit, expect, what the reader must notice). Bases: "example" (d = 1,
+# s = 2, k = 2, p = 3, e = 2) and "dyadic" (d = 3, s = 8, k = 3, p = 5, e = 6).
+CASES = [
+    ("header_empty", "example", _text(lambda t: b""), "rejected", "empty header"),
+    ("header_truncated_half", "example", _text(lambda t: t[: len(t) // 2]), "rejected", "truncated JSON"),
+    ("header_truncated_end", "example", _text(lambda t: t[:-3]), "rejected", "missing closing brace"),
+    ("header_not_json", "example", _text(lambda t: b"\x00\x01\x02 not json"), "rejected", "not JSON"),
+    ("header_not_object", "example", _text(lambda t: b"[1, 2, 3]\n"), "rejected", "JSON but not an object"),
+    ("header_trailing_garbage", "example", _text(lambda t: t + b"x"), "rejected", "text after the JSON value"),
+    (
+        "header_invalid_utf8",
+        "example",
+        _text(lambda t: t.replace(b"sites are", b"sites \xff\xfe")),
+        "rejected",
+        "invalid UTF-8",
+    ),
+    (
+        "header_nan_token",
+        "example",
+        _text(lambda t: t.replace(b'"default_threshold": 1.5', b'"default_threshold": NaN')),
+        "rejected",
+        "NaN is not JSON (and not a valid threshold)",
+    ),
+    (
+        "header_deep_nesting",
+        "example",
+        _text(lambda t: t[:-2] + b',\n  "zzz": ' + b"[" * 5000 + b"]" * 5000 + b"\n}\n"),
+        "rejected",
+        "an unknown key nested 5000 deep: readers limit the depth instead of recursing without bound",
+    ),
+    ("format_wrong", "example", _edit(["format"], "fracture-modes-runtime-x"), "rejected", "other format"),
+    ("format_missing", "example", _edit(["format"], ...), "rejected", "no format key"),
+    ("version_2", "example", _edit(["version"], 2), "rejected", "unknown version"),
+    ("version_0", "example", _edit(["version"], 0), "rejected", "unknown version"),
+    ("version_string", "example", _edit(["version"], "1"), "rejected", "version is not an integer"),
+    ("version_fraction", "example", _edit(["version"], 1.5), "rejected", "version is not an integer"),
+    ("dim_2", "example", _edit(["dim"], 2), "rejected", "d must be 1 or 3"),
+    ("dim_disagrees", "example", _edit(["dim"], 3), "rejected", "dim disagrees with the arrays' shapes"),
+    ("counts_sites", "example", _edit(["counts", "sites"], 3), "rejected", "counts disagree with shapes"),
+    ("counts_edges_missing", "example", _edit(["counts", "edges"], ...), "rejected", "counts incomplete"),
+    (
+        "names_too_few",
+        "example",
+        _edit(["fragment_names"], ["fragment_000", "fragment_001"]),
+        "rejected",
+        "fewer names than fragments",
+    ),
+    ("threshold_negative", "example", _edit(["default_threshold"], -1.0), "rejected", "default threshold < 0"),
+    (
+        "threshold_overflow",
+        "example",
+        _text(lambda t: t.replace(b'"default_threshold": 1.5', b'"default_threshold": 1e999')),
+        "rejected",
+        "default threshold is not finite",
+    ),
+    ("buffer_missing", "example", _edit(["buffer"], ...), "rejected", "no buffer entry"),
+    ("byte_length_wrong", "example", _edit(["buffer", "byte_length"], 128), "rejected", "binary size differs"),
+    (
+        "uri_directory",
+        "example",
+        _edit(["buffer", "uri"], "sub/example.fracture.bin"),
+        "rejected",
+        "uri is not a plain file name",
+    ),
+    (
+        "uri_parent",
+        "example",
+        _edit(["buffer", "uri"], "../example.fracture.bin"),
+        "rejected",
+        "uri is not a plain file name",
+    ),
+    (
+        "uri_backslash",
+        "example",
+        _edit(["buffer", "uri"], "sub\\example.fracture.bin"),
+        "rejected",
+        "uri is not a plain file name",
+    ),
+    ("uri_empty", "example", _edit(["buffer", "uri"], ""), "rejected", "uri is empty"),
+    ("arrays_missing", "example", _edit(["arrays"], ...), "rejected", "no arrays table"),
+    ("array_W_missing", "example", _edit(["arrays", "W"], ...), "rejected", "array W missing"),
+    ("dtype_float64", "example", _edit(["arrays", "sites", "dtype"], "float64"), "rejected", "wrong dtype"),
+    ("dtype_edges_float", "example", _edit(["arrays", "edges", "dtype"], "float32"), "rejected", "wrong dtype"),
+    ("shape_rank", "example", _edit(["arrays", "sites", "shape"], [6]), "rejected", "sites must be (s, 3)"),
+    ("shape_negative", "example", _edit(["arrays", "B", "shape"], [-2, -2, 1]), "rejected", "negative size"),
+    (
+        "shape_vs_length",
+        "example",
+        _edit(["arrays", "W", "byte_length"], 20),
+        "rejected",
+        "byte_length != 4 * product(shape)",
+    ),
+    (
+        "shape_overflow",
+        "example",
+        _edit(["arrays", "B", "shape"], [1 << 31, 1 << 31, 1 << 2]),
+        "rejected",
+        "product of the shape overflows 64 bits",
+    ),
+    (
+        "offset_outside",
+        "example",
+        _edit(["arrays", "edge_areas", "byte_offset"], 112),
+        "rejected",
+        "array past the end of the binary",
+    ),
+    ("offset_negative", "example", _edit(["arrays", "sites", "byte_offset"], -16), "rejected", "negative offset"),
+    (
+        "offset_huge",
+        "example",
+        _edit(["arrays", "sites", "byte_offset"], 1 << 62),
+        "rejected",
+        "offset + length overflows",
+    ),
+    (
+        "offset_unaligned_4",
+        "example",
+        _edit(["arrays", "B", "byte_offset"], 34),
+        "rejected",
+        "offset not a multiple of 16",
+    ),
+    (
+        "offset_unaligned_16",
+        "example",
+        _relayout(["sites", "B", "W", "edges", "edge_areas"], 4),
+        "rejected",
+        "arrays packed at 4-byte alignment (offsets must be multiples of 16)",
+    ),
+    ("bin_truncated", "example", _binary(lambda b: b[:-1]), "rejected", "binary shorter than byte_length"),
+    ("bin_empty", "example", _binary(lambda b: b""), "rejected", "empty binary"),
+    ("bin_extra_byte", "example", _binary(lambda b: b + b"\0"), "rejected", "binary longer than byte_length"),
+    ("crc_mismatch", "example", _flip_padding, "rejected", "crc32 differs (only the checksum can tell)"),
+    ("edge_out_of_range", "example", lambda h, b: _poke(h, b, "edges", 3, "i", 3), "rejected", "Q >= p"),
+    ("edge_negative", "example", lambda h, b: _poke(h, b, "edges", 0, "i", -1), "rejected", "P < 0"),
+    ("edge_self", "example", lambda h, b: _poke(h, b, "edges", 1, "i", 0), "rejected", "P == Q"),
+    (
+        "edge_reversed",
+        "example",
+        lambda h, b: _poke(*_poke(h, b, "edges", 2, "i", 2), "edges", 3, "i", 1),
+        "rejected",
+        "P > Q",
+    ),
+    ("site_nan", "example", lambda h, b: _poke(h, b, "sites", 4, "f", float("nan")), "rejected", "NaN in sites"),
+    ("B_inf", "example", lambda h, b: _poke(h, b, "B", 1, "f", float("inf")), "rejected", "inf in B"),
+    ("W_nan", "example", lambda h, b: _poke(h, b, "W", 5, "f", float("nan")), "rejected", "NaN in W"),
+    (
+        "edge_area_inf",
+        "example",
+        lambda h, b: _poke(h, b, "edge_areas", 0, "f", float("-inf")),
+        "rejected",
+        "inf in edge_areas",
+    ),
+    ("no_sites", "example", _empty_array("sites", 0), "rejected", "s = 0 (and B disagrees)"),
+    ("d3_B_with_d1", "dyadic", _edit(["arrays", "B", "shape"], [8, 9, 1]), "rejected", "B's d differs from W's"),
+    ("d3_W_nan", "dyadic", lambda h, b: _poke(h, b, "W", 7, "f", float("nan")), "rejected", "NaN in W"),
+    ("d3_edge_out_of_range", "dyadic", lambda h, b: _poke(h, b, "edges", 11, "i", 5), "rejected", "Q >= p"),
+    # Valid files a reader must accept.
+    (
+        "ok_minified",
+        "example",
+        _text(lambda t: json.dumps(json.loads(t), separators=(",", ":")).encode()),
+        "ok",
+        "no whitespace",
+    ),
+    (
+        "ok_reordered_keys",
+        "example",
+        _text(lambda t: json.dumps(dict(reversed(list(json.loads(t).items()))), indent=4).encode()),
+        "ok",
+        "keys in another order, other indent",
+    ),
+    (
+        "ok_unknown_keys",
+        "example",
+        lambda h, b: (
+            {
+                **h,
+                "zzz_future": {"nested": [1, 2.5e-3, None, True, "x"]},
+                "buffer": {**h["buffer"], "mime": "application/octet-stream"},
+                "counts": {**h["counts"], "groups": 7},
+                "arrays": {
+                    **h["arrays"],
+                    "extra": {"dtype": "uint8", "shape": [3], "byte_offset": 0, "byte_length": 3},
+                },
+            },
+            b,
+        ),
+        "ok",
+        "keys a reader does not know are ignored",
+    ),
+    ("ok_no_crc", "example", _edit(["buffer", "crc32"], ...), "ok", "crc32 is optional"),
+    (
+        "ok_unicode_names",
+        "example",
+        _edit(["fragment_names"], UNICODE_NAMES),
+        "ok",
+        "\\u escapes (incl. a surrogate pair) and other escapes in names",
+    ),
+    (
+        "ok_arrays_reordered",
+        "example",
+        _relayout(["edges", "W", "edge_areas", "B", "sites"], 16, 0),
+        "ok",
+        "arrays in another order: use the header's offsets",
+    ),
+    (
+        "ok_gaps_nonzero",
+        "example",
+        _relayout(["sites", "B", "W", "edges", "edge_areas"], 32, 0xAB),
+        "ok",
+        "wider, non-zero gaps between arrays",
+    ),
+    ("ok_dyadic", "dyadic", lambda h, b: (h, b), "ok", "the d = 3 base file itself"),
+]
+
+
+def generate(out: str, example_json: str, dyadic_json: str) -> list[str]:
+    """Write every case and ``index.json`` into ``out``; returns the paths written (relative to its parent)."""
+    os.makedirs(out, exist_ok=True)
+    bases = {}
+    for key, path in (("example", example_json), ("dyadic", dyadic_json)):
+        with open(path, encoding="utf-8") as fh:
+            header = json.load(fh)
+        with open(os.path.join(os.path.dirname(path), header["buffer"]["uri"]), "rb") as fh:
+            binary = fh.read()
+        bases[key] = (header, binary, os.path.basename(path).replace(".fracture.json", ".vectors.json"))
+    entries, written = [], []
+    for name, base, edit, expect, why in CASES:
+        header, binary, vectors = bases[base]
+        header = json.loads(json.dumps(header))  # a private copy to edit
+        if isinstance(header.get("buffer"), dict) and "uri" in header["buffer"] and not name.startswith("uri_"):
+            header["buffer"]["uri"] = f"{name}.fracture.bin"
+        header_out, binary_out = edit(header, binary)
+        if isinstance(header_out, dict):
+            header_out = _header(header_out)
+        with open(os.path.join(out, f"{name}.fracture.json"), "wb") as fh:
+            fh.write(header_out)
+        with open(os.path.join(out, f"{name}.fracture.bin"), "wb") as fh:
+            fh.write(binary_out)
+        entry: dict[str, object] = {
+            "name": name,
+            "header": f"{name}.fracture.json",
+            "binary": f"{name}.fracture.bin",
+            "expect": expect,
+            "why": why,
+        }
+        if expect == "ok":
+            entry["vectors"] = vectors
+            entry["fragment_names"] = UNICODE_NAMES if name == "ok_unicode_names" else header["fragment_names"]
+        if name == "crc_mismatch":
+            entry["only_crc"] = True
+        if name in PYTHON_REFERENCE_BUGS:
+            entry["python_reference_bug"] = PYTHON_REFERENCE_BUGS[name]
+        entries.append(entry)
+        written += [f"corrupt/{name}.fracture.json", f"corrupt/{name}.fracture.bin"]
+    index = {"format": INDEX_FORMAT, "version": 1, "cases": entries}
+    with open(os.path.join(out, "index.json"), "w", encoding="ascii", newline="\n") as fh:
+        fh.write(json.dumps(index, indent=1) + "\n")
+    return written + ["corrupt/index.json"]

@@ -1,0 +1,476 @@
+"""Generate the runtime conformance vectors in this folder (see README.md here).
+
+    .venv/bin/python tests/data/runtime_conformance/generate.py            # regenerate everything
+    .venv/bin/python tests/data/runtime_conformance/generate.py --rebake   # also re-bake the sample assets
+    .venv/bin/python tests/data/runtime_conformance/generate.py --out DIR  # write elsewhere (the test does)
+
+Small runtime files (the worked example of docs/FORMAT.md, a dyadic d = 3 file
+with exact ties, random d = 1 and d = 3 files, a one-fragment file) are written
+by the reference writer; the sample assets' runtime files are baked with the
+recipe of sample_assets/manifest.toml only with ``--rebake`` (slow) and are
+otherwise read from this folder. Expected answers come from ``reference.py``
+(docs/FORMAT.md section 4 to the letter); tests/test_engine_conformance.py
+checks they agree with ``fracture_cli.runtime.impact``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import shutil
+import struct
+import subprocess
+import sys
+import tempfile
+import tomllib
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(HERE)))
+sys.path.insert(0, HERE)
+sys.path.insert(0, REPO)
+
+import corrupt  # noqa: E402
+import reference  # noqa: E402
+
+from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime  # noqa: E402
+
+VECTORS_FORMAT = "fracture-runtime-conformance"
+VECTORS_VERSION = 1
+SAMPLE_IMPACTS = 24  # random hits per sample asset
+SMALL_IMPACTS = 40  # random hits per random synthetic file
+
+
+# ---------------------------------------------------------------- the runtime files
+
+
+def _names(p: int) -> tuple[str, ...]:
+    return tuple(f"fragment_{j:03d}" for j in range(p))
+
+
+def _doc_example() -> dict:
+    """The JSON block after <!-- example-data --> in docs/FORMAT.md."""
+    with open(os.path.join(REPO, "docs", "FORMAT.md"), encoding="utf-8") as fh:
+        match = re.search(r"<!-- example-data -->\s*```json\n(.*?)```", fh.read(), re.DOTALL)
+    if match is None:
+        raise ValueError("docs/FORMAT.md has no <!-- example-data --> block")
+    return json.loads(match.group(1))
+
+
+def example_data() -> RuntimeData:
+    """The worked example of docs/FORMAT.md section 6 (d = 1)."""
+    ex = _doc_example()
+    return RuntimeData(
+        sites=np.array(ex["sites"], np.float32),
+        B=np.array(ex["B"], np.float32),
+        W=np.array(ex["W"], np.float32),
+        edges=np.array(ex["edges"], np.int32),
+        edge_areas=np.array(ex["edge_areas"], np.float32),
+        fragment_names=tuple(ex["fragment_names"]),
+        default_threshold=ex["default_threshold"],
+        radius=ex["impact_radius"],
+    )
+
+
+def dyadic_d3() -> RuntimeData:
+    """Five fragments with a cycle, three vector modes, small dyadic values (every sum exact).
+
+    Sites 2 and 6 are the same point (an identical-site tie); edge (1, 3) has a
+    jump of exactly 1.25 for a unit x impulse at site 0 (an exact threshold tie).
+    """
+    sites = [[0, 0, 0], [4, 0, 0], [0, 4, 0], [0, 0, 4], [4, 4, 0], [-4, 0, 0], [0, 4, 0], [2, 2, 2]]
+    B = np.array(
+        [
+            [[1, 0, 0], [0, 0.5, 0], [0, 0, 0.25]],
+            [[-0.5, 0, 0], [0, 1, 0], [0.5, 0, 0]],
+            [[0, 1, 0], [0.25, 0, 0], [0, 0, -1]],
+            [[0, 0, 1], [0, -0.5, 0], [1, 0, 0]],
+            [[0.5, 0.5, 0], [0, 0, 0.5], [-0.25, 0, 0]],
+            [[-1, 0, 0], [0, -1, 0], [0, 0, -1]],
+            [[0, 0.75, 0], [0, 0, 0.5], [0.5, 0, 0]],
+            [[0.25, 0.25, 0.25], [0.5, 0, 0], [0, 0.5, 0]],
+        ]
+    )
+    W = np.array(
+        [
+            [[1, 0, 0], [0.25, 0, 0], [-0.5, 0, 0], [-1, 0, 0], [0, 0, 0]],
+            [[0, 0.5, 0], [0, -0.5, 0], [0, 0, 0], [0, 0.25, 0.5], [0, 0, -1]],
+            [[0, 0, 1], [0, 0, 0], [0, 0, -0.5], [0.5, 0, 0], [0, 0.25, 0]],
+        ]
+    )
+    edges = [[0, 1], [0, 2], [1, 2], [1, 3], [2, 4], [3, 4]]
+    return RuntimeData(
+        sites=np.array(sites, np.float32),
+        B=B.astype(np.float32),
+        W=W.astype(np.float32),
+        edges=np.array(edges, np.int32),
+        edge_areas=np.arange(1, 7, dtype=np.float32),
+        fragment_names=_names(5),
+        default_threshold=1.0,
+        radius=0.05,
+    )
+
+
+def single_fragment() -> RuntimeData:
+    """One site, one mode, one fragment, no edges: zero-length arrays in the file."""
+    return RuntimeData(
+        sites=np.array([[1, 2, 3]], np.float32),
+        B=np.array([[[2.0]]], np.float32),
+        W=np.array([[[1.0]]], np.float32),
+        edges=np.zeros((0, 2), np.int32),
+        edge_areas=np.zeros(0, np.float32),
+        fragment_names=_names(1),
+        default_threshold=0.5,
+    )
+
+
+def random_data(d: int, seed: int, s: int = 400, k: int = 8, p: int = 40, e: int = 100) -> RuntimeData:
+    """Random sites on a bumpy sphere and a connected graph with cycles (many cuts per hit)."""
+    rng = np.random.default_rng(seed)
+    sites = rng.normal(size=(s, 3))
+    sites *= rng.uniform(0.8, 1.2, size=(s, 1)) / np.linalg.norm(sites, axis=1, keepdims=True)
+    pairs = {(j, j + 1) for j in range(p - 1)}
+    while len(pairs) < e:
+        a, b = sorted(rng.integers(0, p, 2).tolist())
+        if a != b:
+            pairs.add((a, b))
+    W = rng.normal(size=(k, p, d))
+    return RuntimeData(
+        sites=(sites * 2.5).astype(np.float32),
+        B=rng.normal(size=(s, k, d)).astype(np.float32),
+        W=W.astype(np.float32),
+        edges=np.array(sorted(pairs), np.int32),
+        edge_areas=rng.uniform(0.1, 1, e).astype(np.float32),
+        fragment_names=_names(p),
+        default_threshold=2.0,
+        radius=0.05,
+    )
+
+
+def sample_assets() -> list[tuple[str, str]]:
+    """(asset file, recipe) pairs of sample_assets/manifest.toml."""
+    with open(os.path.join(REPO, "sample_assets", "manifest.toml"), "rb") as fh:
+        return sorted(tomllib.load(fh)["assets"].items())
+
+
+def rebake_sample_assets(dest: str) -> None:
+    """Bake every sample asset with its manifest recipe and copy its runtime file to ``dest``."""
+    for asset, recipe in sample_assets():
+        stem = os.path.splitext(asset)[0]
+        with tempfile.TemporaryDirectory() as tmp:
+            subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "fracture_cli",
+                    "-q",
+                    "bake",
+                    os.path.join(REPO, "sample_assets", asset),
+                    "-o",
+                    tmp,
+                    "--recipe",
+                    recipe,
+                ],
+                check=True,
+                cwd=REPO,
+            )
+            for suffix in (".fracture.json", ".fracture.bin"):
+                shutil.copyfile(os.path.join(tmp, stem + suffix), os.path.join(dest, stem + suffix))
+
+
+# ---------------------------------------------------------------- the impacts
+
+
+def _unit(rng) -> list[float]:
+    v = rng.normal(size=3)
+    return (v / np.linalg.norm(v)).tolist()
+
+
+def _midpoint_tie(rt: reference.Runtime, rng):
+    """A point exactly halfway between two sites with no site nearer (an exact tie), or None."""
+    sites = np.array(rt.sites)
+    for a in rng.permutation(len(sites))[:50].tolist():
+        d2 = ((sites - sites[a]) ** 2).sum(axis=1)
+        d2[a] = np.inf
+        b = int(d2.argmin())
+        mid = [(sites[a, c] + sites[b, c]) / 2 for c in range(3)]
+        if all(2 * mid[c] - sites[a, c] == sites[b, c] for c in range(3)):
+            _, tied, _ = reference.nearest(rt, mid)
+            if tied == tuple(sorted((a, b))) and not np.array_equal(sites[a], sites[b]):
+                return mid
+    return None
+
+
+def _typical_jump(rt: reference.Runtime, point, direction) -> float:
+    """Largest |jump| of a unit impulse at ``point`` (to scale impulses so some edges break)."""
+    result = reference.project(rt, point, direction, math.inf)
+    jumps = [abs(result.displacement[P][c] - result.displacement[Q][c]) for P, Q in rt.edges for c in range(rt.d)]
+    return max(jumps, default=0.0) or 1.0
+
+
+def designed_impacts(rt: reference.Runtime, rng) -> list[dict]:
+    """The hand-picked cases every file gets (ties, extremes, invalid inputs)."""
+    site0 = list(rt.sites[0])
+    lo = [min(s[c] for s in rt.sites) for c in range(3)]
+    u = _unit(rng)
+    T = rt.default_threshold
+    strong = [c * 2 * T / _typical_jump(rt, site0, u) for c in u]
+    cases = [
+        ("zero impulse at a site", site0, [0.0, 0.0, 0.0], None),
+        ("zero impulse, threshold 0", site0, [0.0, -0.0, 0.0], 0.0),
+        ("point far outside", [lo[0] - 1e6, lo[1] - 3e5, lo[2] + 2e5], strong, None),
+        ("point on a site", list(rt.sites[-1]), strong, None),
+        ("threshold +inf: unbreakable", site0, strong, math.inf),
+        ("threshold 0: every nonzero jump breaks", site0, u, 0.0),
+        ("threshold -0.0 acts as 0", site0, u, -0.0),
+        ("impulse 1e155 (|n|^2 overflows), threshold scaled alike", site0, [c * 1e155 for c in strong], T * 1e155),
+        ("impulse 1e-170 (|n|^2 underflows), threshold 1e-171", site0, [c * 1e-170 for c in u], 1e-171),
+        ("subnormal impulse: T/m overflows, nothing breaks", site0, [5e-324, 0.0, 0.0], T),
+        ("huge impulse against a tiny threshold", site0, [1e300, -1e300, 1e300], 1e-300),
+        ("invalid: NaN in point", [math.nan, 0.0, 0.0], u, None),
+        ("invalid: inf in point", [0.0, math.inf, 0.0], u, None),
+        ("invalid: -inf in impulse", site0, [0.0, 0.0, -math.inf], None),
+        ("invalid: NaN in impulse", site0, [1.0, math.nan, 0.0], None),
+        ("invalid: NaN threshold", site0, u, math.nan),
+        ("invalid: negative threshold", site0, u, -1.0),
+        ("invalid: -inf threshold", site0, u, -math.inf),
+    ]
+    impacts = [
+        {"name": name, "point": point, "impulse": impulse, "threshold": threshold}
+        for name, point, impulse, threshold in cases
+    ]
+    # Exact site ties by construction: every squared distance overflows to +inf (so site 0),
+    # and a point exactly halfway between two sites that no other site is nearer to.
+    impacts.append(
+        {
+            "name": "exact tie: point so far that every squared distance overflows (site 0)",
+            "point": [1e300, -1e300, 1e300],
+            "impulse": strong,
+            "threshold": None,
+            "site_tie": True,
+        }
+    )
+    mid = _midpoint_tie(rt, rng)
+    if mid is not None:
+        impacts.append(
+            {
+                "name": "exact tie: halfway between two sites",
+                "point": mid,
+                "impulse": strong,
+                "threshold": None,
+                "site_tie": True,
+            }
+        )
+    return impacts
+
+
+def random_impacts(rt: reference.Runtime, count: int, seed: int) -> list[dict]:
+    """Hits near sites, impulses scaled so that from none to many edges break; ties avoided."""
+    rng = np.random.default_rng(seed)
+    sites = np.array(rt.sites)
+    spread = float(np.ptp(sites, axis=0).max()) * 0.02 or 0.1
+    impacts: list[dict] = []
+    while len(impacts) < count:
+        point = (sites[rng.integers(len(sites))] + rng.normal(scale=spread, size=3)).tolist()
+        direction = _unit(rng)
+        magnitude = rt.default_threshold / _typical_jump(rt, point, direction) * float(rng.choice([0.7, 1.3, 2.5, 6.0]))
+        impulse = [c * magnitude for c in direction]
+        threshold = None if len(impacts) % 3 else float(np.float32(rt.default_threshold * rng.uniform(0.5, 2)))
+        result = reference.project(rt, point, impulse, threshold)
+        if result.site_margin > reference.SAFE_MARGIN and result.edge_margin > reference.SAFE_MARGIN:
+            impacts.append(
+                {"name": f"random hit {len(impacts)}", "point": point, "impulse": impulse, "threshold": threshold}
+            )
+    return impacts
+
+
+# Exact ties in the dyadic d = 3 file: all sums exact, so every evaluation order agrees.
+DYADIC_TIES: list[dict] = [
+    {
+        "name": "exact threshold tie: |jump| == T holds",
+        "point": [0.5, 0.0, 0.0],
+        "impulse": [1.0, 0.0, 0.0],
+        "threshold": 1.25,
+        "exact": True,
+    },
+    {
+        "name": "exact threshold tie, impulse and threshold x8",
+        "point": [0.5, 0.0, 0.0],
+        "impulse": [8.0, 0.0, 0.0],
+        "threshold": 10.0,
+        "exact": True,
+    },
+    {
+        "name": "identical sites 2 and 6: the smaller index",
+        "point": [0.0, 4.0, 0.0],
+        "impulse": [0.0, -2.0, 0.0],
+        "threshold": None,
+        "exact": True,
+    },
+    {
+        "name": "equidistant from sites 0 and 5",
+        "point": [-2.0, 7.0, -3.0],
+        "impulse": [0.0, 0.0, 3.0],
+        "threshold": 0.5,
+        "exact": True,
+    },
+]
+EXAMPLE_TIES: list[dict] = [
+    {
+        "name": "worked example case 1 with T = 2.5: |jump| == T holds",
+        "point": [0.1, 0.0, 0.0],
+        "impulse": [0.0, 0.0, -2.0],
+        "threshold": 2.5,
+        "exact": True,
+    },
+]
+
+
+# ---------------------------------------------------------------- writing
+
+
+def _number(x):
+    """A JSON value for a double: the shortest round-trip decimal, or "nan" / "inf" / "-inf"."""
+    if math.isnan(x):
+        return "nan"
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return float(x)
+
+
+def _bits(x: float) -> str:
+    return struct.pack(">d", x).hex()
+
+
+def vector_entry(rt: reference.Runtime, impact: dict) -> dict:
+    """One impact with its expected outcome, as written to ``<name>.vectors.json``."""
+    point, impulse, threshold = impact["point"], impact["impulse"], impact["threshold"]
+    entry = {
+        "name": impact["name"],
+        "point": [_number(c) for c in point],
+        "impulse": [_number(c) for c in impulse],
+        "threshold": None if threshold is None else _number(threshold),
+        "bits": {
+            "point": [_bits(c) for c in point],
+            "impulse": [_bits(c) for c in impulse],
+            "threshold": None if threshold is None else _bits(threshold),
+        },
+    }
+    try:
+        result = reference.project(rt, point, impulse, threshold)
+    except reference.InvalidImpact as exc:
+        entry.update(expect="error", error=exc.what)
+        return entry
+    exact = impact.get("exact", False)
+    site_tie = exact or impact.get("site_tie", False)
+    if len(result.tied_sites) > 1 and not site_tie:
+        raise ValueError(f"{impact['name']}: unplanned exact tie between sites {result.tied_sites}")
+    if len(result.tied_sites) == 1 and result.site_margin <= reference.SAFE_MARGIN:
+        raise ValueError(f"{impact['name']}: nearest site within rounding of a tie")
+    if not exact and result.edge_margin <= reference.SAFE_MARGIN:
+        raise ValueError(f"{impact['name']}: an edge is within rounding of the threshold")
+    entry.update(
+        expect="ok",
+        site=result.site,
+        tied_sites=list(result.tied_sites),
+        num_groups=sum(1 for j, g in enumerate(result.groups) if g == j),
+        groups=result.groups,
+        broken=[m for m, cut in enumerate(result.broken) if cut],
+        alpha=[_number(a) for a in result.alpha],
+        displacement=[[_number(x) for x in row] for row in result.displacement],
+    )
+    return entry
+
+
+def write_vectors(path: str, runtime_name: str, rt: reference.Runtime, impacts: list[dict]) -> None:
+    """``<name>.vectors.json``: one impact per line so diffs stay readable."""
+    head = {
+        "format": VECTORS_FORMAT,
+        "version": VECTORS_VERSION,
+        "runtime": runtime_name,
+        "dim": rt.d,
+        "counts": {"sites": len(rt.sites), "modes": rt.k, "fragments": rt.p, "edges": len(rt.edges)},
+        "default_threshold": rt.default_threshold,
+    }
+    lines = [json.dumps(vector_entry(rt, impact), allow_nan=False) for impact in impacts]
+    text = (
+        json.dumps(head, indent=2, allow_nan=False)[:-2]
+        + ',\n  "impacts": [\n    '
+        + ",\n    ".join(lines)
+        + "\n  ]\n}\n"
+    )
+    with open(path, "w", encoding="ascii", newline="\n") as fh:
+        fh.write(text)
+
+
+def generate(out: str, rebake: bool = False) -> list[str]:
+    """Write every file of the conformance set into ``out``; returns the file names written."""
+    os.makedirs(out, exist_ok=True)
+    written = []
+    small = {
+        "example": example_data(),
+        "dyadic_d3": dyadic_d3(),
+        "single": single_fragment(),
+        "random_d1": random_data(1, seed=11),
+        "random_d3": random_data(3, seed=13),
+    }
+    for name, data in small.items():
+        write_runtime(data, os.path.join(out, f"{name}.fracture.json"))
+        written += [f"{name}.fracture.json", f"{name}.fracture.bin"]
+    if rebake:
+        rebake_sample_assets(out)
+    stems = [os.path.splitext(asset)[0] for asset, _ in sample_assets()]
+    for stem in stems:
+        if os.path.abspath(out) != HERE and not rebake:
+            for suffix in (".fracture.json", ".fracture.bin"):
+                shutil.copyfile(os.path.join(HERE, stem + suffix), os.path.join(out, stem + suffix))
+    for seed, name in enumerate([*small, *stems]):
+        rt = reference.Runtime.from_data(load_runtime(os.path.join(out, f"{name}.fracture.json")))
+        rng = np.random.default_rng(100 + seed)
+        impacts = designed_impacts(rt, rng)
+        if name == "example":
+            impacts = _doc_cases() + EXAMPLE_TIES + impacts
+        elif name == "dyadic_d3":
+            impacts = DYADIC_TIES + impacts
+        count = SMALL_IMPACTS if name.startswith("random") else SAMPLE_IMPACTS if name in stems else 8
+        impacts += random_impacts(rt, count, seed=200 + seed)
+        write_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", rt, impacts)
+        written.append(f"{name}.vectors.json")
+    written += corrupt.generate(
+        os.path.join(out, "corrupt"),
+        os.path.join(out, "example.fracture.json"),
+        os.path.join(out, "dyadic_d3.fracture.json"),
+    )
+    return written
+
+
+def _doc_cases() -> list[dict]:
+    ex = _doc_example()
+    return [
+        {
+            "name": f"worked example case {i + 1}",
+            "point": [float(c) for c in case["point"]],
+            "impulse": [float(c) for c in case["impulse"]],
+            "threshold": case["threshold"],
+            "exact": True,
+        }
+        for i, case in enumerate(ex["cases"])
+    ]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default=HERE, help="output folder (default: this folder)")
+    parser.add_argument("--rebake", action="store_true", help="re-bake the sample assets' runtime files (slow)")
+    args = parser.parse_args()
+    names = generate(args.out, rebake=args.rebake)
+    print(f"wrote {len(names)} files to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

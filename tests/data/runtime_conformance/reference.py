@@ -1,0 +1,187 @@
+"""Exact reference of docs/FORMAT.md section 4, in plain Python doubles, for the conformance vectors.
+
+It follows the spec's order of operations literally (the scale-invariant rule,
+sums in index order, the Euclidean norm of a jump) and also measures how close
+each decision is to a tie, so the generator can keep only impacts whose answer
+every reader computing in double must reproduce. It does not replace
+``fracture_cli.runtime.impact`` (the numpy reference); the tests check that both
+agree on every vector.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+# A decision (nearest site, edge broken) is "safe" when the two sides differ by more
+# than this fraction of the magnitudes that went into them: far above the rounding
+# of any evaluation order in double (about k * 1e-16), far below real differences.
+SAFE_MARGIN = 1e-9
+
+
+class InvalidImpact(ValueError):
+    """The impact's point, impulse or threshold is not allowed (section 4, "Inputs")."""
+
+    def __init__(self, what: str):
+        super().__init__(what)
+        self.what = what
+
+
+@dataclass(frozen=True)
+class Runtime:
+    """The arrays of one runtime file as Python floats / ints (float32 values widened exactly).
+
+    Attributes
+    ----------
+    sites : list of (x, y, z)
+    B : list over sites of list over modes of d-tuples
+    W : list over modes of list over fragments of d-tuples
+    edges : list of (P, Q)
+    default_threshold : float
+    """
+
+    sites: list
+    B: list
+    W: list
+    edges: list
+    default_threshold: float
+
+    @property
+    def d(self) -> int:
+        return len(self.W[0][0])
+
+    @property
+    def k(self) -> int:
+        return len(self.W)
+
+    @property
+    def p(self) -> int:
+        return len(self.W[0])
+
+    @classmethod
+    def from_data(cls, data) -> Runtime:
+        """From a :class:`fracture_cli.runtime.format.RuntimeData`."""
+        return cls(sites=[tuple(float(c) for c in s) for s in data.sites.tolist()],
+                   B=[[tuple(m) for m in site] for site in data.B.tolist()],
+                   W=[[tuple(f) for f in mode] for mode in data.W.tolist()],
+                   edges=[tuple(e) for e in data.edges.tolist()],
+                   default_threshold=float(data.default_threshold))
+
+
+@dataclass(frozen=True)
+class Expected:
+    """The answer to one impact, and how far each decision was from a tie."""
+
+    site: int
+    tied_sites: tuple
+    alpha: list
+    displacement: list
+    broken: list
+    groups: list
+    site_margin: float  # relative gap to the runner-up site (inf: one site, 0: exact tie)
+    edge_margin: float  # smallest relative gap between |jump'| and T/m over the edges
+
+
+def squared_distance(site, x, y, z) -> float:
+    """``((sx-x)^2 + (sy-y)^2) + (sz-z)^2`` in double, in this order (section 4, step 1)."""
+    dx = site[0] - x
+    dy = site[1] - y
+    dz = site[2] - z
+    return dx * dx + dy * dy + dz * dz
+
+
+def check_inputs(point, impulse, threshold) -> None:
+    """Raise :class:`InvalidImpact` for a non-finite point/impulse or a NaN/negative threshold."""
+    if not all(math.isfinite(c) for c in point):
+        raise InvalidImpact("point")
+    if not all(math.isfinite(c) for c in impulse):
+        raise InvalidImpact("impulse")
+    if threshold is not None and (math.isnan(threshold) or threshold < 0):
+        raise InvalidImpact("threshold")
+
+
+def nearest(rt: Runtime, point) -> tuple[int, tuple, float]:
+    """Nearest site (smallest index on exact ties), all exactly tied sites, relative margin."""
+    x, y, z = point
+    d2 = [squared_distance(s, x, y, z) for s in rt.sites]
+    best = min(d2)
+    tied = tuple(i for i, v in enumerate(d2) if v == best)
+    others = [v for v in d2 if v != best]
+    if len(tied) > 1:
+        margin = 0.0
+    elif not others:
+        margin = math.inf
+    else:
+        # Each squared distance is computed with a relative error of a few ulps (one
+        # rounding per subtraction, square and sum), so the gap is measured relative to it.
+        runner_up = min(others)
+        margin = (runner_up - best) / runner_up if math.isfinite(runner_up) else math.inf
+    return tied[0], tied, margin
+
+
+def components(p: int, edges, broken) -> list:
+    """Group of every fragment: the smallest index in its component over unbroken edges."""
+    parent = list(range(p))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            a = parent[a]
+        return a
+
+    for (P, Q), cut in zip(edges, broken):
+        if not cut:
+            a, b = find(P), find(Q)
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+    return [find(j) for j in range(p)]
+
+
+def project(rt: Runtime, point, impulse, threshold) -> Expected:
+    """The answer docs/FORMAT.md section 4 prescribes, with the scale-invariant rule.
+
+    Parameters
+    ----------
+    rt : Runtime
+    point, impulse : 3 floats
+    threshold : float or None (the file's default threshold)
+    """
+    check_inputs(point, impulse, threshold)
+    T = rt.default_threshold if threshold is None else threshold
+    v, tied, site_margin = nearest(rt, point)
+    k, p, d = rt.k, rt.p, rt.d
+    m = max(abs(c) for c in impulse)
+    if m == 0:
+        zero = [[0.0] * d for _ in range(p)]
+        broken = [False] * len(rt.edges)
+        return Expected(v, tied, [0.0] * k, zero, broken, components(p, rt.edges, broken),
+                        site_margin, math.inf)
+    n = [c / m for c in impulse]
+    B = rt.B[v]
+    if d == 1:
+        length = math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+        alpha = [B[i][0] * length for i in range(k)]
+        alpha_scale = [abs(B[i][0]) * length for i in range(k)]
+    else:
+        alpha = [B[i][0] * n[0] + B[i][1] * n[1] + B[i][2] * n[2] for i in range(k)]
+        alpha_scale = [sum(abs(B[i][c] * n[c]) for c in range(3)) for i in range(k)]
+    disp = []
+    for j in range(p):
+        row = []
+        for c in range(d):
+            acc = 0.0
+            for i in range(k):
+                acc += alpha[i] * rt.W[i][j][c]
+            row.append(acc)
+        disp.append(row)
+    t = T / m  # overflow -> inf (nothing breaks), underflow -> 0 (any nonzero jump breaks)
+    broken, edge_margin = [], math.inf
+    for P, Q in rt.edges:
+        jump = [disp[P][c] - disp[Q][c] for c in range(d)]
+        norm = abs(jump[0]) if d == 1 else math.sqrt(jump[0] * jump[0] + jump[1] * jump[1] + jump[2] * jump[2])
+        broken.append(norm > t)
+        scale = sum(alpha_scale[i] * (max(map(abs, rt.W[i][P])) + max(map(abs, rt.W[i][Q]))) for i in range(k))
+        if math.isfinite(t) and scale > 0:
+            edge_margin = min(edge_margin, abs(norm - t) / scale)
+    return Expected(site=v, tied_sites=tied, alpha=[m * a for a in alpha],
+                    displacement=[[m * x for x in row] for row in disp], broken=broken,
+                    groups=components(p, rt.edges, broken), site_margin=site_margin, edge_margin=edge_margin)

@@ -1,0 +1,168 @@
+"""Shared by the engine reader tests: the conformance vectors and the drivers' text protocol.
+
+Every engine reader (C, C#, GDScript) has a small driver that loads one runtime
+file and answers impacts in the same line protocol, so one comparison checks them all.
+
+Impacts in (one line each): 7 tokens, the IEEE-754 bits of point x y z, impulse
+x y z and threshold as 16 hex digits, or ``-`` for the default threshold.
+
+Answers out (one line each)::
+
+    ok <site> <num_groups> g <groups...> b <broken edges...> a <alpha bits...> d <displacement bits...>
+    error <reason>
+
+Loading: a driver that cannot load the file prints ``load-error <reason>`` and
+exits with status 2; ``--names`` prints ``names <hex of each name's UTF-8 bytes...>``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import struct
+import subprocess
+from collections.abc import Callable
+
+import pytest
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFORMANCE = os.path.join(REPO, "tests", "data", "runtime_conformance")
+CORRUPT = os.path.join(CONFORMANCE, "corrupt")
+RELATIVE_TOLERANCE = 1e-9  # alpha and displacement, relative to the array's largest magnitude
+
+
+def require_tool(name: str, package: str) -> str:
+    """Path of an executable, or skip the test saying what to install."""
+    path = shutil.which(name)
+    if path is None:
+        pytest.skip(f"'{name}' not found: install the Debian package {package} "
+                    "(.ci/run does: apt-get install -y --no-install-recommends mono-mcs mono-runtime godot3-server)")
+    return path
+
+
+def vector_names() -> list[str]:
+    """Names of the runtime files that have vectors (``example``, ``pillar``, ...)."""
+    return sorted(f[: -len(".vectors.json")] for f in os.listdir(CONFORMANCE) if f.endswith(".vectors.json"))
+
+
+def load_vectors(name: str) -> dict:
+    with open(os.path.join(CONFORMANCE, f"{name}.vectors.json"), encoding="utf-8") as fh:
+        return json.load(fh)
+
+
+def runtime_paths(name: str) -> tuple[str, str]:
+    """(header, binary) paths of a conformance runtime file."""
+    return (os.path.join(CONFORMANCE, f"{name}.fracture.json"), os.path.join(CONFORMANCE, f"{name}.fracture.bin"))
+
+
+def corrupt_cases() -> list[dict]:
+    with open(os.path.join(CORRUPT, "index.json"), encoding="utf-8") as fh:
+        return json.load(fh)["cases"]
+
+
+def bits_to_float(bits: str) -> float:
+    return struct.unpack(">d", bytes.fromhex(bits))[0]
+
+
+def float_to_bits(value: float) -> str:
+    return struct.pack(">d", value).hex()
+
+
+def impact_inputs(impact: dict) -> tuple[list[float], list[float], float | None]:
+    """The exact (point, impulse, threshold) of an impact, from its ``bits``."""
+    bits = impact["bits"]
+    threshold = None if bits["threshold"] is None else bits_to_float(bits["threshold"])
+    return ([bits_to_float(b) for b in bits["point"]], [bits_to_float(b) for b in bits["impulse"]], threshold)
+
+
+def protocol_input(impacts: list[dict]) -> str:
+    """The driver input for a list of impacts."""
+    lines = []
+    for impact in impacts:
+        bits = impact["bits"]
+        lines.append(" ".join(bits["point"] + bits["impulse"] + [bits["threshold"] or "-"]))
+    return "\n".join(lines) + "\n"
+
+
+def parse_answer(line: str) -> dict:
+    """One driver output line as a dict (``expect``, ``site``, ``groups``, ...)."""
+    tokens = line.split()
+    if not tokens or tokens[0] not in ("ok", "error"):
+        raise ValueError(f"unexpected driver output line: {line!r}")
+    if tokens[0] == "error":
+        return {"expect": "error", "reason": " ".join(tokens[1:])}
+    sections: dict[str, list[str]] = {"": []}
+    key = ""
+    for token in tokens[3:]:
+        if token in ("g", "b", "a", "d"):
+            key = token
+            sections[key] = []
+        else:
+            sections[key].append(token)
+    return {"expect": "ok", "site": int(tokens[1]), "num_groups": int(tokens[2]),
+            "groups": [int(t) for t in sections.get("g", [])], "broken": [int(t) for t in sections.get("b", [])],
+            "alpha": [bits_to_float(t) for t in sections.get("a", [])],
+            "displacement": [bits_to_float(t) for t in sections.get("d", [])]}
+
+
+def _close(got: list[float], want: list[float]) -> bool:
+    if len(got) != len(want):
+        return False
+    scale = max((abs(w) for w in want), default=0.0)
+    return all(g == w or abs(g - w) <= RELATIVE_TOLERANCE * scale for g, w in zip(got, want))
+
+
+def compare(impact: dict, got: dict, check_values: bool = True) -> str | None:
+    """Why ``got`` (a parsed answer) does not conform to ``impact``, or None."""
+    if impact["expect"] == "error":
+        return None if got["expect"] == "error" else "expected an error, got a result"
+    if got["expect"] != "ok":
+        return f"expected a result, got error {got.get('reason')!r}"
+    for key in ("site", "groups", "broken", "num_groups"):
+        if got[key] != impact[key]:
+            return f"{key}: got {got[key]}, expected {impact[key]}"
+    if check_values:
+        want_alpha = [float(a) for a in impact["alpha"]]
+        want_disp = [float(x) for row in impact["displacement"] for x in row]
+        if not _close(got["alpha"], want_alpha):
+            return f"alpha: got {got['alpha']}, expected {want_alpha}"
+        if not _close(got["displacement"], want_disp):
+            return "displacement differs beyond the tolerance"
+    return None
+
+
+def check_answers(vectors: dict, output: str, check_values: bool = True) -> list[str]:
+    """Every mismatch between a driver's output and the vectors (empty when it conforms)."""
+    lines = [line for line in output.splitlines() if line.startswith(("ok", "error"))]
+    impacts = vectors["impacts"]
+    if len(lines) != len(impacts):
+        return [f"driver answered {len(lines)} impacts of {len(impacts)}"]
+    problems = []
+    for impact, line in zip(impacts, lines):
+        why = compare(impact, parse_answer(line), check_values)
+        if why:
+            problems.append(f"{vectors['runtime']}: {impact['name']}: {why}")
+    return problems
+
+
+def hex_names(names: list[str]) -> list[str]:
+    """Fragment names as the drivers print them (hex of the UTF-8 bytes; ``-`` for an empty name)."""
+    return [name.encode("utf-8").hex() or "-" for name in names]
+
+
+def check_damaged_file(case: dict, run: Callable[..., subprocess.CompletedProcess]) -> None:
+    """Assert a driver's handling of one ``corrupt/`` case: rejected with exit 2, or loaded with the right
+    names and answers. ``run(header, binary, stdin, *flags)`` runs the driver."""
+    header, binary = os.path.join(CORRUPT, case["header"]), os.path.join(CORRUPT, case["binary"])
+    if case["expect"] == "rejected":
+        result = run(header, binary, "")
+        assert result.returncode == 2 and result.stdout.startswith("load-error "), result.stdout + result.stderr
+        if case.get("only_crc"):  # with the check off, the same file loads
+            assert run(header, binary, "", "--skip-crc").returncode == 0
+        return
+    vectors = load_vectors(case["vectors"][: -len(".vectors.json")])
+    result = run(header, binary, protocol_input(vectors["impacts"]), "--names")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert result.stdout.splitlines()[0].split()[1:] == hex_names(case["fragment_names"])
+    assert check_answers(vectors, result.stdout) == []

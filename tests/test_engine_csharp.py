@@ -1,0 +1,57 @@
+"""The C# reader (engines/csharp/) on the conformance vectors and damaged files, built with Mono's mcs."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+
+import pytest
+from engine_support import (
+    REPO,
+    check_answers,
+    check_damaged_file,
+    corrupt_cases,
+    load_vectors,
+    protocol_input,
+    require_tool,
+    runtime_paths,
+    vector_names,
+)
+
+CS_DIR = os.path.join(REPO, "engines", "csharp")
+SOURCES = [os.path.join(CS_DIR, "FractureRuntime.cs"), os.path.join(CS_DIR, "tools", "FractureCheck.cs")]
+
+
+@pytest.fixture(scope="module")
+def driver(tmp_path_factory) -> list[str]:
+    mcs = require_tool("mcs", "mono-mcs")
+    mono = require_tool("mono", "mono-runtime")
+    exe = str(tmp_path_factory.mktemp("csharp") / "FractureCheck.exe")
+    # C# 7.2 (mcs's newest) keeps the file buildable by mcs as well as by Unity's compiler (C# 8/9).
+    result = subprocess.run(
+        [mcs, "-langversion:7.2", "-warnaserror", "-checked-", "-out:" + exe, *SOURCES],
+        check=False,
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0, f"the C# reader does not compile:\n{result.stdout}\n{result.stderr}"
+    return [mono, exe]
+
+
+def run_driver(driver, header: str, binary: str, stdin: str = "", *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [*driver, header, binary, *args], input=stdin, check=False, capture_output=True, text=True, timeout=300
+    )
+
+
+@pytest.mark.parametrize("name", vector_names())
+def test_csharp_reader_passes_the_vectors(driver, name):
+    vectors = load_vectors(name)
+    result = run_driver(driver, *runtime_paths(name), protocol_input(vectors["impacts"]))
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert check_answers(vectors, result.stdout) == []
+
+
+@pytest.mark.parametrize("case", corrupt_cases(), ids=lambda c: c["name"])
+def test_csharp_reader_on_damaged_files(driver, case):
+    check_damaged_file(case, lambda *args: run_driver(driver, *args))

@@ -1,0 +1,265 @@
+"""The Godot add-on (engines/godot/addons/fracture/) headless: conformance vectors and breaking a baked asset."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from engine_support import (
+    CORRUPT,
+    REPO,
+    check_answers,
+    corrupt_cases,
+    float_to_bits,
+    hex_names,
+    load_vectors,
+    protocol_input,
+    runtime_paths,
+    vector_names,
+)
+from godot_harness import GodotProject
+
+from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime
+from fracture_cli.runtime.impact import project_impact
+
+CHECK_SCRIPT = os.path.join(REPO, "engines", "godot", "tests", "fracture_check.gd")
+
+
+@pytest.fixture(scope="module")
+def conformance_output(tmp_path_factory) -> dict[str, list[str]]:
+    """Every vector file and damaged file through the GDScript reader, in one Godot run."""
+    root = tmp_path_factory.mktemp("godot_conformance")
+    project = GodotProject(root / "project")
+    jobs = []
+    for name in vector_names():
+        impacts = root / f"{name}.impacts"
+        impacts.write_text(protocol_input(load_vectors(name)["impacts"]))
+        jobs.append((name, *runtime_paths(name), str(impacts), ""))
+    for case in corrupt_cases():
+        header, binary = os.path.join(CORRUPT, case["header"]), os.path.join(CORRUPT, case["binary"])
+        jobs.append((case["name"], header, binary, "-", ""))
+        if case.get("only_crc"):
+            jobs.append((case["name"] + "+skip-crc", header, binary, "-", "--skip-crc"))
+        if case["expect"] == "ok":
+            vectors = case["vectors"][: -len(".vectors.json")]
+            impacts = root / f"{vectors}.impacts"
+            jobs.append((case["name"] + "+vectors", header, binary, str(impacts), "--names"))
+    (root / "jobs.txt").write_text("".join("\t".join(job) + "\n" for job in jobs))
+    with open(CHECK_SCRIPT, encoding="utf-8") as fh:
+        run = project.run_script(fh.read(), str(root / "jobs.txt"), name="fracture_check.gd")
+    output: dict[str, list[str]] = {}
+    current = None
+    for line in run.stdout.splitlines():
+        if line.startswith("job "):
+            current = output.setdefault(line[4:], [])
+        elif line == "end":
+            current = None
+        elif current is not None:
+            current.append(line)
+    return output
+
+
+@pytest.mark.parametrize("name", vector_names())
+def test_gdscript_reader_passes_the_vectors(conformance_output, name):
+    vectors = load_vectors(name)
+    assert check_answers(vectors, "\n".join(conformance_output[name])) == []
+
+
+@pytest.mark.parametrize("case", corrupt_cases(), ids=lambda c: c["name"])
+def test_gdscript_reader_on_damaged_files(conformance_output, case):
+    lines = conformance_output[case["name"]]
+    if case["expect"] == "rejected":
+        assert lines and lines[0].startswith("load-error "), lines
+        if case.get("only_crc"):
+            assert not conformance_output[case["name"] + "+skip-crc"], "loads with the CRC check off"
+    else:
+        assert lines == [], lines
+        answers = conformance_output[case["name"] + "+vectors"]
+        assert answers[0].split()[1:] == hex_names(case["fragment_names"])
+        assert check_answers(load_vectors(case["vectors"][: -len(".vectors.json")]), "\n".join(answers)) == []
+
+
+# ---------------------------------------------------------------- FractureBody in a scene
+
+BREAK_SCRIPT = os.path.join(REPO, "engines", "godot", "tests", "break_scene.gd")
+
+
+def _hits_file(path, hits) -> str:
+    """Write hits (point, impulse, body index) in break_scene.gd's format."""
+    lines = [
+        " ".join([float_to_bits(float(c)) for c in (*point, *impulse)] + [str(body)]) for point, impulse, body in hits
+    ]
+    path.write_text("\n".join(lines) + "\n")
+    return str(path)
+
+
+def _bodies_after_each_step(run) -> list[dict]:
+    """Parse break_scene.gd's report: per step, {body index: (class, fragment names, shape counts)}."""
+    steps: list[dict] = []
+    current: dict = {}
+    for line in run.stdout.splitlines():
+        fields = line.split()
+        if fields[:1] == ["body"]:
+            current[int(fields[1])] = (fields[2], fields[3:], {})
+        elif fields[:1] == ["shapes"]:
+            current[int(fields[1])][2].update(
+                {name: int(count) for name, count in (field.rsplit(":", 1) for field in fields[2:])}
+            )
+        elif fields[:1] == ["step"]:
+            steps.append(current)
+            current = {}
+    return steps
+
+
+def _row_of_boxes(tmp_path):
+    """Four unit boxes in a row with every kind of exported collision part, and a runtime file for them."""
+    trimesh = pytest.importorskip("trimesh")
+    scene = trimesh.Scene()
+    for j in range(4):
+        at = np.eye(4)
+        at[0, 3] = 1.0 * j
+        scene.add_geometry(
+            trimesh.creation.box(extents=(1, 1, 1)), node_name=f"fragment_{j:03d}", geom_name=f"mesh_{j}", transform=at
+        )
+    parts = {
+        "fragment_000-convcolonly": "fragment_000",
+        "fragment_001_00-convcolonly": "fragment_001",
+        "fragment_001_01-convcolonly": "fragment_001",
+        "UCX_fragment_002_00": "fragment_002",
+    }
+    for name, parent in parts.items():
+        scene.add_geometry(
+            trimesh.creation.box(extents=(0.9, 0.9, 0.45)),
+            node_name=name,
+            geom_name="c_" + name,
+            parent_node_name=parent,
+        )
+    glb = tmp_path / "row.glb"
+    scene.export(glb)
+    # One mode, W = (1, 1, -1, -1): a unit impulse anywhere breaks only the edge (1, 2).
+    data = RuntimeData(
+        sites=np.array([[j, 0.5, 0] for j in range(4)], np.float32),
+        B=np.ones((4, 1, 1), np.float32),
+        W=np.array([[[1], [1], [-1], [-1]]], np.float32),
+        edges=np.array([[0, 1], [1, 2], [2, 3]], np.int32),
+        edge_areas=np.ones(3, np.float32),
+        fragment_names=tuple(f"fragment_{j:03d}" for j in range(4)),
+        default_threshold=1.0,
+    )
+    json_path, _ = write_runtime(data, tmp_path / "row.fracture.json")
+    return glb, json_path
+
+
+def _godot_break(tmp_path, glb, json_path, hits):
+    project = GodotProject(tmp_path / "project")
+    scene = project.add_file(glb)
+    runtime = project.add_file(json_path)
+    project.add_file(str(json_path).replace(".fracture.json", ".fracture.bin"))
+    project.import_resources()
+    with open(BREAK_SCRIPT, encoding="utf-8") as fh:
+        run = project.run_script(
+            fh.read(), scene, runtime, _hits_file(tmp_path / "hits.txt", hits), name="break_scene.gd"
+        )
+    assert not run.lines("setup-error"), run.lines("setup-error")
+    return _bodies_after_each_step(run)
+
+
+def test_fracture_body_uses_exported_collision_parts(tmp_path):
+    glb, json_path = _row_of_boxes(tmp_path)
+    steps = _godot_break(tmp_path, glb, json_path, [((0.0, 0.5, 0.0), (0.0, -1.0, 0.0), 0)])
+    intact_class, names, shapes = steps[0][0]
+    assert intact_class == "StaticBody" and names == [f"fragment_{j:03d}" for j in range(4)]
+    # -convcolonly child, two numbered -convcolonly parts, a UCX mesh, and the hull fallback.
+    assert shapes == {"fragment_000": 1, "fragment_001": 2, "fragment_002": 1, "fragment_003": 1}
+    after = steps[1]
+    assert after[0][:2] == ("StaticBody", ["fragment_000", "fragment_001"])  # a tie: the smaller ids stay
+    assert after[1][:2] == ("RigidBody", ["fragment_002", "fragment_003"])
+    assert after[1][2] == {"fragment_002": 1, "fragment_003": 1}
+
+
+def _robust(data, point, impulse) -> bool:
+    """No edge within 1e-6 (relative) of the threshold, so float32 vs double cannot flip it."""
+    result = project_impact(data, point, impulse)
+    disp = result.displacement
+    jumps = np.linalg.norm(disp[data.edges[:, 0]] - disp[data.edges[:, 1]], axis=1)
+    return bool(np.all(np.abs(jumps - data.default_threshold) > 1e-6 * max(data.default_threshold, 1e-12)))
+
+
+def _root(parent: dict[int, int], a: int) -> int:
+    while parent[a] != a:
+        a = parent[a]
+    return a
+
+
+def _expected_bodies(data, hits) -> list[list[list[int]]]:
+    """FractureBody's rule replayed on the Python reference: per step, the fragments of each body."""
+    bodies = [list(range(data.p))]
+    steps = [[list(b) for b in bodies]]
+    for point, impulse, index in hits:
+        broken = project_impact(data, point, impulse).broken
+        members = set(bodies[index])
+        parent = {j: j for j in members}
+        for (P, Q), cut in zip(data.edges.tolist(), broken.tolist()):
+            if not cut and P in members and Q in members:
+                a, b = _root(parent, P), _root(parent, Q)
+                parent[max(a, b)] = min(a, b)
+        pieces: dict[int, list[int]] = {}
+        for j in sorted(members):
+            pieces.setdefault(_root(parent, j), []).append(j)
+        ordered = sorted(pieces.values(), key=lambda piece: (-len(piece), piece[0]))
+        bodies[index] = ordered[0]
+        bodies += ordered[1:]
+        steps.append([list(b) for b in bodies])
+    return steps
+
+
+def _pick_hits(data) -> list:
+    """A hit on the intact asset that splits it in three or more, then one more on the static rest."""
+    directions = [(0, -8, 0), (8, 0, 0), (0, 0, 8), (-8, 0, 0), (0, 0, -8), (6, -6, 0)]
+    sites = data.sites.astype(np.float64)
+    for v in range(0, len(sites), 7):
+        for n in directions:
+            hit = (tuple(sites[v].tolist()), n, 0)
+            if _robust(data, hit[0], n) and len(_expected_bodies(data, [hit])[-1]) >= 3:
+                for w in range(len(sites) - 1, 0, -11):
+                    second = (tuple(sites[w].tolist()), tuple(4 * c for c in n), 0)
+                    steps = _expected_bodies(data, [hit, second])
+                    if _robust(data, second[0], second[1]) and len(steps[-1]) > len(steps[-2]):
+                        return [hit, second]
+    raise AssertionError("no hit on the baked asset breaks it in three")
+
+
+@pytest.mark.slow
+def test_fracture_body_breaks_a_baked_asset_like_the_reference(tmp_path):
+    """Bake the pillar, break it in Godot twice: the detached bodies are exactly the reference's groups."""
+    out = tmp_path / "bake"
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fracture_cli",
+            "-q",
+            "bake",
+            os.path.join(REPO, "sample_assets", "pillar.glb"),
+            "-o",
+            str(out),
+            "--recipe",
+            "stone",
+        ],
+        check=True,
+        cwd=REPO,
+    )
+    json_path = out / "pillar.fracture.json"
+    data = load_runtime(json_path)
+    hits = _pick_hits(data)
+    steps = _godot_break(tmp_path, out / "pillar.glb", json_path, hits)
+    expected = _expected_bodies(data, hits)
+    names = data.fragment_names
+    assert len(steps) == len(expected) == 3
+    for got, want in zip(steps, expected):
+        assert [got[i][1] for i in sorted(got)] == [[names[j] for j in body] for body in want]
+        assert [got[i][0] for i in sorted(got)] == ["StaticBody"] + ["RigidBody"] * (len(want) - 1)
+        assert all(count >= 1 for body in got.values() for count in body[2].values())
