@@ -85,8 +85,8 @@ def test_principal_axes_follow_the_model_axes():
         moments, axes = principal_axes(np.diag(diagonal) + 1e-15)
         assert np.allclose(moments, diagonal) and np.allclose(axes, np.eye(3))
     R = _rotation([0, 0, 1], 0.3)
-    I = R @ np.diag([3.0, 1.0, 2.0]) @ R.T
-    moments, axes = principal_axes(I)
+    tensor = R @ np.diag([3.0, 1.0, 2.0]) @ R.T
+    moments, axes = principal_axes(tensor)
     assert np.allclose(axes, R) and np.allclose(moments, [3.0, 1.0, 2.0])
     assert np.linalg.det(axes) == pytest.approx(1.0)
 

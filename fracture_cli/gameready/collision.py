@@ -183,7 +183,8 @@ class _Intrusion:
 
     def __call__(self, hull: manifold3d.Manifold) -> float:
         box = np.asarray(hull.bounding_box())
-        near = np.flatnonzero(np.all(self.boxes[:, :3] <= box[3:], axis=1) & np.all(box[:3] <= self.boxes[:, 3:], axis=1))
+        near = np.flatnonzero(np.all(self.boxes[:, :3] <= box[3:], axis=1)
+                              & np.all(box[:3] <= self.boxes[:, 3:], axis=1))
         return float(sum((hull ^ self.solids[k]).volume() for k in near.tolist() if k != self.own))
 
 
@@ -518,10 +519,10 @@ def _interface_normals(materials) -> dict:
 
 def _best_plane(overlap: manifold3d.Manifold, material_a, material_b, mass_a, mass_b, interface_normal):
     """The candidate plane ``(unit normal from a to b, offset)`` that leaves the least material on the wrong side."""
-    O, OF = _mesh(overlap)
+    corners, triangles = _mesh(overlap)
     towards_b = mass_b.center - mass_a.center
     # Largest principal moment of inertia = smallest second moment: the overlap's thinnest direction.
-    moments, axes = mass_properties(O, OF).principal()
+    moments, axes = mass_properties(corners, triangles).principal()
     candidates = [axes[:, int(np.argmax(moments))], towards_b]
     if interface_normal is not None:
         candidates.insert(0, interface_normal)
@@ -534,7 +535,7 @@ def _best_plane(overlap: manifold3d.Manifold, material_a, material_b, mass_a, ma
         normal = normal / length
         if normal @ towards_b < 0:
             normal = -normal
-        s = O @ normal
+        s = corners @ normal
         offsets = s.min() + (s.max() - s.min()) * _PLANE_FRACTIONS
         # Fractions of a's material beyond the plane and of b's before it: relative, so a small part
         # is not sacrificed to save a sliver of a big one.

@@ -116,8 +116,8 @@ def _outer(x: np.ndarray) -> np.ndarray:
 
 def inertia6(inertia: np.ndarray) -> np.ndarray:
     """The six distinct entries (6,) ``[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`` of a symmetric (3, 3) tensor."""
-    I = np.asarray(inertia, dtype=np.float64)
-    return np.array([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])
+    tensor = np.asarray(inertia, dtype=np.float64)
+    return tensor[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
 
 
 def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -131,10 +131,10 @@ def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     rounding and are zeroed first, so equal moments (a cube) keep the
     identity.
     """
-    I = np.asarray(inertia, dtype=np.float64)
-    I = (I + I.T) / 2.0
-    I = np.where(np.abs(I) > 1e-12 * max(float(np.abs(I).max()), 1e-300), I, 0.0)
-    moments, axes = np.linalg.eigh(I)
+    tensor = np.asarray(inertia, dtype=np.float64)
+    tensor = (tensor + tensor.T) / 2.0
+    tensor = np.where(np.abs(tensor) > 1e-12 * max(float(np.abs(tensor).max()), 1e-300), tensor, 0.0)
+    moments, axes = np.linalg.eigh(tensor)
     best = max(_PERMUTATIONS, key=lambda perm: (float(np.abs(axes[np.arange(3), list(perm)]).sum()), perm))
     axes, moments = axes[:, list(best)], moments[list(best)]
     axes = axes * np.where(np.diag(axes) < 0, -1.0, 1.0)[None, :]

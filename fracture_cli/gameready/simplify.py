@@ -148,7 +148,8 @@ def simplify_faults(fragments: Fragments, tolerance: float = 1e-3, uv_scale: flo
     after = sum(len(f.faces) for f in results)
     fault_before = sum(len(t) for t in faults)
     fault_after = sum(int(np.sum(f.material_ids == interior)) for f in results)
-    report = FaultReport(before, after, fault_before, fault_after, int(sum(int(u.sum()) for u in unmatched)), len(patches))
+    report = FaultReport(before, after, fault_before, fault_after, int(sum(int(u.sum()) for u in unmatched)),
+                         len(patches))
     log.info("faults: %d -> %d interior triangles (%d -> %d in all) at tolerance %.3g", fault_before, fault_after,
              before, after, tolerance)
     new = Fragments(fragments=tuple(results), materials=fragments.materials, normalization=fragments.normalization,

@@ -103,7 +103,7 @@ def _texture_png(material: Material) -> bytes | None:
 class GlbBuffer:
     """The binary chunk of a GLB being written, with its buffer views and accessors."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.binary = bytearray()
         self.views: list[dict] = []
         self.accessors: list[dict] = []

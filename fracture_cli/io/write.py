@@ -135,7 +135,10 @@ def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: st
     meshes, physics = [], []
     for i, frag in enumerate(fragments.fragments):
         mass = mass_properties(frag.vertices, frag.faces).to_world(fragments.normalization)
-        origin = mass.center if pivot == "center_of_mass" else node_origin(fragments.normalization.to_world(frag.vertices))
+        if pivot == "center_of_mass":
+            origin = mass.center
+        else:
+            origin = node_origin(fragments.normalization.to_world(frag.vertices))
         prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids,
                                   fragments.normalization, origin)
         meshes.append((fragment_name(i), prims, origin))
