@@ -61,7 +61,7 @@ def test_every_format_writes_mass_extras_and_its_collision_nodes(tmp_path, colli
         assert len(children) == (0 if collision == "none" else parts[index])
         for k, child in enumerate(children):
             if collision == "godot":
-                assert child["name"] == f"fragment_{index:03d}_hull{k:02d}-convcolonly" and "mesh" in child
+                assert child["name"] == f"fragment_{index:03d}_{k:02d}-convcolonly" and "mesh" in child
             elif collision == "unreal":
                 assert child["name"] == f"UCX_fragment_{index:03d}_{k:02d}"
                 assert doc["meshes"][child["mesh"]]["name"] == child["name"]

@@ -12,11 +12,11 @@ Four ways to write the convex parts of each fragment (the ``collision`` option):
     children; the shape meshes are referenced by no node, so viewers and
     importers that do not know the extensions show nothing extra.
 ``godot``
-    One child node per part named ``<fragment>_hullNN-convcolonly`` with the
+    One child node per part named ``<fragment>_NN-convcolonly`` with the
     part as its mesh: Godot's scene importer (3.x and 4.x) turns each into a
-    ``StaticBody`` with one convex shape and drops the visible mesh. A game
-    moves those shapes into its own ``RigidBody`` (they are static bodies as
-    imported); other tools show them as ordinary meshes.
+    ``StaticBody`` named ``<fragment>_NN`` with one convex shape and drops the
+    visible mesh. The add-on's ``FractureBody`` (engines/godot) moves those
+    shapes into its rigid bodies; other tools show them as ordinary meshes.
 ``unreal``
     One child node and mesh per part named ``UCX_<fragment>_NN``: Unreal's
     FBX and Interchange importers attach such meshes as convex collision to
@@ -159,8 +159,8 @@ def _part_name(fragment: str, k: int, collision: str) -> str:
     if collision == "unreal":
         return f"{UNREAL_PREFIX}{fragment}_{k:02d}"
     if collision == "godot":
-        return f"{fragment}_hull{k:02d}{GODOT_SUFFIX}"
-    return f"{fragment}_hull{k:02d}"
+        return f"{fragment}_{k:02d}{GODOT_SUFFIX}"
+    return f"{fragment}_{k:02d}"
 
 
 def _hull_primitive(corners: np.ndarray, origin: np.ndarray, buffer) -> dict:
