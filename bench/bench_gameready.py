@@ -14,7 +14,10 @@ the GLB, and the game-ready steps run on them:
   (fraction of the smaller) with plain hulls and with the parts;
 * faults: triangles before and after simplifying the shared faults to 1e-3 of
   the bounding-box diagonal (prototype; every fragment checked closed and free
-  of self-intersections).
+  of self-intersections);
+* rest (when Godot 3 is installed): one rigid body per fragment, gravity off,
+  one second of physics (Bullet, shape margin 1e-4), largest speed with each
+  fragment's convex hull and with its exported parts (``UCX_`` meshes).
 
 Seconds are CPU seconds (``time.process_time``) of one process: the machine
 may be shared. Targets: collision parts in a few seconds per asset, no
@@ -25,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -94,6 +98,7 @@ def _measure(fragments: Fragments) -> dict:
                         int((shapes.hull_ratio > 1.5).sum()), shapes.parts_ratio.max(), shapes.coverage.min(),
                         np.median(shapes.coverage), max_overlap_fraction(hulls),
                         max_overlap_fraction([p for ps in shapes.parts for p in ps]), seconds)
+    out["rest"] = _rest_in_godot(split, shapes) if shutil.which("godot3-server") else None
     t = time.process_time()
     simplified, faults = simplify_faults(fragments, 1e-3)
     seconds = time.process_time() - t
@@ -104,12 +109,42 @@ def _measure(fragments: Fragments) -> dict:
     return out
 
 
+def _rest_in_godot(fragments: Fragments, shapes) -> tuple[float, float]:
+    """Largest body speed after one second in Godot 3: (convex hulls, exported parts)."""
+    sys.path.insert(0, os.path.join(REPO, "tests"))
+    from godot_harness import GodotProject
+    from test_gameready_engine import REST_SCRIPT
+
+    from fracture_cli.gameready.export_shapes import FragmentPhysics, physics_extender
+    from fracture_cli.io.gltf import glb_bytes
+    from fracture_cli.io.write import fragment_name, split_by_material
+
+    norm = fragments.normalization
+    nodes, physics = [], []
+    for i, frag in enumerate(fragments.fragments):
+        mass = mass_properties(frag.vertices, frag.faces).to_world(norm)
+        prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids, norm,
+                                  mass.center)
+        nodes.append((fragment_name(i), prims, mass.center))
+        physics.append(FragmentPhysics(mass, mass.center, [norm.to_world(p) for p in shapes.parts[i]]))
+    with tempfile.TemporaryDirectory() as tmp:
+        glb = os.path.join(tmp, "asset.glb")
+        with open(glb, "wb") as fh:
+            fh.write(glb_bytes(nodes, fragments.materials, extend=physics_extender(physics, "unreal")))
+        project = GodotProject(os.path.join(tmp, "godot"))
+        scene = project.add_file(glb)
+        project.import_resources()
+        speeds = [float(project.run_script(REST_SCRIPT, scene, mode).lines("max_speed ")[0].split()[1])
+                  for mode in ("hull", "parts")]
+    return speeds[0], speeds[1]
+
+
 def run(quick: bool = False, source: str | None = None) -> str:
     with open(os.path.join(REPO, "sample_assets", "manifest.toml"), "rb") as fh:
         assets = sorted(tomllib.load(fh)["assets"].items())
     if quick:
         assets = [a for a in assets if a[0] == "chair.glb"]
-    rows = {"bodies": [], "collision": [], "faults": []}
+    rows: dict[str, list[str]] = {"bodies": [], "collision": [], "faults": [], "rest": []}
     with tempfile.TemporaryDirectory() as tmp:
         for asset, recipe in assets:
             measured = _measure(read_fragments(_glb(asset, recipe, source, tmp)))
@@ -120,6 +155,8 @@ def run(quick: bool = False, source: str | None = None) -> str:
             rows["collision"].append(
                 f"| {name} | {c[0]} | {c[1]:.2f} / {c[2]} / {c[3]} | {c[4]} | {c[5]:.2f} ({c[6]} > 1.5) | {c[7]:.2f} "
                 f"| {c[8]:.3f} / {c[9]:.3f} | {c[10]:.3f} | {c[11]:.1e} | {c[12]:.1f} |")
+            if measured["rest"] is not None:
+                rows["rest"].append(f"| {name} | {measured['rest'][0]:.3f} | {measured['rest'][1]:.4f} |")
             f = measured["faults"]
             rows["faults"].append(f"| {name} | {f[0]} -> {f[1]} | {f[2]} -> {f[3]} | {f[4]} | {f[5]} -> {f[6]} "
                                   f"| {f[7]:.1f} |")
@@ -148,6 +185,11 @@ def run(quick: bool = False, source: str | None = None) -> str:
          "(as read back from the GLB's float32 -> after) | s |"),
         "|---|---|---|---|---|---|",
         *rows["faults"],
+        "",
+        "At rest in Godot 3 (largest speed after 1 s, m/s; target: under 0.05), on the split fragments."
+        if rows["rest"] else "At rest in Godot 3: not measured (godot3-server not installed).",
+        "",
+        *(["| asset | convex hulls | exported parts |", "|---|---|---|", *rows["rest"]] if rows["rest"] else []),
     ])
 
 
