@@ -7,26 +7,12 @@ subprocess, so its peak resident memory (``ru_maxrss``) is the bake's alone.
 
 from __future__ import annotations
 
-import json
 import os
-import resource
-import subprocess
 import sys
 import tempfile
-import time
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SETTINGS = ("cage.target_faces=2000", "modes.num_modes=12")
-
-_CHILD = r"""
-import json, logging, sys
-from fracture_cli.bake import bake
-from fracture_cli.recipe import load_recipe
-logging.basicConfig(level=logging.WARNING)
-result = bake(sys.argv[1], sys.argv[2], load_recipe("default", sys.argv[3:]))
-print(json.dumps({"seconds": result.report["seconds"], "counts": result.report["counts"],
-                  "checks": result.report["checks"], "triangles": result.report["input"]["triangles"]}))
-"""
 
 
 def bumpy_sphere(path: str, count: int) -> int:
@@ -43,16 +29,12 @@ def bumpy_sphere(path: str, count: int) -> int:
     return len(mesh.faces)
 
 
-def bake_in_subprocess(path: str, out_dir: str, settings=SETTINGS) -> tuple[dict, float, float]:
-    """Bake ``path`` in a child process; returns (report extract, wall seconds, peak RSS in MiB)."""
-    t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-c", _CHILD, path, out_dir, *settings], cwd=REPO, capture_output=True,
-                          text=True)
-    wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise RuntimeError(f"bake failed ({proc.returncode}): {proc.stderr.strip().splitlines()[-1:]}")
-    peak_kib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss  # largest child so far (KiB on Linux)
-    return json.loads(proc.stdout.strip().splitlines()[-1]), wall, peak_kib / 1024.0
+def bake_in_subprocess(path: str, out_dir: str, settings=SETTINGS) -> dict:
+    """Bake ``path`` in a child process: its report, wall and CPU seconds (per stage too), peaks (MiB)."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from bench_recipes import bake_child
+
+    return bake_child(path, out_dir, "default", *settings)
 
 
 def run(quick: bool = False) -> str:
@@ -61,21 +43,24 @@ def run(quick: bool = False) -> str:
         path = os.path.join(tmp, "bumpy_sphere.ply")
         triangles = bumpy_sphere(path, target)
         size_mb = os.path.getsize(path) / 1e6
-        report, wall, peak = bake_in_subprocess(path, os.path.join(tmp, "out"))
+        data = bake_in_subprocess(path, os.path.join(tmp, "out"))
+    report, wall, cpu = data["report"], data["wall"], data["cpu"]
     lines = [
         "## Large input (bench_large)",
         "",
         f"A bumpy UV sphere of {triangles:,} triangles ({size_mb:.1f} MB binary PLY, generated), baked with "
         f"`{' '.join('--set ' + s for s in SETTINGS)}` in a subprocess: {wall:.1f} s wall, peak memory "
-        f"{peak:,.0f} MiB (ru_maxrss), {report['counts']['fragments']} fragments, volume error "
-        f"{report['checks']['volume_error']:.1e}, watertight {report['checks']['watertight']}.",
+        f"{data['peak_mb']:,.0f} MiB (ru_maxrss; largest worker {data['worker_peak_mb']:,.0f} MiB), "
+        f"{cpu:.1f} s CPU ({100 * cpu / wall:.0f} %), {report['counts']['fragments']} fragments, volume error "
+        f"{report['checks']['volume_error']:.1e}, watertight {report['checks']['watertight']}. "
+        "Target: under 60 s wall, peak under 2 GB.",
         "",
-        "| stage | seconds |",
-        "| --- | ---: |",
+        "| stage | seconds | CPU s |",
+        "| --- | ---: | ---: |",
     ]
     for stage, seconds in report["seconds"].items():
-        lines.append(f"| {stage} | {seconds:.2f} |")
-    lines.append(f"| **total** | **{sum(report['seconds'].values()):.2f}** |")
+        lines.append(f"| {stage} | {seconds:.2f} | {data['cpu_stages'].get(stage, 0.0):.2f} |")
+    lines.append(f"| **total** | **{sum(report['seconds'].values()):.2f}** | **{cpu:.2f}** |")
     return "\n".join(lines) + "\n"
 
 

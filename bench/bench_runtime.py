@@ -1,13 +1,18 @@
 """Benchmark: realtime impact projection, Python reference and the engine readers.
 
-Median time per call over random surface hits, for the sample assets (Python
-reference, the C reader in engines/c/ and the GDScript reader in engines/godot/
-on the same files and hits) and for synthetic runtime files of realistic sizes
-(sites ~ a cage's boundary vertices, k modes, p fragments, e graph edges; Python
-only). The synthetic threshold is calibrated per file so a typical hit breaks a
-few edges (3% of the jumps exceed it), like a game's ordinary hits. Targets:
-Python median under 100 microseconds (aim 50; paper: 1-2 ms); C reader median
-under 2 microseconds on every sample asset.
+Median and p99 time per call over random surface hits, for the sample assets (the
+Python reference and the C, C#, JavaScript and GDScript readers under engines/ on the
+same files and hits) and for synthetic runtime files of realistic sizes (sites ~ a
+cage's boundary vertices, k modes, p fragments, e graph edges; Python only). The
+synthetic threshold is calibrated per file so a typical hit breaks a few edges (3% of
+the jumps exceed it), like a game's ordinary hits. Targets: Python median under 100
+microseconds (aim 50; paper: 1-2 ms); C reader median under 2 microseconds on every
+sample asset.
+
+    python bench/bench_runtime.py [--quick] [--no-bake]
+
+--no-bake times the sample assets' runtime files committed under
+tests/data/runtime_conformance/ instead of baking them (minutes) first.
 """
 
 from __future__ import annotations
@@ -29,7 +34,10 @@ from fracture_cli.runtime.impact import prepare, project_impact  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 C_DIR = os.path.join(REPO, "engines", "c")
-C_ROUNDS = 5  # each hit timed this many times by the C driver
+CS_DIR = os.path.join(REPO, "engines", "csharp")
+JS_CHECK = os.path.join(REPO, "engines", "web", "fracture_check.mjs")
+CONFORMANCE = os.path.join(REPO, "tests", "data", "runtime_conformance")
+ROUNDS = 5  # each hit timed this many times by the C, C# and JavaScript drivers
 
 SIZES = [  # (sites, k, p, edges, d)
     (1500, 16, 60, 200, 1),
@@ -53,9 +61,10 @@ def synthetic(s, k, p, e, d, seed=0) -> RuntimeData:
                        edge_areas=np.ones(e, np.float32), fragment_names=tuple(f"fragment_{j:03d}" for j in range(p)))
 
 
-def run(quick: bool = False) -> str:
+def run(quick: bool = False, bake: bool = True) -> str:
     hits = 1000 if quick else 10000
-    rows = ["| sites | k | p | edges | d | file (KiB) | load (ms) | median (us) | p90 (us) | broken (median) | groups (median) |",
+    rows = [("| sites | k | p | edges | d | file (KiB) | load (ms) | median (us) | p90 (us) | broken (median) "
+             "| groups (median) |"),
             "|---|---|---|---|---|---|---|---|---|---|---|"]
     rng = np.random.default_rng(1)
     for s, k, p, e, d in SIZES:
@@ -83,35 +92,44 @@ def run(quick: bool = False) -> str:
                     f"{np.percentile(times, 90) * 1e6:.0f} | {np.median(broken):.0f} | {np.median(groups):.0f} |")
     return ("## Impact projection (runtime)\n\n"
             f"Time per projection over {hits} random surface hits on each sample asset baked with its manifest recipe "
-            "(default threshold, impulses of magnitude 4 in random directions), in the Python reference "
-            "(`project_impact`), the C reader (engines/c) and the GDScript reader (engines/godot), then the Python "
-            "reference on synthetic files of larger sizes. Targets: Python < 100 us (aim 50 us), C < 2 us median; "
-            "paper 1-2 ms.\n\n"
-            + _sample_assets(hits, rng) + "\n" + "\n".join(rows) + "\n")
+            "(default threshold, impulses of magnitude 4 in random directions), median / p99 in microseconds: the "
+            "Python reference (`project_impact`), the C reader (engines/c; default: with its d = 1 jump table; "
+            "compact: `FR_LOAD_COMPACT`), the C# reader (engines/csharp, Mono), the JavaScript reader (engines/web, "
+            "Node.js, with `jumpTable: true`) and the GDScript reader (engines/godot, Godot 3 headless); the engine "
+            "readers compute the groups and broken edges only (no displacements, as a game that only spawns bodies), "
+            "the Python reference everything. Then the Python reference on synthetic files of larger sizes. "
+            "Targets: Python < 100 us (aim 50 us), C < 2 us median; paper 1-2 ms.\n\n"
+            + _sample_assets(hits, rng, bake) + "\n" + "\n".join(rows) + "\n")
 
 
-def _sample_assets(hits: int, rng) -> str:
-    """Rows for the sample assets: bake each, then time the same random surface hits in every reader."""
+def _sample_assets(hits: int, rng, bake: bool = True) -> str:
+    """Rows for the sample assets: bake each (or take the committed file), then time the same hits in every reader."""
     import tomllib
 
-    from fracture_cli.bake import bake
+    from fracture_cli.bake import bake as bake_asset
     from fracture_cli.io.read import load_surface
     from fracture_cli.recipe import load_recipe
 
     with open(os.path.join(REPO, "sample_assets", "manifest.toml"), "rb") as fh:
         assets = sorted(tomllib.load(fh)["assets"].items())
-    rows = [("| asset | recipe | sites | k | fragments | bonds | groups (median) | Python median / p99 (us) | "
-             "C median / p99 (us) | GDScript median / p99 (us) |"),
-            "|---|---|---|---|---|---|---|---|---|---|"]
+    rows = [("| asset | recipe | sites | k | fragments | bonds | groups (median) | Python | C | C compact | C# | "
+             "JavaScript | GDScript | C jump table (MiB, load ms) |"),
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     notes: list[str] = []
+    load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         c_bench = _build_c_bench(tmp, notes)
+        cs_bench = _build_csharp_bench(tmp, notes)
         for asset, recipe in assets:
             path = os.path.join(REPO, "sample_assets", asset)
             stem = os.path.splitext(asset)[0]
             out = os.path.join(tmp, stem)
-            bake(path, out, load_recipe(recipe))
-            json_path = os.path.join(out, f"{stem}.fracture.json")
+            if bake:
+                bake_asset(path, out, load_recipe(recipe))
+                json_path = os.path.join(out, f"{stem}.fracture.json")
+            else:
+                os.makedirs(out)
+                json_path = os.path.join(CONFORMANCE, f"{stem}.fracture.json")
             data = load_runtime(json_path)
             points, impulses = _surface_hits(load_surface(path), hits, rng)
             prepare(data)
@@ -124,13 +142,41 @@ def _sample_assets(hits: int, rng) -> str:
             hits_file = os.path.join(out, "hits.txt")
             with open(hits_file, "w") as fh:
                 fh.writelines(" ".join(_bits(c) for c in (*p, *n)) + " -\n" for p, n in zip(points, impulses))
-            c_cell = _run_c_bench(c_bench, json_path, hits_file, notes) if c_bench else "n/a"
-            gd_cell = _run_gdscript_bench(os.path.join(tmp, "godot"), json_path, hits_file, notes)
+            c_table = _run_c_bench(c_bench, json_path, hits_file) if c_bench else {}
+            c_compact = _run_c_bench(c_bench, json_path, hits_file, "--compact") if c_bench else {}
+            table = (f"{float(c_table['memory_kib']) / 1024:.1f}, {float(c_table['load_ms']):.0f}"
+                     if c_table else "n/a")
             rows.append(f"| {asset} | {recipe} | {data.num_sites} | {data.k} | {data.p} | {data.num_edges} | "
-                        f"{np.median(groups):.0f} | {np.median(times) * 1e6:.0f} / {np.percentile(times, 99) * 1e6:.0f} | "
-                        f"{c_cell} | {gd_cell} |")
+                        f"{np.median(groups):.0f} | {_us(np.median(times) * 1e9, np.percentile(times, 99) * 1e9)} | "
+                        f"{_cell(c_table)} | {_cell(c_compact)} | "
+                        f"{_cell(_run_csharp_bench(cs_bench, json_path, hits_file) if cs_bench else {})} | "
+                        f"{_cell(_run_js_bench(json_path, hits_file, notes))} | "
+                        f"{_run_gdscript_bench(os.path.join(tmp, 'godot'), json_path, hits_file, notes)} | {table} |")
+    load_after = os.getloadavg()
+    notes.append(f"Load average (1 min) {load_before[0]:.1f} before and {load_after[0]:.1f} after these rows, on "
+                 f"{os.cpu_count()} cores: wall-clock medians of sub-microsecond calls are noisy under load (the C "
+                 "driver also prints the mean thread CPU time per call).")
+    if not bake:
+        notes.append("Runtime files: the committed tests/data/runtime_conformance/ copies (--no-bake).")
     text = "\n".join(rows) + "\n"
-    return text + ("\n" + "\n".join(sorted(set(notes))) + "\n" if notes else "")
+    return text + ("\n" + "\n".join(f"- {note}" for note in sorted(set(notes))) + "\n" if notes else "")
+
+
+def _us(median_ns: float, p99_ns: float) -> str:
+    digits = 2 if median_ns < 1e4 else 0
+    return f"{median_ns / 1e3:.{digits}f} / {p99_ns / 1e3:.{digits}f}"
+
+
+def _cell(values: dict[str, str]) -> str:
+    """"median / p99" (us) from a driver's key-value output, or n/a."""
+    if not values:
+        return "n/a"
+    return _us(float(values["median_ns"]), float(values["p99_ns"]))
+
+
+def _key_values(text: str) -> dict[str, str]:
+    fields = text.split()
+    return dict(zip(fields[::2], fields[1::2]))
 
 
 def _surface_hits(surface, hits: int, rng) -> tuple[np.ndarray, np.ndarray]:
@@ -158,17 +204,56 @@ def _build_c_bench(tmp: str, notes: list[str]) -> str | None:
     exe = os.path.join(tmp, "fracture_bench")
     subprocess.run([compiler, "-std=c99", "-O2", os.path.join(C_DIR, "fracture_runtime.c"),
                     os.path.join(C_DIR, "tools", "fracture_bench.c"), "-o", exe, "-lm"], check=True)
-    notes.append(f"C reader: `cc -std=c99 -O2`, every hit timed on its own with CLOCK_MONOTONIC, {C_ROUNDS} rounds "
-                 "over all hits, the clock's own cost subtracted.")
+    notes.append(f"C reader: `cc -std=c99 -O2`, every hit timed on its own with CLOCK_MONOTONIC, {ROUNDS} rounds "
+                 "over all hits, the clock's own cost subtracted; \"C jump table\": the memory fr_load takes "
+                 "(fr_memory_size) and its CPU time, with the table (compact: no table).")
     return exe
 
 
-def _run_c_bench(exe: str, json_path: str, hits_file: str, notes: list[str]) -> str:
+def _run_c_bench(exe: str, json_path: str, hits_file: str, *flags: str) -> dict[str, str]:
     with open(hits_file) as fh:
-        out = subprocess.run([exe, json_path, json_path[: -len(".json")] + ".bin", str(C_ROUNDS)], stdin=fh,
-                             capture_output=True, text=True, check=True).stdout.split()
-    values = dict(zip(out[::2], out[1::2]))
-    return f"{float(values['median_ns']) / 1e3:.2f} / {float(values['p99_ns']) / 1e3:.2f}"
+        out = subprocess.run([exe, json_path, json_path[: -len(".json")] + ".bin", str(ROUNDS), *flags], stdin=fh,
+                             capture_output=True, text=True, check=True).stdout
+    return _key_values(out)
+
+
+def _build_csharp_bench(tmp: str, notes: list[str]) -> list[str] | None:
+    """Compile engines/csharp with its check/bench driver (Mono's mcs, optimized), or None."""
+    mcs, mono = shutil.which("mcs"), shutil.which("mono")
+    if mcs is None or mono is None:
+        notes.append("C# reader: Mono (Debian packages mono-mcs, mono-runtime) not installed, not measured.")
+        return None
+    exe = os.path.join(tmp, "FractureCheck.exe")
+    subprocess.run([mcs, "-langversion:7.2", "-optimize+", "-out:" + exe, os.path.join(CS_DIR, "FractureRuntime.cs"),
+                    os.path.join(CS_DIR, "tools", "FractureCheck.cs")], check=True, capture_output=True)
+    notes.append(f"C# reader: `mcs -optimize+`, Mono's JIT, `Stopwatch` around each call (0.1 us ticks), {ROUNDS} "
+                 "rounds after one untimed warm-up round.")
+    return [mono, exe]
+
+
+def _run_csharp_bench(command: list[str], json_path: str, hits_file: str) -> dict[str, str]:
+    with open(hits_file) as fh:
+        out = subprocess.run([*command, "--bench", str(ROUNDS), json_path, json_path[: -len(".json")] + ".bin"],
+                             stdin=fh, capture_output=True, text=True, check=True).stdout
+    return _key_values(out)
+
+
+def _run_js_bench(json_path: str, hits_file: str, notes: list[str]) -> dict[str, str]:
+    node = shutil.which("node")
+    if node is None:
+        notes.append("JavaScript reader: Node.js not installed, not measured.")
+        return {}
+    notes.append(f"JavaScript reader: Node.js {_node_version(node)}, `process.hrtime` around each call, {ROUNDS} "
+                 "rounds after one untimed warm-up round.")
+    with open(hits_file) as fh:
+        out = subprocess.run([node, JS_CHECK, f"--bench={ROUNDS}", "--jump-table", json_path,
+                              json_path[: -len(".json")] + ".bin"], stdin=fh, capture_output=True, text=True,
+                             check=True).stdout
+    return _key_values(out)
+
+
+def _node_version(node: str) -> str:
+    return subprocess.run([node, "--version"], capture_output=True, text=True, check=False).stdout.strip()
 
 
 def _run_gdscript_bench(project_dir: str, json_path: str, hits_file: str, notes: list[str]) -> str:
@@ -183,9 +268,10 @@ def _run_gdscript_bench(project_dir: str, json_path: str, hits_file: str, notes:
     with open(os.path.join(REPO, "engines", "godot", "tests", "bench_project.gd"), encoding="utf-8") as fh:
         run = project.run_script(fh.read(), json_path, hits_file, name="bench_project.gd")
     fields = run.lines("median_us")[0].split()
-    notes.append("GDScript reader: Godot 3 headless, `OS.get_ticks_usec()` around each `project()` call.")
+    notes.append("GDScript reader: Godot 3 headless, `OS.get_ticks_usec()` around each "
+                 "`project(..., with_displacement = false)` call.")
     return f"{fields[1]} / {fields[3]}"
 
 
 if __name__ == "__main__":
-    print(run())
+    print(run(quick="--quick" in sys.argv, bake="--no-bake" not in sys.argv))

@@ -3,7 +3,10 @@
     python bench/run.py --out bench/RESULTS.md [--quick] [--only cage,modes]
 
 Each benchmark module exposes ``run(quick: bool = False) -> str`` returning a
-markdown section. Speed and memory targets live here, never in tests.
+markdown section. Speed and memory targets live here, never in tests. With
+``--only``, the other sections of an existing output file are kept (so one
+section can be rerun). Writing bench/RESULTS.md also regenerates the README's
+performance table from it (bench/perf_table.py).
 """
 
 from __future__ import annotations
@@ -13,12 +16,14 @@ import datetime
 import importlib.util
 import os
 import platform
+import re
 import sys
 import time
 import traceback
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
+sys.path.insert(0, HERE)
 
 
 def main() -> int:
@@ -44,7 +49,8 @@ def main() -> int:
         "Regenerate with `make bench`. Each section says what it measures and the target.",
         "",
     ]
-    sections, failed = [], 0
+    sections: dict[str, str] = {}
+    failed = 0
     for name in names:
         spec = importlib.util.spec_from_file_location(f"bench_{name}", os.path.join(HERE, f"bench_{name}.py"))
         module = importlib.util.module_from_spec(spec)
@@ -55,12 +61,48 @@ def main() -> int:
         except Exception:  # a benchmark failure is reported in the results, then the run fails
             failed += 1
             section = f"## {name}\n\nFAILED:\n\n```\n{traceback.format_exc()}\n```\n"
-        sections.append(section.rstrip() + f"\n\n_(section took {time.perf_counter() - t0:.1f} s)_\n")
+        sections[name] = (f"<!-- bench:{name} -->\n" + section.rstrip()
+                          + f"\n\n_(section took {time.perf_counter() - t0:.1f} s)_\n")
         print(f"bench {name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    if only and os.path.exists(args.out):
+        with open(args.out) as fh:
+            kept = previous_sections(fh.read())
+        sections = {**{k: v for k, v in kept.items() if k not in sections}, **sections}
+    body = [sections[k] for k in sorted(sections)]
     with open(args.out, "w") as fh:
-        fh.write("\n".join(header) + "\n" + "\n".join(sections))
+        fh.write("\n".join(header) + "\n" + "\n".join(body))
     print(f"wrote {args.out}", file=sys.stderr)
+    if os.path.abspath(args.out) == os.path.join(HERE, "RESULTS.md"):
+        import perf_table
+
+        perf_table.main_update()
     return 1 if failed else 0
+
+
+# Titles of the sections written before they carried a ``<!-- bench:NAME -->`` marker.
+_LEGACY_TITLES = {"bake": "Bake: end to end", "cage": "Cage", "fragments": "Pieces, fault smoothing",
+                  "large": "Large input", "modes": "Fracture modes", "preview": "Preview",
+                  "runtime": "Impact projection"}
+
+
+def previous_sections(text: str) -> dict[str, str]:
+    """The sections of an earlier results file by benchmark name (markers, else known titles)."""
+    out: dict[str, str] = {}
+    name = None
+    marker = None
+    for line in text.splitlines(keepends=True):
+        found = re.match(r"<!-- bench:(\w+) -->", line)
+        if found:
+            marker = found.group(1)
+            continue
+        if line.startswith("## "):
+            name = marker or next((k for k, t in _LEGACY_TITLES.items() if line[3:].startswith(t)), None)
+            marker = None
+            if name is not None:
+                out[name] = f"<!-- bench:{name} -->\n"
+        if name is not None:
+            out[name] += line
+    return out
 
 
 if __name__ == "__main__":

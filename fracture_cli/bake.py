@@ -83,7 +83,8 @@ def stem_of(path: str) -> str:
     return os.path.splitext(os.path.basename(path))[0]
 
 
-def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = None) -> BakeResult:
+def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = None,
+         jobs: int | None = None) -> BakeResult:
     """Run the whole pipeline on one asset and write its outputs.
 
     Parameters
@@ -97,6 +98,9 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
     cache_dir : str, optional (default None)
         Folder of a :class:`~fracture_cli.cache.StageCache`: the cage, tets and
         modes are reused when nothing they depend on changed.
+    jobs : int, optional (default None: every core)
+        Processes the stages may use for independent work (see :mod:`fracture_cli.parallel`); the
+        outputs are the same bytes for any value.
 
     Returns
     -------
@@ -119,7 +123,7 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
             from fracture_cli.cache import StageCache
 
             cache = StageCache(cache_dir)
-        runner = Runner(f"bake {stem}", total=len(STEPS), cache=cache)
+        runner = Runner(f"bake {stem}", total=len(STEPS), cache=cache, jobs=jobs)
         state = run_pipeline(input_path, recipe, runner)
         report = build_report(state, recipe, runner)
         outputs = write_outputs(out_dir, stem, state, report, runner)
@@ -147,6 +151,8 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
     ``recipe`` names the recipe; the parameters are those the stages ran with
     (``runner.options``), so a chain with changed flags reports what it did.
     """
+    from fracture_cli.stages.repair.report import records_for_report
+
     loaded, surface = state.need("loaded", "export"), state.need("surface", "export")
     frags, data = state.need("fragments", "export"), state.need("runtime", "export")
     used = dataclasses.replace(recipe, options={**recipe.options, **runner.options})
@@ -172,6 +178,7 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
             "contact_sites": int(data.num_sites),
         },
         "checks": dict(state.checks or {}),
+        "repairs": records_for_report(state.repairs, surface.normalization),
         "fragments": fragment_summary(frags),
         "outputs": [f"{stem}.glb", f"{stem}.fracture.json", f"{stem}.fracture.bin", f"{stem}.report.json"],
     }
@@ -214,14 +221,14 @@ def check_batch(inputs: Sequence[str], out_dir: str) -> None:
 
 def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir: str | None = None,
               keep_going: bool = False, preview: bool = False,
-              preview_size: tuple[int, int] = (1600, 1000)) -> Iterator[BatchItem]:
+              preview_size: tuple[int, int] = (1600, 1000), jobs: int | None = None) -> Iterator[BatchItem]:
     """Bake several inputs into one folder, yielding each one's outcome as it finishes.
 
     Parameters
     ----------
     inputs : sequence of str
         Asset paths; no two may share a stem (checked before any work).
-    out_dir, recipe, cache_dir
+    out_dir, recipe, cache_dir, jobs
         As for :func:`bake`.
     keep_going : bool, optional (default False)
         With several inputs, an input that fails (any error, bugs included) is
@@ -242,7 +249,7 @@ def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir:
     check_batch(inputs, out_dir)
     for path in inputs:
         try:
-            result = bake(path, out_dir, recipe, cache_dir=cache_dir)
+            result = bake(path, out_dir, recipe, cache_dir=cache_dir, jobs=jobs)
             preview_png = os.path.join(out_dir, f"{stem_of(path)}.preview.png")
             if preview:
                 from fracture_cli.preview import render_preview

@@ -6,19 +6,118 @@ pipeline's report and by the tests.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 import manifold3d
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fracture_cli import trigeom
+from fracture_cli import parallel, trigeom
+from fracture_cli.errors import StageError
+from fracture_cli.meshfix.weld_check import MeshCheck, as_written, check_mesh, collapsed, weld_by_position
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, Regions, SurfaceMesh
 
 log = logging.getLogger(__name__)
 
+# A bake fails when the fragments' volumes differ from the input solid's by more than this fraction
+# (they are exact booleans of it: the error is rounding, ~1e-9, plus zero-volume slivers dropped).
+VOLUME_TOLERANCE = 1e-5
 
-def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs: int = 2000) -> dict:
+
+def written_fragments(fragments: Fragments) -> tuple[Fragments, list[MeshCheck]]:
+    """Check every fragment on its positions exactly as the GLB stores them, dropping faces rounding collapses.
+
+    Parameters
+    ----------
+    fragments : Fragments
+
+    Returns
+    -------
+    fragments : Fragments
+        The same fragments, except that faces with two corners at one position
+        once written (float32, relative to the fragment's pivot, as
+        :func:`~fracture_cli.io.write.write_fragments_glb` does) are left out:
+        they have no area, and removing them collapses their short edge as the
+        writer's rounding already did.
+    checks : list of MeshCheck
+        One per fragment, welded by exact written position (see
+        :func:`~fracture_cli.meshfix.weld_check.check_mesh`).
+    """
+    from fracture_cli.io.write import node_origin
+
+    out, checks = [], []
+    for frag in fragments.fragments:
+        world = fragments.normalization.to_world(frag.vertices)
+        stored = as_written(world, node_origin(world))
+        _, index = weld_by_position(stored)
+        degenerate = collapsed(index[frag.faces])
+        if degenerate.any():
+            frag = dataclasses.replace(frag, faces=frag.faces[~degenerate], material_ids=frag.material_ids[~degenerate])
+        out.append(frag)
+        checks.append(check_mesh(stored, frag.faces))
+    return dataclasses.replace(fragments, fragments=tuple(out)), checks
+
+
+def written_summary(checks: list[MeshCheck]) -> dict:
+    """The report's verdict on the written fragments (:func:`written_fragments`).
+
+    Returns
+    -------
+    dict
+        ``watertight`` (every fragment: every edge in exactly two faces of
+        opposite orientation, no degenerate face, positive volume),
+        ``connected`` (every fragment one body: faces connected across
+        two-face edges), ``open_edges``, ``pinched_edges`` (more than two
+        faces), ``misoriented_edges`` and ``degenerate_faces`` summed over the
+        fragments, and ``fragment_bodies_max``.
+    """
+    return {
+        "watertight": bool(all(c.watertight for c in checks)),
+        "connected": bool(all(c.bodies == 1 for c in checks)),
+        "open_edges": int(sum(c.open_edges for c in checks)),
+        "pinched_edges": int(sum(c.pinched_edges for c in checks)),
+        "misoriented_edges": int(sum(c.misoriented_edges for c in checks)),
+        "degenerate_faces": int(sum(c.degenerate_faces for c in checks)),
+        "fragment_bodies_max": int(max((c.bodies for c in checks), default=0)),
+    }
+
+
+def require_sound(checks: list[MeshCheck]) -> None:
+    """Raise unless every written fragment is watertight; warn about fragments of several bodies.
+
+    Raises
+    ------
+    StageError
+        Naming the first fragment that is not watertight (``fragment_NNN``, as
+        written) and what is wrong with it. Nothing has been written yet, so
+        earlier outputs stay as they were.
+    """
+    from fracture_cli.io.write import fragment_name
+
+    bad = [i for i, c in enumerate(checks) if not c.watertight]
+    if bad:
+        i = bad[0]
+        more = f" (and {len(bad) - 1} more fragments)" if len(bad) > 1 else ""
+        raise StageError(f"{fragment_name(i)} would be written as a broken mesh: {', '.join(checks[i].problems())}"
+                         f"{more}; the input may have parts touching along an edge or too thin to cut; rerun with "
+                         "-v for the repair log", stage="fragments")
+    multi = [i for i, c in enumerate(checks) if c.bodies > 1]
+    if multi:
+        log.warning("fragments: %d fragment(s) consist of several separate bodies (up to %d, e.g. %s)", len(multi),
+                    max(checks[i].bodies for i in multi), fragment_name(multi[0]))
+
+
+def require_volume(report: dict) -> None:
+    """Raise when the fragments' volumes differ from the input's by more than :data:`VOLUME_TOLERANCE`."""
+    error = report.get("volume_error", 0.0)
+    if not error <= VOLUME_TOLERANCE:
+        raise StageError(f"the fragments' volumes add up to the input's only within {error:.3g} (tolerance "
+                         f"{VOLUME_TOLERANCE:g}): some of the input is missing from the fragments", stage="fragments")
+
+
+def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs: int = 2000,
+                        written: list[MeshCheck] | None = None, jobs: int | None = None) -> dict:
     """Measure what ALGORITHM.md section 6 promises of the fragments.
 
     Parameters
@@ -28,49 +127,59 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
     fragments : Fragments
         The fragments.
     max_pairs : int, optional (default 2000)
-        At most this many bounding-box-overlapping fragment pairs are
-        intersected for the overlap estimate (closest centroids first).
+        At most this many neighbouring fragment pairs are intersected for the
+        overlap estimate (closest centroids first).
+    jobs : int, optional (default :func:`fracture_cli.parallel.current_jobs`)
+        Processes for the pairwise booleans; the result does not depend on it.
+    written : list of MeshCheck, optional
+        The checks of :func:`written_fragments` (computed when not given).
 
     Returns
     -------
     dict
-        ``fragments`` count; ``watertight`` (every fragment, welded by
-        position, has every edge in exactly two faces of opposite orientation,
-        or in an even number of faces with balanced orientation where a
-        fragment touches itself); ``pinched_edges`` (edges of the latter kind);
-        ``volume_error`` (|sum of fragment volumes - input volume| / input
-        volume, input volume = ``fragments.input_volume``);
+        ``fragments`` count; the keys of :func:`written_summary`
+        (``watertight``, ``connected``, edge counts: checked on the positions
+        as written); ``volume_error`` (|sum of fragment volumes - input volume|
+        / input volume, input volume = ``fragments.input_volume``);
         ``max_outer_distance`` (largest distance from a vertex of a non-interior
         face to the input surface, in units of the bounding-box diagonal);
-        ``max_overlap`` (largest intersection volume of two fragments relative
-        to the smaller one); ``min_fragment_volume`` relative to the input.
+        ``max_overlap`` (largest intersection volume of two neighbouring
+        fragments, those sharing a fault (:func:`fragment_neighbours`), relative
+        to the smaller one); the fragment volumes relative to the input:
+        ``min_fragment_volume`` (= ``fragment_volume_min``),
+        ``fragment_volume_median``, ``fragment_volume_max``.
+
+    Notes
+    -----
+    Overlaps are measured between neighbours only: fragments that share no
+    fault are kept apart by the regions between them, so an overlap there
+    would also show as a volume error (the volumes sum to more than the
+    input's) or a fragment reaching outside the input (``max_outer_distance``).
     """
+    if written is None:
+        written = written_fragments(fragments)[1]
     interior = [i for i, m in enumerate(fragments.materials) if m.name == INTERIOR_MATERIAL_NAME]
     interior_id = interior[-1] if interior else -1
-    watertight = True
-    pinched = 0
     volume_list: list[float] = []
     outer_points = []
-    solids = []
     for frag in fragments.fragments:
-        ok, pinch = _closed_by_position(frag.vertices, frag.faces)
-        watertight &= ok
-        pinched += pinch
         volume_list.append(trigeom.signed_volume(frag.vertices, frag.faces))
         outer = frag.faces[frag.material_ids != interior_id]
         outer_points.append(frag.vertices[np.unique(outer)])
-        solids.append(_solid(frag.vertices, frag.faces))
     volumes = np.array(volume_list)
     reference = fragments.input_volume
     points = np.concatenate(outer_points) if outer_points else np.zeros((0, 3))
+    relative = np.sort(volumes) / reference if len(volumes) and reference > 0 else np.zeros(1)
     return {
         "fragments": len(fragments.fragments),
-        "watertight": bool(watertight),
-        "pinched_edges": int(pinched),
+        **written_summary(written),
         "volume_error": float(abs(volumes.sum() - reference) / reference) if reference > 0 else float("nan"),
         "max_outer_distance": float(_max_distance_to_surface(points, surface.vertices, surface.faces)),
-        "max_overlap": float(_max_overlap(solids, volumes, max_pairs)),
-        "min_fragment_volume": float(volumes.min() / reference) if len(volumes) and reference > 0 else 0.0,
+        "max_overlap": float(_max_overlap(fragments, volumes, max_pairs, jobs)),
+        "min_fragment_volume": float(relative[0]),
+        "fragment_volume_min": float(relative[0]),
+        "fragment_volume_median": float(np.median(relative)),
+        "fragment_volume_max": float(relative[-1]),
     }
 
 
@@ -314,19 +423,6 @@ def fragment_fault_shape(fragments: Fragments) -> dict:
     return fault_shape(*fragment_faults(fragments))
 
 
-def _closed_by_position(vertices: np.ndarray, faces: np.ndarray):
-    _, pos = np.unique(vertices, axis=0, return_inverse=True)
-    F = pos.reshape(-1)[faces]
-    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    key = np.sort(directed, axis=1)
-    forward = (directed[:, 0] < directed[:, 1]).astype(np.int64)
-    uniq, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    n_forward = np.bincount(inverse.reshape(-1), weights=forward, minlength=len(uniq))
-    balanced = 2 * n_forward == counts
-    ok = bool(np.all(balanced & (counts >= 2)))
-    return ok, int(np.sum(counts > 2))
-
-
 def _solid(V: np.ndarray, F: np.ndarray):
     _, first, pos = np.unique(V, axis=0, return_index=True, return_inverse=True)
     pos = pos.reshape(-1)
@@ -341,22 +437,47 @@ def _solid(V: np.ndarray, F: np.ndarray):
     return manifold3d.Manifold(mesh)
 
 
-def _max_overlap(solids: list, volumes: np.ndarray, max_pairs: int) -> float:
-    if len(solids) < 2:
+def fragment_neighbours(fragments: Fragments) -> np.ndarray:
+    """Pairs ``(i, j)``, ``i < j`` (e, 2) int64, of fragments that share a fault (the fragment graph).
+
+    Measured on the meshes: ``j`` owns the interior face nearest to some
+    interior face of ``i`` (or the other way round), as in :func:`fragment_faults`.
+    """
+    q = len(fragments.fragments)
+    fault = fragment_faults(fragments)[2]
+    labels = np.unique(fault[fault >= 0])
+    pairs = np.sort(np.column_stack([labels // max(q, 1), labels % max(q, 1)]), axis=1)
+    return np.unique(pairs, axis=0) if len(pairs) else np.zeros((0, 2), dtype=np.int64)
+
+
+def _max_overlap(fragments: Fragments, volumes: np.ndarray, max_pairs: int, jobs: int | None) -> float:
+    frags = fragments.fragments
+    if len(frags) < 2:
         return 0.0
-    boxes = np.array([s.bounding_box() for s in solids])  # (q, 6) min xyz, max xyz
-    lo, hi = boxes[:, :3], boxes[:, 3:]
-    touching = np.all((lo[:, None, :] <= hi[None, :, :]) & (lo[None, :, :] <= hi[:, None, :]), axis=2)
-    i, j = np.nonzero(np.triu(touching, 1))
+    lo = np.array([f.vertices.min(axis=0) for f in frags])
+    hi = np.array([f.vertices.max(axis=0) for f in frags])
+    pairs = fragment_neighbours(fragments)
+    i, j = pairs[:, 0], pairs[:, 1]
+    touching = np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)
+    i, j = i[touching], j[touching]
     centres = (lo + hi) / 2
     order = np.argsort(np.linalg.norm(centres[i] - centres[j], axis=1), kind="stable")[:max_pairs]
+    todo = list(zip(i[order].tolist(), j[order].tolist()))
+    # Each solid built once here (the workers inherit them), then one boolean per pair, independent: on worker
+    # processes, results in order (the same max either way).
+    used = set(i[order].tolist()) | set(j[order].tolist())
+    solids = {k: _solid(frags[k].vertices, frags[k].faces) for k in sorted(used)}
+    overlaps = parallel.ordered_map(_pair_overlap, todo, solids, jobs=jobs)
     worst = 0.0
-    for a, b in zip(i[order].tolist(), j[order].tolist()):
-        overlap = (solids[a] ^ solids[b]).volume()
+    for (a, b), overlap in zip(todo, overlaps):
         smaller = min(volumes[a], volumes[b])
         if smaller > 0:
             worst = max(worst, overlap / smaller)
     return worst
+
+
+def _pair_overlap(solids: dict, pair: tuple[int, int]) -> float:
+    return float((solids[pair[0]] ^ solids[pair[1]]).volume())
 
 
 def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> float:
@@ -381,9 +502,16 @@ def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -
     if len(far):
         from scipy.sparse import csr_matrix
 
+        # All (point, triangle) pairs at once: each far point against the triangles around its triangle's corners.
         incidence = csr_matrix((np.ones(F.size), (F.reshape(-1), np.repeat(np.arange(len(F)), 3))),
                                shape=(len(V), len(F)))
-        for i in far:
-            near = np.unique(incidence[F[tri[i]]].indices)
-            distance[i] = trigeom.point_triangle_distance(np.repeat(points[i][None], len(near), 0), V[F[near]]).min()
+        corners = F[tri[far]].reshape(-1)  # (3 * far,)
+        count = np.diff(incidence.indptr)[corners]
+        start = np.repeat(incidence.indptr[corners] - np.cumsum(count) + count, count)
+        near = incidence.indices[start + np.arange(int(count.sum()))]
+        point = np.repeat(np.repeat(far, 3), count)
+        pair_distance = trigeom.point_triangle_distance(points[point], V[F[near]])
+        best = np.full(len(points), np.inf)
+        np.minimum.at(best, point, pair_distance)
+        distance[far] = best[far]
     return float(distance.max())

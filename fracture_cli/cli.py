@@ -23,6 +23,7 @@ import click
 from fracture_cli import __version__
 from fracture_cli.cli_options import build_options, configure_output, hoist_global_flags, stage_options, toml_text
 from fracture_cli.errors import EXIT_FAILURE, FractureError, exit_code_for
+from fracture_cli.parallel import available_cores
 from fracture_cli.pipeline import STAGE_NAMES, PipelineState, Runner, stage
 
 log = logging.getLogger("fracture_cli")
@@ -47,7 +48,7 @@ Examples:
   # round-trip a mesh (geometry, UVs, normals, materials)
   fracture load in.glb save out.glb
 \b
-Global options (-v, -q, --debug) may also follow any command.
+Global options (-v, -q, --debug, -j N) may also follow any command.
 """
 
 
@@ -159,9 +160,12 @@ class TerminalCommand(click.Command):
 @click.option("--recipes", "recipes_dir", type=click.Path(file_okay=False, path_type=str), default=None,
               help="Folder of your own recipes, searched first (then $FRACTURE_RECIPES, recipes/ beside the "
                    "asset, ./recipes, the built-ins).")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Processes a bake may use for independent work (default: every core, here "
+                   f"{available_cores()}); the outputs are the same bytes for any N.")
 @click.pass_context
 def cli(ctx: click.Context, debug: bool, quiet: bool, verbose: int, recipe_name: str, overrides: tuple[str, ...],
-        recipes_dir: str | None) -> None:
+        recipes_dir: str | None, jobs: int | None) -> None:
     """Prefracture game assets with fracture modes (Sellan et al. 2023).
 
     Run everything from a recipe with 'bake', or chain the stages left to
@@ -169,7 +173,8 @@ def cli(ctx: click.Context, debug: bool, quiet: bool, verbose: int, recipe_name:
     flags default to the recipe's values (-r, default 'default').
     """
     ctx.meta.update({"fracture.debug": debug, "fracture.quiet": quiet, "fracture.recipe_name": recipe_name,
-                     "fracture.overrides": overrides, "fracture.recipes_dir": recipes_dir})
+                     "fracture.overrides": overrides, "fracture.recipes_dir": recipes_dir,
+                     "fracture.jobs": jobs})
     configure_output(verbose, quiet)
 
 
@@ -178,7 +183,7 @@ def run_chain(processors: list[Processor | None], **_: Any) -> None:
     """Thread one pipeline state through the chained commands' processors."""
     if not any(processors):
         return
-    chain = Chain(runner=Runner("fracture"))
+    chain = Chain(runner=Runner("fracture", jobs=_root_meta().get("fracture.jobs")))
     for process in processors:
         if process is not None:
             process(chain)

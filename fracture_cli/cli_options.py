@@ -24,6 +24,8 @@ from fracture_cli.options import check_value, option_fields
 
 # Flags of the top-level group that may also follow a command (``fracture bake x.glb -o out -v``).
 GLOBAL_FLAGS = frozenset({"-v", "-vv", "-vvv", "--verbose", "-q", "--quiet", "--debug"})
+# ... and global options that take a value (``--jobs 2``, ``--jobs=2``, ``-j2``).
+GLOBAL_VALUED = ("-j", "--jobs")
 
 
 def hoist_global_flags(args: Sequence[str]) -> list[str]:
@@ -33,8 +35,20 @@ def hoist_global_flags(args: Sequence[str]) -> list[str]:
     """
     args = list(args)
     end = args.index("--") if "--" in args else len(args)
-    flags = [a for a in args[:end] if a in GLOBAL_FLAGS]
-    rest = [a for a in args[:end] if a not in GLOBAL_FLAGS]
+    flags, rest = [], []
+    i = 0
+    while i < end:
+        a = args[i]
+        if a in GLOBAL_FLAGS:
+            flags.append(a)
+        elif a in GLOBAL_VALUED and i + 1 < end:
+            flags += [a, args[i + 1]]
+            i += 1
+        elif a.startswith("--jobs=") or (a.startswith("-j") and a[2:].isdigit()):
+            flags.append(a)
+        else:
+            rest.append(a)
+        i += 1
     return flags + rest + args[end:]
 
 

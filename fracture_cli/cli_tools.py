@@ -64,7 +64,8 @@ def bake_cmd(ctx: click.Context, inputs: tuple[str, ...], out_dir: str, recipe_n
         reports: list[dict[str, Any]] = []
         failures = []
         for item in bake_many(inputs, out_dir, recipe, cache_dir=cache_dir, keep_going=keep_going,
-                              preview=preview, preview_size=preview_size or (1600, 1000)):
+                              preview=preview, preview_size=preview_size or (1600, 1000),
+                              jobs=meta.get("fracture.jobs")):
             if item.result is None:
                 click.echo(f"error: {item.error}", err=True)
                 failures.append(item.input_path)

@@ -19,15 +19,16 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from fracture_cli import progress
+from fracture_cli import parallel, progress
 from fracture_cli.errors import UsageError
-from fracture_cli.types import Cage, Fragments, Modes, Pieces, Regions, SurfaceMesh, TetMesh
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help` imports neither
+    import numpy as np
+
     from fracture_cli.cache import StageCache
+    from fracture_cli.meshfix.records import RepairRecord
     from fracture_cli.runtime.format import RuntimeData
+    from fracture_cli.types import Cage, Fragments, Modes, Pieces, Regions, SurfaceMesh, TetMesh
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +44,7 @@ class PipelineState:
     source_sha256: str | None = None
     loaded: SurfaceMesh | None = None  # as read, before repair
     surface: SurfaceMesh | None = None  # the solid every later stage uses
+    repairs: tuple[RepairRecord, ...] = ()  # what the repair stage did (report.json ``repairs``)
     cage: Cage | None = None
     tet_mesh: TetMesh | None = None
     eta: np.ndarray | None = None  # (f,) or (f, d) material weights of the interior faces
@@ -120,10 +122,11 @@ def _load(state: PipelineState, options: Any) -> PipelineState:
 
 
 def _repair(state: PipelineState, options: Any) -> PipelineState:
-    from fracture_cli.stages.repair import repair
+    from fracture_cli.stages.repair import repair_surface
 
     # Cage and fragments both use the repaired solid, so they agree on what is inside.
-    return dataclasses.replace(state, surface=repair(state.need("surface", "repair"), options))
+    result = repair_surface(state.need("surface", "repair"), options)
+    return dataclasses.replace(state, surface=result.surface, repairs=result.records)
 
 
 def _cage(state: PipelineState, options: Any) -> PipelineState:
@@ -153,7 +156,8 @@ def _modes(state: PipelineState, options: Any) -> PipelineState:
 def _pieces(state: PipelineState, options: Any) -> PipelineState:
     from fracture_cli.stages.pieces import pieces
 
-    result = pieces(state.need("tet_mesh", "pieces"), state.need("modes", "pieces"), options)
+    # Piece sizes are measured in asset volume: the repaired surface says what is material.
+    result = pieces(state.need("tet_mesh", "pieces"), state.need("modes", "pieces"), options, surface=state.surface)
     return dataclasses.replace(state, pieces=result)
 
 
@@ -165,12 +169,22 @@ def _smooth(state: PipelineState, options: Any) -> PipelineState:
 
 
 def _fragments(state: PipelineState, options: Any) -> PipelineState:
-    from fracture_cli.checks import fragment_fault_shape, fragment_invariants
+    from fracture_cli.checks import (
+        fragment_fault_shape,
+        fragment_invariants,
+        require_sound,
+        require_volume,
+        written_fragments,
+    )
     from fracture_cli.stages.fragments import fragments
 
     surface = state.need("surface", "fragments")
     frags = fragments(surface, state.need("regions", "fragments"), options)
-    checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags))
+    # Checked as they will be written (float32 about each pivot); a broken fragment stops the bake here.
+    frags, written = written_fragments(frags)
+    require_sound(written)
+    checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written))
+    require_volume(checks)
     checks["input_volume"] = float(frags.input_volume * surface.normalization.scale**3)
     # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
     shape = fragment_fault_shape(frags)
@@ -195,7 +209,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("load", "Read a mesh (OBJ, PLY, STL, OFF, GLB, glTF).", "fracture_cli.io.read:LoadOptions",
           _load, consumes=("source",), produces=("loaded", "surface", "source_sha256")),
     Stage("repair", "Make the surface a closed solid: weld, fix winding, close holes or thicken open sheets.",
-          "fracture_cli.stages.repair:RepairOptions", _repair, consumes=("surface",), produces=("surface",)),
+          "fracture_cli.stages.repair:RepairOptions", _repair, consumes=("surface",), produces=("surface", "repairs")),
     Stage("cage", "Build the nested cage: a coarse closed surface around the input.",
           "fracture_cli.stages.cage:CageOptions", _cage, consumes=("surface",), produces=("cage",), cached=True),
     Stage("tetra", "Tetrahedralize the cage (TetGen), keeping its surface.", "fracture_cli.stages.tetra:TetraOptions",
@@ -206,7 +220,8 @@ STAGES: tuple[Stage, ...] = (
     Stage("modes", "Compute the fracture modes of the tet mesh.", "fracture_cli.stages.modes:ModesOptions", _modes,
           consumes=("tet_mesh",), uses=("eta",), produces=("modes",), cached=True, short={"num_modes": "-k"}),
     Stage("pieces", "Split the tet mesh into atomic pieces and build the piece graph.",
-          "fracture_cli.stages.pieces:PiecesOptions", _pieces, consumes=("tet_mesh", "modes"), produces=("pieces",)),
+          "fracture_cli.stages.pieces:PiecesOptions", _pieces, consumes=("tet_mesh", "modes"), uses=("surface",),
+          produces=("pieces",)),
     Stage("smooth", "Smooth the fault surfaces between pieces into closed piece regions.",
           "fracture_cli.stages.smooth:SmoothOptions", _smooth, consumes=("tet_mesh", "pieces"), uses=("surface",),
           produces=("regions",)),
@@ -241,6 +256,9 @@ class Runner:
         Number of steps this run will take, for "[i/n]" (default: unknown).
     cache : StageCache, optional
         Where results of :attr:`Stage.cached` stages are stored and found.
+    jobs : int, optional
+        How many processes a stage may use for its independent work (``--jobs``; default: every core).
+        It never changes a result, so it is not part of the options the report and the cache keys record.
 
     Attributes
     ----------
@@ -250,10 +268,12 @@ class Runner:
         The options each stage ran with (the report's recipe parameters).
     """
 
-    def __init__(self, label: str, total: int | None = None, cache: StageCache | None = None):
+    def __init__(self, label: str, total: int | None = None, cache: StageCache | None = None,
+                 jobs: int | None = None):
         self.label = label
         self.total = total
         self.cache = cache
+        self.jobs = jobs
         self.seconds: dict[str, float] = {}
         self.options: dict[str, Any] = {}
         self._step = 0
@@ -267,7 +287,8 @@ class Runner:
             cache = self.cache if row.cached and key is not None else None
             result = cache.get(name, key, state) if cache and key else None
             if result is None:
-                result = row.run(state, options)
+                with parallel.using(self.jobs):
+                    result = row.run(state, options)
                 if cache and key:
                     cache.put(name, key, result)
         self.options[name] = options

@@ -16,12 +16,15 @@ option fields::
 
 Every key is validated against the stage's options dataclass (type and range),
 and so is every ``--set section.key=value`` override; errors name the key, the
-value and the allowed range.
+value and the allowed range. Keys of older versions still load: a renamed key
+(``RENAMED`` of the options class) is read under its new name and a retired
+one (``RETIRED``) is ignored, each with a warning saying what replaced it.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 import tomllib
 from collections.abc import Iterable, Sequence
@@ -33,6 +36,8 @@ from typing import Any
 from fracture_cli.errors import RecipeError
 from fracture_cli.options import check_value, option_fields
 from fracture_cli.pipeline import STAGE_NAMES, stage
+
+log = logging.getLogger(__name__)
 
 # The recipe sections, in pipeline order: one per stage of the pipeline table.
 SECTIONS: tuple[str, ...] = STAGE_NAMES
@@ -189,6 +194,24 @@ def _coerce(section: str, key: str, value: Any, where: str | None) -> Any:
     return value
 
 
+def _current_key(section: str, key: str, where: str | None) -> str | None:
+    """The key to use for ``section.key`` of an older recipe: renamed keys map to their new name, retired ones
+    to None (ignored), each with a warning; ``--set`` (``where`` None) of a retired key is an error."""
+    cls = options_class(section)
+    renamed = getattr(cls, "RENAMED", {})
+    if key in renamed:
+        new, note = renamed[key]
+        log.warning("%s: %s.%s is now %s.%s (%s)", where or "--set", section, key, section, new, note)
+        return new
+    note = getattr(cls, "RETIRED", {}).get(key)
+    if note is None:
+        return key
+    if where is None:
+        raise RecipeError(f"--set {section}.{key}: this option is no longer used: {note}")
+    log.warning("%s: %s.%s is no longer used and is ignored: %s", where, section, key, note)
+    return None
+
+
 def parse_override(text: str) -> tuple[str, str, Any]:
     """Parse ``section.key=value`` (value in TOML syntax; bare words are strings)."""
     if "=" not in text or "." not in text.split("=", 1)[0]:
@@ -232,13 +255,17 @@ def load_recipe(name_or_path: str = "default", overrides: Sequence[str] = (), *,
             table = data.get(section, {})
             if not isinstance(table, dict):
                 raise RecipeError(f"[{section}] must be a table", path=path)
-            for key, value in table.items():
-                values[section][key] = _coerce(section, key, value, path)
+            for old_key, value in table.items():
+                key = _current_key(section, old_key, path)
+                if key is not None:
+                    values[section][key] = _coerce(section, key, value, path)
     for text in overrides:
         section, key, value = parse_override(text)
         if section not in SECTIONS:
             raise RecipeError(f"--set {text}: unknown section '{section}'; valid: {', '.join(SECTIONS)}")
-        values[section][key] = _coerce(section, key, value, None)
+        current = _current_key(section, key, None)
+        if current is not None:
+            values[section][current] = _coerce(section, current, value, None)
     options = {s: dataclasses.replace(options_class(s)(), **values[s]) for s in SECTIONS}
     name, _, data = chain[0]
     description = data.get("description") or next(

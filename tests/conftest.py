@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 
 import pytest
@@ -9,6 +10,21 @@ import pytest
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SAMPLE_ASSETS = os.path.join(REPO, "sample_assets")
 SAMPLE_FILES = ("pillar.glb", "chair.glb", "vase.obj")
+
+
+def _splits_fragment_bodies() -> bool:
+    import importlib.util
+
+    return (importlib.util.find_spec("fracture_cli.gameready") is not None
+            and importlib.util.find_spec("fracture_cli.gameready.components") is not None)
+
+
+# Whether the tree splits every fragment into its connected bodies (fracture_cli/gameready/components.py, the
+# gameready work). Without it a fragment may be several bodies (reported `connected: false`), and one whose
+# bodies share an edge stops the bake; tests that need the split expect that and say so.
+SPLITS_BODIES = _splits_fragment_bodies()
+BODY_SPLIT_MISSING = ("fragments are not split into their connected bodies in this tree "
+                      "(fracture_cli/gameready/components.py)")
 
 
 def pytest_addoption(parser):
@@ -24,3 +40,13 @@ def update_goldens(request) -> bool:
 @pytest.fixture(params=SAMPLE_FILES)
 def sample_asset(request) -> str:
     return os.path.join(SAMPLE_ASSETS, request.param)
+
+
+@pytest.fixture(autouse=True)
+def _restore_fracture_logger():
+    """CLI tests route the 'fracture_cli' logger to stderr and stop its propagation (configure_output); put
+    it back afterwards, so a later test in the same worker still sees its records through caplog."""
+    logger = logging.getLogger("fracture_cli")
+    saved = (list(logger.handlers), logger.level, logger.propagate)
+    yield
+    logger.handlers[:], logger.level, logger.propagate = saved[0], saved[1], saved[2]

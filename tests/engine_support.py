@@ -17,6 +17,7 @@ exits with status 2; ``--names`` prints ``names <hex of each name's UTF-8 bytes.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
@@ -30,6 +31,7 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFORMANCE = os.path.join(REPO, "tests", "data", "runtime_conformance")
 CORRUPT = os.path.join(CONFORMANCE, "corrupt")
 RELATIVE_TOLERANCE = 1e-9  # alpha and displacement, relative to the array's largest magnitude
+SAMPLE_ASSETS = ("chair", "pillar", "vase")  # the conformance runtime files baked from sample_assets/
 
 
 def require_tool(name: str, package: str) -> str:
@@ -74,6 +76,38 @@ def impact_inputs(impact: dict) -> tuple[list[float], list[float], float | None]
     bits = impact["bits"]
     threshold = None if bits["threshold"] is None else bits_to_float(bits["threshold"])
     return ([bits_to_float(b) for b in bits["point"]], [bits_to_float(b) for b in bits["impulse"]], threshold)
+
+
+@functools.cache
+def random_impacts(name: str, count: int, seed: int = 0) -> list[dict]:
+    """Random hits on a conformance runtime file with the numpy reference's answers, shaped like vector impacts.
+
+    Points near random sites, impulses in random directions with magnitudes from a tenth
+    to twenty times the default threshold (from no break to shattering), default threshold.
+    Cached: every engine's test gets the same list (do not modify it).
+    """
+    import numpy as np
+
+    from fracture_cli.runtime.format import load_runtime
+    from fracture_cli.runtime.impact import project_impact
+
+    data = load_runtime(runtime_paths(name)[0])
+    rng = np.random.default_rng(seed)
+    scale = float(np.ptp(data.sites, axis=0).max())
+    points = data.sites[rng.integers(0, data.num_sites, count)] + rng.normal(scale=0.02 * scale, size=(count, 3))
+    directions = rng.normal(size=(count, 3))
+    magnitudes = data.default_threshold * np.exp(rng.uniform(np.log(0.1), np.log(20.0), count))
+    impulses = directions / np.linalg.norm(directions, axis=1, keepdims=True) * magnitudes[:, None]
+    impacts = []
+    for i, (point, impulse) in enumerate(zip(points.tolist(), impulses.tolist())):
+        result = project_impact(data, np.array(point), np.array(impulse))
+        impacts.append({"name": f"random {i}", "expect": "ok", "site": result.site,
+                        "num_groups": result.num_groups, "groups": result.groups.tolist(),
+                        "broken": np.flatnonzero(result.broken).tolist(), "alpha": result.alpha.tolist(),
+                        "displacement": result.displacement.tolist(),
+                        "bits": {"point": [float_to_bits(x) for x in point],
+                                 "impulse": [float_to_bits(x) for x in impulse], "threshold": None}})
+    return impacts
 
 
 def protocol_input(impacts: list[dict]) -> str:

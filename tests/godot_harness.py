@@ -93,15 +93,23 @@ class GodotProject:
         return "res://" + name
 
     def import_resources(self, timeout: float = 300) -> None:
-        """Run the editor's import pass once (GLB files become importable scenes)."""
-        result = subprocess.run(
-            [self.godot, "--path", str(self.root), "--editor", "--quit"],
-            check=False,
-            capture_output=True,
-            text=True,
-            timeout=timeout,
-        )
-        missing = [p.name for p in self.root.glob("*.glb") if not (self.root / (p.name + ".import")).exists()]
+        """Run the editor's import pass (GLB files become importable scenes).
+
+        ``--editor --quit`` sometimes quits before the file-system scan has
+        finished ("Scan thread aborted"), leaving files unimported; the pass is
+        repeated, up to three times, until every GLB has its ``.import`` file.
+        """
+        for _attempt in range(3):
+            result = subprocess.run(
+                [self.godot, "--path", str(self.root), "--editor", "--quit"],
+                check=False,
+                capture_output=True,
+                text=True,
+                timeout=timeout,
+            )
+            missing = [p.name for p in self.root.glob("*.glb") if not (self.root / (p.name + ".import")).exists()]
+            if not missing:
+                return
         assert not missing, f"Godot did not import {missing} (exit {result.returncode}):\n{result.stderr[-3000:]}"
 
     def run_script(self, script: str, *args: str, timeout: float = 600, name: str = "run.gd") -> GodotRun:

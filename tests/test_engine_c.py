@@ -9,11 +9,13 @@ import pytest
 from engine_support import (
     CORRUPT,
     REPO,
+    SAMPLE_ASSETS,
     check_answers,
     check_damaged_file,
     corrupt_cases,
     load_vectors,
     protocol_input,
+    random_impacts,
     require_tool,
     runtime_paths,
     vector_names,
@@ -66,12 +68,27 @@ def _assert_clean(result: subprocess.CompletedProcess, allowed=(0,)):
     assert result.returncode in allowed, f"exit {result.returncode}: {result.stderr[-2000:]}"
 
 
+# The two projection paths: the d = 1 jump table (default) and FR_LOAD_COMPACT (displacements and edge tests).
+MODES = {"table": (), "compact": ("--compact",)}
+
+
+@pytest.mark.parametrize("mode", sorted(MODES))
 @pytest.mark.parametrize("name", vector_names())
-def test_c_reader_passes_the_vectors(driver, name):
+def test_c_reader_passes_the_vectors(driver, name, mode):
     vectors = load_vectors(name)
-    result = run_driver(driver, *runtime_paths(name), protocol_input(vectors["impacts"]))
+    result = run_driver(driver, *runtime_paths(name), protocol_input(vectors["impacts"]), *MODES[mode])
     _assert_clean(result)
     assert check_answers(vectors, result.stdout) == []
+
+
+@pytest.mark.parametrize("name", SAMPLE_ASSETS)
+def test_c_reader_matches_the_reference_on_many_hits(driver, name):
+    """Hundreds of random hits from gentle to shattering: both paths give the Python reference's answers."""
+    impacts = random_impacts(name, 400)
+    for mode in sorted(MODES):
+        result = run_driver(driver, *runtime_paths(name), protocol_input(impacts), *MODES[mode])
+        _assert_clean(result)
+        assert check_answers({"runtime": name, "impacts": impacts}, result.stdout) == [], mode
 
 
 @pytest.mark.parametrize("case", corrupt_cases(), ids=lambda c: c["name"])
@@ -88,9 +105,10 @@ def test_c_reader_under_sanitizers(sanitized_driver):
     """Every vector and damaged file under ASan + UBSan, then truncations and mutations of two files."""
     for name in vector_names():
         vectors = load_vectors(name)
-        result = run_driver(sanitized_driver, *runtime_paths(name), protocol_input(vectors["impacts"]))
-        _assert_clean(result)
-        assert check_answers(vectors, result.stdout) == []
+        for flags in MODES.values():
+            result = run_driver(sanitized_driver, *runtime_paths(name), protocol_input(vectors["impacts"]), *flags)
+            _assert_clean(result)
+            assert check_answers(vectors, result.stdout) == []
     for case in corrupt_cases():
         result = run_driver(
             sanitized_driver, os.path.join(CORRUPT, case["header"]), os.path.join(CORRUPT, case["binary"])

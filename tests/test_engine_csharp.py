@@ -8,11 +8,13 @@ import subprocess
 import pytest
 from engine_support import (
     REPO,
+    SAMPLE_ASSETS,
     check_answers,
     check_damaged_file,
     corrupt_cases,
     load_vectors,
     protocol_input,
+    random_impacts,
     require_tool,
     runtime_paths,
     vector_names,
@@ -44,12 +46,27 @@ def run_driver(driver, header: str, binary: str, stdin: str = "", *args: str) ->
     )
 
 
+# The two projection paths: the d = 1 jump table (default) and compact (displacements and edge tests).
+MODES = {"table": (), "compact": ("--compact",)}
+
+
+@pytest.mark.parametrize("mode", sorted(MODES))
 @pytest.mark.parametrize("name", vector_names())
-def test_csharp_reader_passes_the_vectors(driver, name):
+def test_csharp_reader_passes_the_vectors(driver, name, mode):
     vectors = load_vectors(name)
-    result = run_driver(driver, *runtime_paths(name), protocol_input(vectors["impacts"]))
+    result = run_driver(driver, *runtime_paths(name), protocol_input(vectors["impacts"]), *MODES[mode])
     assert result.returncode == 0, result.stdout + result.stderr
     assert check_answers(vectors, result.stdout) == []
+
+
+@pytest.mark.parametrize("name", SAMPLE_ASSETS)
+def test_csharp_reader_matches_the_reference_on_many_hits(driver, name):
+    """Hundreds of random hits from gentle to shattering: both paths give the Python reference's answers."""
+    impacts = random_impacts(name, 400)
+    for mode in sorted(MODES):
+        result = run_driver(driver, *runtime_paths(name), protocol_input(impacts), *MODES[mode])
+        assert result.returncode == 0, result.stdout + result.stderr
+        assert check_answers({"runtime": name, "impacts": impacts}, result.stdout) == [], mode
 
 
 @pytest.mark.parametrize("case", corrupt_cases(), ids=lambda c: c["name"])

@@ -11,12 +11,14 @@ import pytest
 from engine_support import (
     CORRUPT,
     REPO,
+    SAMPLE_ASSETS,
     check_answers,
     corrupt_cases,
     float_to_bits,
     hex_names,
     load_vectors,
     protocol_input,
+    random_impacts,
     runtime_paths,
     vector_names,
 )
@@ -26,6 +28,7 @@ from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime
 from fracture_cli.runtime.impact import project_impact
 
 CHECK_SCRIPT = os.path.join(REPO, "engines", "godot", "tests", "fracture_check.gd")
+RANDOM_HITS = 100  # per sample asset
 
 
 @pytest.fixture(scope="module")
@@ -38,6 +41,10 @@ def conformance_output(tmp_path_factory) -> dict[str, list[str]]:
         impacts = root / f"{name}.impacts"
         impacts.write_text(protocol_input(load_vectors(name)["impacts"]))
         jobs.append((name, *runtime_paths(name), str(impacts), ""))
+    for name in SAMPLE_ASSETS:
+        impacts = root / f"{name}.random"
+        impacts.write_text(protocol_input(random_impacts(name, RANDOM_HITS)))
+        jobs.append((f"random-{name}", *runtime_paths(name), str(impacts), ""))
     for case in corrupt_cases():
         header, binary = os.path.join(CORRUPT, case["header"]), os.path.join(CORRUPT, case["binary"])
         jobs.append((case["name"], header, binary, "-", ""))
@@ -66,6 +73,13 @@ def conformance_output(tmp_path_factory) -> dict[str, list[str]]:
 def test_gdscript_reader_passes_the_vectors(conformance_output, name):
     vectors = load_vectors(name)
     assert check_answers(vectors, "\n".join(conformance_output[name])) == []
+
+
+@pytest.mark.parametrize("name", SAMPLE_ASSETS)
+def test_gdscript_reader_matches_the_reference_on_many_hits(conformance_output, name):
+    """Random hits from gentle to shattering (fewer than the other readers get: GDScript is slow)."""
+    impacts = random_impacts(name, RANDOM_HITS)
+    assert check_answers({"runtime": name, "impacts": impacts}, "\n".join(conformance_output[f"random-{name}"])) == []
 
 
 @pytest.mark.parametrize("case", corrupt_cases(), ids=lambda c: c["name"])

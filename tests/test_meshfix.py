@@ -10,10 +10,11 @@ import pytest
 
 from fracture_cli.errors import StageError
 from fracture_cli.meshfix.faces import orient_consistently, unique_faces
-from fracture_cli.meshfix.holes import FillOptions, boundary_loops, fill_holes, plan_fill, winding_numbers
+from fracture_cli.meshfix.holes import FillOptions, boundary_loops, fill_holes, plan_fill
 from fracture_cli.meshfix.nonmanifold import split_nonmanifold
 from fracture_cli.meshfix.thicken import thicken_inward
 from fracture_cli.meshfix.weld_check import as_written, check_mesh
+from fracture_cli.trigeom import winding_numbers
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "data"))
 from make_realworld_corpus import grid_faces

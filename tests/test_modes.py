@@ -14,6 +14,7 @@ from fracture_cli.discontinuity import (
     face_weights,
 )
 from fracture_cli.errors import StageError
+from fracture_cli.parallel import using
 from fracture_cli.stages.modes import ModesOptions, mode_pieces, modes
 from fracture_cli.testing import grid_tetmesh, two_boxes_with_neck
 
@@ -260,8 +261,10 @@ def test_parallel_chains_are_byte_identical_to_serial():
     mesh = asymmetric_mesh()
     normals = np.abs(mesh.interior_face_normals)
     eta = np.column_stack([np.ones(len(normals)), 2.0 + normals[:, 0], 1.0 + 3.0 * normals[:, 2]])
-    serial = modes(mesh, ModesOptions(num_modes=6, dim=3, jobs=1), eta=eta)
-    parallel = modes(mesh, ModesOptions(num_modes=6, dim=3, jobs=2), eta=eta)
+    with using(1):
+        serial = modes(mesh, ModesOptions(num_modes=6, dim=3), eta=eta)
+    with using(2):
+        parallel = modes(mesh, ModesOptions(num_modes=6, dim=3), eta=eta)
     assert serial.stats["chains"] == 3 and parallel.stats["workers"] == 2 and serial.stats["workers"] == 1
     for name in ("U", "labels", "cut", "piece_counts", "energies", "iterations"):
         assert getattr(serial, name).tobytes() == getattr(parallel, name).tobytes(), name

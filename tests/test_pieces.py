@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fracture_cli.errors import StageError
-from fracture_cli.stages.pieces import PiecesOptions, pieces
+from fracture_cli.stages.pieces import PiecesOptions, pieces, tet_material_fraction
 from fracture_cli.testing import grid_tetmesh
 from fracture_cli.types import Modes
 
@@ -75,9 +75,9 @@ def test_merge_small_pieces(grid):
     c = grid.tet_centroids
     small = (c[:, 0] > 0.32) & (c[:, 1] > 0.32) & (c[:, 2] > 0.32)  # one voxel corner
     rows = [small.astype(int)]
-    P0 = pieces(grid, _modes_from_labels(grid, rows))
+    P0 = pieces(grid, _modes_from_labels(grid, rows), PiecesOptions(min_fragment_fraction=0.0))
     assert P0.num_pieces == 2
-    P1 = pieces(grid, _modes_from_labels(grid, rows), PiecesOptions(min_volume_fraction=0.01))
+    P1 = pieces(grid, _modes_from_labels(grid, rows), PiecesOptions(min_fragment_fraction=0.01))
     assert P1.num_pieces == 1
     np.testing.assert_allclose(P1.volumes.sum(), P0.volumes.sum())
     # The deviation check is on the atomic pieces (before merging), where the modes are constant.
@@ -87,11 +87,40 @@ def test_merge_small_pieces(grid):
     np.testing.assert_allclose(P1.W[0, 0, 0], np.sum(vol * (rows[0] + 1.0)) / vol.sum())
 
 
+def _box_surface(lo, hi):
+    import trimesh
+
+    from fracture_cli.types import Material, Normalization, SurfaceMesh
+
+    box = trimesh.creation.box(bounds=(lo, hi))
+    return SurfaceMesh(vertices=np.asarray(box.vertices, float), faces=np.asarray(box.faces, np.int64), uvs=None,
+                       normals=None, colors=None, material_ids=np.zeros(len(box.faces), np.int32),
+                       materials=(Material("m"),), normalization=Normalization.identity())
+
+
+def test_pieces_are_measured_in_asset_volume(grid):
+    """Piece sizes count the asset they hold, not the cage: an empty piece always merges, and the threshold is a
+    fraction of the asset's volume."""
+    c = grid.tet_centroids
+    # The asset fills x < 0 of the grid; modes cut at x = 1/3 (a piece with no asset) and at y = 0.
+    rows = [(c[:, 0] > 1 / 3).astype(int), (c[:, 1] > 0).astype(int)]
+    asset = _box_surface((-0.5, -0.5, -0.5), (0.0, 0.5, 0.5))
+    modes = _modes_from_labels(grid, rows)
+    assert pieces(grid, modes, PiecesOptions(min_fragment_fraction=0.0)).num_pieces == 4
+    P = pieces(grid, modes, PiecesOptions(min_fragment_fraction=0.0), surface=asset)
+    assert P.num_pieces == 2  # the two pieces beyond x = 1/3 hold nothing of the asset
+    material = tet_material_fraction(grid, asset)
+    np.testing.assert_allclose((material * np.abs(grid.tet_volumes)).sum(), 0.5, rtol=1e-9)
+    # Each of the two remaining pieces holds half the asset (a quarter of the grid): merged above one half.
+    assert pieces(grid, modes, PiecesOptions(min_fragment_fraction=0.3), surface=asset).num_pieces == 2
+    assert pieces(grid, modes, PiecesOptions(min_fragment_fraction=0.5 + 1e-6), surface=asset).num_pieces == 1
+
+
 def test_merging_does_not_warn(grid, caplog):
     c = grid.tet_centroids
     rows = [((c[:, 0] > 0.32) & (c[:, 1] > 0.32)).astype(int), (c[:, 2] > 0.0).astype(int)]
     with caplog.at_level(logging.WARNING):
-        P = pieces(grid, _modes_from_labels(grid, rows), PiecesOptions(min_volume_fraction=0.05))
+        P = pieces(grid, _modes_from_labels(grid, rows), PiecesOptions(min_fragment_fraction=0.05))
     assert P.num_pieces < 4
     assert not any("deviates" in r.message for r in caplog.records)
 

@@ -38,7 +38,7 @@ def test_every_recipe_key_is_in_help_with_the_default_bake_uses(section):
         flag = "--" + f.name.replace("_", "-")
         assert flag in text, (section, flag)
     if section == "pieces":  # the recipe's value, not the options class's
-        assert "[recipe 'default': 0.002]" in text
+        assert "[recipe 'default': 0.01]" in text
     if section == "fragments":
         assert "--interior-color TOML" in text and "[recipe 'default': [0.55, 0.5, 0.45, 1.0]]" in text
     if section == "material":

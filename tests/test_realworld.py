@@ -28,48 +28,23 @@ from fracture_cli.cli import cli
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from invariants import check_glb, input_box, read_glb_fragments
 
+from conftest import SPLITS_BODIES
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 CORPUS = os.path.join(HERE, "data", "realworld")
 with open(os.path.join(CORPUS, "expected.toml"), "rb") as _fh:
     CASES = {c["file"]: c for c in tomllib.load(_fh)["case"]}
 SMALL = ("cage.target_faces=500", "modes.num_modes=4")
 
-# Root causes (see docs/notes/realworld-diagnosis.md); each entry is a strict xfail of test_corpus_bake.
-_FILL_LIMIT = (
-    "repair.auto shells an open body whose holes exceed max_fill_ratio=2% of the area "
-    "(repair.py:repair step 4), so a closed shape with holes becomes an eggshell 1% of the diagonal thick"
-)
-_EDGE_UNION = (
-    "repair.py:_split_nonmanifold + _union_bodies: bodies touching along an edge are united by manifold3d, "
-    "which keeps the edge as two coincident edges; fragments cut from that solid have 4-face (pinched) "
-    "edges, and checks.py:_closed_by_position counts a balanced 4-face edge as watertight"
-)
-_REFUSED = (
-    "repair.py:_split_nonmanifold pairs only closed patches or open patches with identical boundaries; "
-    "coincident faces triangulated differently leave 4-face edges it cannot pair, and the bake is refused"
-)
-_SOUP = (
-    "repair.py:_unique_faces drops a duplicated face together with its reversed copy ('back-to-back'), so a "
-    "soup's duplicate of opposite winding becomes a hole; the soup is then shelled (over 2%), outward where the "
-    "load-time shading normals (from the random winding) point in, and the shell's rims pinch"
-)
-KNOWN_FAILURES = {
-    "head_open_eyes.glb": _FILL_LIMIT + " (the eyes' rims are 2.35% of the area)",
-    "scan_holes_037.glb": _FILL_LIMIT,
-    "scan_holes_06.glb": _FILL_LIMIT,
-    "scan_holes_10.glb": _FILL_LIMIT,
-    "gear_edge_contact.glb": _EDGE_UNION,
-    "vertex_contact.glb": _EDGE_UNION,
-    "gear_coplanar.glb": _REFUSED,
-    "touching_fragments.glb": _REFUSED,
-    "soup.stl": _SOUP,
-    "teapot.glb": _FILL_LIMIT + " (22.9%): four thin shells, the pot's inside empty; and the shelled union has a "
-    "cavity, for which repair.py:_reversed passes manifold3d a read-only vert_properties view: TypeError, "
-    "an internal error",
-    "awning_sheet.glb": (
-        "repair.py:_shell offsets along the area-weighted vertex normal with no bound: at the rim the "
-        "normal tilts, and the back side leaves the input's bounding box (by ~0.1% of the diagonal)"
-    ),
+# Fragments of several bodies (bodies touching along an edge or at a point) are split into one fragment per body
+# where the tree has that split (conftest.SPLITS_BODIES); without it, these files are expected to fail: a pinched
+# fragment stops the bake (exit 1).
+NEEDS_BODY_SPLIT = {
+    "gear_edge_contact.glb": "teeth touch the hub along an edge: the solid keeps the 4-face edge, and a fragment "
+    "holding a tooth and the hub is two bodies sharing it (pinched), which only splitting the fragment into its "
+    "bodies resolves",
+    "vertex_contact.glb": "boxes touching at a corner and along an edge: fragments holding both sides are several "
+    "bodies sharing an edge or a vertex",
 }
 
 
@@ -102,6 +77,11 @@ def bake_once(shared: str, path: str, recipe: str = "default", overrides=SMALL) 
     return record["exit"], record["output"], out
 
 
+def read_report(out: str, path: str) -> dict:
+    with open(os.path.join(out, f"{os.path.splitext(os.path.basename(path))[0]}.report.json")) as fh:
+        return json.load(fh)
+
+
 def check_bake(case: dict, path: str, exit_code: int, output: str, out: str) -> list[str]:
     """Everything wrong with one bake of a corpus file, as lines (empty when it meets its expected outcome)."""
     if exit_code != 0:
@@ -115,12 +95,18 @@ def check_bake(case: dict, path: str, exit_code: int, output: str, out: str) -> 
         reference_box=input_box(path),
     )
     problems = list(check.problems)
-    with open(os.path.join(out, f"{stem}.report.json")) as fh:
-        report = json.load(fh)
-    claimed = report["checks"]["watertight"]
-    really = not any(f.problems for f in check.fragments)
-    if claimed != really:
-        problems.append(f"report says watertight={claimed}, the independent check says {really}")
+    report = read_report(out, path)
+    claims = report["checks"]
+    watertight = not any(f.open_edges or f.pinched_edges or f.misoriented_edges or f.degenerate_faces
+                         or not f.volume > 0 for f in check.fragments)
+    connected = all(f.components == 1 for f in check.fragments)
+    if claims["watertight"] != watertight:
+        problems.append(f"report says watertight={claims['watertight']}, the independent check says {watertight}")
+    if claims["connected"] != connected:
+        problems.append(f"report says connected={claims['connected']}, the independent check says {connected}")
+    decision = next(r for r in report["repairs"] if r["what"] == "decision")["decision"]
+    if decision != case["outcome"]:
+        problems.append(f"repair decided {decision!r}, expected {case['outcome']!r}")
     return problems
 
 
@@ -128,8 +114,8 @@ def check_bake(case: dict, path: str, exit_code: int, output: str, out: str) -> 
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_corpus_bake(name, tmp_path_factory, request):
     """Bake one corpus file and check its expected outcome on the written GLB."""
-    if name in KNOWN_FAILURES:
-        request.applymarker(pytest.mark.xfail(strict=True, reason=KNOWN_FAILURES[name]))
+    if name in NEEDS_BODY_SPLIT and not SPLITS_BODIES:
+        request.applymarker(pytest.mark.xfail(strict=True, reason=NEEDS_BODY_SPLIT[name]))
     case = CASES[name]
     path = os.path.join(CORPUS, name)
     exit_code, output, out = bake_once(_shared_dir(tmp_path_factory), path)
@@ -138,76 +124,108 @@ def test_corpus_bake(name, tmp_path_factory, request):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True, reason="report.json has no 'repairs' list yet (bake.py); round two adds it from the meshfix records"
-)
-@pytest.mark.parametrize("name", ["scan_holes_037.glb", "gear_edge_contact.glb", "soup.stl"])
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_no_broken_fragment_is_written(name, tmp_path_factory):
+    """Whatever the outcome: no fragment is written with an open, pinched or misoriented edge, and the report's
+    ``watertight`` agrees with the independent check; a bake that cannot do it fails with one line, no output."""
+    path = os.path.join(CORPUS, name)
+    exit_code, output, out = bake_once(_shared_dir(tmp_path_factory), path)
+    stem = os.path.splitext(name)[0]
+    if exit_code != 0:
+        lines = output.strip().splitlines()
+        assert exit_code == 1 and lines and lines[-1].startswith("error:") and "Traceback" not in output, output
+        assert not os.path.exists(os.path.join(out, f"{stem}.glb"))
+        return
+    check = check_glb(os.path.join(out, f"{stem}.glb"))
+    broken = [f"{f.name}: {f.problems}" for f in check.fragments
+              if f.open_edges or f.pinched_edges or f.misoriented_edges or f.degenerate_faces or not f.volume > 0]
+    assert not broken, broken[:5]
+    report = read_report(out, path)
+    assert report["checks"]["watertight"] is True
+    assert report["checks"]["connected"] == all(f.components == 1 for f in check.fragments)
+    assert report["checks"]["fragment_bodies_max"] == max(f.components for f in check.fragments)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["scan_holes_037.glb", "awning_sheet.glb", "soup.stl", "teapot.glb"])
 def test_corpus_repairs_are_reported(name, tmp_path_factory):
-    """What repair did (filled holes and their area, split edges, re-wound faces) is listed in report.json."""
+    """What repair did (filled holes and their area, thickened sheets, re-wound faces) is listed in report.json."""
     path = os.path.join(CORPUS, name)
     exit_code, output, out = bake_once(_shared_dir(tmp_path_factory), path)
     assert exit_code == 0, output
-    with open(os.path.join(out, f"{os.path.splitext(name)[0]}.report.json")) as fh:
-        report = json.load(fh)
-    repairs = report.get("repairs")
+    repairs = read_report(out, path)["repairs"]
     assert isinstance(repairs, list) and repairs, "no repairs listed"
     assert all({"what", "detail"} <= set(r) for r in repairs)
+    assert repairs[0]["what"] == "decision" and repairs[0]["decision"] == CASES[name]["outcome"]
+    kinds = {r["what"] for r in repairs}
+    expected = {"scan_holes_037.glb": "filled_hole", "awning_sheet.glb": "thickened_sheet",
+                "soup.stl": "flipped_winding", "teapot.glb": "filled_hole"}[name]
+    assert expected in kinds, sorted(kinds)
+    assert all(r["area"] > 0 for r in repairs if r["what"] == "filled_hole")
+    # Significant repairs are printed at the default verbosity, with the per-asset override where one applies.
+    assert "warning: repair:" in output
+    if CASES[name]["kind"] != "triangle soup":
+        assert "--set repair.open_surface=" in output
 
 
 @pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
-    reason="the output GLB stores each fragment in float32 about its own pivot, so "
-    "neighbours' shared faces no longer coincide (off by ~1e-8); repair.py:_union_bodies unites them "
-    "into a solid with hairline gaps and pinched edges; its fragments have vertices 1e-9 apart that "
-    "merge when written in float32 (degenerate faces, pinched edges, several bodies), while "
-    "checks.py:fragment_invariants checks the float64 meshes and reports watertight",
+    reason="re-baking an output GLB: repair snaps the fragments' shared vertices (float32 about different pivots) "
+    "and unites the fragments into the first bake's volume, but where a fault meets the outer surface their "
+    "rounded faces are not coplanar, so the union keeps hairline cracks that close along edges (9 pinched edges "
+    "on the pillar); fragments cut across them are pinched and the bake stops with one line "
+    "(test_rebaked_output_glb_is_never_written_broken)",
 )
 def test_rebaking_an_output_glb(tmp_path_factory):
     """Bake a sample asset, then bake its output GLB: one solid of the same volume, every fragment closed."""
-    from conftest import SAMPLE_ASSETS
-
-    shared = _shared_dir(tmp_path_factory)
-    source = os.path.join(SAMPLE_ASSETS, "pillar.glb")
-    exit_code, output, first = bake_once(shared, source)
-    assert exit_code == 0, output
-    first_glb = os.path.join(first, "pillar.glb")
+    path, exit_code, output, out = _rebake(tmp_path_factory)
+    first_glb = os.path.join(_shared_dir(tmp_path_factory), "pillar-default-small", "pillar.glb")
     volume = sum(check.volume for check in check_glb(first_glb).fragments)
     assert len(read_glb_fragments(first_glb)) > 1
-    rebake_input = os.path.join(shared, "pillar_fragments.glb")
-    if not os.path.exists(rebake_input):
-        with open(first_glb, "rb") as src, open(rebake_input, "wb") as dst:
-            dst.write(src.read())
-    exit_code, output, out = bake_once(shared, rebake_input)
-    case = {"volume": volume, "volume_tolerance": 1e-3, "kind": "re-baked output GLB"}
-    problems = check_bake(case, rebake_input, exit_code, output, out)
+    case = {"volume": volume, "volume_tolerance": 1e-3, "kind": "re-baked output GLB", "outcome": "solid"}
+    problems = check_bake(case, path, exit_code, output, out)
     assert not problems, "; ".join(problems[:8])
 
 
+def _rebake(tmp_path_factory) -> tuple[str, int, str, str]:
+    """Bake pillar.glb, then bake its output GLB (both cached for the run); the second bake's input and result."""
+    from conftest import SAMPLE_ASSETS
+
+    shared = _shared_dir(tmp_path_factory)
+    exit_code, output, first = bake_once(shared, os.path.join(SAMPLE_ASSETS, "pillar.glb"))
+    assert exit_code == 0, output
+    rebake_input = os.path.join(shared, "pillar_fragments.glb")
+    if not os.path.exists(rebake_input):
+        with open(os.path.join(first, "pillar.glb"), "rb") as src, open(rebake_input, "wb") as dst:
+            dst.write(src.read())
+    return (rebake_input, *bake_once(shared, rebake_input))
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    "name",
-    [
-        "two_prisms.glb",
-        pytest.param(
-            "scan_holes_01.glb",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason=(
-                    "pieces.py: the atomic pieces are the common refinement of all 12 modes' partitions; on a round, "
-                    "nearly symmetric body the modes cut along unrelated surfaces, so the refinement has 520 "
-                    "atomic pieces (a cube: 40), and min_volume_fraction=0.002, measured on cage volume, merges only "
-                    "down to 197"
-                ),
-            ),
-        ),
-    ],
-)
+def test_rebaked_output_glb_is_never_written_broken(tmp_path_factory):
+    """Re-baking an output GLB: the fragments are snapped and united (repairs say so); the bake either writes
+    sound fragments or stops with one line naming the fragment, and writes nothing."""
+    path, exit_code, output, out = _rebake(tmp_path_factory)
+    assert "snapped" in output and "nearly coincident vertices" in output
+    if exit_code == 0:
+        check = check_glb(os.path.join(out, "pillar_fragments.glb"))
+        assert not [f for f in check.fragments if f.open_edges or f.pinched_edges or f.degenerate_faces]
+    else:
+        last = output.strip().splitlines()[-1]
+        assert exit_code == 1 and last.startswith("error:") and "fragment_" in last and "Traceback" not in output
+        assert not os.path.exists(os.path.join(out, "pillar_fragments.glb"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["two_prisms.glb", "scan_holes_01.glb"])
 def test_fragment_count_follows_the_recipe(name, tmp_path_factory):
     """With the default recipe (full settings), a compact asset gives tens of fragments, not gravel."""
     case = CASES[name]
     exit_code, output, out = bake_once(_shared_dir(tmp_path_factory), os.path.join(CORPUS, name), overrides=())
     assert exit_code == 0, output
-    with open(os.path.join(out, f"{os.path.splitext(name)[0]}.report.json")) as fh:
-        count = json.load(fh)["counts"]["fragments"]
+    checks = read_report(out, name)["checks"]
+    count = checks["fragments"]
     assert count <= case["max_fragments"], f"{count} fragments (at most {case['max_fragments']} expected)"
+    # The distribution of fragment sizes is reported, relative to the asset.
+    assert 0 < checks["fragment_volume_min"] <= checks["fragment_volume_median"] <= checks["fragment_volume_max"] <= 1

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 import pytest
 from click.testing import CliRunner
 
@@ -115,3 +117,17 @@ def test_interior_colour_is_a_validated_vector():
         load_recipe("default", ["fragments.interior_color=[0.2, 0.1]"])
     with pytest.raises(RecipeError, match="out of range"):
         load_recipe("default", ["fragments.interior_color=[2, 0, 0, 1]"])
+
+
+def test_keys_of_older_recipes_still_load(tmp_path, caplog):
+    """A retired key is ignored and a renamed one read under its new name, each with a warning saying why."""
+    old = tmp_path / "old.toml"
+    old.write_text('extends = "default"\n[repair]\nmax_fill_ratio = 0.02\n[pieces]\nmin_volume_fraction = 0.004\n')
+    with caplog.at_level(logging.WARNING, logger="fracture_cli.recipe"):
+        recipe = load_recipe(str(old))
+    assert recipe["pieces"].min_fragment_fraction == 0.004
+    messages = " ".join(r.message for r in caplog.records)
+    assert "repair.max_fill_ratio is no longer used" in messages and "max_fill_share" in messages
+    assert "pieces.min_volume_fraction is now pieces.min_fragment_fraction" in messages
+    with pytest.raises(RecipeError, match="no longer used.*max_fill_share"):
+        load_recipe("default", ["repair.max_fill_ratio=0.1"])

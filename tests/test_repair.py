@@ -10,7 +10,7 @@ import trimesh
 
 from fracture_cli.errors import StageError
 from fracture_cli.io.read import load_surface
-from fracture_cli.stages.repair import RepairOptions, repair
+from fracture_cli.stages.repair import RepairOptions, repair, repair_surface
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Material, Normalization, SurfaceMesh
 
 from conftest import SAMPLE_ASSETS
@@ -92,14 +92,19 @@ def test_open_vase_becomes_a_solid(vase, mode):
         assert r.vertices.min(axis=0) == pytest.approx(vase.vertices.min(axis=0), abs=0.011)
 
 
-def test_auto_fills_small_holes_and_shells_large_ones(vase, caplog):
-    with caplog.at_level(logging.INFO, logger="fracture_cli.stages.repair"):
-        filled = repair(vase)  # the top opening is ~0.5% of the surface
-    assert any("auto: fill" in r.message for r in caplog.records)
-    assert any("filled 1 hole" in r.message for r in caplog.records)
+def test_auto_fills_holes_that_close_into_a_solid(vase, caplog):
+    with caplog.at_level(logging.WARNING, logger="fracture_cli.stages.repair"):
+        result = repair_surface(vase)  # the top opening: a planar loop, ~0.5% of the surface
+    warnings = [r.message for r in caplog.records]
+    assert any("filled" in m and "--set repair.open_surface=shell" in m for m in warnings), warnings
+    assert result.records[0].what == "decision" and result.records[0].extra["decision"] == "solid"
+    assert [r.what for r in result.records].count("filled_hole") == 1
+    filled = result.surface
     assert (filled.material_ids == 1).sum() < 0.05 * filled.num_faces
-    shelled = repair(vase, RepairOptions(max_fill_ratio=0.001))
-    assert closed_by_position(shelled).volume < 0.2 * closed_by_position(filled).volume
+    # a body whose patches would be more than max_fill_share of its surface is a sheet: thickened inward
+    shelled = repair_surface(vase, RepairOptions(max_fill_share=0.001))
+    assert shelled.records[0].extra["decision"] == "shell"
+    assert closed_by_position(shelled.surface).volume < 0.2 * closed_by_position(filled).volume
 
 
 def test_open_error_mode_names_the_loops(vase):
@@ -170,7 +175,7 @@ def test_duplicated_and_degenerate_faces_are_removed(caplog):
     assert r.num_faces == 12
     assert trimesh.Trimesh(r.vertices, r.faces).volume == pytest.approx(1 / s.normalization.scale**3, rel=1e-9)
     message = " ".join(rec.message for rec in caplog.records)
-    assert "removed 3 degenerate faces" in message and "removed 3 duplicated faces" in message
+    assert "removed 3 degenerate faces" in message and "removed 3 repeated copies of faces" in message
 
 
 @pytest.mark.parametrize("mode", ["auto", "fill"])
@@ -243,3 +248,49 @@ def test_edges_shared_by_three_faces_are_refused():
     F = np.vstack([box.faces, [[a, b, len(box.vertices)]]])
     with pytest.raises(StageError, match="shared by more than two faces"):
         repair(surface(fin, F))
+
+
+def test_two_bodies_one_hollow():
+    """A hollow box (with a cavity) next to a second body: the union subtracts the cavity (once an internal error:
+    manifold3d's read-only buffers were passed back to it)."""
+    outer = trimesh.creation.box(extents=(2, 2, 2))
+    inner = trimesh.creation.box(extents=(1, 1, 1))
+    inner.invert()
+    other = trimesh.creation.box(extents=(1, 1, 1))
+    other.apply_translation((1.2, 0.0, 0.0))  # partly inside the hollow box's wall, not touching its cavity
+    parts = trimesh.util.concatenate([outer, inner, other])
+    s = surface(parts.vertices, parts.faces)
+    r = repair_surface(s)
+    assert trimesh.Trimesh(r.surface.vertices, r.surface.faces).volume == pytest.approx(
+        (8 - 1 + 0.7) / s.normalization.scale**3, rel=1e-9)
+    assert any(rec.what == "unioned_bodies" and rec.extra["cavities"] == 1 for rec in r.records)
+
+
+def test_bodies_a_rounding_step_apart_are_snapped_and_united():
+    """Two boxes sharing a face, one moved by 1e-9 of the diagonal (a baked GLB's fragments read back): snapped
+    and united into one closed body, no hairline gap."""
+    from fracture_cli.meshfix.weld_check import check_mesh
+
+    a = trimesh.creation.box(extents=(1, 1, 1))
+    b = trimesh.creation.box(extents=(1, 1, 1))
+    b.apply_translation((1.0 + 2e-9, 1e-9, 0.0))
+    both = trimesh.util.concatenate([a, b])
+    s = surface(both.vertices, both.faces)
+    r = repair_surface(s)
+    assert [rec for rec in r.records if rec.what == "snapped_vertices"][0].count == 4
+    check = check_mesh(r.surface.vertices, r.surface.faces)
+    assert check.closed and check.pinched_vertices == 0, check.problems()
+    assert check.volume == pytest.approx(2 / s.normalization.scale**3, rel=1e-6)
+
+
+def test_shell_stays_inside_the_input_box(vase):
+    r = repair(vase, RepairOptions(open_surface="shell"))
+    lo, hi = vase.vertices.min(axis=0), vase.vertices.max(axis=0)
+    assert np.all(r.vertices >= lo - 1e-6) and np.all(r.vertices <= hi + 1e-6)  # unit diagonal: 1e-6 of it
+
+
+def test_repairs_are_warned_with_the_override(vase, caplog):
+    with caplog.at_level(logging.WARNING, logger="fracture_cli.stages.repair"):
+        repair(vase, RepairOptions(open_surface="shell"))
+    warnings = [r.message for r in caplog.records if r.levelno == logging.WARNING]
+    assert any("thickened" in m and "--set repair.open_surface=fill" in m for m in warnings), warnings

@@ -143,7 +143,7 @@ def test_direct_regions_match_cell_unions():
     tet_piece = P.tet_piece.astype(np.int64)
     lam = 2e-3
     R = smooth(tm, P, SmoothOptions(smoothing=lam, method="field", refine=0))
-    Z, vanished = _winning_field(tm, _Topology(tm.tets, tm.num_vertices), tet_piece, P, lam, 0.01)
+    Z, vanished, _ = _winning_field(tm, _Topology(tm.tets, tm.num_vertices), tet_piece, P, lam, 0.01)
     assert list(R.vanished) == vanished
     unions = _union_regions(tm.vertices, tm.tets, Z, tet_piece, P.num_pieces, list(R.vanished),
                             list(range(P.num_pieces)))

@@ -6,7 +6,8 @@
  *
  * Layout of this file: JSON (a small validating parser for the header), header
  * (the keys of docs/FORMAT.md section 1), load (validation, one allocation, the
- * k-d tree and the spanning forest), project (section 4, no allocation).
+ * k-d tree, the whole graph's groups and the d = 1 jump table), project (section 4,
+ * no allocation).
  */
 #include "fracture_runtime.h"
 
@@ -27,9 +28,22 @@
 #define JSON_MAX_DEPTH 64
 #define NUMBER_MAX 511  /* longest number token accepted (the writer's are under 30 characters) */
 #define URI_MAX 255
-#define KD_LEAF 8
+#define KD_LEAF 16
 #define KD_STACK 96
 #define BOUND_SLACK 1e-9 /* far above the rounding of a k-term sum in double for any k << 1e6 */
+#if defined(__cplusplus) || (defined(_MSC_VER) && !defined(__STDC_VERSION__))
+#define restrict __restrict /* the source also compiles as C++, and as C by MSVC before /std:c11 */
+#endif
+#if defined(__GNUC__) || defined(__clang__)
+#define NOINLINE __attribute__((noinline))
+#elif defined(_MSC_VER)
+#define NOINLINE __declspec(noinline)
+#else
+#define NOINLINE
+#endif
+#ifndef FR_TABLE_MAX_BYTES
+#define FR_TABLE_MAX_BYTES (16u << 20) /* largest d = 1 jump table fr_load builds (see wants_table) */
+#endif
 
 /* ------------------------------------------------------------------ messages */
 
@@ -705,8 +719,7 @@ struct fr_runtime {
     int32_t s, k, p, e, d;
     double default_threshold, impact_radius, transform[16];
     float *sites, *B, *areas;
-    double *Wd; /* (k, p, d) W in double */
-    int32_t *edges;
+    int32_t *edges;    /* (e, 2) as in the file */
     char *names;
     int32_t *name_offsets;
     double *kd_points; /* (s, 3) sites in tree order */
@@ -714,19 +727,19 @@ struct fr_runtime {
     kd_node *kd_nodes;
     int32_t *whole;    /* groups of the whole graph (no edge broken) */
     int32_t whole_groups;
-    /* Spanning forest in DFS preorder ("positions"): a subtree is a range of positions. */
-    int32_t *pos;         /* (p,) position of each fragment */
-    int32_t *parent_pos;  /* (p,) by position: position of the parent (itself for a root) */
-    uint8_t *root_head;   /* (p,) by position: 1 for a tree's root */
-    int32_t *identity;    /* (p,) 0, 1, 2, ...: initial union-find parents */
-    int32_t *tree_child;  /* (e,) position of the child a tree edge leads to, -1 for other edges */
-    int32_t *order;       /* (e,) edges in test order: the num_tree spanning-tree edges first */
-    int32_t *ends;        /* (e, 2) (P, Q) of each edge in test order */
-    int32_t *child_at;    /* (num_tree,) tree_child of each tree edge in test order */
-    double *edge_bound;   /* (e,) in test order: |W[:, P] - W[:, Q]| + slack * (|W[:, P]| + |W[:, Q]|) */
-    int32_t num_tree;
-    int32_t *end_pos;     /* (e, 2) positions of each edge's ends, in test order */
-    void *scratch;        /* the built-in workspace */
+    int32_t *identity; /* (p,) 0, 1, 2, ...: initial union-find parents */
+    int32_t row;       /* p * d rounded up to a multiple of 16 */
+    double *Wd;        /* (k, row) W in double, zero padding */
+    double max_bound;  /* largest per-edge bound (see edge_bounds) */
+    double *jumps;     /* (s, e) d = 1 jump table, each row ascending (see build_jump_table); NULL if not built */
+    uint16_t *jump_edge; /* (s, e) the edge of each entry of `jumps` */
+    /* Per site, the merges of Kruskal's algorithm over its row (see build_merges), p entries each: */
+    uint16_t *merge_at;     /* (s, p) position in the row of each merge's edge (ascending) */
+    uint16_t *merge_child;  /* (s, p, 2) the two clusters each merge joins: fragment j, or p + earlier merge */
+    int32_t *merge_label;   /* (s, p) smallest fragment of each merge's cluster */
+    int32_t merges;         /* merges per site: p minus the whole graph's number of groups */
+    size_t bytes;      /* size of the block */
+    void *scratch;     /* the built-in workspace */
 };
 
 typedef struct dims {
@@ -919,58 +932,62 @@ static uint64_t take(uint64_t *cursor, uint64_t bytes)
 }
 
 typedef struct workspace_layout {
-    uint64_t alpha, disp, head, broken, piece, uf, first, size;
+    uint64_t alpha, disp, cut, uf, size;
 } workspace_layout;
+
+static int64_t round_up(int64_t n, int64_t multiple) { return (n + multiple - 1) / multiple * multiple; }
 
 static workspace_layout workspace_plan(int64_t k, int64_t p, int64_t e, int64_t d)
 {
     workspace_layout w;
     uint64_t cursor = 0;
     w.alpha = take(&cursor, 8u * (uint64_t)k);
-    w.disp = take(&cursor, 8u * (uint64_t)p * (uint64_t)d);
-    w.head = take(&cursor, (uint64_t)p);
-    w.broken = take(&cursor, (uint64_t)e);
-    w.piece = take(&cursor, 4u * (uint64_t)p);
-    w.uf = take(&cursor, 4u * (uint64_t)p);
-    w.first = take(&cursor, 4u * (uint64_t)p);
+    w.disp = take(&cursor, 8u * (uint64_t)round_up(p * d, 16));
+    w.cut = take(&cursor, (uint64_t)e);
+    w.uf = take(&cursor, 8u * (uint64_t)p); /* union-find parents, or table_groups' 2p labels */
     w.size = take(&cursor, 0);
     return w;
 }
 
+/*
+ * Whether fr_load builds the d = 1 jump table: (10 e + 10 p) bytes per site, at most
+ * FR_TABLE_MAX_BYTES in all (compile with -DFR_TABLE_MAX_BYTES=... to change the limit).
+ */
+static int wants_table(const dims *dm, unsigned flags)
+{
+    return dm->d == 1 && dm->e > 0 && dm->e <= 65535 && dm->p <= 32767 && (flags & FR_LOAD_COMPACT) == 0 &&
+           (uint64_t)(10 * dm->e + 10 * dm->p) <= (uint64_t)FR_TABLE_MAX_BYTES / (uint64_t)dm->s;
+}
+
 /* Offsets of every array in the runtime's block (after the struct itself). */
 typedef struct block_layout {
-    uint64_t sites, B, W, areas, edges, edge_bound, names, name_offsets, kd_points, kd_index, kd_nodes, whole;
-    uint64_t pos, parent_pos, root_head, identity, tree_child, order, ends, end_pos, child_at, scratch, size;
-    uint64_t kd_capacity;
+    uint64_t sites, B, W, areas, edges, names, name_offsets, kd_points, kd_index, kd_nodes, whole, identity;
+    uint64_t jumps, jump_edge, merge_at, merge_child, merge_label, scratch, size, kd_capacity;
 } block_layout;
 
-static block_layout block_plan(const dims *dm, int64_t name_bytes)
+static block_layout block_plan(const dims *dm, int64_t name_bytes, int table)
 {
     block_layout b;
     uint64_t s = (uint64_t)dm->s, k = (uint64_t)dm->k, p = (uint64_t)dm->p, e = (uint64_t)dm->e, d = (uint64_t)dm->d;
     uint64_t cursor = sizeof(struct fr_runtime);
-    b.kd_capacity = s / 2 + 2;
+    b.kd_capacity = 4u * s / KD_LEAF + 2; /* a leaf holds at least KD_LEAF / 2 sites */
     b.sites = take(&cursor, 12u * s);
     b.B = take(&cursor, 4u * s * k * d);
-    b.W = take(&cursor, 8u * k * p * d);
+    b.W = take(&cursor, 8u * k * (uint64_t)round_up(dm->p * dm->d, 16));
     b.areas = take(&cursor, 4u * e);
     b.edges = take(&cursor, 8u * e);
-    b.edge_bound = take(&cursor, 8u * e);
     b.names = take(&cursor, (uint64_t)name_bytes);
     b.name_offsets = take(&cursor, 4u * p);
     b.kd_points = take(&cursor, 24u * s);
     b.kd_index = take(&cursor, 4u * s);
     b.kd_nodes = take(&cursor, sizeof(kd_node) * b.kd_capacity);
     b.whole = take(&cursor, 4u * p);
-    b.pos = take(&cursor, 4u * p);
-    b.parent_pos = take(&cursor, 4u * p);
-    b.root_head = take(&cursor, p);
     b.identity = take(&cursor, 4u * p);
-    b.tree_child = take(&cursor, 4u * e);
-    b.order = take(&cursor, 4u * e);
-    b.ends = take(&cursor, 8u * e);
-    b.child_at = take(&cursor, 4u * e);
-    b.end_pos = take(&cursor, 8u * e);
+    b.jumps = take(&cursor, table ? 8u * s * e : 0u);
+    b.jump_edge = take(&cursor, table ? 2u * s * e : 0u);
+    b.merge_at = take(&cursor, table ? 2u * s * p : 0u);
+    b.merge_child = take(&cursor, table ? 4u * s * p : 0u);
+    b.merge_label = take(&cursor, table ? 4u * s * p : 0u);
     b.scratch = take(&cursor, workspace_plan(dm->k, dm->p, dm->e, dm->d).size);
     b.size = take(&cursor, 0);
     return b;
@@ -981,7 +998,7 @@ static void copy_arrays(fr_runtime *rt, const header *h, const unsigned char *bi
     float *floats[3];
     static const int FLOAT_ARRAYS[3] = {A_SITES, A_B, A_AREAS};
     int a;
-    int64_t i;
+    int64_t i, j, n = (int64_t)rt->p * rt->d;
     floats[0] = rt->sites;
     floats[1] = rt->B;
     floats[2] = rt->areas;
@@ -990,31 +1007,226 @@ static void copy_arrays(fr_runtime *rt, const header *h, const unsigned char *bi
         for (i = 0; i < entry->length / 4; i++)
             floats[a][i] = read_f32(bin + entry->offset + 4 * i);
     }
-    for (i = 0; i < h->arrays[A_W].length / 4; i++)
-        rt->Wd[i] = read_f32(bin + h->arrays[A_W].offset + 4 * i);
+    for (i = 0; i < rt->k; i++)
+        for (j = 0; j < rt->row; j++)
+            rt->Wd[i * rt->row + j] = j < n ? read_f32(bin + h->arrays[A_W].offset + 4 * (i * n + j)) : 0.0;
     for (i = 0; i < 2 * (int64_t)rt->e; i++)
         rt->edges[i] = read_i32(bin + h->arrays[A_EDGES].offset + 4 * i);
 }
 
 /*
- * Per edge, a constant c with |jump'| <= |alpha'| * c for the computed jump (Cauchy-Schwarz
- * on W[:, P] - W[:, Q], plus the rounding of both displacements), so fr_project can skip
- * the edges that surely hold without computing any displacement.
+ * The largest over edges of a constant c with |jump'| <= |alpha'| * c for the computed
+ * jump (Cauchy-Schwarz on W[:, P] - W[:, Q], plus the rounding of both displacements),
+ * so fr_project can skip the edge pass without computing any displacement.
  */
 static void edge_bounds(fr_runtime *rt)
 {
-    int32_t m, i, c, k = rt->k, p = rt->p, d = rt->d;
+    int32_t m, i, c, k = rt->k, d = rt->d;
+    rt->max_bound = 0.0;
     for (m = 0; m < rt->e; m++) {
-        int32_t P = rt->ends[2 * m], Q = rt->ends[2 * m + 1];
-        double diff2 = 0, wp2 = 0, wq2 = 0;
-        for (i = 0; i < k; i++)
+        const double *wp = rt->Wd + (size_t)rt->edges[2 * m] * d, *wq = rt->Wd + (size_t)rt->edges[2 * m + 1] * d;
+        double diff2 = 0, wp2 = 0, wq2 = 0, bound;
+        for (i = 0; i < k; i++, wp += rt->row, wq += rt->row)
             for (c = 0; c < d; c++) {
-                double wp = rt->Wd[((size_t)i * p + P) * d + c], wq = rt->Wd[((size_t)i * p + Q) * d + c];
-                diff2 += (wp - wq) * (wp - wq); /* float32 - float32 is exact in double */
-                wp2 += wp * wp;
-                wq2 += wq * wq;
+                diff2 += (wp[c] - wq[c]) * (wp[c] - wq[c]);
+                wp2 += wp[c] * wp[c];
+                wq2 += wq[c] * wq[c];
             }
-        rt->edge_bound[m] = (sqrt(diff2) + BOUND_SLACK * (sqrt(wp2) + sqrt(wq2))) * (1.0 + BOUND_SLACK);
+        bound = (sqrt(diff2) + BOUND_SLACK * (sqrt(wp2) + sqrt(wq2))) * (1.0 + BOUND_SLACK);
+        rt->max_bound = bound > rt->max_bound ? bound : rt->max_bound;
+    }
+}
+
+/* Union-find root with path halving; parents are never larger than their child (see unite). */
+static int32_t uf_root(int32_t *uf, int32_t a)
+{
+    while (uf[a] != a)
+        a = uf[a] = uf[uf[a]];
+    return a;
+}
+
+/* Step 6, one unbroken edge: hook the larger root under the smaller, so every parent is smaller than its child. */
+static void unite(int32_t *uf, int32_t P, int32_t Q)
+{
+    const int32_t a = uf_root(uf, P), b = uf_root(uf, Q);
+    uf[a > b ? a : b] = a > b ? b : a;
+}
+
+/*
+ * Step 6 after every unite: since parents are smaller, one forward pass turns each
+ * entry into its root, the component's smallest fragment (the group id). Returns
+ * the number of groups.
+ */
+static int32_t label(int32_t *uf, int32_t p, int32_t *groups)
+{
+    int32_t j, count = 0;
+    for (j = 0; j < p; j++) {
+        const int32_t root = uf[uf[j]]; /* uf[j] <= j is a root already */
+        uf[j] = root;
+        groups[j] = root;
+        count += root == j;
+    }
+    return count;
+}
+
+typedef struct jump_entry {
+    double value;
+    int32_t edge;
+} jump_entry;
+
+/*
+ * Stable least-significant-digit radix sort of n entries by value (non-negative
+ * doubles, whose bit patterns order like their values), a byte per pass, skipping
+ * the bytes every entry shares. `spare` holds n entries. Returns the sorted array.
+ */
+static jump_entry *sort_entries(jump_entry *a, jump_entry *spare, int32_t n)
+{
+    uint32_t count[8][256];
+    int32_t i, byte;
+    memset(count, 0, sizeof count);
+    for (i = 0; i < n; i++) {
+        uint64_t bits;
+        memcpy(&bits, &a[i].value, sizeof bits);
+        for (byte = 0; byte < 8; byte++)
+            count[byte][(bits >> (8 * byte)) & 255u]++;
+    }
+    for (byte = 0; byte < 8 && n > 0; byte++) {
+        uint32_t start[256], total = 0;
+        uint64_t first;
+        int digit;
+        jump_entry *t;
+        memcpy(&first, &a[0].value, sizeof first);
+        if (count[byte][(first >> (8 * byte)) & 255u] == (uint32_t)n)
+            continue; /* this byte is the same in every entry */
+        for (digit = 0; digit < 256; digit++) {
+            start[digit] = total;
+            total += count[byte][digit];
+        }
+        for (i = 0; i < n; i++) {
+            uint64_t bits;
+            memcpy(&bits, &a[i].value, sizeof bits);
+            spare[start[(bits >> (8 * byte)) & 255u]++] = a[i];
+        }
+        t = a, a = spare, spare = t;
+    }
+    return a;
+}
+
+/*
+ * Step 4: disp'[j, c] = sum over i of alpha'[i] W[i, j, c], each sum in mode order.
+ * Sixteen outputs at a time: sixteen independent sums that compilers keep in vector
+ * registers (GCC and Clang vectorize this at -O2, as long as it is not inlined into
+ * fr_project); rows of W are padded to a multiple of 16, so there is no remainder loop.
+ */
+NOINLINE static void displacements(const double *restrict W, size_t n, size_t k, const double *restrict alpha,
+                          double *restrict disp)
+{
+    size_t i, j;
+    for (j = 0; j < n; j += 16) {
+        double s[16] = {0};
+        const double *w = W + j;
+        for (i = 0; i < k; i++, w += n) {
+            const double a = alpha[i];
+            s[0] += a * w[0], s[1] += a * w[1], s[2] += a * w[2], s[3] += a * w[3];
+            s[4] += a * w[4], s[5] += a * w[5], s[6] += a * w[6], s[7] += a * w[7];
+            s[8] += a * w[8], s[9] += a * w[9], s[10] += a * w[10], s[11] += a * w[11];
+            s[12] += a * w[12], s[13] += a * w[13], s[14] += a * w[14], s[15] += a * w[15];
+        }
+        memcpy(disp + j, s, sizeof s);
+    }
+}
+
+/* Temporary memory of build_jump_table. */
+typedef struct table_temp {
+    double *diff;        /* (k, round_up(e, 16)) W[i, P] - W[i, Q], zero padding */
+    double *row;         /* (round_up(e, 16),) J[v, :] */
+    double *b;           /* (k,) B[v] in double */
+    jump_entry *entries; /* (2e,) one row being sorted, and the sort's spare room */
+    int32_t *uf;         /* (p,) */
+    int32_t *cluster;    /* (p,) dendrogram node of each root: fragment j, or p + merge */
+} table_temp;
+
+/* Lay out a table_temp in `base` (NULL: only the size); returns its size in bytes. */
+static uint64_t table_temp_at(const dims *dm, unsigned char *base, table_temp *tt)
+{
+    const uint64_t e16 = (uint64_t)round_up(dm->e, 16);
+    uint64_t cursor = 0, diff = take(&cursor, 8u * (uint64_t)dm->k * e16), row = take(&cursor, 8u * e16);
+    uint64_t b = take(&cursor, 8u * (uint64_t)dm->k);
+    uint64_t entries = take(&cursor, 2u * sizeof(jump_entry) * (uint64_t)dm->e);
+    uint64_t uf = take(&cursor, 4u * (uint64_t)dm->p), cluster = take(&cursor, 4u * (uint64_t)dm->p);
+    if (base != NULL) {
+        tt->diff = (double *)(base + diff);
+        tt->row = (double *)(base + row);
+        tt->b = (double *)(base + b);
+        tt->entries = (jump_entry *)(base + entries);
+        tt->uf = (int32_t *)(base + uf);
+        tt->cluster = (int32_t *)(base + cluster);
+    }
+    return take(&cursor, 0);
+}
+
+/*
+ * Kruskal's algorithm over site v's sorted row: merge r joins two clusters with the
+ * edge at row position merge_at[r]. The edges that hold for a hit are a prefix of the
+ * row, so the groups are the clusters of the merges inside that prefix (a prefix of
+ * the merges): fr_project labels them in one pass over this dendrogram, without any
+ * union-find. Returns the number of merges.
+ */
+static int32_t build_merges(fr_runtime *rt, int32_t v, const table_temp *tmp)
+{
+    const size_t base = (size_t)v * (size_t)rt->p;
+    uint16_t *at = rt->merge_at + base, *child = rt->merge_child + 2 * base;
+    int32_t *label = rt->merge_label + base, pos, j, count = 0;
+    for (j = 0; j < rt->p; j++) {
+        tmp->uf[j] = tmp->cluster[j] = j;
+        at[j] = child[2 * j] = child[2 * j + 1] = 0;
+        label[j] = 0;
+    }
+    for (pos = 0; pos < rt->e; pos++) {
+        const int32_t m = rt->jump_edge[(size_t)v * rt->e + pos];
+        const int32_t a = uf_root(tmp->uf, rt->edges[2 * m]), b = uf_root(tmp->uf, rt->edges[2 * m + 1]);
+        if (a == b)
+            continue;
+        at[count] = (uint16_t)pos;
+        child[2 * count] = (uint16_t)tmp->cluster[a];
+        child[2 * count + 1] = (uint16_t)tmp->cluster[b];
+        label[count] = a < b ? a : b; /* roots are their component's smallest fragment */
+        tmp->uf[a < b ? b : a] = a < b ? a : b;
+        tmp->cluster[a < b ? a : b] = rt->p + count++;
+    }
+    return count;
+}
+
+/*
+ * The d = 1 jump table: for each site v, the values |J[v, m]| with J[v, m] = sum over i
+ * of B[v, i] (W[i, P] - W[i, Q]) in ascending order, and their edges. |jump'| of edge
+ * m for a hit at site v is |n'| |J[v, m]| (section 4 allows this regrouping: B[v] @ W
+ * tabulated per site, with per-edge differences), and x -> |n'| x rounds monotonically,
+ * so the edges that hold are a prefix of the row, found by bisection.
+ */
+static void build_jump_table(fr_runtime *rt, const table_temp *tmp)
+{
+    const int32_t k = rt->k, e = rt->e, e16 = (int32_t)round_up(e, 16);
+    int32_t v, m, i;
+    const jump_entry *sorted;
+    for (i = 0; i < k; i++)
+        for (m = 0; m < e16; m++)
+            tmp->diff[(size_t)i * e16 + m] = m >= e ? 0.0 : rt->Wd[(size_t)i * rt->row + rt->edges[2 * m]] -
+                                                           rt->Wd[(size_t)i * rt->row + rt->edges[2 * m + 1]];
+    for (v = 0; v < rt->s; v++) {
+        for (i = 0; i < k; i++)
+            tmp->b[i] = rt->B[(size_t)v * k + i];
+        displacements(tmp->diff, (size_t)e16, (size_t)k, tmp->b, tmp->row); /* J[v, m], sums in mode order */
+        for (m = 0; m < e; m++) {
+            tmp->entries[m].value = fabs(tmp->row[m]);
+            tmp->entries[m].edge = m;
+        }
+        sorted = sort_entries(tmp->entries, tmp->entries + e, e); /* stable: ties stay in edge order */
+        for (m = 0; m < e; m++) {
+            rt->jumps[(size_t)v * e + m] = sorted[m].value;
+            rt->jump_edge[(size_t)v * e + m] = (uint16_t)sorted[m].edge;
+        }
+        rt->merges = build_merges(rt, v, tmp); /* the same for every site: p minus the whole graph's groups */
     }
 }
 
@@ -1080,122 +1292,16 @@ static void build_kd_tree(fr_runtime *rt)
             rt->kd_points[3 * i + c] = rt->sites[3 * rt->kd_index[i] + c];
 }
 
-static int32_t uf_find(int32_t *parent, int32_t a)
+/* Groups of the whole graph (nothing broken) and the identity array, once at load. */
+static void whole_groups(fr_runtime *rt)
 {
-    while (parent[a] != a) {
-        parent[a] = parent[parent[a]]; /* path halving */
-        a = parent[a];
-    }
-    return a;
-}
-
-/* Hook the larger root under the smaller, so every root is its component's smallest member. */
-static void uf_union(int32_t *parent, int32_t a, int32_t b)
-{
-    a = uf_find(parent, a);
-    b = uf_find(parent, b);
-    if (a < b) parent[b] = a;
-    else if (b < a) parent[a] = b;
-}
-
-/*
- * Spanning forest (breadth-first, so subtrees stay small) numbered in depth-first
- * preorder, so each subtree is a contiguous range of positions. `temp` holds
- * 7p + 2 + 4e ints for the adjacency, the queue and the tree's child lists.
- */
-static void build_forest(fr_runtime *rt, int32_t *temp)
-{
-    int32_t p = rt->p, e = rt->e, *start = temp, *adj = start + p + 1, *queue = adj + 4 * e;
-    int32_t *child_start = queue + p, *children = child_start + p + 1, *next = children + p, *stack = next + p;
-    int32_t *parent = stack + p, m, v, head, tail, counter = 0;
-    memset(start, 0, sizeof(int32_t) * ((size_t)p + 1));
-    memset(child_start, 0, sizeof(int32_t) * ((size_t)p + 1));
-    for (m = 0; m < e; m++) {
-        start[rt->edges[2 * m] + 1]++;
-        start[rt->edges[2 * m + 1] + 1]++;
-        rt->tree_child[m] = -1;
-    }
-    for (v = 0; v < p; v++) {
-        start[v + 1] += start[v];
-        next[v] = start[v];
-        parent[v] = -2; /* unvisited */
-    }
-    for (m = 0; m < e; m++) {
-        int32_t P = rt->edges[2 * m], Q = rt->edges[2 * m + 1];
-        adj[2 * next[P]] = Q;
-        adj[2 * next[P]++ + 1] = m;
-        adj[2 * next[Q]] = P;
-        adj[2 * next[Q]++ + 1] = m;
-    }
-    for (v = 0; v < p; v++) { /* breadth-first trees; parent[w] = the edge to w's parent, -1 for a root */
-        if (parent[v] != -2)
-            continue;
-        parent[v] = -1;
-        queue[0] = v;
-        for (head = 0, tail = 1; head < tail; head++) {
-            int32_t u = queue[head], a;
-            for (a = start[u]; a < start[u + 1]; a++)
-                if (parent[adj[2 * a]] == -2) {
-                    parent[adj[2 * a]] = adj[2 * a + 1];
-                    queue[tail++] = adj[2 * a];
-                    child_start[u + 1]++;
-                }
-        }
-    }
-    for (v = 0; v < p; v++) {
-        child_start[v + 1] += child_start[v];
-        next[v] = child_start[v];
-    }
-    for (v = 0; v < p; v++)
-        if (parent[v] >= 0) {
-            int32_t up = rt->edges[2 * parent[v]] == v ? rt->edges[2 * parent[v] + 1] : rt->edges[2 * parent[v]];
-            children[next[up]++] = v;
-        }
-    for (v = 0; v < p; v++) { /* preorder numbering of each tree */
-        int32_t top = 1;
-        if (parent[v] != -1)
-            continue;
-        stack[0] = v;
-        while (top > 0) {
-            int32_t u = stack[--top], c;
-            rt->pos[u] = counter;
-            rt->root_head[counter] = parent[u] < 0;
-            rt->parent_pos[counter] = counter;
-            if (parent[u] >= 0) {
-                int32_t P = rt->edges[2 * parent[u]], Q = rt->edges[2 * parent[u] + 1];
-                rt->tree_child[parent[u]] = counter;
-                rt->parent_pos[counter] = rt->pos[P == u ? Q : P]; /* numbered before u */
-            }
-            rt->identity[counter] = counter;
-            counter++;
-            for (c = child_start[u + 1] - 1; c >= child_start[u]; c--)
-                stack[top++] = children[c];
-        }
-    }
-    rt->num_tree = 0; /* test order: tree edges first */
-    for (m = 0; m < e; m++)
-        if (rt->tree_child[m] >= 0) {
-            rt->child_at[rt->num_tree] = rt->tree_child[m];
-            rt->order[rt->num_tree++] = m;
-        }
-    for (m = 0, v = rt->num_tree; m < e; m++)
-        if (rt->tree_child[m] < 0)
-            rt->order[v++] = m;
-    for (m = 0; m < e; m++) {
-        rt->ends[2 * m] = rt->edges[2 * rt->order[m]];
-        rt->ends[2 * m + 1] = rt->edges[2 * rt->order[m] + 1];
-        rt->end_pos[2 * m] = rt->pos[rt->ends[2 * m]];
-        rt->end_pos[2 * m + 1] = rt->pos[rt->ends[2 * m + 1]];
-    }
-    for (v = 0; v < p; v++)
-        rt->whole[v] = v;
-    for (m = 0; m < e; m++)
-        uf_union(rt->whole, rt->edges[2 * m], rt->edges[2 * m + 1]);
-    rt->whole_groups = 0;
-    for (v = 0; v < p; v++) {
-        rt->whole[v] = uf_find(rt->whole, v);
-        rt->whole_groups += rt->whole[v] == v;
-    }
+    int32_t m, j;
+    for (j = 0; j < rt->p; j++)
+        rt->identity[j] = j;
+    memcpy(rt->whole, rt->identity, sizeof(int32_t) * (size_t)rt->p);
+    for (m = 0; m < rt->e; m++)
+        unite(rt->whole, rt->edges[2 * m], rt->edges[2 * m + 1]);
+    rt->whole_groups = label(rt->whole, rt->p, rt->whole);
 }
 
 static void decode_names(fr_runtime *rt, header *h, int64_t name_bytes)
@@ -1217,8 +1323,10 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     fr_allocator al;
     fr_status status;
     unsigned char *block;
-    int32_t *temp;
+    unsigned char *temp = NULL;
+    table_temp tt = {NULL, NULL, NULL, NULL, NULL, NULL};
     fr_runtime *rt;
+    int table;
     if (message != NULL && message_size > 0)
         message[0] = 0;
     if (out == NULL || (binary == NULL && binary_size > 0) || header_data == NULL)
@@ -1232,11 +1340,11 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     al.alloc = allocator != NULL && allocator->alloc != NULL ? allocator->alloc : default_alloc;
     al.free = allocator != NULL && allocator->free != NULL ? allocator->free : default_free;
     al.user = allocator != NULL ? allocator->user : NULL;
-    b = block_plan(&dm, h.name_bytes);
+    table = wants_table(&dm, flags);
+    b = block_plan(&dm, h.name_bytes, table);
     if (b.size > (uint64_t)(SIZE_MAX / 2) || (block = (unsigned char *)al.alloc(al.user, (size_t)b.size)) == NULL)
         return fail(message, message_size, FR_ERR_MEMORY, "out of memory (%lu bytes)", (unsigned long)b.size);
-    temp = (int32_t *)al.alloc(al.user, sizeof(int32_t) * (7 * (size_t)dm.p + 2 + 4 * (size_t)dm.e));
-    if (temp == NULL) {
+    if (table && (temp = (unsigned char *)al.alloc(al.user, (size_t)table_temp_at(&dm, NULL, &tt))) == NULL) {
         al.free(al.user, block);
         return fail(message, message_size, FR_ERR_MEMORY, "out of memory");
     }
@@ -1244,6 +1352,8 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     memset(rt, 0, sizeof *rt);
     rt->allocator = al;
     rt->s = (int32_t)dm.s, rt->k = (int32_t)dm.k, rt->p = (int32_t)dm.p, rt->e = (int32_t)dm.e, rt->d = (int32_t)dm.d;
+    rt->row = (int32_t)round_up(dm.p * dm.d, 16);
+    rt->bytes = (size_t)b.size;
     rt->default_threshold = h.default_threshold;
     rt->impact_radius = h.impact_radius;
     memcpy(rt->transform, h.transform, sizeof rt->transform);
@@ -1252,29 +1362,29 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     rt->Wd = (double *)(block + b.W);
     rt->areas = (float *)(block + b.areas);
     rt->edges = (int32_t *)(block + b.edges);
-    rt->edge_bound = (double *)(block + b.edge_bound);
     rt->names = (char *)(block + b.names);
     rt->name_offsets = (int32_t *)(block + b.name_offsets);
     rt->kd_points = (double *)(block + b.kd_points);
     rt->kd_index = (int32_t *)(block + b.kd_index);
     rt->kd_nodes = (kd_node *)(block + b.kd_nodes);
     rt->whole = (int32_t *)(block + b.whole);
-    rt->pos = (int32_t *)(block + b.pos);
-    rt->parent_pos = (int32_t *)(block + b.parent_pos);
-    rt->root_head = block + b.root_head;
     rt->identity = (int32_t *)(block + b.identity);
-    rt->tree_child = (int32_t *)(block + b.tree_child);
-    rt->order = (int32_t *)(block + b.order);
-    rt->ends = (int32_t *)(block + b.ends);
-    rt->child_at = (int32_t *)(block + b.child_at);
-    rt->end_pos = (int32_t *)(block + b.end_pos);
+    rt->jumps = table ? (double *)(block + b.jumps) : NULL;
+    rt->jump_edge = table ? (uint16_t *)(block + b.jump_edge) : NULL;
+    rt->merge_at = table ? (uint16_t *)(block + b.merge_at) : NULL;
+    rt->merge_child = table ? (uint16_t *)(block + b.merge_child) : NULL;
+    rt->merge_label = table ? (int32_t *)(block + b.merge_label) : NULL;
     rt->scratch = block + b.scratch;
     copy_arrays(rt, &h, (const unsigned char *)binary);
     decode_names(rt, &h, h.name_bytes);
     build_kd_tree(rt);
-    build_forest(rt, temp);
+    whole_groups(rt);
     edge_bounds(rt);
-    al.free(al.user, temp);
+    if (table) {
+        (void)table_temp_at(&dm, temp, &tt);
+        build_jump_table(rt, &tt);
+        al.free(al.user, temp);
+    }
     *out = rt;
     return FR_OK;
 }
@@ -1284,6 +1394,8 @@ void fr_free(fr_runtime *rt)
     if (rt != NULL)
         rt->allocator.free(rt->allocator.user, rt);
 }
+
+size_t fr_memory_size(const fr_runtime *rt) { return rt != NULL ? rt->bytes : 0; }
 
 fr_info fr_get_info(const fr_runtime *rt)
 {
@@ -1373,13 +1485,12 @@ int32_t fr_nearest_site(const fr_runtime *rt, const double point[3])
     return kd_nearest(rt, point[0], point[1], point[2]);
 }
 
-/* Steps 2-3: alpha' of the impulse scaled by m = max |n_c| (m > 0). */
-static void mode_coefficients(const fr_runtime *rt, int32_t site, const double n[3], double *alpha)
+/* Steps 2-3: alpha' of the impulse scaled by m = max |n_c| (m > 0); `length` is |n'| (used when d = 1). */
+static void mode_coefficients(const fr_runtime *rt, int32_t site, const double n[3], double length, double *alpha)
 {
     int32_t i, k = rt->k;
     const float *B = rt->B + (size_t)site * (size_t)k * (size_t)rt->d;
     if (rt->d == 1) {
-        double length = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         for (i = 0; i < k; i++)
             alpha[i] = (double)B[i] * length;
     } else {
@@ -1388,127 +1499,101 @@ static void mode_coefficients(const fr_runtime *rt, int32_t site, const double n
     }
 }
 
-/*
- * Step 4: disp'[j, c] = sum over i of alpha'[i] W[i, j, c], each sum in mode order.
- * Eight outputs at a time keep eight independent sums in registers (no dependency
- * chain, and compilers vectorize it), with W stored in double.
- */
-static void displacements(const fr_runtime *rt, const double *alpha, double *disp)
+/* Step 5 from the jump table (d = 1): the number of edges that hold, |n'| |J[v, m]| <= t (a prefix of the row). */
+static int32_t table_holding(const fr_runtime *rt, int32_t site, double length, double t)
 {
-    size_t n = (size_t)rt->p * (size_t)rt->d, k = (size_t)rt->k, i, j = 0, c;
-    const double *W = rt->Wd;
-    for (; j + 8 <= n; j += 8) {
-        double s0 = 0, s1 = 0, s2 = 0, s3 = 0, s4 = 0, s5 = 0, s6 = 0, s7 = 0;
-        for (i = 0; i < k; i++) {
-            const double a = alpha[i], *w = W + i * n + j;
-            s0 += a * w[0];
-            s1 += a * w[1];
-            s2 += a * w[2];
-            s3 += a * w[3];
-            s4 += a * w[4];
-            s5 += a * w[5];
-            s6 += a * w[6];
-            s7 += a * w[7];
+    const double *row = rt->jumps + (size_t)site * (size_t)rt->e;
+    int32_t lo = 0, hi = rt->e;
+    while (lo < hi) {
+        const int32_t mid = lo + (hi - lo) / 2;
+        if (length * row[mid] <= t)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+/* Step 5 from the displacements: cut[m] = |disp'[P] - disp'[Q]| > t (Euclidean norm when d = 3). */
+static void direct_cuts(const fr_runtime *rt, const double *disp, double t, uint8_t *cut)
+{
+    const int32_t *edges = rt->edges;
+    int32_t m;
+    if (rt->d == 1) {
+        for (m = 0; m < rt->e; m++)
+            cut[m] = (uint8_t)(fabs(disp[edges[2 * m]] - disp[edges[2 * m + 1]]) > t);
+    } else {
+        for (m = 0; m < rt->e; m++) {
+            const double *a = disp + 3 * (size_t)edges[2 * m], *b = disp + 3 * (size_t)edges[2 * m + 1];
+            const double j0 = a[0] - b[0], j1 = a[1] - b[1], j2 = a[2] - b[2];
+            cut[m] = (uint8_t)(sqrt(j0 * j0 + j1 * j1 + j2 * j2) > t);
         }
-        disp[j] = s0, disp[j + 1] = s1, disp[j + 2] = s2, disp[j + 3] = s3;
-        disp[j + 4] = s4, disp[j + 5] = s5, disp[j + 6] = s6, disp[j + 7] = s7;
     }
-    for (c = j; c < n; c++) {
-        double sum = 0;
-        for (i = 0; i < k; i++)
-            sum += alpha[i] * W[i * n + c];
-        disp[c] = sum;
-    }
-}
-
-/* |jump'| of the edge (P, Q): |disp'[P] - disp'[Q]| (d = 1) or its Euclidean norm (d = 3). */
-static double jump_norm(const double *disp, int32_t d, int32_t P, int32_t Q)
-{
-    if (d == 1)
-        return fabs(disp[P] - disp[Q]);
-    else {
-        const double *a = disp + 3 * (size_t)P, *b = disp + 3 * (size_t)Q;
-        double j0 = a[0] - b[0], j1 = a[1] - b[1], j2 = a[2] - b[2];
-        return sqrt(j0 * j0 + j1 * j1 + j2 * j2);
-    }
-}
-
-/* Whether some edge might break: |jump'| <= |alpha'| * edge_bound[m] for every edge (see edge_bounds). */
-static int any_edge_may_break(const fr_runtime *rt, const double *alpha, double t)
-{
-    int32_t i, m;
-    double norm2 = 0.0, norm;
-    for (i = 0; i < rt->k; i++)
-        norm2 += alpha[i] * alpha[i];
-    norm = sqrt(norm2) * (1.0 + BOUND_SLACK);
-    for (m = 0; m < rt->e; m++)
-        if (!(norm * rt->edge_bound[m] <= t))
-            return 1;
-    return 0;
 }
 
 /* Pointers into the caller's (or the built-in) workspace. */
 typedef struct scratch {
     double *alpha, *disp;
-    uint8_t *head, *broken;
-    int32_t *piece, *uf, *first;
+    uint8_t *cut;
+    int32_t *uf;
 } scratch;
 
-static int32_t uf_root(int32_t *uf, int32_t a)
+/*
+ * Steps 5-6 with the jump table: the edges that hold are the row's first `holding`,
+ * so the merges done are the first `done` (those inside that prefix) and the groups
+ * are the clusters they form. label[0, p) starts as each fragment's own index and
+ * label[p + r] as merge r's smallest fragment; top-down over the done merges (a
+ * merge's parent comes later), each passes its label on to its two children.
+ * Returns the number of groups.
+ */
+static int32_t table_groups(const fr_runtime *rt, int32_t site, double length, double t, const scratch *w,
+                            fr_impact *out)
 {
-    while (uf[a] != a)
-        a = uf[a] = uf[uf[a]]; /* path halving */
-    return a;
+    const size_t base = (size_t)site * (size_t)rt->p;
+    const uint16_t *at = rt->merge_at + base, *child = rt->merge_child + 2 * base;
+    const uint16_t *order = rt->jump_edge + (size_t)site * (size_t)rt->e;
+    const int32_t holding = table_holding(rt, site, length, t), p = rt->p;
+    int32_t *label = w->uf, lo = 0, hi = rt->merges, r, j;
+    while (lo < hi) { /* done = the number of merges with at[r] < holding */
+        const int32_t mid = lo + (hi - lo) / 2;
+        if (at[mid] < holding)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    memcpy(label, rt->identity, sizeof(int32_t) * (size_t)p);
+    memcpy(label + p, rt->merge_label + base, sizeof(int32_t) * (size_t)lo);
+    for (r = lo - 1; r >= 0; r--) {
+        const int32_t value = label[p + r];
+        label[child[2 * r]] = value;
+        label[child[2 * r + 1]] = value;
+    }
+    memcpy(out->groups, label, sizeof(int32_t) * (size_t)p);
+    if (out->broken != NULL) {
+        memset(out->broken, 1, (size_t)rt->e);
+        for (j = 0; j < holding; j++)
+            out->broken[order[j]] = 0;
+    }
+    out->num_broken = rt->e - holding;
+    return p - lo;
 }
 
-/*
- * Steps 5 and 6 once the displacements are known. Edges are tested in the order
- * of build_forest: spanning-tree edges first. A broken tree edge makes its child
- * the head of a subtree; since a parent precedes its children in preorder, one
- * forward pass labels every position with its subtree's head. Unbroken non-tree
- * edges then join subtrees (union-find on heads), and the group of a fragment is
- * the first fragment met in its component in increasing order. Branch-free where
- * a shattering hit makes the branches unpredictable. Returns the number of groups.
- */
-static int32_t break_and_group(const fr_runtime *rt, double t, const scratch *w, int32_t *groups,
-                               int32_t *num_broken)
+/* Steps 5-6 from the displacements. Returns the number of groups. */
+static int32_t direct_groups(const fr_runtime *rt, double t, const scratch *w, fr_impact *out)
 {
-    /* Everything in locals: stores through uint8_t may alias anything, so fields would be reloaded. */
-    const int32_t e = rt->e, p = rt->p, d = rt->d, num_tree = rt->num_tree, *ends = rt->ends, *order = rt->order;
-    const int32_t *child = rt->child_at, *parent_pos = rt->parent_pos, *end_pos = rt->end_pos, *pos = rt->pos;
-    const double *disp = w->disp;
-    uint8_t *broken = w->broken, *head = w->head;
-    int32_t *piece = w->piece, *uf = w->uf, *first = w->first, r, j, v, count = 0, groups_count = 0;
-    memcpy(head, rt->root_head, (size_t)p);
-    for (r = 0; r < num_tree; r++) {
-        const int cut = jump_norm(disp, d, ends[2 * r], ends[2 * r + 1]) > t;
-        broken[order[r]] = (uint8_t)cut;
-        head[child[r]] = (uint8_t)cut;
-        count += cut;
+    const int32_t *edges = rt->edges;
+    int32_t m, count = 0;
+    direct_cuts(rt, w->disp, t, w->cut);
+    memcpy(w->uf, rt->identity, sizeof(int32_t) * (size_t)rt->p);
+    for (m = 0; m < rt->e; m++) {
+        count += w->cut[m];
+        if (!w->cut[m])
+            unite(w->uf, edges[2 * m], edges[2 * m + 1]);
     }
-    for (j = 0; j < p; j++)
-        piece[j] = head[j] ? j : piece[parent_pos[j]];
-    memcpy(uf, rt->identity, sizeof(int32_t) * (size_t)p);
-    for (; r < e; r++) {
-        const int cut = jump_norm(disp, d, ends[2 * r], ends[2 * r + 1]) > t;
-        broken[order[r]] = (uint8_t)cut;
-        count += cut;
-        if (!cut) {
-            int32_t a = uf_root(uf, piece[end_pos[2 * r]]), b = uf_root(uf, piece[end_pos[2 * r + 1]]);
-            uf[a > b ? a : b] = a > b ? b : a;
-        }
-    }
-    memset(first, 0xFF, sizeof(int32_t) * (size_t)p); /* -1 */
-    for (v = 0; v < p; v++) {
-        const int32_t c = uf_root(uf, piece[pos[v]]);
-        if (first[c] < 0) {
-            first[c] = v;
-            groups_count++;
-        }
-        groups[v] = first[c];
-    }
-    *num_broken = count;
-    return groups_count;
+    if (out->broken != NULL && rt->e > 0)
+        memcpy(out->broken, w->cut, (size_t)rt->e);
+    out->num_broken = count;
+    return label(w->uf, rt->p, out->groups);
 }
 
 fr_status fr_project(const fr_runtime *rt, const double point[3], const double impulse[3], double threshold,
@@ -1517,8 +1602,8 @@ fr_status fr_project(const fr_runtime *rt, const double point[3], const double i
     workspace_layout layout;
     unsigned char *base;
     scratch w;
-    double n[3], m = 0.0;
-    int32_t i, c, breaks = 0;
+    double n[3], m = 0.0, t = 0.0, length = 0.0;
+    int32_t i, c, breaks = 0, have_alpha = 0;
     if (rt == NULL || point == NULL || impulse == NULL || out == NULL || out->groups == NULL)
         return FR_ERR_ARGUMENT;
     for (c = 0; c < 3; c++) {
@@ -1532,27 +1617,39 @@ fr_status fr_project(const fr_runtime *rt, const double point[3], const double i
     base = workspace != NULL ? (unsigned char *)workspace : (unsigned char *)rt->scratch;
     w.alpha = (double *)(base + layout.alpha);
     w.disp = (double *)(base + layout.disp);
-    w.head = base + layout.head;
-    w.broken = out->broken != NULL ? out->broken : base + layout.broken;
-    w.piece = (int32_t *)(base + layout.piece);
+    w.cut = base + layout.cut;
     w.uf = (int32_t *)(base + layout.uf);
-    w.first = (int32_t *)(base + layout.first);
     out->site = kd_nearest(rt, point[0], point[1], point[2]);
     if (m == 0.0) { /* step 2: a zero impulse breaks nothing */
         memset(w.alpha, 0, sizeof(double) * (size_t)rt->k);
+        have_alpha = 1;
     } else {
         for (c = 0; c < 3; c++)
             n[c] = impulse[c] / m;
-        mode_coefficients(rt, out->site, n, w.alpha);
-        breaks = any_edge_may_break(rt, w.alpha, threshold / m);
+        t = threshold / m;
+        length = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        if (rt->jumps != NULL) {
+            breaks = !(length * rt->jumps[(size_t)out->site * (size_t)rt->e + (size_t)rt->e - 1] <= t);
+        } else {
+            double norm2 = 0.0;
+            mode_coefficients(rt, out->site, n, length, w.alpha);
+            have_alpha = 1;
+            for (i = 0; i < rt->k; i++)
+                norm2 += w.alpha[i] * w.alpha[i];
+            breaks = !(sqrt(norm2) * (1.0 + BOUND_SLACK) * rt->max_bound <= t);
+        }
     }
-    if (breaks || out->displacement != NULL)
-        displacements(rt, w.alpha, w.disp);
-    if (breaks) {
-        out->num_groups = break_and_group(rt, threshold / m, &w, out->groups, &out->num_broken);
+    if (!have_alpha && (out->alpha != NULL || out->displacement != NULL))
+        mode_coefficients(rt, out->site, n, length, w.alpha);
+    if (out->displacement != NULL || (breaks && rt->jumps == NULL))
+        displacements(rt->Wd, (size_t)rt->row, (size_t)rt->k, w.alpha, w.disp);
+    if (breaks && rt->jumps != NULL) {
+        out->num_groups = table_groups(rt, out->site, length, t, &w, out);
+    } else if (breaks) {
+        out->num_groups = direct_groups(rt, t, &w, out);
     } else { /* nothing breaks: the components of the whole graph */
-        if (rt->e > 0)
-            memset(w.broken, 0, (size_t)rt->e);
+        if (out->broken != NULL && rt->e > 0)
+            memset(out->broken, 0, (size_t)rt->e);
         memcpy(out->groups, rt->whole, sizeof(int32_t) * (size_t)rt->p);
         out->num_groups = rt->whole_groups;
         out->num_broken = 0;

@@ -60,13 +60,12 @@ namespace Fracture
         /// <summary>[p * d] fragment displacements, row-major, model axes (dimensionless).</summary>
         public readonly double[] Displacement;
         public int Site, NumGroups, NumBroken;
-        /// <summary>Fill <see cref="Displacement"/> (costs k*p*d multiply-adds when nothing breaks).</summary>
+        /// <summary>Fill <see cref="Displacement"/> (k*p*d multiply-adds; the groups do not need them).</summary>
         public bool ComputeDisplacement = true;
 
         internal readonly FractureRuntime Owner;
         internal readonly double[] ScaledAlpha, ScaledDisp;
-        internal readonly bool[] Head;
-        internal readonly int[] Piece, UnionFind, First;
+        internal readonly int[] Labels; // [2p] union-find parents, or the merge labels of the jump table
         internal readonly int[] KdIds = new int[FractureRuntime.KdStack];
         internal readonly double[] KdBounds = new double[FractureRuntime.KdStack];
 
@@ -81,10 +80,7 @@ namespace Fracture
             Displacement = new double[runtime.Fragments * runtime.Dim];
             ScaledAlpha = new double[runtime.Modes];
             ScaledDisp = new double[runtime.Fragments * runtime.Dim];
-            Head = new bool[runtime.Fragments];
-            Piece = new int[runtime.Fragments];
-            UnionFind = new int[runtime.Fragments];
-            First = new int[runtime.Fragments];
+            Labels = new int[2 * runtime.Fragments];
         }
     }
 
@@ -93,7 +89,9 @@ namespace Fracture
     {
         public const int FormatVersion = 1;
         const double BoundSlack = 1e-9;
-        const int KdLeaf = 8;
+        const int KdLeaf = 16;
+        /// <summary>Largest d = 1 jump table Load builds, in bytes (see <see cref="Load"/>).</summary>
+        public const long TableMaxBytes = 16L << 20;
 
         public readonly int Sites, Modes, Fragments, Edges, Dim;
         public readonly double DefaultThreshold, ImpactRadius;
@@ -102,13 +100,22 @@ namespace Fracture
         readonly float[] sites, B, edgeAreas;
         readonly double[] W;
         readonly int[] edges;
-        // k-d tree (sites in tree order) and the spanning forest of FractureRuntime.BuildForest.
+        // k-d tree (sites in tree order), groups when nothing breaks, the largest per-edge bound.
         readonly double[] kdPoints, kdBoxes;
         readonly int[] kdIndex, kdNodes;
-        readonly int[] whole, pos, parentPos, order, ends, endPos, childAt;
-        readonly bool[] rootHead;
-        readonly double[] edgeBound;
-        readonly int wholeGroups, numTree;
+        readonly int[] whole, identity;
+        readonly int wholeGroups;
+        double maxBound;
+        // d = 1 jump table (null when not built), see BuildJumpTable: per site, |J[v, m]| ascending with its
+        // edge, and the merges of Kruskal's algorithm over that row (p entries per site).
+        readonly double[] jumps;
+        readonly ushort[] jumpEdge, mergeAt, mergeChild;
+        readonly int[] mergeLabel;
+        readonly int merges;
+        readonly bool[] allBroken; // [e] all true
+
+        /// <summary>Whether Load built the d = 1 jump table (the fast path; see <see cref="Load"/>).</summary>
+        public bool HasJumpTable { get { return jumps != null; } }
 
         /// <summary>Row-major 4x4 matrix, normalized bake coordinates to model space (informational).</summary>
         public double[] Transform { get { return (double[])transform.Clone(); } }
@@ -119,21 +126,29 @@ namespace Fracture
         public float EdgeArea(int edge) { return edgeAreas[edge]; }
         public float SiteCoordinate(int site, int axis) { return sites[3 * site + axis]; }
 
-        /// <summary>Parse and validate; throws <see cref="FractureRuntimeException"/> for a bad file.</summary>
-        public static FractureRuntime Load(byte[] header, byte[] binary, bool checkCrc = true)
+        /// <summary>
+        /// Parse and validate; throws <see cref="FractureRuntimeException"/> for a bad file. For a d = 1
+        /// file it also tabulates per contact site the edges' jumps in ascending order and the order in
+        /// which they join fragments, so a projection is a bisection and one pass over at most p merges:
+        /// (10 e + 10 p) bytes per site (6 MB for a vase with s = 1002, p = 189, e = 435), skipped above
+        /// <see cref="TableMaxBytes"/>, for d = 3 and with <paramref name="compact"/> (then a projection
+        /// computes the displacements and tests every edge: slower on files with hundreds of edges, same
+        /// answers).
+        /// </summary>
+        public static FractureRuntime Load(byte[] header, byte[] binary, bool checkCrc = true, bool compact = false)
         {
             if (header == null || binary == null)
                 throw new FractureRuntimeException(FractureStatus.Argument, "null header or binary");
-            return new FractureRuntime(Header.Parse(header), binary, checkCrc);
+            return new FractureRuntime(Header.Parse(header), binary, checkCrc, compact);
         }
 
         /// <summary>Like <see cref="Load"/>, returning false and a one-line reason instead of throwing.</summary>
         public static bool TryLoad(byte[] header, byte[] binary, out FractureRuntime runtime, out string error,
-                                   bool checkCrc = true)
+                                   bool checkCrc = true, bool compact = false)
         {
             try
             {
-                runtime = Load(header, binary, checkCrc);
+                runtime = Load(header, binary, checkCrc, compact);
                 error = null;
                 return true;
             }
@@ -153,7 +168,7 @@ namespace Fracture
             return h.Uri;
         }
 
-        FractureRuntime(Header h, byte[] binary, bool checkCrc)
+        FractureRuntime(Header h, byte[] binary, bool checkCrc, bool compact)
         {
             h.CheckKeys();
             h.CheckUri();
@@ -214,21 +229,31 @@ namespace Fracture
                                                     "): edges must be (P, Q) with 0 <= P < Q < " + Fragments);
             kdIndex = new int[Sites];
             kdPoints = new double[3 * Sites];
-            kdNodes = new int[4 * (Sites / 2 + 2)];
-            kdBoxes = new double[6 * (Sites / 2 + 2)];
+            int kdCapacity = 4 * (Sites / KdLeaf) + 2; // a leaf holds at least KdLeaf / 2 sites
+            kdNodes = new int[4 * kdCapacity];
+            kdBoxes = new double[6 * kdCapacity];
             BuildKdTree();
+            identity = new int[Fragments];
             whole = new int[Fragments];
-            pos = new int[Fragments];
-            parentPos = new int[Fragments];
-            rootHead = new bool[Fragments];
-            order = new int[Edges];
-            ends = new int[2 * Edges];
-            endPos = new int[2 * Edges];
-            childAt = new int[Edges];
-            edgeBound = new double[Edges];
-            numTree = BuildForest();
-            wholeGroups = WholeGraph();
+            for (int j = 0; j < Fragments; j++)
+                identity[j] = whole[j] = j;
+            for (int m = 0; m < Edges; m++)
+                Unite(whole, edges[2 * m], edges[2 * m + 1]);
+            wholeGroups = Label(whole, Fragments, whole);
             EdgeBounds();
+            if (!compact && Dim == 1 && Edges > 0 && Edges <= ushort.MaxValue && Fragments <= short.MaxValue &&
+                (10L * Edges + 10L * Fragments) * Sites <= TableMaxBytes)
+            {
+                jumps = new double[(long)Sites * Edges];
+                jumpEdge = new ushort[(long)Sites * Edges];
+                mergeAt = new ushort[(long)Sites * Fragments];
+                mergeChild = new ushort[2L * Sites * Fragments];
+                mergeLabel = new int[(long)Sites * Fragments];
+                merges = BuildJumpTable();
+                allBroken = new bool[Edges];
+                for (int m = 0; m < Edges; m++)
+                    allBroken[m] = true;
+            }
         }
 
         static FractureRuntimeException Fail(FractureStatus status, string message)
@@ -414,102 +439,6 @@ namespace Fracture
 
         // ------------------------------------------------------------------ fragment graph
 
-        // Breadth-first spanning forest (small subtrees) numbered in depth-first preorder, so a parent
-        // precedes its children; edges get a test order with the tree edges first. Returns their number.
-        int BuildForest()
-        {
-            int p = Fragments, e = Edges;
-            var start = new int[p + 1];
-            for (int m = 0; m < e; m++)
-            {
-                start[edges[2 * m] + 1]++;
-                start[edges[2 * m + 1] + 1]++;
-            }
-            for (int v = 0; v < p; v++)
-                start[v + 1] += start[v];
-            var adjacency = new int[4 * e];
-            var next = (int[])start.Clone();
-            for (int m = 0; m < e; m++)
-            {
-                int P = edges[2 * m], Q = edges[2 * m + 1];
-                adjacency[2 * next[P]] = Q;
-                adjacency[2 * next[P]++ + 1] = m;
-                adjacency[2 * next[Q]] = P;
-                adjacency[2 * next[Q]++ + 1] = m;
-            }
-            var parentEdge = new int[p]; // -2 unvisited, -1 root, else the edge to the parent
-            var queue = new int[p];
-            var children = new List<int>[p];
-            for (int v = 0; v < p; v++)
-            {
-                parentEdge[v] = -2;
-                children[v] = new List<int>();
-            }
-            for (int v = 0; v < p; v++)
-            {
-                if (parentEdge[v] != -2)
-                    continue;
-                parentEdge[v] = -1;
-                queue[0] = v;
-                for (int head = 0, tail = 1; head < tail; head++)
-                {
-                    int u = queue[head];
-                    for (int a = start[u]; a < start[u + 1]; a++)
-                        if (parentEdge[adjacency[2 * a]] == -2)
-                        {
-                            parentEdge[adjacency[2 * a]] = adjacency[2 * a + 1];
-                            children[u].Add(adjacency[2 * a]);
-                            queue[tail++] = adjacency[2 * a];
-                        }
-                }
-            }
-            var treeChild = new int[e];
-            for (int m = 0; m < e; m++)
-                treeChild[m] = -1;
-            var stack = new Stack<int>();
-            int counter = 0;
-            for (int v = 0; v < p; v++)
-            {
-                if (parentEdge[v] != -1)
-                    continue;
-                stack.Push(v);
-                while (stack.Count > 0)
-                {
-                    int u = stack.Pop();
-                    pos[u] = counter;
-                    rootHead[counter] = parentEdge[u] < 0;
-                    parentPos[counter] = counter;
-                    if (parentEdge[u] >= 0)
-                    {
-                        int P = edges[2 * parentEdge[u]], Q = edges[2 * parentEdge[u] + 1];
-                        treeChild[parentEdge[u]] = counter;
-                        parentPos[counter] = pos[P == u ? Q : P];
-                    }
-                    counter++;
-                    for (int c = children[u].Count - 1; c >= 0; c--)
-                        stack.Push(children[u][c]);
-                }
-            }
-            int tree = 0;
-            for (int m = 0; m < e; m++)
-                if (treeChild[m] >= 0)
-                {
-                    childAt[tree] = treeChild[m];
-                    order[tree++] = m;
-                }
-            for (int m = 0, r = tree; m < e; m++)
-                if (treeChild[m] < 0)
-                    order[r++] = m;
-            for (int r = 0; r < e; r++)
-            {
-                ends[2 * r] = edges[2 * order[r]];
-                ends[2 * r + 1] = edges[2 * order[r] + 1];
-                endPos[2 * r] = pos[ends[2 * r]];
-                endPos[2 * r + 1] = pos[ends[2 * r + 1]];
-            }
-            return tree;
-        }
-
         static int Root(int[] parent, int a)
         {
             while (parent[a] != a)
@@ -517,33 +446,35 @@ namespace Fracture
             return a;
         }
 
-        // Groups when nothing breaks; returns how many.
-        int WholeGraph()
+        // One unbroken edge: hook the larger root under the smaller, so every parent is smaller than its child.
+        static void Unite(int[] parent, int P, int Q)
         {
-            for (int v = 0; v < Fragments; v++)
-                whole[v] = v;
-            for (int m = 0; m < Edges; m++)
-            {
-                int a = Root(whole, edges[2 * m]), b = Root(whole, edges[2 * m + 1]);
-                whole[Math.Max(a, b)] = Math.Min(a, b); // roots stay the smallest member
-            }
+            int a = Root(parent, P), b = Root(parent, Q);
+            parent[Math.Max(a, b)] = Math.Min(a, b);
+        }
+
+        // After every Unite: since parents are smaller, one forward pass turns each entry into its root, the
+        // component's smallest fragment (the group id). Returns the number of groups.
+        static int Label(int[] parent, int p, int[] groups)
+        {
             int count = 0;
-            for (int v = 0; v < Fragments; v++)
+            for (int j = 0; j < p; j++)
             {
-                whole[v] = Root(whole, v);
-                count += whole[v] == v ? 1 : 0;
+                int root = parent[parent[j]];
+                parent[j] = groups[j] = root;
+                count += root == j ? 1 : 0;
             }
             return count;
         }
 
-        // Per edge (test order) c with |jump'| <= |alpha'| * c for the computed jump: Cauchy-Schwarz on
+        // The largest over edges of c with |jump'| <= |alpha'| * c for the computed jump: Cauchy-Schwarz on
         // W[:, P] - W[:, Q] plus slack for the rounding of both displacements.
         void EdgeBounds()
         {
             int n = Fragments * Dim;
-            for (int r = 0; r < Edges; r++)
+            for (int m = 0; m < Edges; m++)
             {
-                int P = ends[2 * r], Q = ends[2 * r + 1];
+                int P = edges[2 * m], Q = edges[2 * m + 1];
                 double diff2 = 0, wp2 = 0, wq2 = 0;
                 for (int i = 0; i < Modes; i++)
                     for (int c = 0; c < Dim; c++)
@@ -553,8 +484,61 @@ namespace Fracture
                         wp2 += wp * wp;
                         wq2 += wq * wq;
                     }
-                edgeBound[r] = (Math.Sqrt(diff2) + BoundSlack * (Math.Sqrt(wp2) + Math.Sqrt(wq2))) * (1.0 + BoundSlack);
+                double bound = (Math.Sqrt(diff2) + BoundSlack * (Math.Sqrt(wp2) + Math.Sqrt(wq2))) * (1.0 + BoundSlack);
+                maxBound = Math.Max(maxBound, bound);
             }
+        }
+
+        // The d = 1 jump table (docs/FORMAT.md section 4, "Cost"): J[v, m] = sum over i of
+        // B[v, i] (W[i, P] - W[i, Q]), so |jump'| = |n'| |J[v, m]|, and x -> |n'| x rounds monotonically: the
+        // edges that hold are a prefix of the row sorted by |J|. Kruskal's algorithm over the row gives the
+        // merges whose clusters are the groups. Returns the number of merges (the same for every site).
+        int BuildJumpTable()
+        {
+            int k = Modes, e = Edges, p = Fragments, count = 0;
+            var diff = new double[e * k];
+            for (int m = 0; m < e; m++)
+                for (int i = 0; i < k; i++)
+                    diff[m * k + i] = W[i * p + edges[2 * m]] - W[i * p + edges[2 * m + 1]];
+            var keys = new double[e];
+            var items = new int[e];
+            var uf = new int[p];
+            var cluster = new int[p];
+            for (int v = 0; v < Sites; v++)
+            {
+                for (int m = 0; m < e; m++)
+                {
+                    double sum = 0;
+                    for (int i = 0; i < k; i++)
+                        sum += (double)B[v * k + i] * diff[m * k + i];
+                    keys[m] = Math.Abs(sum);
+                    items[m] = m;
+                }
+                Array.Sort(keys, items); // ties in any order: they hold or break together
+                long row = (long)v * e, at = (long)v * p;
+                for (int m = 0; m < e; m++)
+                {
+                    jumps[row + m] = keys[m];
+                    jumpEdge[row + m] = (ushort)items[m];
+                }
+                for (int j = 0; j < p; j++)
+                    uf[j] = cluster[j] = j;
+                count = 0;
+                for (int pos = 0; pos < e; pos++)
+                {
+                    int a = Root(uf, edges[2 * items[pos]]), b = Root(uf, edges[2 * items[pos] + 1]);
+                    if (a == b)
+                        continue;
+                    int lo = Math.Min(a, b), hi = Math.Max(a, b);
+                    mergeAt[at + count] = (ushort)pos;
+                    mergeChild[2 * (at + count)] = (ushort)cluster[a];
+                    mergeChild[2 * (at + count) + 1] = (ushort)cluster[b];
+                    mergeLabel[at + count] = lo; // roots are their component's smallest fragment
+                    uf[hi] = lo;
+                    cluster[lo] = p + count++;
+                }
+            }
+            return count;
         }
 
         // ------------------------------------------------------------------ projection
@@ -574,7 +558,7 @@ namespace Fracture
                 return FractureStatus.Input;
             if (double.IsNaN(threshold) || threshold < 0)
                 return FractureStatus.Input;
-            double m = Math.Max(Math.Abs(nx), Math.Max(Math.Abs(ny), Math.Abs(nz)));
+            double m = Math.Max(Math.Abs(nx), Math.Max(Math.Abs(ny), Math.Abs(nz))), t = 0, length = 0;
             double[] alpha = result.ScaledAlpha, disp = result.ScaledDisp;
             result.Site = NearestSiteCore(px, py, pz, result.KdIds, result.KdBounds);
             bool breaks = false;
@@ -584,14 +568,31 @@ namespace Fracture
             }
             else
             {
-                ModeCoefficients(result.Site, nx / m, ny / m, nz / m, alpha);
-                breaks = AnyEdgeMayBreak(alpha, threshold / m);
+                double n0 = nx / m, n1 = ny / m, n2 = nz / m;
+                t = threshold / m;
+                length = Math.Sqrt(n0 * n0 + n1 * n1 + n2 * n2);
+                ModeCoefficients(result.Site, n0, n1, n2, length, alpha);
+                if (jumps != null)
+                {
+                    breaks = !(length * jumps[(long)result.Site * Edges + Edges - 1] <= t); // the row's largest
+                }
+                else
+                {
+                    double norm2 = 0;
+                    for (int i = 0; i < Modes; i++)
+                        norm2 += alpha[i] * alpha[i];
+                    breaks = !(Math.Sqrt(norm2) * (1.0 + BoundSlack) * maxBound <= t);
+                }
             }
-            if (breaks || result.ComputeDisplacement)
+            if (result.ComputeDisplacement || (breaks && jumps == null))
                 Displacements(alpha, disp);
-            if (breaks)
+            if (breaks && jumps != null)
             {
-                result.NumGroups = BreakAndGroup(threshold / m, result);
+                result.NumGroups = TableGroups(result.Site, length, t, result);
+            }
+            else if (breaks)
+            {
+                result.NumGroups = DirectGroups(t, result);
             }
             else
             {
@@ -608,12 +609,11 @@ namespace Fracture
             return FractureStatus.Ok;
         }
 
-        void ModeCoefficients(int site, double n0, double n1, double n2, double[] alpha)
+        void ModeCoefficients(int site, double n0, double n1, double n2, double length, double[] alpha)
         {
             int b = site * Modes * Dim;
             if (Dim == 1)
             {
-                double length = Math.Sqrt(n0 * n0 + n1 * n1 + n2 * n2);
                 for (int i = 0; i < Modes; i++)
                     alpha[i] = (double)B[b + i] * length;
             }
@@ -622,18 +622,6 @@ namespace Fracture
                 for (int i = 0; i < Modes; i++)
                     alpha[i] = (double)B[b + 3 * i] * n0 + (double)B[b + 3 * i + 1] * n1 + (double)B[b + 3 * i + 2] * n2;
             }
-        }
-
-        bool AnyEdgeMayBreak(double[] alpha, double t)
-        {
-            double norm2 = 0;
-            for (int i = 0; i < Modes; i++)
-                norm2 += alpha[i] * alpha[i];
-            double norm = Math.Sqrt(norm2) * (1.0 + BoundSlack);
-            for (int r = 0; r < Edges; r++)
-                if (!(norm * edgeBound[r] <= t))
-                    return true;
-            return false;
         }
 
         // disp'[j, c] = sum over i of alpha'[i] W[i, j, c], each sum in mode order.
@@ -650,61 +638,78 @@ namespace Fracture
             }
         }
 
-        double JumpNorm(double[] disp, int P, int Q)
+        // Steps 5-6 with the jump table: the edges that hold are the row's first `holding`, the merges done
+        // the first `done` (those inside that prefix). labels[0, p) start as each fragment's own index and
+        // labels[p + r] as merge r's smallest fragment; top-down over the done merges (a merge's parent comes
+        // later), each passes its label on to its two children.
+        int TableGroups(int site, double length, double t, FractureImpact result)
         {
-            if (Dim == 1)
-                return Math.Abs(disp[P] - disp[Q]);
-            double j0 = disp[3 * P] - disp[3 * Q], j1 = disp[3 * P + 1] - disp[3 * Q + 1], j2 = disp[3 * P + 2] - disp[3 * Q + 2];
-            return Math.Sqrt(j0 * j0 + j1 * j1 + j2 * j2);
+            int e = Edges, p = Fragments, lo = 0, hi = e;
+            long row = (long)site * e, at = (long)site * p;
+            while (lo < hi) // holding: the edges with |n'| |J| <= t
+            {
+                int mid = lo + (hi - lo) / 2;
+                if (length * jumps[row + mid] <= t) lo = mid + 1;
+                else hi = mid;
+            }
+            int holding = lo;
+            lo = 0;
+            hi = merges;
+            while (lo < hi) // done: the merges whose edge holds
+            {
+                int mid = lo + (hi - lo) / 2;
+                if (mergeAt[at + mid] < holding) lo = mid + 1;
+                else hi = mid;
+            }
+            int done = lo;
+            int[] labels = result.Labels;
+            Array.Copy(identity, labels, p);
+            Array.Copy(mergeLabel, at, labels, p, done);
+            for (int r = done - 1; r >= 0; r--)
+            {
+                int value = labels[p + r];
+                labels[mergeChild[2 * (at + r)]] = value;
+                labels[mergeChild[2 * (at + r) + 1]] = value;
+            }
+            Array.Copy(labels, result.Groups, p);
+            bool[] broken = result.Broken;
+            Array.Copy(allBroken, broken, e); // a block copy: much faster than a loop in Mono
+            for (int i = 0; i < holding; i++)
+                broken[jumpEdge[row + i]] = false;
+            result.NumBroken = e - holding;
+            return p - done;
         }
 
-        // Steps 5-6: tree edges first mark subtree heads; one forward pass labels each position with its
-        // subtree's head (parents precede children); unbroken non-tree edges join subtrees; a fragment's
-        // group is the first fragment met in its component in increasing order.
-        int BreakAndGroup(double t, FractureImpact result)
+        // Steps 5-6 from the displacements: test every edge, union-find over those that hold.
+        int DirectGroups(double t, FractureImpact result)
         {
             double[] disp = result.ScaledDisp;
-            bool[] broken = result.Broken, head = result.Head;
-            int[] piece = result.Piece, uf = result.UnionFind, first = result.First, groups = result.Groups;
-            int count = 0, groupCount = 0, r = 0;
-            Array.Copy(rootHead, head, Fragments);
-            for (; r < numTree; r++)
+            bool[] broken = result.Broken;
+            int[] uf = result.Labels;
+            int count = 0;
+            Array.Copy(identity, uf, Fragments);
+            for (int m = 0; m < Edges; m++)
             {
-                bool cut = JumpNorm(disp, ends[2 * r], ends[2 * r + 1]) > t;
-                broken[order[r]] = cut;
-                head[childAt[r]] = cut;
-                count += cut ? 1 : 0;
-            }
-            for (int j = 0; j < Fragments; j++)
-            {
-                piece[j] = head[j] ? j : piece[parentPos[j]];
-                uf[j] = j;
-                first[j] = -1;
-            }
-            for (; r < Edges; r++)
-            {
-                bool cut = JumpNorm(disp, ends[2 * r], ends[2 * r + 1]) > t;
-                broken[order[r]] = cut;
-                if (cut)
+                int P = edges[2 * m], Q = edges[2 * m + 1];
+                double jump;
+                if (Dim == 1)
                 {
+                    jump = Math.Abs(disp[P] - disp[Q]);
+                }
+                else
+                {
+                    double j0 = disp[3 * P] - disp[3 * Q], j1 = disp[3 * P + 1] - disp[3 * Q + 1];
+                    double j2 = disp[3 * P + 2] - disp[3 * Q + 2];
+                    jump = Math.Sqrt(j0 * j0 + j1 * j1 + j2 * j2);
+                }
+                broken[m] = jump > t;
+                if (broken[m])
                     count++;
-                    continue;
-                }
-                int a = Root(uf, piece[endPos[2 * r]]), b = Root(uf, piece[endPos[2 * r + 1]]);
-                uf[Math.Max(a, b)] = Math.Min(a, b);
-            }
-            for (int v = 0; v < Fragments; v++)
-            {
-                int c = Root(uf, piece[pos[v]]);
-                if (first[c] < 0)
-                {
-                    first[c] = v;
-                    groupCount++;
-                }
-                groups[v] = first[c];
+                else
+                    Unite(uf, P, Q);
             }
             result.NumBroken = count;
-            return groupCount;
+            return Label(uf, Fragments, result.Groups);
         }
 
         // ------------------------------------------------------------------ header

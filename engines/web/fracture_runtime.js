@@ -9,6 +9,11 @@
 //   const hit = rt.project([x, y, z], [nx, ny, nz], threshold);  // threshold optional
 //   hit.groups  // Int32Array(p): smallest fragment index of each fragment's group
 //
+// For many hits per second (a game rather than a viewer): parseRuntime(..., { jumpTable: true })
+// tabulates the d = 1 jumps per contact site (docs/FORMAT.md section 4, "Cost"; about 10 * (e + p)
+// bytes per site) and rt.project(point, impulse, threshold, { displacement: false }) then finds
+// the groups with a bisection and one pass over at most p merges, without the displacements.
+//
 // Arithmetic is double precision. The projection is scale invariant (docs/FORMAT.md
 // section 4): with m = max(|n0|, |n1|, |n2|) the impulse is divided by m, the jumps are
 // compared with T / m, and reported values are multiplied back by m, so impulses near
@@ -195,7 +200,9 @@ function readArray(name, dtype, ndim, entry, view, shapes) {
  *
  * @param {string|object|Uint8Array|ArrayBuffer} header  the .fracture.json text, bytes or parsed object
  * @param {ArrayBuffer|Uint8Array} binary  the .fracture.bin bytes
- * @param {{checkCrc?: boolean}} [options]  checkCrc (default true): compare buffer.crc32 when present
+ * @param {{checkCrc?: boolean, jumpTable?: boolean}} [options]  checkCrc (default true): compare buffer.crc32
+ *   when present; jumpTable (default false): for a d = 1 file, build the per-site jump table that makes
+ *   project(..., { displacement: false }) fast (see the top of this file)
  * @returns {FractureRuntime}
  * @throws {RuntimeFileError} on any inconsistency (sizes, offsets, shapes, counts, indices, checksum)
  */
@@ -218,7 +225,10 @@ export function parseRuntime(header, binary, options = {}) {
   for (let m = 0; m < edges.length; m += 2) {
     if (!(edges[m] >= 0 && edges[m] < edges[m + 1] && edges[m + 1] < p)) fail(`edges must be pairs (P, Q) with 0 <= P < Q < ${p}`);
   }
-  return new FractureRuntime(h, arrays);
+  const runtime = new FractureRuntime(h, arrays);
+  if (options.jumpTable && runtime.dim === 1 && runtime.numEdges > 0 && runtime.numEdges <= 0xffff &&
+      runtime.numFragments <= 0x7fff) runtime._buildJumpTable();
+  return runtime;
 }
 
 /**
@@ -272,6 +282,8 @@ export class FractureRuntime {
     this.W = arrays.W;                // (k, p, d)
     this.edges = arrays.edges;        // (e, 2) Int32Array
     this.edgeAreas = arrays.edge_areas;  // (e,)
+    this.hasJumpTable = false;
+    this._buildKdTree();
   }
 
   /** Index of the contact site nearest to point (ties: the smallest index). */
@@ -280,21 +292,188 @@ export class FractureRuntime {
     return this._nearest(x, y, z);
   }
 
-  _nearest(x, y, z) {
+  // k-d tree over the sites: node n is kdNodes[4n..4n+3] = begin, end, left, right (left < 0: a leaf)
+  // over kdIndex[begin, end), with its exact bounding box kdBoxes[6n..6n+5] = lo xyz, hi xyz.
+  _buildKdTree() {
+    const s = this.numSites;
     const sites = this.sites;
-    let best = 0;
-    let bestD2 = Infinity;
-    for (let v = 0; v < this.numSites; v++) {
-      const dx = sites[3 * v] - x;
-      const dy = sites[3 * v + 1] - y;
-      const dz = sites[3 * v + 2] - z;
-      const d2 = dx * dx + dy * dy + dz * dz;
-      if (d2 < bestD2) {  // strictly smaller: the first minimum wins ties
-        bestD2 = d2;
-        best = v;
+    const capacity = 4 * Math.floor(s / KD_LEAF) + 2;  // a leaf holds at least KD_LEAF / 2 sites
+    this.kdIndex = new Int32Array(s);
+    this.kdNodes = new Int32Array(4 * capacity);
+    this.kdBoxes = new Float64Array(6 * capacity);
+    for (let i = 0; i < s; i++) this.kdIndex[i] = i;
+    let count = 0;
+    const build = (begin, end) => {
+      const id = count++;
+      let axis = 0;
+      for (let c = 0; c < 3; c++) {
+        let lo = Infinity;
+        let hi = -Infinity;
+        for (let i = begin; i < end; i++) {
+          const v = sites[3 * this.kdIndex[i] + c];
+          if (v < lo) lo = v;
+          if (v > hi) hi = v;
+        }
+        this.kdBoxes[6 * id + c] = lo;
+        this.kdBoxes[6 * id + 3 + c] = hi;
+        if (hi - lo > this.kdBoxes[6 * id + 3 + axis] - this.kdBoxes[6 * id + axis]) axis = c;
+      }
+      this.kdNodes[4 * id] = begin;
+      this.kdNodes[4 * id + 1] = end;
+      this.kdNodes[4 * id + 2] = this.kdNodes[4 * id + 3] = -1;
+      if (end - begin <= KD_LEAF) return id;
+      const mid = begin + ((end - begin) >> 1);
+      // Any split is correct (the boxes are exact): sort the range along the widest axis and halve it.
+      const part = Array.from(this.kdIndex.subarray(begin, end));
+      part.sort((a, b) => sites[3 * a + axis] - sites[3 * b + axis]);
+      this.kdIndex.set(part, begin);
+      this.kdNodes[4 * id + 2] = build(begin, mid);
+      this.kdNodes[4 * id + 3] = build(mid, end);
+      return id;
+    };
+    build(0, s);
+    this.kdPoints = new Float64Array(3 * s);
+    for (let i = 0; i < s; i++) for (let c = 0; c < 3; c++) this.kdPoints[3 * i + c] = sites[3 * this.kdIndex[i] + c];
+    this.kdStack = new Int32Array(KD_STACK);
+    this.kdBounds = new Float64Array(KD_STACK);
+  }
+
+  // Squared distance to a node's box, computed like a site's so it never exceeds one inside.
+  _boxDistance2(node, x, y, z) {
+    const b = this.kdBoxes;
+    const o = 6 * node;
+    const dx = x < b[o] ? b[o] - x : x > b[o + 3] ? x - b[o + 3] : 0;
+    const dy = y < b[o + 1] ? b[o + 1] - y : y > b[o + 4] ? y - b[o + 4] : 0;
+    const dz = z < b[o + 2] ? b[o + 2] - z : z > b[o + 5] ? z - b[o + 5] : 0;
+    return dx * dx + dy * dy + dz * dz;
+  }
+
+  // Section 4 step 1: a box is skipped only when strictly farther than the best site so far, and
+  // equal distances keep the smallest index, so the answer is brute force's, ties included.
+  _nearest(x, y, z) {
+    const { kdNodes: nodes, kdPoints: points, kdIndex: index, kdStack: stack, kdBounds: bounds } = this;
+    let top = 1;
+    let best = Infinity;
+    let bestIndex = 0x7fffffff;
+    stack[0] = 0;
+    bounds[0] = this._boxDistance2(0, x, y, z);
+    while (top > 0) {
+      top--;
+      if (bounds[top] > best) continue;
+      const node = stack[top];
+      const left = nodes[4 * node + 2];
+      const right = nodes[4 * node + 3];
+      if (left < 0) {
+        for (let i = nodes[4 * node]; i < nodes[4 * node + 1]; i++) {
+          const dx = points[3 * i] - x;
+          const dy = points[3 * i + 1] - y;
+          const dz = points[3 * i + 2] - z;
+          const d2 = dx * dx + dy * dy + dz * dz;
+          if (d2 < best || (d2 === best && index[i] < bestIndex)) {
+            best = d2;
+            bestIndex = index[i];
+          }
+        }
+        continue;
+      }
+      const a = this._boxDistance2(left, x, y, z);
+      const b = this._boxDistance2(right, x, y, z);
+      stack[top] = a <= b ? right : left;  // pushed first: the nearer box is searched first
+      bounds[top++] = a <= b ? b : a;
+      stack[top] = a <= b ? left : right;
+      bounds[top++] = a <= b ? a : b;
+    }
+    return bestIndex;
+  }
+
+  // The d = 1 jump table (docs/FORMAT.md section 4, "Cost"): per site v, |J[v, m]| ascending with
+  // J[v, m] = sum over i of B[v, i] (W[i, P] - W[i, Q]) (|jump'| = |n'| |J[v, m]|, and x -> |n'| x
+  // rounds monotonically, so the edges that hold are a prefix of the row), and the merges of
+  // Kruskal's algorithm over that row, whose clusters are the groups (p entries per site).
+  _buildJumpTable() {
+    const { numSites: s, numModes: k, numFragments: p, numEdges: e, edges, B, W } = this;
+    const diff = new Float64Array(e * k);
+    for (let m = 0; m < e; m++) {
+      for (let i = 0; i < k; i++) diff[m * k + i] = W[i * p + edges[2 * m]] - W[i * p + edges[2 * m + 1]];
+    }
+    this.jumps = new Float64Array(s * e);
+    this.jumpEdge = new Uint16Array(s * e);
+    this.mergeAt = new Uint16Array(s * p);
+    this.mergeChild = new Uint16Array(2 * s * p);
+    this.mergeLabel = new Int32Array(s * p);
+    const keys = new Float64Array(e);
+    const order = new Uint16Array(e);
+    const uf = new Int32Array(p);
+    const cluster = new Int32Array(p);
+    let count = 0;
+    for (let v = 0; v < s; v++) {
+      for (let m = 0; m < e; m++) {
+        let sum = 0;
+        for (let i = 0; i < k; i++) sum += B[v * k + i] * diff[m * k + i];
+        keys[m] = Math.abs(sum);
+        order[m] = m;
+      }
+      order.sort((a, b) => keys[a] - keys[b]);  // ties in any order: they hold or break together
+      const row = v * e;
+      const at = v * p;
+      for (let m = 0; m < e; m++) {
+        this.jumps[row + m] = keys[order[m]];
+        this.jumpEdge[row + m] = order[m];
+      }
+      for (let j = 0; j < p; j++) uf[j] = cluster[j] = j;
+      count = 0;
+      for (let pos = 0; pos < e; pos++) {
+        const a = root(uf, edges[2 * order[pos]]);
+        const b = root(uf, edges[2 * order[pos] + 1]);
+        if (a === b) continue;
+        const lo = Math.min(a, b);
+        this.mergeAt[at + count] = pos;
+        this.mergeChild[2 * (at + count)] = cluster[a];
+        this.mergeChild[2 * (at + count) + 1] = cluster[b];
+        this.mergeLabel[at + count] = lo;  // roots are their component's smallest fragment
+        uf[Math.max(a, b)] = lo;
+        cluster[lo] = p + count++;
       }
     }
-    return best;
+    this.merges = count;  // the same for every site: p minus the whole graph's number of groups
+    this.mergeLabels = new Int32Array(2 * p);  // scratch of _tableGroups
+    this.hasJumpTable = true;
+  }
+
+  // Steps 5-6 with the jump table: the edges that hold are the row's first `holding`, the merges done
+  // the first `done`; top-down over those (a merge's parent comes later), each passes its label on to
+  // its two children (labels[0, p): fragments, labels[p + r]: merge r).
+  _tableGroups(site, length, limit) {
+    const { numEdges: e, numFragments: p, jumps, mergeAt, mergeChild } = this;
+    const row = site * e;
+    const at = site * p;
+    let lo = 0;
+    let hi = e;
+    while (lo < hi) {
+      const mid = (lo + hi) >> 1;
+      if (length * jumps[row + mid] <= limit) lo = mid + 1;
+      else hi = mid;
+    }
+    const holding = lo;
+    lo = 0;
+    hi = this.merges;
+    while (lo < hi) {
+      const mid = (lo + hi) >> 1;
+      if (mergeAt[at + mid] < holding) lo = mid + 1;
+      else hi = mid;
+    }
+    const done = lo;
+    const { mergeLabels: labels, mergeLabel, jumpEdge } = this;
+    for (let j = 0; j < p; j++) labels[j] = j;
+    for (let r = 0; r < done; r++) labels[p + r] = mergeLabel[at + r];
+    for (let r = done - 1; r >= 0; r--) {
+      const value = labels[p + r];
+      labels[mergeChild[2 * (at + r)]] = value;
+      labels[mergeChild[2 * (at + r) + 1]] = value;
+    }
+    const broken = new Uint8Array(e).fill(1);
+    for (let i = 0; i < holding; i++) broken[jumpEdge[row + i]] = 0;
+    return { broken, groups: labels.slice(0, p), numGroups: p - done };
   }
 
   /** Mode coefficients (k) of the unit-max impulse nUnit at site v. */
@@ -334,25 +513,17 @@ export class FractureRuntime {
     const p = this.numFragments;
     const parent = new Int32Array(p);
     for (let j = 0; j < p; j++) parent[j] = j;
-    const find = (j) => {
-      while (parent[j] !== j) {
-        parent[j] = parent[parent[j]];  // path halving
-        j = parent[j];
-      }
-      return j;
-    };
     const edges = this.edges;
     for (let m = 0; m < this.numEdges; m++) {
       if (broken && broken[m]) continue;
-      const a = find(edges[2 * m]);
-      const b = find(edges[2 * m + 1]);
+      const a = root(parent, edges[2 * m]);
+      const b = root(parent, edges[2 * m + 1]);
       // The smaller root always wins, so every root is the smallest index of its component.
-      if (a < b) parent[b] = a;
-      else if (b < a) parent[a] = b;
+      parent[Math.max(a, b)] = Math.min(a, b);
     }
-    const labels = new Int32Array(p);
-    for (let j = 0; j < p; j++) labels[j] = find(j);
-    return labels;
+    // Parents are smaller than their children: one forward pass turns each entry into its root.
+    for (let j = 0; j < p; j++) parent[j] = parent[parent[j]];
+    return parent;
   }
 
   /**
@@ -361,11 +532,13 @@ export class FractureRuntime {
    * @param {ArrayLike<number>|{x,y,z}} point  hit point, model space (finite)
    * @param {ArrayLike<number>|{x,y,z}} impulse  impulse vector (finite); same unit as threshold
    * @param {number} [threshold]  toughness >= 0 (+Infinity allowed); default: the file's default_threshold
-   * @returns {{site: number, alpha: Float64Array, displacement: Float64Array, jumps: Float64Array,
+   * @param {{displacement?: boolean}} [options]  displacement (default true): false leaves displacement
+   *   and jumps null, and uses the jump table when parseRuntime built one (much faster on big files)
+   * @returns {{site: number, alpha: Float64Array, displacement: Float64Array|null, jumps: Float64Array|null,
    *            broken: Uint8Array, groups: Int32Array, numGroups: number}}
    *   displacement is (p, d) row-major and jumps (e, d); both, like alpha, for the impulse as given.
    */
-  project(point, impulse, threshold) {
+  project(point, impulse, threshold, options = {}) {
     const [x, y, z] = vector3(point, 'point');
     const n = vector3(impulse, 'impulse');
     let T = threshold === undefined || threshold === null ? this.defaultThreshold : threshold;
@@ -381,9 +554,16 @@ export class FractureRuntime {
       return { site, alpha: new Float64Array(this.numModes), displacement: new Float64Array(this.numFragments * d),
         jumps: new Float64Array(e * d), broken, groups, numGroups: countGroups(groups) };
     }
-    const alpha = this._alpha(site, [n[0] / m, n[1] / m, n[2] / m]);
-    const disp = this._displacement(alpha);
+    const nUnit = [n[0] / m, n[1] / m, n[2] / m];
+    const alpha = this._alpha(site, nUnit);
     const limit = T / m;  // +Infinity: nothing breaks; 0 (underflow or T = 0): any nonzero jump breaks
+    if (options.displacement === false && this.hasJumpTable) {
+      const length = Math.sqrt(nUnit[0] * nUnit[0] + nUnit[1] * nUnit[1] + nUnit[2] * nUnit[2]);
+      for (let i = 0; i < alpha.length; i++) alpha[i] *= m;
+      const { broken, groups, numGroups } = this._tableGroups(site, length, limit);
+      return { site, alpha, displacement: null, jumps: null, broken, groups, numGroups };
+    }
+    const disp = this._displacement(alpha);
     const jumps = new Float64Array(e * d);
     for (let q = 0; q < e; q++) {
       const P = edges[2 * q] * d;
@@ -406,8 +586,22 @@ export class FractureRuntime {
     for (let i = 0; i < disp.length; i++) disp[i] *= m;
     for (let i = 0; i < jumps.length; i++) jumps[i] *= m;
     const groups = this.groups(broken);
-    return { site, alpha, displacement: disp, jumps, broken, groups, numGroups: countGroups(groups) };
+    const keep = options.displacement !== false;
+    return { site, alpha, displacement: keep ? disp : null, jumps: keep ? jumps : null, broken, groups,
+      numGroups: countGroups(groups) };
   }
+}
+
+const KD_LEAF = 16;
+const KD_STACK = 96;  // deeper than any tree of at most 2^31 sites
+
+/** Union-find root with path halving. */
+function root(parent, j) {
+  while (parent[j] !== j) {
+    parent[j] = parent[parent[j]];
+    j = parent[j];
+  }
+  return j;
 }
 
 function countGroups(groups) {

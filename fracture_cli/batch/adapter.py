@@ -43,5 +43,7 @@ def bake_asset(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | N
     """
     from fracture_cli.bake import bake
 
-    result = bake(input_path, out_dir, recipe, cache_dir=cache_dir)
+    # One process per asset: the batch's parallelism is across assets (one Dask worker per core),
+    # a bake's own --jobs workers on top would oversubscribe the cores.
+    result = bake(input_path, out_dir, recipe, cache_dir=cache_dir, jobs=1)
     return BakeOutcome(report=result.report, outputs=tuple(result.outputs))

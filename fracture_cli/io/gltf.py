@@ -100,8 +100,39 @@ def _texture_png(material: Material) -> bytes | None:
     return buf.getvalue()
 
 
+class GlbBuffer:
+    """The binary chunk of a GLB being written, with its buffer views and accessors."""
+
+    def __init__(self) -> None:
+        self.binary = bytearray()
+        self.views: list[dict] = []
+        self.accessors: list[dict] = []
+
+    def add_view(self, data: bytes, target: int | None) -> int:
+        """Append ``data`` (4-byte aligned) as a buffer view; returns its index."""
+        while len(self.binary) % 4:
+            self.binary.append(0)
+        view = {"buffer": 0, "byteOffset": len(self.binary), "byteLength": len(data)}
+        if target is not None:
+            view["target"] = target
+        self.binary.extend(data)
+        self.views.append(view)
+        return len(self.views) - 1
+
+    def add_accessor(self, array: np.ndarray, kind: str, component: int, target: int | None,
+                     bounds: bool = False) -> int:
+        """Append ``array`` (already in its file dtype) as a view and an accessor; returns the accessor index."""
+        view = self.add_view(array.tobytes(), target)
+        acc = {"bufferView": view, "componentType": component, "count": int(array.shape[0]), "type": kind}
+        if bounds:
+            acc["min"] = [float(x) for x in array.min(axis=0)]
+            acc["max"] = [float(x) for x in array.max(axis=0)]
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+
 def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Primitive], np.ndarray]],
-              materials: tuple[Material, ...]) -> bytes:
+              materials: tuple[Material, ...], extend=None) -> bytes:
     """Encode meshes as a GLB file, one node per mesh.
 
     Parameters
@@ -111,34 +142,18 @@ def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Pri
         translation (positions are relative to it), in output order.
     materials : tuple of Material
         Material slots referenced by ``Primitive.material``.
+    extend : callable, optional
+        ``extend(doc, buffer)`` may add to the document before it is packed
+        (child nodes, extensions, extras; data through ``buffer``'s
+        :meth:`GlbBuffer.add_accessor`). Node ``i`` is ``meshes[i]``.
 
     Returns
     -------
     bytes
         A complete, deterministic GLB file.
     """
-    binary = bytearray()
-    buffer_views: list[dict] = []
-    accessors: list[dict] = []
-
-    def add_view(data: bytes, target: int | None) -> int:
-        while len(binary) % 4:
-            binary.append(0)
-        view = {"buffer": 0, "byteOffset": len(binary), "byteLength": len(data)}
-        if target is not None:
-            view["target"] = target
-        binary.extend(data)
-        buffer_views.append(view)
-        return len(buffer_views) - 1
-
-    def add_accessor(array: np.ndarray, kind: str, component: int, target: int | None, bounds: bool = False) -> int:
-        view = add_view(array.tobytes(), target)
-        acc = {"bufferView": view, "componentType": component, "count": int(array.shape[0]), "type": kind}
-        if bounds:
-            acc["min"] = [float(x) for x in array.min(axis=0)]
-            acc["max"] = [float(x) for x in array.max(axis=0)]
-        accessors.append(acc)
-        return len(accessors) - 1
+    buffer = GlbBuffer()
+    add_view, add_accessor = buffer.add_view, buffer.add_accessor
 
     images: list[dict] = []
     textures: list[dict] = []
@@ -183,8 +198,6 @@ def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Pri
             node["translation"] = [float(x) for x in translation]
         nodes.append(node)
 
-    while len(binary) % 4:
-        binary.append(0)
     doc = {
         "asset": {"version": "2.0", "generator": f"fracture {__version__}"},
         "scene": 0,
@@ -192,15 +205,21 @@ def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Pri
         "nodes": nodes,
         "meshes": gl_meshes,
         "materials": material_json,
-        "accessors": accessors,
-        "bufferViews": buffer_views,
-        "buffers": [{"byteLength": len(binary)}],
+        # Filled in below, once ``extend`` has added its data (kept here for a stable key order).
+        "accessors": buffer.accessors,
+        "bufferViews": buffer.views,
+        "buffers": [],
     }
     if images:
         doc["images"] = images
         doc["textures"] = textures
         doc["samplers"] = samplers
-    return pack_glb(doc, bytes(binary))
+    if extend is not None:
+        extend(doc, buffer)
+    while len(buffer.binary) % 4:
+        buffer.binary.append(0)
+    doc["buffers"] = [{"byteLength": len(buffer.binary)}]
+    return pack_glb(doc, bytes(buffer.binary))
 
 
 def pack_glb(doc: dict, binary: bytes | None) -> bytes:

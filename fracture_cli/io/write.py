@@ -113,18 +113,34 @@ def node_origin(world_points: np.ndarray) -> np.ndarray:
     return (world_points.min(axis=0) + world_points.max(axis=0)) / 2.0
 
 
-def write_fragments_glb(path: str | os.PathLike, fragments: Fragments) -> None:
+def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: str = "center_of_mass") -> None:
     """Write all fragments to one GLB: one node and mesh per fragment, named ``fragment_###``.
 
     Each mesh has one primitive per material it uses (the input's materials and
-    the interior material). Each node is translated to its fragment's centre
-    (its pivot) and the positions are relative to it, so the fragments sit in
-    the input's units and placement.
+    the interior material). Each node is translated to its fragment's pivot and
+    the positions are relative to it, so the fragments sit in the input's units
+    and placement. Each node's ``extras.fracture`` holds the fragment's
+    unit-density volume, centre of mass and inertia tensor (asset units; see
+    :func:`fracture_cli.gameready.export_shapes.node_extras`).
+
+    Parameters
+    ----------
+    pivot : {"center_of_mass", "bbox"}, optional (default "center_of_mass")
+        Node origins at the centre of mass (where engines put a rigid body's
+        origin) or at the bounding-box centre.
     """
-    meshes = []
+    from fracture_cli.gameready.export_shapes import FragmentPhysics, physics_extender
+    from fracture_cli.gameready.mass import mass_properties
+
+    meshes, physics = [], []
     for i, frag in enumerate(fragments.fragments):
-        origin = node_origin(fragments.normalization.to_world(frag.vertices))
+        mass = mass_properties(frag.vertices, frag.faces).to_world(fragments.normalization)
+        if pivot == "center_of_mass":
+            origin = mass.center
+        else:
+            origin = node_origin(fragments.normalization.to_world(frag.vertices))
         prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids,
                                   fragments.normalization, origin)
         meshes.append((fragment_name(i), prims, origin))
-    write_bytes_atomic(path, glb_bytes(meshes, fragments.materials))
+        physics.append(FragmentPhysics(mass=mass, origin=origin))
+    write_bytes_atomic(path, glb_bytes(meshes, fragments.materials, extend=physics_extender(physics, "none")))

@@ -80,6 +80,11 @@ def components(num: int, pairs: np.ndarray) -> np.ndarray:
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(num, num))
     _, labels = connected_components(graph, directed=False)
+    return renumber_by_first(labels)
+
+
+def renumber_by_first(labels: np.ndarray) -> np.ndarray:
+    """Labels (n,) renumbered 0, 1, ... in increasing order of their lowest index."""
     _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
     rank = np.empty(len(first), dtype=np.int64)
     rank[np.argsort(first, kind="stable")] = np.arange(len(first))

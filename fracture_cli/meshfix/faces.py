@@ -8,7 +8,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from fracture_cli.meshfix.edges import edge_table
+from fracture_cli.meshfix.edges import components, edge_table
 from fracture_cli.meshfix.records import RepairRecord
 
 
@@ -36,13 +36,19 @@ def unique_faces(W: np.ndarray) -> UniqueFaces:
 
     Notes
     -----
-    A group of copies is judged by its edges, counting the *other* groups on
-    each: when every edge has exactly one, the group is one face of a surface
-    listed several times (a triangle soup repeats faces with either winding):
-    one copy is kept and winding propagation orients it. Otherwise, copies of
-    opposite winding in equal numbers enclose nothing (a double-sided wall or
-    card) and all go; an unbalanced group keeps one copy of its majority
-    winding.
+    Repeated faces are judged together with the repeated faces next to them
+    (a patch: groups of copies joined across shared edges). A patch whose
+    every edge leading out of it meets exactly one other face, a surface face
+    listed once, is a piece of surface listed several times (a triangle soup
+    repeats faces with either winding; a closed object listed twice has no
+    such edge at all): one copy of each face is kept and winding propagation
+    orients it. A patch whose rim edges each lead to exactly two faces is a
+    wall between two solids touching face to face (or overlapping there, when
+    both copies have one winding): both copies stay, one per solid (the
+    non-manifold split separates the solids and the union joins them).
+    Otherwise (a free double-sided card), copies of opposite winding in equal
+    numbers enclose nothing and all go; an unbalanced group keeps one copy of
+    its majority winding.
     """
     W = np.asarray(W, dtype=np.int64).reshape(-1, 3)
     m = len(W)
@@ -58,9 +64,10 @@ def unique_faces(W: np.ndarray) -> UniqueFaces:
     rotated = np.stack([W[np.arange(m), (first + k) % 3] for k in range(3)], axis=1)
     parity = np.where(rotated[:, 1] < rotated[:, 2], 1, -1)
     net = np.bincount(group, weights=parity, minlength=len(uniq))
-    table = edge_table(uniq)
-    others = table.count[table.edge].reshape(3, -1).T - 1  # (g, 3) other groups on each edge
-    surface_face = np.all(others == 1, axis=1)
+    surface_face, wall = _repeated_patches(uniq, counts > 1)
+    # A wall between two solids keeps both copies: each belongs to one solid (touching, or overlapping where both
+    # have the same winding), and the union joins them.
+    wall &= counts == 2
     keep_group = surface_face | (net != 0)
     # One copy per kept group: the first face with the group's majority winding (any face for a surface face).
     wanted = np.where(net[group] == 0, True, np.sign(net[group]) == parity) | surface_face[group]
@@ -68,18 +75,48 @@ def unique_faces(W: np.ndarray) -> UniqueFaces:
     np.minimum.at(chosen, group[wanted], np.flatnonzero(wanted))
     keep = np.zeros(m, dtype=bool)
     keep[chosen[keep_group & (chosen < m)]] = True
+    keep |= wall[group]
+    keep_group |= wall
     repeated = counts > 1
     dropped = int((repeated & ~keep_group).sum())
-    duplicates = int((counts[keep_group] - 1).sum())
+    duplicates = int((counts[keep_group & ~wall] - 1).sum())
     records = []
     if duplicates:
         records.append(RepairRecord("removed_duplicate_faces", f"removed {duplicates} repeated copies of faces",
                                     count=duplicates))
     if dropped:
         records.append(RepairRecord("removed_double_sided_faces", f"removed {dropped} faces listed with both windings "
-                                    "that enclose nothing (double-sided walls)", count=int(counts[repeated &
-                                                                                             ~keep_group].sum())))
+                                    "that enclose nothing (walls between touching solids, double-sided cards)",
+                                    count=int(counts[repeated & ~keep_group].sum())))
     return UniqueFaces(keep, duplicates, dropped, records)
+
+
+def _repeated_patches(groups: np.ndarray, repeated: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per group of copies (g, 3): whether its patch of repeated groups is a piece of surface listed again, and
+    whether it is a wall between two solids.
+
+    A surface listed again: every edge of the patch is either inside it (two
+    repeated groups, no other face) or leads out of it to exactly one face
+    listed once. A wall: its edges inside it, or leading out of it to exactly
+    two faces listed once (one per solid).
+    """
+    table = edge_table(groups)
+    side_repeated = repeated[table.face]
+    num_repeated = np.bincount(table.edge, weights=side_repeated, minlength=len(table.count)).astype(np.int64)
+    num_single = table.count - num_repeated
+    inside = (num_repeated == 2) & (num_single == 0)
+    edge_ok = ((num_repeated == 1) & (num_single == 1)) | inside
+    edge_wall = ((num_repeated == 1) & (num_single == 2)) | inside
+    # Patches: repeated groups joined across edges that only repeated groups share.
+    order, start = table.sides_of_edges()
+    inner = np.flatnonzero((num_repeated == 2) & (num_single == 0))
+    pairs = np.column_stack([table.face[order[start[inner]]], table.face[order[start[inner] + 1]]])
+    patch = components(len(groups), pairs)
+    bad_patch = np.zeros(int(patch.max()) + 1, dtype=bool)
+    bad_patch[patch[table.face[side_repeated & ~edge_ok[table.edge]]]] = True
+    not_wall = np.zeros(len(bad_patch), dtype=bool)
+    not_wall[patch[table.face[side_repeated & ~edge_wall[table.edge]]]] = True
+    return repeated & ~bad_patch[patch], repeated & ~not_wall[patch]
 
 
 def orient_consistently(W: np.ndarray) -> tuple[np.ndarray, list[RepairRecord]]:

@@ -34,8 +34,6 @@ from fracture_cli.tetgeom import triangle_areas
 
 # Points per patch tested for being inside another body.
 _HIDDEN_SAMPLES = 16
-# Winding-number evaluation: points x faces per chunk.
-_WINDING_CHUNK = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -238,29 +236,6 @@ def measure_loop(V: np.ndarray, loop: np.ndarray, body: int) -> HoleLoop:
                     planarity=deviation / max(diameter, 1e-300), patch=patch, area=area)
 
 
-def winding_numbers(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Generalized winding numbers (p,) of points about the triangles ``F`` (m, 3) over ``V`` (n, 3).
-
-    About 1 inside a closed outward surface, 0 outside, in between near holes
-    (solid angles summed over the triangles / 4 pi, Van Oosterom and Strackee).
-    """
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    out = np.zeros(len(points))
-    if len(F) == 0:
-        return out
-    T = np.asarray(V, dtype=np.float64)[np.asarray(F, dtype=np.int64)]
-    step = max(1, _WINDING_CHUNK // len(F))
-    for s in range(0, len(points), step):
-        d = T[None, :, :, :] - points[s:s + step, None, None, :]  # (p, m, 3, 3)
-        a, b, c = d[..., 0, :], d[..., 1, :], d[..., 2, :]
-        la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
-        num = np.einsum("pmi,pmi->pm", a, np.cross(b, c))
-        den = (la * lb * lc + np.einsum("pmi,pmi->pm", a, b) * lc + np.einsum("pmi,pmi->pm", a, c) * lb
-               + np.einsum("pmi,pmi->pm", b, c) * la)
-        out[s:s + step] = np.arctan2(num, den).sum(axis=1) / (2.0 * np.pi)
-    return out
-
-
 def _with_centroids(V: np.ndarray, loops: list[HoleLoop]) -> tuple[np.ndarray, list[np.ndarray]]:
     """Vertices with every loop's centroid appended, and each loop's patch over those ids."""
     extra: list[np.ndarray] = []
@@ -315,7 +290,7 @@ def _judge_body(b: int, loops: list[HoleLoop], W: np.ndarray, patches: list[np.n
     hidden = False
     if share > options.max_fill_share:
         samples = np.vstack([_patch_samples(W, p) for p in patches])
-        hidden = bool(len(others)) and bool(np.all(np.abs(winding_numbers(samples, W, others)) > 0.5))
+        hidden = bool(len(others)) and bool(np.all(np.abs(trigeom.winding_numbers(samples, W, others)) > 0.5))
         if not hidden:
             return BodyPlan(b, "thicken", f"the holes would be {100 * share:.3g}% of the filled surface (more than "
                             f"{100 * options.max_fill_share:g}%) and are not inside another body", tuple(loops))
@@ -396,7 +371,7 @@ def fill_holes(V: np.ndarray, F: np.ndarray, plan: FillPlan) -> FilledMesh:
         if loop.body in flip_body:
             patch[:] = patch[:, ::-1]
         records.append(RepairRecord(
-            "filled_hole", f"filled a hole of {len(loop.vertices)} edges in body {loop.body}, area {loop.area:.3g} "
+            "filled_hole", f"filled a hole of {len(loop.vertices)} edges in body {loop.body} "
             f"({100 * loop.area / surface_area:.3g}% of the surface)", area=loop.area,
             where=tuple(float(x) for x in loop.centroid),
             extra={"share": loop.area / surface_area, "planarity": loop.planarity, "edges": len(loop.vertices)}))

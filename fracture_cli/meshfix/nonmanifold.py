@@ -109,16 +109,38 @@ def _pair_fan(sides: np.ndarray, sign: np.ndarray) -> tuple[list[tuple[int, int]
     return pairs, walls
 
 
+def _pair_within_patches(sides: np.ndarray, sign: np.ndarray, patch: np.ndarray) -> list[tuple[int, int]] | None:
+    """Side pairs gluing each patch's own two faces at an edge, or None unless every patch has one of each sign.
+
+    Used where the wedges around an edge overlap (two closed bodies that
+    interpenetrate there, e.g. fragments of a baked GLB after rounding): each
+    body stays closed on its own and the union resolves the overlap.
+    """
+    pairs = []
+    for p in np.unique(patch).tolist():
+        mine = patch == p
+        if mine.sum() != 2 or sign[mine].sum() != 0:
+            return None
+        a, b = sides[mine]
+        pairs.append((int(a), int(b)))
+    return pairs
+
+
 def _glue(V: np.ndarray, F: np.ndarray, table: EdgeTable):
     """Glued side pairs (g, 2) of every edge, the wall faces found, and the unresolved many-face edges."""
     glued = [table.manifold_pairs()]
     order, start = table.sides_of_edges()
+    patch = face_bodies(table)
     walls: set[int] = set()
     unresolved = []
     for e in np.flatnonzero(table.count > 2).tolist():
         sides, sign = _edge_fan(V, F, table, order[start[e]:start[e + 1]])
         pairs, wall_sides = _pair_fan(sides, sign)
         if wall_sides:
+            own = _pair_within_patches(sides, sign, patch[table.face[sides]])
+            if own is not None:
+                glued.append(np.array(own, dtype=np.int64))
+                continue
             walls.update(int(table.face[s]) for s in wall_sides)
             unresolved.append(e)
         elif pairs:
@@ -206,13 +228,14 @@ def _assemble(V: np.ndarray, F: np.ndarray, source_corner: np.ndarray, table: Ed
     records = []
     if split_edges:
         records.append(RepairRecord("split_nonmanifold_edges", f"split {split_edges} edges shared by more than two "
-                                    "faces by pairing the faces around them", count=split_edges))
+                                    "faces (bodies touching along an edge) into closed bodies", count=split_edges))
     if (copies > 1).any():
-        records.append(RepairRecord("split_nonmanifold_vertices", f"gave {int((copies > 1).sum())} vertices shared "
-                                    "by several fans of faces one copy per fan", count=int((copies > 1).sum())))
+        records.append(RepairRecord("split_nonmanifold_vertices", f"separated bodies touching at "
+                                    f"{int((copies > 1).sum())} vertices (one copy of each per body)",
+                                    count=int((copies > 1).sum())))
     if doubled:
         records.append(RepairRecord("doubled_wall_faces", f"doubled {doubled} faces of internal walls (material on "
-                                    "both sides), one copy per cell", count=doubled))
+                                    "both sides): one copy for each cell", count=doubled))
     for i in np.flatnonzero(~body_closed).tolist():
         where = tuple(float(x) for x in vertices_out[np.unique(faces_out[body == i])].mean(axis=0))
         records.append(RepairRecord("unclosed_body", f"body {i} ({int((body == i).sum())} faces) is not closed after "

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fracture_cli import trigeom
 from fracture_cli.errors import StageError
 from fracture_cli.meshfix.edges import edge_table
 from fracture_cli.meshfix.records import RepairRecord
@@ -63,16 +64,6 @@ class ThickenedSheet:
     source_vertex: np.ndarray
     thickness: np.ndarray
     records: list[RepairRecord] = field(default_factory=list)
-
-
-def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Unit area-weighted vertex normals (n, 3) of faces ``F`` (m, 3); zero at unused vertices."""
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    acc = np.zeros((len(V), 3))
-    for k in range(3):
-        np.add.at(acc, F[:, k], fn)
-    length = np.linalg.norm(acc, axis=1, keepdims=True)
-    return np.where(length > 0, acc / np.maximum(length, 1e-300), 0.0)
 
 
 def free_distance(V: np.ndarray, F: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -145,7 +136,7 @@ def thicken_inward(V: np.ndarray, F: np.ndarray, thickness: float, *, box: np.nd
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
-    normal = vertex_normals(V, F)
+    normal = trigeom.vertex_normals(V, F)
     if box is not None:
         box = np.asarray(box, dtype=np.float64)
     back = _back_positions(V, F, normal, thickness, box, max_free_fraction)
@@ -185,8 +176,9 @@ def _build(V: np.ndarray, F: np.ndarray, offset: np.ndarray, t: np.ndarray, thic
     kind = np.concatenate([np.zeros(len(F)), np.ones(len(back)), np.full(len(rim), 2)]).astype(np.int8)
     thinned = int((t[used] < thickness * (1 - 1e-9)).sum())
     area = float(triangle_areas(V, F).sum())
-    records = [RepairRecord("thickened_sheet", f"thickened an open sheet of area {area:.3g} inward by {thickness:.3g}"
-                            + (f" (thinner at {thinned} vertices, down to {t[used].min():.3g})" if thinned else ""),
+    records = [RepairRecord("thickened_sheet", f"thickened an open sheet of {len(F)} faces behind its visible side"
+                            + (f" (thinner at {thinned} vertices, down to {t[used].min() / thickness:.2g} of the "
+                               "thickness)" if thinned else ""),
                             count=len(F), area=area, where=tuple(float(x) for x in V[used].mean(axis=0)),
                             extra={"thickness": float(thickness), "min_thickness": float(t[used].min()),
                                    "thinned_vertices": thinned, "direction": "inward"})]

@@ -52,6 +52,16 @@ class MeshCheck:
     volume: float
 
     @property
+    def watertight(self) -> bool:
+        """Every edge in exactly two faces of opposite orientation, no degenerate face, positive volume.
+
+        Bodies touching only at a vertex pass; several separate bodies pass
+        too (see :attr:`bodies` and :attr:`closed`).
+        """
+        return (self.open_edges == 0 and self.pinched_edges == 0 and self.misoriented_edges == 0
+                and self.degenerate_faces == 0 and self.volume > 0)
+
+    @property
     def closed(self) -> bool:
         """Closed, edge-manifold, consistently oriented, one body, positive volume (pinched vertices allowed)."""
         return (self.open_edges == 0 and self.pinched_edges == 0 and self.misoriented_edges == 0
@@ -80,6 +90,11 @@ def as_written(world: np.ndarray, origin: np.ndarray) -> np.ndarray:
     return local.astype(np.float32).astype(np.float64)
 
 
+def collapsed(W: np.ndarray) -> np.ndarray:
+    """Faces (m,) bool of ``W`` (m, 3) with two corners at one (welded) vertex."""
+    return (W[:, 0] == W[:, 1]) | (W[:, 1] == W[:, 2]) | (W[:, 2] == W[:, 0])
+
+
 def check_mesh(positions: np.ndarray, faces: np.ndarray) -> MeshCheck:
     """Check a mesh welded by exact position.
 
@@ -97,7 +112,7 @@ def check_mesh(positions: np.ndarray, faces: np.ndarray) -> MeshCheck:
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     unique, index = weld_by_position(positions)
     W = index[faces]
-    degenerate = (W[:, 0] == W[:, 1]) | (W[:, 1] == W[:, 2]) | (W[:, 2] == W[:, 0])
+    degenerate = collapsed(W)
     W = W[~degenerate]
     if len(W) == 0:
         return MeshCheck(len(faces), 0, 0, 0, int(degenerate.sum()), 0, 0, 0.0)

@@ -234,14 +234,15 @@ def to_manifold(mesh: SplitMesh, num_materials: int) -> tuple[manifold3d.Manifol
 def reversed_solid(part: manifold3d.Manifold) -> manifold3d.Manifold:
     """The same manifold3d body with every triangle reversed (a cavity as a positive solid)."""
     mesh = part.to_mesh64()
-    tris = np.asarray(mesh.tri_verts, dtype=np.uint64).reshape(-1, 3)[:, ::-1]
+    tris = np.array(mesh.tri_verts, dtype=np.uint64).reshape(-1, 3)[:, ::-1]
+    # Copies: manifold3d's buffers come back as read-only views, and Mesh64 refuses read-only arrays.
     flipped = manifold3d.Mesh64(
-        vert_properties=np.asarray(mesh.vert_properties, dtype=np.float64),
+        vert_properties=np.array(mesh.vert_properties, dtype=np.float64),
         tri_verts=np.ascontiguousarray(tris),
-        merge_from_vert=np.asarray(mesh.merge_from_vert, dtype=np.uint64),
-        merge_to_vert=np.asarray(mesh.merge_to_vert, dtype=np.uint64),
-        run_index=np.asarray(mesh.run_index, dtype=np.uint64),
-        run_original_id=np.asarray(mesh.run_original_id, dtype=np.uint32),
+        merge_from_vert=np.array(mesh.merge_from_vert, dtype=np.uint64),
+        merge_to_vert=np.array(mesh.merge_to_vert, dtype=np.uint64),
+        run_index=np.array(mesh.run_index, dtype=np.uint64),
+        run_original_id=np.array(mesh.run_original_id, dtype=np.uint32),
     )
     return manifold3d.Manifold(flipped)
 

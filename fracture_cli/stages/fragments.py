@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
-from fracture_cli import trigeom
+from fracture_cli import parallel, trigeom
 from fracture_cli.errors import StageError
 from fracture_cli.options import option
 from fracture_cli.stages._solids import SHELL_VOLUME, shell_mask, surface_solid
@@ -100,17 +100,19 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     id_to_material = dict(id_to_material)
     id_to_material[region_id] = interior_index
 
-    results = []
-    empty = []
-    for piece, (rv, rf) in enumerate(regions.meshes):
-        region = _region_manifold(rv, rf, region_id, piece)
-        part = solid ^ region
-        volume = part.volume()
-        if part.is_empty() or volume <= SHELL_VOLUME * input_volume:
-            empty.append(piece)
-            continue
-        results.append(_to_fragment(part, piece, id_to_material, interior_index, surface, options,
-                                    SHELL_VOLUME * input_volume))
+    cut = _Cut(solid, regions.meshes, region_id, id_to_material, interior_index, surface, options,
+               SHELL_VOLUME * input_volume)
+    # One boolean per piece, independent of the others: on parallel.current_jobs() processes, results in order.
+    if solid.num_tri() > _CROP_TRIANGLES and len(regions.meshes) > 1:
+        groups = _piece_groups(regions.meshes, _CROP_GROUPS)
+        cuts: list[Fragment | None] = [None] * len(regions.meshes)
+        for group, parts in zip(groups, parallel.ordered_map(_cut_group, groups, cut)):
+            for piece, part in zip(group, parts):
+                cuts[piece] = part
+    else:
+        cuts = parallel.ordered_map(_cut_piece, range(len(regions.meshes)), cut)
+    results = [f for f in cuts if f is not None]
+    empty = [piece for piece, f in enumerate(cuts) if f is None]
     if empty:
         log.warning("%s: %d piece(s) do not reach the input and give no fragment: %s", STAGE, len(empty),
                     ", ".join(map(str, empty[:20])) + (" ..." if len(empty) > 20 else ""))
@@ -127,6 +129,68 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
         normalization=surface.normalization,
         input_volume=input_volume,
     )
+
+
+@dataclass(frozen=True)
+class _Cut:
+    """What cutting one piece needs (shared with the worker processes)."""
+
+    solid: manifold3d.Manifold
+    meshes: tuple
+    region_id: int
+    id_to_material: dict
+    interior_index: int
+    surface: SurfaceMesh
+    options: FragmentOptions
+    min_volume: float
+
+
+# Inputs above this many triangles are first cropped to a box around each group of nearby pieces, so a piece's
+# boolean reads a part of the input, not all of it (the cost of a boolean grows with both operands). Cropping
+# changes no geometry (each region lies inside its group's box) but may triangulate a fragment differently,
+# so small inputs, whose booleans are cheap anyway, are cut from the whole input.
+_CROP_TRIANGLES = 200_000
+# ... into this many groups of pieces (a k-d split of the regions' box centres).
+_CROP_GROUPS = 16
+# How far a group's box reaches beyond its regions' boxes (normalized units: bbox diagonal 1).
+_CROP_MARGIN = 1e-3
+
+
+def _piece_groups(meshes: tuple, count: int) -> list[list[int]]:
+    """Pieces in about ``count`` spatial groups: halve the set at the median box centre along its widest axis."""
+    centres = np.array([(V.min(axis=0) + V.max(axis=0)) / 2 if len(V) else np.zeros(3) for V, _ in meshes])
+    groups = [np.arange(len(meshes))]
+    while len(groups) < count:
+        big = max(range(len(groups)), key=lambda g: (len(groups[g]), -g))
+        members = groups[big]
+        if len(members) < 2:
+            break
+        spread = np.ptp(centres[members], axis=0)
+        order = members[np.lexsort((members, centres[members, int(np.argmax(spread))]))]
+        groups[big:big + 1] = [np.sort(order[:len(order) // 2]), np.sort(order[len(order) // 2:])]
+    return [g.tolist() for g in groups]
+
+
+def _cut_group(cut: _Cut, pieces: list[int]) -> list[Fragment | None]:
+    """The fragments of ``pieces``, cut from the input cropped to a box around their regions."""
+    boxes = [(V.min(axis=0), V.max(axis=0)) for V, _ in (cut.meshes[p] for p in pieces) if len(V)]
+    if not boxes:
+        return [None] * len(pieces)
+    lo = np.min([b[0] for b in boxes], axis=0) - _CROP_MARGIN
+    hi = np.max([b[1] for b in boxes], axis=0) + _CROP_MARGIN
+    crop = cut.solid ^ manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
+    return [_cut_piece(cut, piece, crop) for piece in pieces]
+
+
+def _cut_piece(cut: _Cut, piece: int, solid: manifold3d.Manifold | None = None) -> Fragment | None:
+    """The fragment of ``piece`` (``input ^ region``; ``solid``: the input or a crop of it around the region),
+    or None where the region misses the input."""
+    rv, rf = cut.meshes[piece]
+    part = (cut.solid if solid is None else solid) ^ _region_manifold(rv, rf, cut.region_id, piece)
+    if part.is_empty() or part.volume() <= cut.min_volume:
+        return None
+    return _to_fragment(part, piece, cut.id_to_material, cut.interior_index, cut.surface, cut.options,
+                        cut.min_volume)
 
 
 def _with_interior(materials: tuple[Material, ...], color: list) -> tuple[int, tuple[Material, ...]]:
@@ -173,6 +237,8 @@ def _to_fragment(part, piece: int, id_to_material: dict, interior_index: int, su
     material = np.empty(len(tris), dtype=np.int32)
     for r, original in enumerate(run_ids.tolist()):
         if original not in id_to_material:
+            if run_index[r] == run_index[r + 1]:
+                continue  # an operand none of whose faces is left (a crop's box)
             raise StageError(f"a boolean result has faces of unknown origin (id {original})", stage=STAGE)
         material[run_index[r]:run_index[r + 1]] = id_to_material[original]
     tris, material = tris[keep], material[keep]

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import time
 from dataclasses import dataclass
 
@@ -21,7 +20,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import eigsh
 
-from fracture_cli import progress
+from fracture_cli import parallel, progress
 from fracture_cli.discontinuity import (
     ConicSubproblemSolver,
     CutSubproblemSolver,
@@ -63,8 +62,6 @@ class ModesOptions:
     inner_max_iter: int = option(1000, "subproblem iterations at most (max-flows or interior-point steps)", min=1,
                                  max=1000000)
     seed: int = option(0, "seed of the eigensolver's start vector (fixed: results are reproducible)", min=0)
-    jobs: int = option(0, "worker processes for independent ICCM chains (vector modes with per-axis material "
-                       "weights); 0 = all cores. Results do not depend on it", min=0, max=256)
 
 
 def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.ndarray | None = None) -> Modes:
@@ -374,7 +371,7 @@ def _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
             chains.append((a, same, max(axis_count[b] for b in same)))
     scale = float(areas.mean())
     tasks = [(face_tets, areas * eta2[:, a], scale, volumes, scalar_init, count, opts, a, d) for a, _, count in chains]
-    results = _run_chains(tasks, _jobs(opts.jobs))
+    results = parallel.ordered_map(_axis_chain, tasks)
     per_axis_modes: list = [None] * d
     per_axis_stats: list = [None] * d
     backend = results[0][2]
@@ -390,45 +387,19 @@ def _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
         U[i, :, a] = per_axis_modes[a][j][:, 0]
         per_mode.append(dict(per_axis_stats[a][j]))
     return U, {**_summary(per_mode), "max_flow_backend": backend, "lp_backend": lp_backend(),
-               "chains": len(chains), "workers": min(len(chains), _jobs(opts.jobs))}
+               "chains": len(chains), "workers": min(len(chains), parallel.current_jobs())}
 
 
-def _jobs(jobs: int) -> int:
-    """Worker count: ``jobs``, or the cores this process may use when 0."""
-    if jobs > 0:
-        return jobs
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
-
-
-def _run_chains(tasks, jobs: int):
-    """``_axis_chain(*task)`` for every task, in order; in a process pool when there are several and ``jobs > 1``."""
-    if jobs <= 1 or len(tasks) <= 1:
-        return [_axis_chain(*task) for task in tasks]
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context(method),
-                             initializer=_quiet_worker) as pool:
-        return list(pool.map(_axis_chain, *zip(*tasks)))
-
-
-def _quiet_worker() -> None:
-    """Workers report no progress (the parent process owns the terminal)."""
-    progress.configure(None)
-
-
-def _axis_chain(face_tets, weights, weight_scale: float, volumes, scalar_init, count, opts, axis: int, d: int):
+def _axis_chain(_shared, task):
     """One ICCM chain of scalar modes with face weights ``weights`` (in units of ``weight_scale``).
 
     Returns the modes, their stats and the max-flow backend. Runs in the caller or in a worker
-    process (BLAS single-threaded either way).
+    process (BLAS single-threaded either way). ``task`` is ``(face_tets, weights, weight_scale,
+    volumes, scalar_init, count, opts, axis, d)``; :func:`parallel.ordered_map` passes no shared data.
     """
     from threadpoolctl import threadpool_limits
 
+    face_tets, weights, weight_scale, volumes, scalar_init, count, opts, axis, d = task
     t = len(volumes)
     inner = _MInner(volumes, 1)
     # Axis 0 keeps the generator of the scalar case; other axes get their own stream.

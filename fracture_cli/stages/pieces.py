@@ -7,11 +7,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from fracture_cli.errors import StageError
+from fracture_cli.meshfix.edges import components, renumber_by_first
 from fracture_cli.options import option
-from fracture_cli.types import Modes, Pieces, TetMesh
+from fracture_cli.types import Modes, Pieces, SurfaceMesh, TetMesh
 
 log = logging.getLogger(__name__)
 
@@ -22,9 +22,11 @@ STAGE = "pieces"
 class PiecesOptions:
     """Options of :func:`pieces`."""
 
-    min_volume_fraction: float = option(
+    min_fragment_fraction: float = option(
         0.0,
-        "merge pieces smaller than this fraction of the total volume into their largest-interface neighbour (0 = off)",
+        "merge pieces holding less than this fraction of the asset's volume into their largest-interface "
+        "neighbour, so fragments have a size relative to the asset, not to its tessellation (0 = only pieces "
+        "holding none of the asset are merged)",
         min=0.0,
         max=0.5,
     )
@@ -34,8 +36,43 @@ class PiecesOptions:
         min=0.0,
     )
 
+    # Keys of older recipes (see fracture_cli.recipe): old name -> (new name, what changed).
+    RENAMED = {"min_volume_fraction": ("min_fragment_fraction", "a fraction of the asset's volume now, not of the "
+                                       "cage's")}
 
-def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptions()) -> Pieces:
+
+# A piece holding less than this fraction of the asset holds none of it (sampling noise).
+_EMPTY = 1e-9
+# Barycentric lattice order of the points sampled in each tet to estimate how much of it is asset material.
+_SAMPLE_ORDER = 3
+
+
+def tet_material_fraction(tet_mesh: TetMesh, surface: SurfaceMesh) -> np.ndarray:
+    """Share (t,) of each tet inside the closed ``surface``, from a lattice of interior sample points.
+
+    The points are the barycentric lattice of order 3 (20 per tet), moved
+    inside (``(i, j, k, l) + 1/4) / 4``); each is tested with open3d's
+    occupancy query against the surface. Tets of the cage around a thin shell
+    or an empty inside get 0.
+    """
+    from fracture_cli._open3d import open3d
+
+    o3d = open3d()
+    n = _SAMPLE_ORDER
+    lattice = np.array([(i, j, k, n - i - j - k) for i in range(n + 1) for j in range(n + 1 - i)
+                        for k in range(n + 1 - i - j)], dtype=np.float64)
+    weights = (lattice + 0.25) / (n + 1)  # (s, 4), rows sum to 1
+    corners = tet_mesh.vertices[tet_mesh.tets]  # (t, 4, 3)
+    points = np.einsum("sc,tcd->tsd", weights, corners).reshape(-1, 3)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(surface.vertices, dtype=np.float32)),
+                        o3d.core.Tensor(np.asarray(surface.faces, dtype=np.uint32)))
+    inside = scene.compute_occupancy(o3d.core.Tensor(points.astype(np.float32))).numpy()
+    return inside.reshape(len(corners), len(weights)).mean(axis=1)
+
+
+def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptions(), *,
+           surface: SurfaceMesh | None = None) -> Pieces:
     """Atomic pieces of a tet mesh under a set of fracture modes.
 
     Two tets sharing an interior face are glued when that face is cut in no
@@ -49,8 +86,14 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
         Fracture modes; ``modes.U`` is (k, t, d) and ``modes.cut`` is (k, f) bool
         over ``tet_mesh.interior_faces``.
     options : PiecesOptions, optional
-        ``min_volume_fraction`` (default 0.0, off) and ``deviation_warning``
-        (default 1e-2).
+        ``min_fragment_fraction`` (default 0.0: only pieces holding none of the
+        asset merge; the recipes set it) and
+        ``deviation_warning`` (default 1e-2).
+    surface : SurfaceMesh, optional
+        The repaired input the fragments will be cut from: piece sizes are
+        then the asset volume they hold (:func:`tet_material_fraction`), so
+        cage volume around thin or open parts does not count. Without it, the
+        tets' own volume.
 
     Returns
     -------
@@ -77,16 +120,16 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
     U, cut = _checked_modes(tet_mesh, modes)
 
     glued = ~cut.any(axis=0)
-    tet_piece = _components(t, face_tets[glued])
+    tet_piece = components(t, face_tets[glued])
     volumes_t = np.abs(tet_mesh.tet_volumes)
     k = U.shape[0]
 
     atomic = int(tet_piece.max()) + 1 if t else 0
     max_deviation = _atomic_deviation(U, tet_piece, volumes_t, atomic, options.deviation_warning)
 
-    if options.min_volume_fraction > 0:
-        tet_piece = _merge_small(tet_piece, face_tets, tet_mesh.interior_face_areas, volumes_t,
-                                 options.min_volume_fraction)
+    held = volumes_t if surface is None else volumes_t * tet_material_fraction(tet_mesh, surface)
+    tet_piece = _merge_small(tet_piece, face_tets, tet_mesh.interior_face_areas, held,
+                             max(options.min_fragment_fraction, _EMPTY))
     p = int(tet_piece.max()) + 1 if t else 0
 
     volumes = np.bincount(tet_piece, weights=volumes_t, minlength=p)
@@ -168,26 +211,12 @@ def _checked_modes(tet_mesh: TetMesh, modes: Modes) -> tuple[np.ndarray, np.ndar
     return U, cut
 
 
-def _components(t: int, pairs: np.ndarray) -> np.ndarray:
-    """Connected components (t,) of ``t`` nodes joined by ``pairs`` (e, 2), numbered by lowest member."""
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(t, t))
-    _, labels = connected_components(graph, directed=False)
-    return _renumber_by_first(labels)
-
-
-def _renumber_by_first(labels: np.ndarray) -> np.ndarray:
-    """Relabel so that labels appear in increasing order of their lowest index."""
-    _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
-    rank = np.empty(len(first), dtype=np.int64)
-    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
-    return rank[inverse.reshape(-1)].astype(np.int64)
-
-
 def _merge_small(tet_piece, face_tets, face_areas, volumes_t, fraction):
-    """Merge pieces below ``fraction`` of the total volume into their largest-interface neighbour.
+    """Merge pieces below ``fraction`` of the total of ``volumes_t`` (t,) into their largest-interface neighbour.
 
-    Smallest piece first (ties by id); repeats until none is left below the
-    threshold or a small piece has no neighbour.
+    ``volumes_t`` is what counts of each tet (its volume, or the asset volume
+    it holds). Smallest piece first (ties by id); repeats until none is left
+    below the threshold or a small piece has no neighbour.
     """
     total = volumes_t.sum()
     labels = tet_piece.copy()
@@ -207,9 +236,9 @@ def _merge_small(tet_piece, face_tets, face_areas, volumes_t, fraction):
         other = np.where(a[touching] == P, b[touching], a[touching])
         shared = np.bincount(other, weights=face_areas[touching], minlength=p)
         Q = int(np.argmax(shared))  # argmax takes the lowest id on ties
-        log.info("%s: merging piece of volume %.3g into its neighbour (interface %.3g)", STAGE, vol[P], shared[Q])
+        log.debug("%s: merging piece of volume %.3g into its neighbour (interface %.3g)", STAGE, vol[P], shared[Q])
         labels[labels == P] = Q
-        labels = _renumber_by_first(labels)
+        labels = renumber_by_first(labels)
         stuck = set()
     return labels
 

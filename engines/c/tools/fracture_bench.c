@@ -1,14 +1,17 @@
 /*
  * fracture_bench - time fr_project on a list of hits (used by bench/bench_runtime.py).
  *
- *   fracture_bench HEADER BINARY ROUNDS < hits
+ *   fracture_bench HEADER BINARY ROUNDS [--compact] [--all] < hits
  *
  * Hits use fracture_check's line protocol (7 hex doubles, "-" for the default
  * threshold). Every hit is timed on its own with CLOCK_MONOTONIC, ROUNDS times
  * over the whole list; the clock's own cost (measured around an empty call) is
- * subtracted. Prints one line:
- *   median_ns <x> p99_ns <x> cpu_mean_ns <x> clock_ns <x> calls <n> groups_median <x>
- * where cpu_mean_ns is the thread CPU time of all calls divided by their number.
+ * subtracted. --compact loads with FR_LOAD_COMPACT (no jump table); --all also asks
+ * for the broken edges, alpha and the displacements (by default only the groups).
+ * Prints one line:
+ *   median_ns <x> p99_ns <x> cpu_mean_ns <x> clock_ns <x> calls <n> groups_median <x> load_ms <x> memory_kib <x>
+ * where cpu_mean_ns is the thread CPU time of all calls divided by their number, load_ms
+ * the thread CPU time of fr_load and memory_kib fr_memory_size.
  *
  * MIT licence, Copyright (c) fracture developers.
  */
@@ -46,19 +49,27 @@ int main(int argc, char **argv)
     fr_info info;
     fr_impact out;
     char line[4096], message[FR_MESSAGE_SIZE];
-    int n = 0, rounds, r, i, calls = 0;
-    double *times, *groups_count, clock_cost = 0, cpu0, cpu1;
+    int n = 0, rounds, r, i, calls = 0, all = 0;
+    unsigned flags = 0;
+    double *times, *groups_count, clock_cost = 0, cpu0, cpu1, load0, load_ms;
     void *workspace;
-    if (argc != 4 || (rounds = atoi(argv[3])) < 1) {
-        fprintf(stderr, "usage: fracture_bench HEADER BINARY ROUNDS < hits\n");
+    for (i = 4; i < argc; i++) {
+        if (strcmp(argv[i], "--compact") == 0) flags |= FR_LOAD_COMPACT;
+        else if (strcmp(argv[i], "--all") == 0) all = 1;
+        else argc = 0;
+    }
+    if (argc < 4 || (rounds = atoi(argv[3])) < 1) {
+        fprintf(stderr, "usage: fracture_bench HEADER BINARY ROUNDS [--compact] [--all] < hits\n");
         return 64;
     }
     h = read_file(argv[1], &hn);
     b = read_file(argv[2], &bn);
-    if (h == NULL || b == NULL || fr_load(h, hn, b, bn, 0, NULL, &rt, message, sizeof message) != FR_OK) {
+    load0 = now_ns(CLOCK_THREAD_CPUTIME_ID);
+    if (h == NULL || b == NULL || fr_load(h, hn, b, bn, flags, NULL, &rt, message, sizeof message) != FR_OK) {
         fprintf(stderr, "cannot load: %s\n", h && b ? message : "cannot read the files");
         return 2;
     }
+    load_ms = (now_ns(CLOCK_THREAD_CPUTIME_ID) - load0) / 1e6;
     info = fr_get_info(rt);
     while (n < MAX_HITS && fgets(line, sizeof line, stdin) != NULL) {
         char *token = strtok(line, " \t\r\n");
@@ -71,6 +82,11 @@ int main(int argc, char **argv)
     workspace = malloc(fr_workspace_size(rt) + 16);
     memset(&out, 0, sizeof out);
     out.groups = (int32_t *)malloc(sizeof(int32_t) * (size_t)info.fragments);
+    if (all) {
+        out.broken = (uint8_t *)malloc((size_t)info.edges + 1);
+        out.alpha = (double *)malloc(sizeof(double) * (size_t)info.modes);
+        out.displacement = (double *)malloc(sizeof(double) * (size_t)info.fragments * (size_t)info.dim);
+    }
     for (i = 0; i < 1000; i++) { /* the clock's own cost */
         double t0 = now_ns(CLOCK_MONOTONIC), t1 = now_ns(CLOCK_MONOTONIC);
         clock_cost += (t1 - t0) / 1000.0;
@@ -87,10 +103,12 @@ int main(int argc, char **argv)
     cpu1 = now_ns(CLOCK_THREAD_CPUTIME_ID);
     qsort(times, (size_t)calls, sizeof(double), by_value);
     qsort(groups_count, (size_t)n, sizeof(double), by_value);
-    printf("median_ns %.1f p99_ns %.1f cpu_mean_ns %.1f clock_ns %.1f calls %d groups_median %.0f\n",
+    printf("median_ns %.1f p99_ns %.1f cpu_mean_ns %.1f clock_ns %.1f calls %d groups_median %.0f load_ms %.2f "
+           "memory_kib %.0f\n",
            times[calls / 2], times[(size_t)(0.99 * (calls - 1))], (cpu1 - cpu0) / calls - clock_cost, clock_cost,
-           calls, n > 0 ? groups_count[n / 2] : 0.0);
+           calls, n > 0 ? groups_count[n / 2] : 0.0, load_ms, (double)fr_memory_size(rt) / 1024.0);
     fr_free(rt);
     free(h), free(b), free(times), free(groups_count), free(workspace), free(out.groups);
+    free(out.broken), free(out.alpha), free(out.displacement);
     return 0;
 }

@@ -37,7 +37,7 @@ func _init() -> void:
 		var times := []
 		for hit in hits:
 			var start := OS.get_ticks_usec()
-			runtime.project(hit[0], hit[1], hit[2], hit[3], hit[4], hit[5], hit[6])
+			runtime.project(hit[0], hit[1], hit[2], hit[3], hit[4], hit[5], hit[6], false)
 			times.append(OS.get_ticks_usec() - start)
 		times.sort()
 		if not times.empty():

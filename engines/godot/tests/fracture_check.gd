@@ -66,7 +66,12 @@ func _run_job(header: String, binary: String, impacts_path: String, flags: PoolS
 			for i in range(6):
 				v.append(HexBits.from_bits(t[i]))
 			var hit: Dictionary = runtime.project(v[0], v[1], v[2], v[3], v[4], v[5], threshold)
-			lines.append(_answer(hit))
+			var quick: Dictionary = runtime.project(v[0], v[1], v[2], v[3], v[4], v[5], threshold, false)
+			if hit["ok"] and not (quick["ok"] and quick["site"] == hit["site"] and quick["groups"] == hit["groups"]
+					and quick["broken"] == hit["broken"] and quick["num_groups"] == hit["num_groups"]):
+				lines.append("error inconsistent")
+			else:
+				lines.append(_answer(hit))
 	return lines
 
 

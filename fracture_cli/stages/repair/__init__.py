@@ -1,14 +1,23 @@
-"""Repair: turn any loaded surface into one closed, outward-oriented solid.
+"""Repair: turn any loaded surface into one closed, outward-oriented solid, and say what was done.
 
 The cage (section 1) and the fragments (section 6) must agree on what the solid
 is, so the input is made a solid once, right after loading, and both use the
-result. This module holds the stage function and its steps; :mod:`.cleanup`,
-:mod:`.orient` and :mod:`.closing` hold the work of each step.
+result. This module holds the stage function and its steps; the welded-mesh
+work is done by :mod:`fracture_cli.meshfix` (duplicates, winding, non-manifold
+edges, holes, sheets), :mod:`.carry` keeps UVs, normals and colours through it,
+and :mod:`.cleanup`, :mod:`.orient` and :mod:`.closing` hold the rest.
+
+The policy (README, "Accepted inputs"): solid or shell is decided from the mesh.
+Holes are filled when they close into a solid; anything else open is a sheet,
+thickened behind its visible side inside the input's bounding box; edges and
+vertices shared by several bodies are split; only what has no inside is
+refused. Every repair is a :class:`~fracture_cli.meshfix.records.RepairRecord`
+(report.json ``repairs``), and the ones that change the shape are logged as
+warnings with the per-asset override.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from dataclasses import dataclass
@@ -16,16 +25,15 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
-from fracture_cli import tetgeom, trigeom
+from fracture_cli import trigeom
 from fracture_cli.errors import StageError
-from fracture_cli.meshtopo import (
-    boundary_edge_faces,
-    boundary_edges,
-    components,
-    nonmanifold_edges,
-    propagate_winding,
-    unique_faces,
-)
+from fracture_cli.meshfix.edges import edge_table
+from fracture_cli.meshfix.faces import orient_consistently, unique_faces
+from fracture_cli.meshfix.holes import FillOptions, boundary_loops
+from fracture_cli.meshfix.nonmanifold import NonManifoldSplit, split_nonmanifold
+from fracture_cli.meshfix.records import RepairRecord
+from fracture_cli.meshfix.weld_check import collapsed
+from fracture_cli.meshtopo import components
 from fracture_cli.options import option
 from fracture_cli.stages._solids import (
     COLOR,
@@ -40,17 +48,19 @@ from fracture_cli.stages._solids import (
     vertex_properties,
     weld_map,
 )
-from fracture_cli.stages.repair.cleanup import boundary_loops, fan_area, is_flat, split_nonmanifold
-from fracture_cli.stages.repair.closing import fill, interior_slot, shell
+from fracture_cli.stages.repair.carry import after_split
+from fracture_cli.stages.repair.cleanup import is_flat, snap_between_bodies
+from fracture_cli.stages.repair.closing import fill_where_planned, interior_slot, open_bodies, thicken_sheets
 from fracture_cli.stages.repair.orient import (
+    closed_patches_outward,
     component_orientation,
     fix_shading_normals,
     internal_open_faces,
-    sheet_orientation,
 )
-from fracture_cli.types import Material, SurfaceMesh
+from fracture_cli.stages.repair.report import describe, warn_significant
+from fracture_cli.types import Material, Normalization, SurfaceMesh
 
-__all__ = ["FLAT_HINT", "STAGE", "RepairOptions", "repair"]
+__all__ = ["FLAT_HINT", "SNAP_TOLERANCE", "STAGE", "RepairOptions", "RepairResult", "repair", "repair_surface"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +68,9 @@ STAGE = "repair"
 
 # A solid of a unit-diagonal box enclosing less than this has no inside.
 _MIN_VOLUME = 1e-9
+# Vertices of different bodies closer than this (of the diagonal) are one point: a few float32 steps of a
+# fragment's pivot-relative coordinates (a baked GLB read back), far below any modelled feature.
+SNAP_TOLERANCE = 2e-7
 
 FLAT_HINT = ("give it thickness in your modelling tool, or use --set repair.open_surface=shell to thicken it "
              "into a thin solid")
@@ -70,81 +83,130 @@ class RepairOptions:
 
     open_surface: str = option(
         "auto",
-        "what to do with a surface that is open after welding: 'fill' closes each hole with a fan of interior "
-        "faces, 'shell' thickens the sheet into a thin solid, 'auto' fills small holes (total hole area at most "
-        "max_fill_ratio of the surface area) and shells otherwise, 'error' stops",
+        "what to do with a surface that is open after welding: 'auto' fills the holes of each body that close "
+        "into a solid (see hole_planarity, small_hole, max_fill_share) and thickens the rest inward as sheets; "
+        "'fill' fills every hole that can be filled; 'shell' thickens every open body; 'error' stops",
         choices=("auto", "fill", "shell", "error"),
     )
     shell_thickness: float = option(
         0.01,
-        "thickness of a shelled sheet, relative to the bounding-box diagonal (thinner where the sheet folds "
-        "tighter than that)",
+        "thickness of a thickened sheet, relative to the bounding-box diagonal (thinner where the sheet folds "
+        "tighter than that or meets its bounding box)",
         min=0.0,
         max=0.5,
         min_exclusive=True,
     )
-    max_fill_ratio: float = option(
-        0.02,
-        "open_surface='auto' fills holes whose total area is at most this fraction of the surface area",
+    hole_planarity: float = option(
+        0.1,
+        "'auto' fills a hole whose outline lies within this fraction of its diameter of a plane (or is small)",
+        min=0.0,
+    )
+    small_hole: float = option(
+        0.1,
+        "'auto' fills a hole whose diameter is at most this fraction of its body's bounding-box diagonal "
+        "(whatever its shape)",
+        min=0.0,
+    )
+    max_fill_share: float = option(
+        0.5,
+        "'auto' fills a body's holes only while the patches are at most this fraction of the filled surface "
+        "(unless hidden inside another body); above it the body is a sheet",
         min=0.0,
         max=1.0,
     )
 
+    # Keys of older recipes: read with a warning and ignored (see fracture_cli.recipe).
+    RETIRED = {"max_fill_ratio": "holes are now filled when they close into a solid, whatever their share of "
+                                 "the area (see repair.max_fill_share, repair.hole_planarity, repair.small_hole)"}
+
+
+@dataclass(frozen=True)
+class RepairResult:
+    """What :func:`repair_surface` made and did.
+
+    Attributes
+    ----------
+    surface : SurfaceMesh
+        The closed solid (the input itself when nothing needed repair).
+    records : tuple of RepairRecord
+        Every repair, in the order done, positions and areas in normalized
+        units; the first is the ``decision`` (solid or shell).
+    """
+
+    surface: SurfaceMesh
+    records: tuple[RepairRecord, ...]
+
 
 def repair(surface: SurfaceMesh, options: RepairOptions = RepairOptions()) -> SurfaceMesh:
-    """Make a surface a closed, edge-manifold, outward-oriented solid.
+    """Make a surface a closed, edge-manifold, outward-oriented solid (see :func:`repair_surface`)."""
+    return repair_surface(surface, options).surface
+
+
+def repair_surface(surface: SurfaceMesh, options: RepairOptions = RepairOptions()) -> RepairResult:
+    """Make a surface a closed, edge-manifold, outward-oriented solid, recording every repair.
 
     Parameters
     ----------
     surface : SurfaceMesh
         The loaded input, normalized coordinates. May have UV seams (vertices
         split at one position), degenerate and duplicated faces, inconsistent
-        winding, several overlapping closed bodies, cavities, and holes.
+        winding, several overlapping or touching bodies, cavities, holes and
+        open sheets.
     options : RepairOptions, optional
-        ``open_surface`` (default ``'auto'``), ``shell_thickness`` (default
-        0.01 of the bounding-box diagonal) and ``max_fill_ratio`` (default 0.02).
 
     Returns
     -------
-    SurfaceMesh
-        Closed when its vertices are welded by position, every edge in exactly
-        two faces of opposite orientation, positive volume. Vertices stay split
-        where their attributes differ (seams keep their UVs and normals);
-        positions are the input's (vertices merged within manifold3d's
-        tolerance are snapped to one position). Faces added to close the
-        surface carry an ``interior`` material slot (appended, or the input's
-        own slot of that name). ``normalization`` and ``name`` are unchanged.
-        A surface that needs no repair is returned as it is.
+    RepairResult
+        ``surface`` is closed when its vertices are welded by position, every
+        edge in exactly two faces of opposite orientation, positive volume.
+        Vertices stay split where their attributes differ; the input's
+        positions are kept (vertices of touching bodies within
+        :data:`SNAP_TOLERANCE` are snapped to one). Faces added to close the
+        surface carry an ``interior`` material slot. A surface that needs no
+        repair is returned as it is.
 
     Raises
     ------
     StageError
-        If the surface has no inside (flat, or nothing left after removing
-        degenerate faces), is open and ``open_surface='error'``, has edges
-        shared by more than two faces, or cannot be shelled or filled into a
-        valid solid.
+        If the surface has no inside (flat, nothing left after removing
+        degenerate faces, edges whose faces do not bound alternating solid and
+        empty wedges), is open and ``open_surface='error'``, has holes that
+        cannot be filled with ``open_surface='fill'``, or a sheet that cannot
+        be thickened.
 
     Notes
     -----
-    ALGORITHM.md section 8 ("Repair") lists the steps: weld, remove
-    degenerate and duplicated faces, orient, close open parts (fill, shell or
-    auto), union overlapping bodies. Each step that changes something is logged.
+    ALGORITHM.md section 8 ("Input repair") lists the steps: weld and snap,
+    remove degenerate and repeated faces, orient, split non-manifold edges and
+    vertices, fill or thicken what is open, orient bodies (cavities inward),
+    union overlapping bodies.
     """
     t0 = time.perf_counter()
-    did: list[str] = []
-    mesh, num_welded, flat = _weld_and_clean(surface, did)
-    mesh, patch = _orient_patches(mesh, did)
-    mesh, materials = _close_open(mesh, patch, flat, options, tuple(surface.materials), did)
-    mesh = _orient_components(mesh, did, surface.normals is not None)
-    mesh, volume = _solid(mesh, len(materials), flat, did)
-    welded = f"welded {num_welded} seam vertices by position"
-    if not did:
-        log.info("%s: %s: %s; a closed solid, nothing to repair (volume %.6g, %.2f s)", STAGE, surface.name,
-                 welded, volume, time.perf_counter() - t0)
-        return surface
+    records: list[RepairRecord] = []
+    mesh, flat = _weld_and_clean(surface, records)
+    mesh = _orient_and_split(mesh, surface.normalization, records)
+    box = np.stack([surface.vertices.min(axis=0), surface.vertices.max(axis=0)])
+    materials = tuple(surface.materials)
+    mesh, materials, shell = _close_open(mesh, flat, options, materials, box, surface.normals is not None, records)
+    mesh = _orient_components(mesh, records, surface.normals is not None)
+    mesh, volume = _solid(mesh, len(materials), flat, records)
+    changed = any(r.what not in _NO_CHANGE for r in records)
+    records.insert(0, describe(records, shell))
+    warn_significant(surface.name, records)
+    log.info("%s: %s: %s; volume %.6g (%.2f s)", STAGE, surface.name, records[0].detail, volume,
+             time.perf_counter() - t0)
+    if not changed:
+        return RepairResult(surface, tuple(records))
+    return RepairResult(_as_surface(mesh, surface, materials), tuple(records))
+
+
+# Records that describe the input without changing the geometry the later stages see.
+_NO_CHANGE = {"welded_vertices"}
+
+
+def _as_surface(mesh: SplitMesh, surface: SurfaceMesh, materials: tuple[Material, ...]) -> SurfaceMesh:
+    """The repaired split mesh as a compact SurfaceMesh (attributes the input had, unit normals)."""
     props, F = trigeom.compact(mesh.props, mesh.faces)
-    log.info("%s: %s: %s, %s; %d faces, volume %.6g (%.2f s)", STAGE, surface.name, welded, ", ".join(did), len(F),
-             volume, time.perf_counter() - t0)
     normals = props[:, NORMAL]
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), 0.0)
@@ -161,123 +223,173 @@ def repair(surface: SurfaceMesh, options: RepairOptions = RepairOptions()) -> Su
     )
 
 
-def _weld_and_clean(surface: SurfaceMesh, did: list[str]) -> tuple[SplitMesh, int, bool]:
-    """Steps 1-2: weld by position, drop degenerate and duplicated faces, split many-face edges into bodies.
+def _weld_and_clean(surface: SurfaceMesh, records: list[RepairRecord]) -> tuple[SplitMesh, bool]:
+    """Weld by position, snap touching bodies together, drop degenerate and repeated faces.
 
-    Returns the mesh, the number of vertices welded to another, and whether it is flat.
+    Returns the mesh and whether its vertices all lie in one plane.
     """
     F = np.asarray(surface.faces, dtype=np.int64)
     material_ids = np.asarray(surface.material_ids, dtype=np.int32)
     props = vertex_properties(surface, NUM_COLUMNS)
     weld = weld_map(props[:, :3], F)
     num_welded = int((weld != np.arange(len(props))).sum())
+    if num_welded:
+        records.append(RepairRecord("welded_vertices", f"welded {num_welded} vertices at one position (UV seams, "
+                                    "split normals)", count=num_welded))
     snapped = np.any(props[weld, POS] != props[:, POS], axis=1)
-    if snapped.any():
-        props[:, POS] = props[weld, POS]  # vertices merged within tolerance get one position
-        did.append(f"snapped {int(snapped.sum())} nearly coincident vertices together")
+    props[:, POS] = props[weld, POS]  # vertices merged within manifold3d's tolerance get one position
+    num_snapped = snap_between_bodies(props, F, weld, SNAP_TOLERANCE)
+    if snapped.any() or num_snapped:
+        count = int(snapped.sum()) + num_snapped
+        records.append(RepairRecord("snapped_vertices", f"snapped {count} nearly coincident vertices together "
+                                    "(bodies touching, or open edges, a rounding step apart)", count=count))
     W = weld[F]
-    degenerate = (W[:, 0] == W[:, 1]) | (W[:, 1] == W[:, 2]) | (W[:, 2] == W[:, 0])
+    degenerate = collapsed(W)
     if degenerate.any():
-        did.append(f"removed {int(degenerate.sum())} degenerate faces")
+        records.append(RepairRecord("removed_degenerate_faces", f"removed {int(degenerate.sum())} degenerate faces "
+                                    "(two corners at one position)", count=int(degenerate.sum())))
     F, W, material_ids = F[~degenerate], W[~degenerate], material_ids[~degenerate]
-    keep, num_duplicates, num_back_to_back = unique_faces(W)
-    if num_duplicates:
-        did.append(f"removed {num_duplicates} duplicated faces")
-    if num_back_to_back:
-        did.append(f"removed {num_back_to_back} back-to-back face pairs")
-    mesh = SplitMesh(props, F[keep], material_ids[keep], weld)
+    unique = unique_faces(W)
+    records += unique.records
+    mesh = SplitMesh(props, F[unique.keep], material_ids[unique.keep], weld)
     flat = is_flat(props[np.unique(mesh.faces), :3]) if len(mesh.faces) else True
     if len(mesh.faces) == 0:
         raise StageError("no faces are left after removing degenerate and duplicated faces: "
                          + (_FLAT_MESSAGE if flat else "the mesh encloses nothing"), stage=STAGE)
-    if nonmanifold_edges(mesh.welded):
-        mesh, leftover, note = split_nonmanifold(mesh)
-        did.append(note)
-        if leftover:
-            raise StageError(
-                f"{leftover} edges are shared by more than two faces after welding vertices by position, and the "
-                "faces around them do not split into closed bodies (two bodies touching along an edge, or cells "
-                "sharing an internal wall, are handled), so the mesh has no well-defined inside there; separate the "
-                "touching parts in your modelling tool", stage=STAGE)
-    return mesh, num_welded, flat
+    return mesh, flat
 
 
-def _orient_patches(mesh: SplitMesh, did: list[str]) -> tuple[SplitMesh, np.ndarray]:
-    """Step 3a: consistent winding within each edge-connected patch; returns the mesh and each face's patch (m,)."""
-    flip, patch = propagate_winding(mesh.welded)
+def _flipped(mesh: SplitMesh, flip: np.ndarray) -> SplitMesh:
+    faces = mesh.faces.copy()
+    faces[flip] = faces[flip][:, ::-1]
+    return SplitMesh(mesh.props, faces, mesh.material_ids, mesh.weld)
+
+
+def _orient_and_split(mesh: SplitMesh, normalization: Normalization, records: list[RepairRecord]) -> SplitMesh:
+    """Consistent winding across two-face edges; then edges of more than two faces and pinched vertices split.
+
+    Raises
+    ------
+    StageError
+        Where the faces around an edge do not bound alternating solid and
+        empty wedges (fins, sheets hinged on a solid): no inside there.
+    """
+    flip, flipped = orient_consistently(mesh.welded)
+    records += flipped
     if flip.any():
-        did.append(f"re-wound {int(flip.sum())} faces")
-    mesh.faces[flip] = mesh.faces[flip][:, ::-1]
-    return mesh, patch
+        mesh = _flipped(mesh, flip)
+    V = mesh.props[:, POS]
+    if (edge_table(mesh.welded).count > 2).any():
+        outward = closed_patches_outward(V, mesh.welded)
+        if outward.any():
+            records.append(RepairRecord("flipped_winding", f"turned {int(outward.sum())} faces of inside-out bodies "
+                                        "that touch others outward", count=int(outward.sum())))
+            mesh = _flipped(mesh, outward)
+    split = split_nonmanifold(V, mesh.welded)
+    _refuse_without_inside(split, normalization)
+    changes = [r for r in split.records if r.what != "unclosed_body"]
+    if changes:
+        records += changes
+        mesh = after_split(mesh, split)
+    return mesh
 
 
-def _close_open(mesh: SplitMesh, patch: np.ndarray, flat: bool, options: RepairOptions,
-                materials: tuple[Material, ...], did: list[str]) -> tuple[SplitMesh, tuple[Material, ...]]:
-    """Step 4: close what is open (fill or shell); open sheets entirely inside a closed body go first."""
-    boundary = boundary_edges(mesh.welded)
-    if len(boundary):
-        inside = internal_open_faces(mesh.props[:, POS], mesh.welded, mesh.weld)
-        if inside.any():
-            did.append(f"removed {int(inside.sum())} internal faces (open sheets inside the solid)")
-            mesh = dataclasses.replace(mesh, faces=mesh.faces[~inside], material_ids=mesh.material_ids[~inside])
-            _, patch = np.unique(patch[~inside], return_inverse=True)
-            patch = patch.reshape(-1)
-            boundary = boundary_edges(mesh.welded)
-    if not len(boundary):
-        return mesh, materials
-    loops = boundary_loops(boundary)
+def _refuse_without_inside(split: NonManifoldSplit, normalization: Normalization) -> None:
+    """Refuse edges of more than two faces that the split could not pair into bodies with an inside.
+
+    Left unpaired: faces that do not bound alternating solid and empty wedges
+    (sheets hinged on a solid, a book's pages), edges still shared by more than
+    two faces after the split, or bodies that close only onto themselves with
+    no volume (a fin doubled into a wall of nothing).
+    """
+    table = edge_table(split.faces)
+    many = table.ends[table.count > 2]
+    flat = split.body_closed & (np.abs(split.body_volume) <= _MIN_VOLUME)
+    if len(split.unresolved_edges):
+        ends = split.unresolved_edges
+    elif len(many):
+        ends = split.source_vertex[many]
+    elif flat.any():
+        ends = split.source_vertex[split.faces[np.isin(split.body, np.flatnonzero(flat))][:, :2]]
+    else:
+        return
+    P = normalization.to_world(split.vertices[ends].mean(axis=1))
+    where = ", ".join(f"({x:.4g}, {y:.4g}, {z:.4g})" for x, y, z in P[:3])
+    raise StageError(
+        f"{len(ends)} edges are shared by more than two faces that do not pair into closed bodies (fins or sheets "
+        f"hinged on a solid, or identical faces of two overlapping parts; at {where}), so the mesh has no clear "
+        "inside there; remove those faces, give them thickness or separate the parts in your modelling tool",
+        stage=STAGE)
+
+
+def _close_open(mesh: SplitMesh, flat: bool, options: RepairOptions, materials: tuple[Material, ...],
+                box: np.ndarray, shading: bool,
+                records: list[RepairRecord]) -> tuple[SplitMesh, tuple[Material, ...], bool]:
+    """Close what is open: open sheets inside a closed body go; holes that close into a solid are filled
+    ('auto', 'fill'); other open bodies are thickened inward ('auto', 'shell'). Returns whether any was."""
+    if not open_bodies(mesh):
+        return mesh, materials, False
+    inside = internal_open_faces(mesh.props[:, POS], mesh.welded, mesh.weld)
+    if inside.any():
+        records.append(RepairRecord("removed_internal_faces", f"removed {int(inside.sum())} faces of open sheets "
+                                    "lying inside the solid (internal faces)", count=int(inside.sum())))
+        mesh = SplitMesh(mesh.props, mesh.faces[~inside], mesh.material_ids[~inside], mesh.weld)
+        if not open_bodies(mesh):
+            return mesh, materials, False
     mode = options.open_surface
-    hole_area = sum(fan_area(mesh.props[loop, :3]) for loop in loops)
-    surface_area = float(tetgeom.triangle_areas(mesh.props[:, :3], mesh.faces).sum())
-    ratio = hole_area / surface_area if surface_area > 0 else np.inf
-    where = (f"the mesh is open at {len(loops)} boundary loop(s) ({len(boundary)} boundary edges, holes "
-             f"{100 * ratio:.3g}% of the surface area) after welding vertices by position")
     if mode == "error":
-        raise StageError(f"{where}; close it in your modelling tool, or use --set repair.open_surface=fill "
-                         "(close small holes) or --set repair.open_surface=shell (thicken the sheet)", stage=STAGE)
-    if mode == "auto":
-        if flat:
-            raise StageError(_FLAT_MESSAGE, stage=STAGE)
-        mode = "fill" if ratio <= options.max_fill_ratio else "shell"
-        log.info("%s: %s; auto: %s (fill limit %.3g%%)", STAGE, where, mode, 100 * options.max_fill_ratio)
+        loops = boundary_loops(mesh.welded)
+        raise StageError(f"the mesh is open at {len(loops)} boundary loop(s) after welding vertices by position; "
+                         "close it in your modelling tool, or use --set repair.open_surface=fill (close holes) or "
+                         "--set repair.open_surface=shell (thicken the sheet)", stage=STAGE)
+    if flat and mode != "shell":
+        raise StageError(_FLAT_MESSAGE, stage=STAGE)
     interior_material, materials = interior_slot(materials)
-    if mode == "fill":
-        did.append(f"filled {len(loops)} hole(s)")
-        return fill(mesh, loops, interior_material), materials
-    patch_open = np.zeros(patch.max() + 1, dtype=bool)
-    patch_open[patch[boundary_edge_faces(mesh.welded, boundary)]] = True
-    sheet = patch_open[patch]
-    sheet_flip = sheet_orientation(mesh.props, mesh.faces, patch, sheet)
-    mesh.faces[sheet_flip] = mesh.faces[sheet_flip][:, ::-1]
-    mesh, thinned = shell(mesh, sheet, boundary_edges(mesh.welded), options.shell_thickness, interior_material)
-    did.append(f"shelled {int(len(np.unique(patch[sheet])))} open sheet(s) (thickness {options.shell_thickness:g}"
-               + (f", thinner at {thinned} vertices)" if thinned else ")"))
-    return mesh, materials
+    if mode != "shell":
+        everything = float("inf")
+        fill_options = (FillOptions(everything, everything, everything) if mode == "fill" else
+                        FillOptions(options.hole_planarity, options.small_hole, options.max_fill_share))
+        mesh, plan, done = fill_where_planned(mesh, fill_options, interior_material)
+        records += done
+        refused = [b for b in plan.bodies if b.action != "fill"]
+        if mode == "fill" and refused:
+            raise StageError(f"cannot fill the holes of an open body: {refused[0].reason}; use --set "
+                             "repair.open_surface=shell to thicken it, or close it in your modelling tool",
+                             stage=STAGE)
+    if not open_bodies(mesh):
+        return mesh, materials, False
+    mesh, done = thicken_sheets(mesh, options.shell_thickness, box, shading, interior_material)
+    records += done
+    return mesh, materials, True
 
 
-def _orient_components(mesh: SplitMesh, did: list[str], has_normals: bool) -> SplitMesh:
-    """Step 3b: each closed component outward (cavities inward); shading normals agree with their faces."""
+def _orient_components(mesh: SplitMesh, records: list[RepairRecord], has_normals: bool) -> SplitMesh:
+    """Each closed component outward (cavities inward); shading normals agree with their faces."""
     component = components(mesh.welded, len(mesh.props))
     flip_component = component_orientation(mesh.props[:, :3], mesh.faces, component)
     flip = flip_component[component]
     if flip.any():
-        did.append(f"flipped {int(flip_component.sum())} inside-out component(s)")
-    mesh.faces[flip] = mesh.faces[flip][:, ::-1]
+        records.append(RepairRecord("flipped_winding", f"turned {int(flip_component.sum())} inside-out bodies "
+                                    "outward", count=int(flip.sum())))
+        mesh = _flipped(mesh, flip)
     num_normals = fix_shading_normals(mesh.props, mesh.faces)
     if num_normals and has_normals:
-        did.append(f"flipped {num_normals} shading normals")
+        records.append(RepairRecord("flipped_shading_normals", f"flipped {num_normals} shading normals that pointed "
+                                    "into the solid", count=num_normals))
     return mesh
 
 
-def _solid(mesh: SplitMesh, num_materials: int, flat: bool, did: list[str]) -> tuple[SplitMesh, float]:
-    """Step 5: check the mesh is a valid manifold and union overlapping bodies; returns it and its volume."""
+def _solid(mesh: SplitMesh, num_materials: int, flat: bool, records: list[RepairRecord]) -> tuple[SplitMesh, float]:
+    """Check the mesh is a valid manifold and union overlapping bodies; returns it and its volume."""
     solid, id_to_material = to_manifold(mesh, num_materials)
     if solid.status() != manifold3d.Error.NoError:
         raise StageError(f"the repaired mesh is not a valid manifold ({solid.status().name}); fix the mesh in "
                          "your modelling tool", stage=STAGE)
     solid, bodies, cavities = union_bodies(solid)
     if bodies > 1:
-        did.append(f"unioned {bodies} overlapping bodies" + (f" minus {cavities} cavities" if cavities else ""))
+        records.append(RepairRecord("unioned_bodies", f"united {bodies} overlapping or touching bodies"
+                                    + (f" minus {cavities} cavities" if cavities else ""), count=bodies,
+                                    extra={"cavities": cavities}))
         props, F, material_ids = from_manifold(solid, id_to_material)
         mesh = SplitMesh(props, F, material_ids, np.arange(len(props)))
     volume = float(solid.volume())

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from fracture_cli import trigeom
+from fracture_cli.meshfix.edges import edge_table, face_bodies
 from fracture_cli.meshtopo import components, undirected_edges
 from fracture_cli.stages._solids import NORMAL, POS
 
@@ -82,11 +83,40 @@ def fix_shading_normals(props: np.ndarray, F: np.ndarray) -> int:
     return int(against.sum())
 
 
-def sheet_orientation(props: np.ndarray, F: np.ndarray, patch: np.ndarray, sheet: np.ndarray) -> np.ndarray:
-    """Flip mask (m,) orienting each open patch so its winding agrees with its shading normals."""
+def sheet_faces_away(props: np.ndarray, F: np.ndarray, shading: bool) -> bool:
+    """Whether an open sheet's faces ``F`` (m, 3) must be reversed so its winding shows its visible side.
+
+    With the input's shading normals (``shading``), the visible side is the one
+    they point to (area-weighted vote); without them (STL, or normals made from
+    the file's own winding), it is the side facing away from the sheet's centre.
+    """
     V = props[:, POS]
     fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    shading = props[F[:, 0], NORMAL] + props[F[:, 1], NORMAL] + props[F[:, 2], NORMAL]
-    agreement = np.bincount(patch, weights=np.einsum("ij,ij->i", fn, shading) * sheet, minlength=patch.max() + 1)
-    return sheet & (agreement[patch] < 0)
+    if shading:
+        towards = props[F[:, 0], NORMAL] + props[F[:, 1], NORMAL] + props[F[:, 2], NORMAL]
+    else:
+        centres = V[F].mean(axis=1)
+        towards = centres - V[np.unique(F)].mean(axis=0)
+    return bool(np.einsum("ij,ij->i", fn, towards).sum() < 0)
 
+
+def closed_patches_outward(V: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """Flip mask (m,) turning inside-out closed patches that touch an edge of more than two faces outward.
+
+    The non-manifold split pairs the faces around such an edge by which side
+    of each the material is on, so the bodies meeting there must face out.
+    Patches not touching such an edge keep their winding (cavities stay).
+    """
+    table = edge_table(W)
+    patch = face_bodies(table)
+    num = int(patch.max()) + 1 if len(patch) else 0
+    at_many = np.zeros(num, dtype=bool)
+    at_many[patch[table.face[table.count[table.edge] > 2]]] = True
+    # A patch is closed when each of its (patch, edge) pairs has two of its faces.
+    key = patch[table.face] * len(table.count) + table.edge
+    _, per = np.unique(key, return_inverse=True)
+    uses = np.bincount(per)
+    closed = np.ones(num, dtype=bool)
+    closed[patch[table.face[uses[per] != 2]]] = False
+    volume = np.bincount(patch, weights=trigeom.face_signed_volumes(V, W), minlength=num)
+    return (at_many & closed & (volume < 0))[patch]

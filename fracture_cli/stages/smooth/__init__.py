@@ -131,9 +131,9 @@ def smooth(tet_mesh: TetMesh, pieces: Pieces, options: SmoothOptions = SmoothOpt
                      moves["reverted"], moves["frozen"], moves["rounds"], moves["alpha"])
         meshes, pinches, repaired = repaired_regions(V, T, topo, None, np.ones(t, dtype=bool), tet_piece, p)
     else:
-        Z, vanished = winning_field(tet_mesh, topo, tet_piece, pieces, lam, options.vanish_fraction)
+        Z, vanished, built = winning_field(tet_mesh, topo, tet_piece, pieces, lam, options.vanish_fraction)
         forced, Zv = forced_field(Z, tet_piece, vanished)
-        meshes, pinches, repaired = repaired_regions(V, T, topo, Zv, forced, tet_piece, p)
+        meshes, pinches, repaired = repaired_regions(V, T, topo, Zv, forced, tet_piece, p, first=built)
 
     broken = [P for P in range(p) if region_defects(*meshes[P])]
     if broken:

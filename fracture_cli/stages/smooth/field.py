@@ -47,15 +47,17 @@ def refined(tet_mesh: TetMesh, tet_piece: np.ndarray, levels: int, max_tets: int
 
 def winning_field(tet_mesh: TetMesh, topo: Topology, tet_piece: np.ndarray, pieces: Pieces, lam: float,
                    vanish_fraction: float):
-    """Field method: the smoothed field ``Z`` (n, p), raised for pieces that would vanish, and the pieces that
-    vanish anyway (they keep their own tets)."""
+    """Field method: the smoothed field ``Z`` (n, p), raised for pieces that would vanish, the pieces that
+    vanish anyway (they keep their own tets), and the direct regions of that field (``direct_regions``' result,
+    so the caller need not build them again)."""
     V, T, p = tet_mesh.vertices, tet_mesh.tets, pieces.num_pieces
     Z = smoothed_field(tet_mesh, tet_piece, p, lam)
     vanished: list[int] = []
     raised: list[int] = []
     while True:
         forced, Zv = forced_field(Z, tet_piece, vanished)
-        meshes, _, _ = direct_regions(V, T, topo, Zv, forced, tet_piece, p, check=False)
+        built = direct_regions(V, T, topo, Zv, forced, tet_piece, p)
+        meshes = built[0]
         won = np.array([trigeom.signed_volume(*m) for m in meshes])
         gone = [P for P in range(p) if P not in vanished and won[P] <= vanish_fraction * pieces.volumes[P]]
         if not gone:
@@ -75,7 +77,7 @@ def winning_field(tet_mesh: TetMesh, topo: Topology, tet_piece: np.ndarray, piec
             STAGE, len(gone), lam, gone[0], won[gone[0]] / pieces.volumes[gone[0]],
         )
         vanished.extend(gone)
-    return Z, vanished
+    return Z, vanished, built
 
 
 def _rescue_bias(tet_mesh: TetMesh, Z: np.ndarray, P: int, target: float) -> float:
@@ -128,11 +130,27 @@ def smoothed_field(tet_mesh: TetMesh, tet_piece: np.ndarray, p: int, lam: float)
     ).toarray()
     mass = sp.diags(np.bincount(tet_mesh.tets.reshape(-1), weights=quarter, minlength=n))
     system = (mass + lam * tet_mesh.stiffness).tocsc()
+    if not p:
+        return np.zeros((n, 0))
     try:
-        solve = spla.factorized(system)
+        factor = _spd_factor(system)
     except RuntimeError as exc:  # singular: degenerate tets
         raise StageError(f"the smoothing system is singular ({exc}); check the tet mesh for flat tets",
                          stage=STAGE) from exc
-    Z = np.column_stack([solve(mass_onehot[:, P]) for P in range(p)]) if p else np.zeros((n, 0))
-    return Z
+    # All right-hand sides in one call: the triangular solves then run as dense block operations.
+    return factor.solve(mass_onehot)
 
+
+def _spd_factor(system: sp.csc_matrix) -> spla.SuperLU:
+    """A sparse factorization of the symmetric positive definite ``system`` (n, n).
+
+    SuperLU told the matrix is symmetric: a symmetric fill-reducing ordering
+    (minimum degree on A + A^T) and no row pivoting (none is needed: the
+    lumped mass makes the system positive definite). On the 54k-unknown field
+    system of the chair this factorizes in about half the CPU time of the
+    default (COLAMD, partial pivoting), with L holding 40% fewer entries;
+    bench/RESULTS.md ("Field smoothing solvers") compares it with a sparse
+    Cholesky (CHOLMOD) and preconditioned conjugate gradients.
+    """
+    return spla.splu(system, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                     options={"SymmetricMode": True})

@@ -23,15 +23,19 @@ _MAX_REPAIRS = 12
 
 
 def repaired_regions(V: np.ndarray, T: np.ndarray, topo: Topology, Zv: np.ndarray | None, forced: np.ndarray,
-                     tet_piece: np.ndarray, p: int):
+                     tet_piece: np.ndarray, p: int, first: tuple | None = None):
     """Direct regions; where a region touches itself along a line, the tets there become tet-aligned (repeatedly).
 
-    Returns the meshes, the number of spindles carved and of tets made tet-aligned.
+    ``first``, when given, is :func:`direct_regions`' result for exactly these arguments (the caller built it
+    already). Returns the meshes, the number of spindles carved and of tets made tet-aligned.
     """
     forced = forced.copy()
     start = int(forced.sum())
     for _ in range(_MAX_REPAIRS):
-        meshes, pinches, defects = direct_regions(V, T, topo, Zv, forced, tet_piece, p)
+        if first is not None:
+            (meshes, pinches, defects), first = first, None
+        else:
+            meshes, pinches, defects = direct_regions(V, T, topo, Zv, forced, tet_piece, p)
         if not defects or forced.all():
             break
         # A defect edge lies in the simplex spanned by its end points' simplices: the tets around that

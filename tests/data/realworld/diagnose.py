@@ -4,10 +4,12 @@
 
 For each (file, recipe): the outcome (exit code, the error line), the
 independent invariant check of the written GLB (tests/invariants.py), what
-report.json claims (watertight, pinched_edges, volume_error), the repair
-decisions from the ``-v`` log, fragment and piece counts, pieces without a
-fragment, the modes stage's seconds and the bake's CPU seconds (user + system
-of the child process; wall-clock is noisy on a shared machine). Results are
+report.json claims (watertight, connected, pinched_edges, volume_error), the
+repairs it lists (the decision and the kinds of repair), fragment and piece
+counts, pieces without a fragment, the fragment volumes relative to the asset,
+the modes stage's seconds and the bake's CPU seconds (user + system of the
+child process; wall-clock is noisy on a shared machine). ``--extra FILE``
+bakes further files (e.g. the sample assets, with ``--recipe``). Results are
 appended as JSON lines to ``<out>/results.jsonl`` and printed as a markdown
 table.
 """
@@ -52,8 +54,15 @@ def bake_one(path: str, out: str, recipe: str, overrides: list[str], reference: 
     with open(report_path) as fh:
         report = json.load(fh)
     checks = report["checks"]
-    row["report"] = {k: checks.get(k) for k in ("watertight", "pinched_edges", "volume_error", "min_fragment_volume",
-                                                "max_outer_distance")}
+    row["report"] = {k: checks.get(k) for k in ("watertight", "connected", "pinched_edges", "volume_error",
+                                                "fragment_volume_min", "fragment_volume_median",
+                                                "fragment_volume_max", "max_outer_distance")}
+    repairs = report.get("repairs", [])
+    kinds: dict[str, int] = {}
+    for r in repairs[1:]:
+        kinds[r["what"]] = kinds.get(r["what"], 0) + int(r.get("count", 1))
+    row["decision"] = repairs[0]["decision"] if repairs else None
+    row["repairs"] = kinds
     counts = report["counts"]
     row["counts"] = {k: counts.get(k) for k in ("fragments", "pieces", "tets", "modes", "cage_faces")}
     row["input_volume"] = checks.get("input_volume")
@@ -69,13 +78,13 @@ def bake_one(path: str, out: str, recipe: str, overrides: list[str], reference: 
 
 def table(rows: list[dict]) -> str:
     """Markdown table of the rows (one per bake)."""
-    head = ("| file | recipe | outcome | independent check | report says | repair | fragments / pieces "
-            "(no fragment) | modes s | CPU s |")
+    head = ("| file | recipe | outcome | independent check | report says | repairs (report.json) | fragments / pieces "
+            "(no fragment) | volumes min / median / max | CPU s |")
     lines = [head, "|" + "---|" * 9]
     for r in rows:
         if r["exit"] != 0:
-            lines.append(f"| {r['file']} | {r['recipe']} | **error**: {r.get('error', '')[-120:]} | | | "
-                         f"{'; '.join(r['repair'])[:120]} | | | {r['cpu_s']} |")
+            lines.append(f"| {r['file']} | {r['recipe']} | **error**: {r.get('error', '')[-160:]} | | | | | | "
+                         f"{r['cpu_s']} |")
             continue
         ind = r["independent"]
         bad = ", ".join(f"{k} {v}" for k, v in ind["fragments_with"].items())
@@ -84,10 +93,13 @@ def table(rows: list[dict]) -> str:
                    + (f"; vol err {vol:.2g}" if vol is not None else "")
                    + (f"; bbox +{ind['bbox_excess']:.2g}" if ind["bbox_excess"] else ""))
         rep = r["report"]
-        says = f"watertight {rep['watertight']}, pinched {rep['pinched_edges']}"
+        says = f"watertight {rep['watertight']}, connected {rep['connected']}, pinched {rep['pinched_edges']}"
+        repairs = f"**{r['decision']}**: " + ", ".join(f"{k} {v}" for k, v in r["repairs"].items())
+        sizes = (f"{rep['fragment_volume_min']:.2%} / {rep['fragment_volume_median']:.2%} / "
+                 f"{rep['fragment_volume_max']:.1%}")
         c = r["counts"]
-        lines.append(f"| {r['file']} | {r['recipe']} | ok | {verdict} | {says} | {'; '.join(r['repair'])[:160]} | "
-                     f"{c['fragments']} / {c['pieces']} ({r['empty_pieces']}) | {r['modes_s']} | {r['cpu_s']} |")
+        lines.append(f"| {r['file']} | {r['recipe']} | ok | {verdict} | {says} | {repairs} | "
+                     f"{c['fragments']} / {c['pieces']} ({r['empty_pieces']}) | {sizes} | {r['cpu_s']} |")
     return "\n".join(lines)
 
 
@@ -96,18 +108,19 @@ def main() -> None:
     parser.add_argument("--recipe", action="append", default=None)
     parser.add_argument("--set", dest="overrides", action="append", default=[])
     parser.add_argument("--only", action="append", default=None, help="file names to bake (default: all)")
+    parser.add_argument("--extra", action="append", default=[], help="further files to bake (e.g. sample assets)")
     parser.add_argument("--out", default=os.path.join(REPO, "build", "realworld"))
     args = parser.parse_args()
     with open(os.path.join(HERE, "expected.toml"), "rb") as fh:
         cases = tomllib.load(fh)["case"]
     rows = []
     os.makedirs(args.out, exist_ok=True)
-    for case in cases:
-        if args.only and case["file"] not in args.only:
-            continue
+    jobs = [(os.path.join(HERE, c["file"]), c.get("volume")) for c in cases if not args.only or c["file"] in args.only]
+    jobs += [(os.path.abspath(path), None) for path in args.extra]
+    for path, volume in jobs:
         for recipe in args.recipe or ["default"]:
-            out = os.path.join(args.out, f"{os.path.splitext(case['file'])[0]}-{recipe}")
-            row = bake_one(os.path.join(HERE, case["file"]), out, recipe, args.overrides, case.get("volume"))
+            out = os.path.join(args.out, f"{os.path.splitext(os.path.basename(path))[0]}-{recipe}")
+            row = bake_one(path, out, recipe, args.overrides, volume)
             rows.append(row)
             with open(os.path.join(args.out, "results.jsonl"), "a") as fh:
                 fh.write(json.dumps(row) + "\n")

@@ -205,7 +205,7 @@ func hit(world_point: Vector3, world_impulse: Vector3, body: PhysicsBody = null,
 	var point: Vector3 = to_model.xform(world_point)
 	var impulse: Vector3 = model_frame.basis.orthonormalized().xform_inv(world_impulse)  # rotate only
 	var t: float = hit_threshold if hit_threshold >= 0.0 else (threshold if threshold >= 0.0 else runtime.default_threshold)
-	var result: Dictionary = runtime.project(point.x, point.y, point.z, impulse.x, impulse.y, impulse.z, t)
+	var result: Dictionary = runtime.project(point.x, point.y, point.z, impulse.x, impulse.y, impulse.z, t, false)
 	if not result["ok"]:
 		error_message = result["error"]
 		return []

@@ -17,8 +17,9 @@ class_name FractureRuntime
 const FORMAT_VERSION := 1
 const ARRAY_NAMES := ["sites", "B", "W", "edges", "edge_areas"]
 const ARRAY_RANKS := [2, 3, 3, 2, 1]
-const KD_LEAF := 8
+const KD_LEAF := 16
 const MAX_DEPTH := 64
+const BOUND_SLACK := 1e-9  # far above the rounding of a k-term sum in double
 
 var sites_count := 0
 var modes := 0
@@ -41,6 +42,11 @@ var _kd_index := PoolIntArray()
 var _kd_nodes := []    # per node: [begin, end, left, right, lo0, lo1, lo2, hi0, hi1, hi2]
 var _whole := PoolIntArray()
 var _whole_groups := 0
+var _max_bound := 0.0  # largest per-edge bound, see _edge_bounds()
+# Arrays copied (in C++) at the start of each projection instead of filled in GDScript loops.
+var _identity := []   # 0, 1, ..., p - 1
+var _no_edges := []   # e times false
+var _zero_modes := [] # k times 0.0
 
 # JSON parsing state (a strict RFC 8259 parser over the header's bytes).
 var _json := PoolByteArray()
@@ -104,6 +110,7 @@ func load_bytes(header: PoolByteArray, binary: PoolByteArray, check_crc := true)
 		return ERR_INVALID_DATA
 	_build_kd_tree()
 	_whole_graph()
+	_edge_bounds()
 	return OK
 
 
@@ -657,20 +664,50 @@ func components(broken: Array) -> PoolIntArray:
 				parent[b] = a
 			elif b < a:
 				parent[a] = b
-	var groups := PoolIntArray()
-	groups.resize(fragments)
 	for v in range(fragments):
 		parent[v] = parent[parent[v]]  # parent[v] <= v, so one increasing pass resolves every root
-		groups[v] = parent[v]
-	return groups
+	return PoolIntArray(parent)
 
 
 func _whole_graph() -> void:
-	var none := []
-	none.resize(edges_count)
+	_identity = []
+	for j in range(fragments):
+		_identity.append(j)
+	_no_edges = []
 	for m in range(edges_count):
-		none[m] = false
-	_whole = components(none)
+		_no_edges.append(false)
+	_zero_modes = []
+	for i in range(modes):
+		_zero_modes.append(0.0)
+	_whole = components(_no_edges)
+	_whole_groups = 0
+	for j in range(fragments):
+		if _whole[j] == j:
+			_whole_groups += 1
+
+
+# The largest over edges of c with |jump'| <= |alpha'| * c for the computed jump (Cauchy-Schwarz on
+# W[:, P] - W[:, Q], plus slack for the rounding of both displacements): project() skips the
+# displacements and the edge pass when |alpha'| * c <= t.
+func _edge_bounds() -> void:
+	var count := fragments * dim
+	_max_bound = 0.0
+	for m in range(edges_count):
+		var P: int = edges[2 * m] * dim
+		var Q: int = edges[2 * m + 1] * dim
+		var diff2 := 0.0
+		var wp2 := 0.0
+		var wq2 := 0.0
+		for i in range(modes):
+			for c in range(dim):
+				var wp: float = _W[i * count + P + c]
+				var wq: float = _W[i * count + Q + c]
+				diff2 += (wp - wq) * (wp - wq)
+				wp2 += wp * wp
+				wq2 += wq * wq
+		var bound := (sqrt(diff2) + BOUND_SLACK * (sqrt(wp2) + sqrt(wq2))) * (1.0 + BOUND_SLACK)
+		if bound > _max_bound:
+			_max_bound = bound
 
 
 func _finite(x: float) -> bool:
@@ -679,11 +716,12 @@ func _finite(x: float) -> bool:
 
 # Project a hit (docs/FORMAT.md section 4). Point in model space, impulse in model axes (any unit),
 # threshold in the impulse's unit (INF: unbreakable). Returns a Dictionary: ok (bool), error (String),
-# site, groups (PoolIntArray), num_groups, broken (Array of bool), alpha (Array), displacement (Array, p*d).
-func project(px: float, py: float, pz: float, nx: float, ny: float, nz: float, threshold: float) -> Dictionary:
-	for value in [px, py, pz, nx, ny, nz]:
-		if not _finite(value):
-			return {"ok": false, "error": "point and impulse must be finite"}
+# site, groups (PoolIntArray), num_groups, broken (Array of bool), alpha (Array), displacement (Array,
+# p*d; empty when with_displacement is false, which skips the displacements when nothing can break).
+func project(px: float, py: float, pz: float, nx: float, ny: float, nz: float, threshold: float,
+		with_displacement := true) -> Dictionary:
+	if not (_finite(px) and _finite(py) and _finite(pz) and _finite(nx) and _finite(ny) and _finite(nz)):
+		return {"ok": false, "error": "point and impulse must be finite"}
 	if is_nan(threshold) or threshold < 0:
 		return {"ok": false, "error": "threshold must not be NaN or negative"}
 	var site := nearest_site(px, py, pz)
@@ -693,52 +731,95 @@ func project(px: float, py: float, pz: float, nx: float, ny: float, nz: float, t
 		m = abs(ny)
 	if abs(nz) > m:
 		m = abs(nz)
-	var alpha := []
+	var alpha: Array = _zero_modes.duplicate()
+	var broken: Array = _no_edges.duplicate()
+	var groups := _whole
 	var disp := []
-	alpha.resize(modes)
-	disp.resize(fragments * dim)
-	for i in range(modes):
-		alpha[i] = 0.0
-	for j in range(fragments * dim):
-		disp[j] = 0.0
-	var broken := []
-	broken.resize(edges_count)
-	for r in range(edges_count):
-		broken[r] = false
+	var breaks := false
 	if m > 0.0:
-		var n := [nx / m, ny / m, nz / m]
+		var n0 := nx / m
+		var n1 := ny / m
+		var n2 := nz / m
+		var B := _B
 		var base := site * modes * dim
-		for i in range(modes):
-			if dim == 1:
-				alpha[i] = _B[base + i] * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
-			else:
-				alpha[i] = _B[base + 3 * i] * n[0] + _B[base + 3 * i + 1] * n[1] + _B[base + 3 * i + 2] * n[2]
-		var count := fragments * dim
-		for i in range(modes):  # each sum in mode order
-			var a: float = alpha[i]
-			var row := i * count
-			for j in range(count):
-				disp[j] += a * _W[row + j]
+		var norm2 := 0.0
+		if dim == 1:
+			var length := sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+			for i in range(modes):
+				alpha[i] = B[base + i] * length
+				norm2 += alpha[i] * alpha[i]
+		else:
+			for i in range(modes):
+				alpha[i] = B[base + 3 * i] * n0 + B[base + 3 * i + 1] * n1 + B[base + 3 * i + 2] * n2
+				norm2 += alpha[i] * alpha[i]
 		var t := threshold / m  # overflow: INF, nothing breaks; underflow: 0, any nonzero jump breaks
-		for r in range(edges_count):
-			broken[r] = _jump(disp, edges[2 * r], edges[2 * r + 1]) > t
-	var groups = components(broken) if m > 0.0 else _whole
-	var num_groups := 0
-	for j in range(fragments):
-		if groups[j] == j:
-			num_groups += 1
+		breaks = not (sqrt(norm2) * (1.0 + BOUND_SLACK) * _max_bound <= t)
+		if breaks or with_displacement:
+			disp = _displacements(alpha)
+		if breaks:
+			groups = _break(disp, t, broken)
+	elif with_displacement:
+		disp.resize(fragments * dim)
+		for j in range(fragments * dim):
+			disp[j] = 0.0
+	var num_groups := _whole_groups
+	if breaks:
+		num_groups = 0
+		for j in range(fragments):
+			if groups[j] == j:
+				num_groups += 1
 	for i in range(modes):
 		alpha[i] *= m
-	for j in range(fragments * dim):
-		disp[j] *= m
+	if with_displacement:
+		for j in range(disp.size()):
+			disp[j] *= m
 	return {"ok": true, "site": site, "groups": groups, "num_groups": num_groups, "broken": broken,
 			"alpha": alpha, "displacement": disp}
 
 
-func _jump(disp: Array, P: int, Q: int) -> float:
-	if dim == 1:
-		return abs(disp[P] - disp[Q])
-	var j0: float = disp[3 * P] - disp[3 * Q]
-	var j1: float = disp[3 * P + 1] - disp[3 * Q + 1]
-	var j2: float = disp[3 * P + 2] - disp[3 * Q + 2]
-	return sqrt(j0 * j0 + j1 * j1 + j2 * j2)
+# disp'[j, c] = sum over i of alpha'[i] W[i, j, c], each sum in mode order.
+func _displacements(alpha: Array) -> Array:
+	var count := fragments * dim
+	var W := _W
+	var disp := []
+	disp.resize(count)
+	var a: float = alpha[0]
+	for j in range(count):
+		disp[j] = 0.0 + a * W[j]  # 0.0 + : the same first sum as a zero start (turns -0.0 into 0.0)
+	for i in range(1, modes):
+		a = alpha[i]
+		var row := i * count
+		for j in range(count):
+			disp[j] += a * W[row + j]
+	return disp
+
+
+# Steps 5-6: test every edge, union-find (inline: calls are slow in GDScript) over those that hold.
+func _break(disp: Array, t: float, broken: Array) -> PoolIntArray:
+	var parent: Array = _identity.duplicate()
+	var E := edges
+	for r in range(edges_count):
+		var P: int = E[2 * r]
+		var Q: int = E[2 * r + 1]
+		var jump: float
+		if dim == 1:
+			jump = abs(disp[P] - disp[Q])
+		else:
+			var j0: float = disp[3 * P] - disp[3 * Q]
+			var j1: float = disp[3 * P + 1] - disp[3 * Q + 1]
+			var j2: float = disp[3 * P + 2] - disp[3 * Q + 2]
+			jump = sqrt(j0 * j0 + j1 * j1 + j2 * j2)
+		if jump > t:
+			broken[r] = true
+			continue
+		while parent[P] != P:
+			P = parent[P]
+		while parent[Q] != Q:
+			Q = parent[Q]
+		if P < Q:  # the smaller root wins: roots are their component's smallest fragment
+			parent[Q] = P
+		elif Q < P:
+			parent[P] = Q
+	for j in range(fragments):
+		parent[j] = parent[parent[j]]  # parent[j] <= j, so one increasing pass resolves every root
+	return PoolIntArray(parent)

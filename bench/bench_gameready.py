@@ -1,0 +1,202 @@
+"""Benchmark of the game-ready modules on the sample assets (fracture_cli.gameready).
+
+    python bench/bench_gameready.py [--quick] [--from DIR]
+
+Each sample asset is baked with the recipe its manifest names (or its GLB is
+taken from ``DIR/<stem>/<stem>.glb``), the fragment meshes are read back from
+the GLB, and the game-ready steps run on them:
+
+* bodies: closed bodies per fragment, fragments after splitting (tiny bodies,
+  below 1e-4 of the asset's volume, merged into their neighbour);
+* collision: convex parts per fragment, hull volume / volume of each fragment
+  before (its plain hull) and after (its parts), the share of each fragment's
+  volume inside its parts, the largest overlap between two collision shapes
+  (fraction of the smaller) with plain hulls and with the parts;
+* faults: triangles before and after simplifying the shared faults to 1e-3 of
+  the bounding-box diagonal (prototype; every fragment checked closed and free
+  of self-intersections);
+* rest (when Godot 3 is installed): one rigid body per fragment, gravity off,
+  one second of physics (Bullet, shape margin 1e-4), largest speed with each
+  fragment's convex hull and with its exported parts (``UCX_`` meshes).
+
+Seconds are CPU seconds (``time.process_time``) of one process: the machine
+may be shared. Targets: collision parts in a few seconds per asset, no
+overlap above 1% of the smaller part.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import sys
+import tempfile
+import time
+import tomllib
+
+import numpy as np
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, REPO)
+
+from fracture_cli.gameready.collision import _solid, collision_shapes, hull_corners, max_overlap_fraction  # noqa: E402
+from fracture_cli.gameready.components import body_faces, split_fragments  # noqa: E402
+from fracture_cli.gameready.mass import mass_properties  # noqa: E402
+from fracture_cli.gameready.simplify import _valid, simplify_faults  # noqa: E402
+from fracture_cli.io.gltf import read_glb  # noqa: E402
+from fracture_cli.types import Fragment, Fragments, Material, Normalization  # noqa: E402
+
+
+def read_fragments(path: str) -> Fragments:
+    """The fragments of a baked GLB as :class:`Fragments` (normalized by the fragments' bounding box)."""
+    meshes, names = read_glb(path)
+    world = np.vstack([p.positions for m in meshes for p in m.primitives])
+    norm = Normalization.from_points(world)
+    frags = []
+    for k, mesh in enumerate(meshes):
+        offset, positions, normals, uvs, faces, material = 0, [], [], [], [], []
+        for prim in mesh.primitives:
+            positions.append(prim.positions)
+            normals.append(prim.normals)
+            uvs.append(prim.uvs if prim.uvs is not None else np.zeros((len(prim.positions), 2)))
+            faces.append(prim.indices + offset)
+            material.append(np.full(len(prim.indices), prim.material, dtype=np.int32))
+            offset += len(prim.positions)
+        frags.append(Fragment(vertices=norm.to_normalized(np.vstack(positions)), faces=np.vstack(faces),
+                              uvs=np.vstack(uvs), normals=np.vstack(normals), material_ids=np.concatenate(material),
+                              piece=k))
+    volume = sum(mass_properties(f.vertices, f.faces).volume for f in frags)
+    return Fragments(tuple(frags), tuple(Material(n) for n in names), norm, volume)
+
+
+def _glb(asset: str, recipe: str, source: str | None, tmp: str) -> str:
+    stem = os.path.splitext(asset)[0]
+    if source:
+        return os.path.join(source, stem, f"{stem}.glb")
+    from fracture_cli.bake import bake
+    from fracture_cli.recipe import load_recipe
+
+    bake(os.path.join(REPO, "sample_assets", asset), os.path.join(tmp, stem), load_recipe(recipe))
+    return os.path.join(tmp, stem, f"{stem}.glb")
+
+
+def _measure(fragments: Fragments) -> dict:
+    out: dict = {}
+    t = time.process_time()
+    bodies = [len(body_faces(f.vertices, f.faces)) for f in fragments.fragments]
+    split, report = split_fragments(fragments, 1e-4)
+    out["bodies"] = (len(fragments.fragments), max(bodies), sum(b > 1 for b in bodies), len(split.fragments),
+                     report.merged, time.process_time() - t)
+    meshes = [(f.vertices, f.faces) for f in split.fragments]
+    t = time.process_time()
+    shapes = collision_shapes(meshes)
+    seconds = time.process_time() - t
+    parts = np.array([len(p) for p in shapes.parts])
+    hulls = [hull_corners(_solid(V, F)) for V, F in meshes]
+    out["collision"] = (len(meshes), parts.mean(), parts.max(), parts.sum(),
+                        max(len(p) for ps in shapes.parts for p in ps), shapes.hull_ratio.max(),
+                        int((shapes.hull_ratio > 1.5).sum()), shapes.parts_ratio.max(), shapes.coverage.min(),
+                        np.median(shapes.coverage), max_overlap_fraction(hulls),
+                        max_overlap_fraction([p for ps in shapes.parts for p in ps]), seconds)
+    out["rest"] = _rest_in_godot(split, shapes) if shutil.which("godot3-server") else None
+    t = time.process_time()
+    simplified, faults = simplify_faults(fragments, 1e-3)
+    seconds = time.process_time() - t
+    invalid_before = sum(not _valid(f) for f in fragments.fragments)
+    invalid = sum(not _valid(f) for f in simplified.fragments)
+    out["faults"] = (faults.triangles_before, faults.triangles_after, faults.fault_before, faults.fault_after,
+                     faults.unmatched, invalid_before, invalid, seconds)
+    return out
+
+
+def _rest_in_godot(fragments: Fragments, shapes) -> tuple[float, float]:
+    """Largest body speed after one second in Godot 3: (convex hulls, exported parts)."""
+    sys.path.insert(0, os.path.join(REPO, "tests"))
+    from godot_harness import GodotProject
+    from test_gameready_engine import REST_SCRIPT
+
+    from fracture_cli.gameready.export_shapes import FragmentPhysics, physics_extender
+    from fracture_cli.io.gltf import glb_bytes
+    from fracture_cli.io.write import fragment_name, split_by_material
+
+    norm = fragments.normalization
+    nodes, physics = [], []
+    for i, frag in enumerate(fragments.fragments):
+        mass = mass_properties(frag.vertices, frag.faces).to_world(norm)
+        prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids, norm,
+                                  mass.center)
+        nodes.append((fragment_name(i), prims, mass.center))
+        physics.append(FragmentPhysics(mass, mass.center, [norm.to_world(p) for p in shapes.parts[i]]))
+    with tempfile.TemporaryDirectory() as tmp:
+        glb = os.path.join(tmp, "asset.glb")
+        with open(glb, "wb") as fh:
+            fh.write(glb_bytes(nodes, fragments.materials, extend=physics_extender(physics, "unreal")))
+        project = GodotProject(os.path.join(tmp, "godot"))
+        scene = project.add_file(glb)
+        project.import_resources()
+        speeds = [float(project.run_script(REST_SCRIPT, scene, mode).lines("max_speed ")[0].split()[1])
+                  for mode in ("hull", "parts")]
+    return speeds[0], speeds[1]
+
+
+def run(quick: bool = False, source: str | None = None) -> str:
+    with open(os.path.join(REPO, "sample_assets", "manifest.toml"), "rb") as fh:
+        assets = sorted(tomllib.load(fh)["assets"].items())
+    if quick:
+        assets = [a for a in assets if a[0] == "chair.glb"]
+    rows: dict[str, list[str]] = {"bodies": [], "collision": [], "faults": [], "rest": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for asset, recipe in assets:
+            measured = _measure(read_fragments(_glb(asset, recipe, source, tmp)))
+            name = f"{asset} ({recipe})"
+            b = measured["bodies"]
+            rows["bodies"].append(f"| {name} | {b[0]} | {b[1]} | {b[2]} | {b[3]} | {b[4]} | {b[5]:.2f} |")
+            c = measured["collision"]
+            rows["collision"].append(
+                f"| {name} | {c[0]} | {c[1]:.2f} / {c[2]} / {c[3]} | {c[4]} | {c[5]:.2f} ({c[6]} > 1.5) | {c[7]:.2f} "
+                f"| {c[8]:.3f} / {c[9]:.3f} | {c[10]:.3f} | {c[11]:.1e} | {c[12]:.1f} |")
+            if measured["rest"] is not None:
+                rows["rest"].append(f"| {name} | {measured['rest'][0]:.3f} | {measured['rest'][1]:.4f} |")
+            f = measured["faults"]
+            rows["faults"].append(f"| {name} | {f[0]} -> {f[1]} | {f[2]} -> {f[3]} | {f[4]} | {f[5]} -> {f[6]} "
+                                  f"| {f[7]:.1f} |")
+    return "\n".join([
+        "## gameready",
+        "",
+        __doc__.split("\n\n", 2)[2].strip(),
+        "",
+        ("Bodies (per asset): fragments, most bodies in one fragment, fragments with several bodies, fragments "
+         "after splitting, tiny bodies merged, CPU s."),
+        "",
+        "| asset | fragments | max bodies | multi-body | after split | merged | s |",
+        "|---|---|---|---|---|---|---|",
+        *rows["bodies"],
+        "",
+        "Collision (defaults: at most 8 parts of at most 64 vertices, concavity 0.1), on the split fragments.",
+        "",
+        ("| asset | fragments | parts mean / max / total | max vertices | hull/volume max | parts/volume max "
+         "| coverage min / median | overlap, plain hulls | overlap, parts | s |"),
+        "|---|---|---|---|---|---|---|---|---|---|",
+        *rows["collision"],
+        "",
+        "Faults simplified to 1e-3 of the diagonal (prototype, on the finished fragments).",
+        "",
+        ("| asset | triangles | fault triangles | unmatched fault faces | fragments not closed or self-intersecting "
+         "(as read back from the GLB's float32 -> after) | s |"),
+        "|---|---|---|---|---|---|",
+        *rows["faults"],
+        "",
+        "At rest in Godot 3 (largest speed after 1 s, m/s; target: under 0.05), on the split fragments."
+        if rows["rest"] else "At rest in Godot 3: not measured (godot3-server not installed).",
+        "",
+        *(["| asset | convex hulls | exported parts |", "|---|---|---|", *rows["rest"]] if rows["rest"] else []),
+    ])
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="the chair only")
+    parser.add_argument("--from", dest="source", default=None,
+                        help="take <stem>/<stem>.glb from this folder instead of baking")
+    args = parser.parse_args()
+    print(run(quick=args.quick, source=args.source))

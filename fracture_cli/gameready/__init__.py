@@ -1,0 +1,12 @@
+"""Game-ready output: one body per fragment, mass properties, collision shapes, lean faults.
+
+Standalone library modules (no pipeline wiring yet), one concern each:
+
+* :mod:`~fracture_cli.gameready.mass`: volume, centre of mass and inertia tensor of closed meshes;
+* :mod:`~fracture_cli.gameready.components`: connected bodies of a fragment, tiny-body merging, the
+  fragment graph recomputed from the meshes;
+* :mod:`~fracture_cli.gameready.collision`: non-overlapping convex collision parts per fragment;
+* :mod:`~fracture_cli.gameready.export_shapes`: collision parts and mass properties in the GLB
+  (OMI_physics_shape/OMI_physics_body, Godot ``-convcolonly`` nodes, Unreal ``UCX_`` nodes);
+* :mod:`~fracture_cli.gameready.simplify`: prototype simplification of the fault (interior) faces.
+"""

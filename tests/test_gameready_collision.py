@@ -1,0 +1,122 @@
+"""Convex collision parts: decomposition, vertex cap, separation, overlap checker."""
+
+from __future__ import annotations
+
+import manifold3d
+import numpy as np
+import pytest
+import trimesh
+
+from fracture_cli.gameready.collision import (
+    CollisionOptions,
+    collision_shapes,
+    hull_mesh,
+    max_overlap_fraction,
+    separate_parts,
+    simplify_hull,
+    volume_beyond,
+)
+from fracture_cli.gameready.mass import mass_properties
+
+
+def _mesh(solid: manifold3d.Manifold):
+    mesh = solid.to_mesh64()
+    return (np.array(mesh.vert_properties, dtype=float)[:, :3].copy(),
+            np.array(mesh.tri_verts, dtype=np.int64).reshape(-1, 3))
+
+
+def _ridge_pair():
+    """A 2 x 1 x 1 box cut by a ridge-shaped fault: the left piece is convex, the right one wraps around it."""
+    box = manifold3d.Manifold.cube([2.0, 1.0, 1.0])
+    left = box.trim_by_plane([-1.0, 0.6, 0.0], -1.0).trim_by_plane([-1.0, -0.6, 0.0], -1.6)
+    return _mesh(left), _mesh(box - left)
+
+
+def _l_shape():
+    return _mesh(manifold3d.Manifold.cube([2.0, 1.0, 1.0]) + manifold3d.Manifold.cube([1.0, 2.0, 1.0]))
+
+
+def _volume(parts):
+    return sum(mass_properties(*hull_mesh(p)).volume for p in parts)
+
+
+def test_nearly_convex_fragment_is_its_hull():
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    shapes = collision_shapes([(np.asarray(box.vertices), np.asarray(box.faces))])
+    (parts,) = shapes.parts
+    assert len(parts) == 1 and len(parts[0]) == 8
+    assert shapes.hull_ratio[0] == pytest.approx(1.0) and shapes.coverage[0] == pytest.approx(1.0)
+
+
+def test_concave_fragment_is_decomposed_into_disjoint_parts():
+    V, F = _l_shape()
+    shapes = collision_shapes([(V, F)], CollisionOptions(max_parts=4, concavity=0.05))
+    (parts,) = shapes.parts
+    assert 2 <= len(parts) <= 4
+    assert shapes.hull_ratio[0] == pytest.approx(3.5 / 3.0)  # the L's hull is a pentagonal prism
+    assert max_overlap_fraction(parts) < 1e-9
+    assert _volume(parts) == pytest.approx(3.0, rel=0.05)
+    assert shapes.coverage[0] > 0.99
+
+
+def test_vertex_cap_keeps_a_subset_that_covers_the_part():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    points = np.asarray(sphere.vertices)
+    simplified = simplify_hull(points, 64)
+    assert len(simplified) <= 64
+    # A subset of the corners: the simplified part lies inside the original one.
+    assert np.all(np.min(np.linalg.norm(simplified[:, None] - points[None], axis=2), axis=1) == 0)
+    assert _volume([simplified]) > 0.9 * sphere.volume
+    assert np.array_equal(simplify_hull(points, 64), simplified)  # deterministic
+
+
+def test_neighbours_with_a_curved_fault_do_not_overlap():
+    left, right = _ridge_pair()
+    from fracture_cli.gameready.collision import hull_corners
+    hulls = [hull_corners(manifold3d.Manifold(manifold3d.Mesh64(vert_properties=V, tri_verts=F.astype(np.uint64))))
+             for V, F in (left, right)]
+    assert max_overlap_fraction([hulls[0]], [hulls[1]]) > 0.15  # plain hulls collide
+    for options in (CollisionOptions(), CollisionOptions(max_parts=1)):
+        shapes = collision_shapes([left, right], options)
+        assert max_overlap_fraction(shapes.parts[0], shapes.parts[1]) < 1e-9
+        assert max_overlap_fraction([p for parts in shapes.parts for p in parts]) < 1e-9
+    # With room for parts, the wrapping piece is decomposed and both keep (nearly) all their material.
+    shapes = collision_shapes([left, right])
+    assert len(shapes.parts[1]) >= 2 and np.all(shapes.coverage > 0.98)
+
+
+def test_separation_by_one_plane_loses_little_material():
+    """Two hulls that overlap by a sixth of the smaller one: one plane separates them, each keeps >= 90%."""
+    left, right = _ridge_pair()
+    parts = [hull_mesh(V)[0] for V, _ in (left, right)]
+    a, b = separate_parts(parts, [left, right])
+    assert max_overlap_fraction([a], [b]) < 1e-9
+    for kept, (V, F) in ((a, left), (b, right)):
+        solid = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=V, tri_verts=F.astype(np.uint64)))
+        hull = manifold3d.Manifold.hull_points(kept)
+        assert (solid ^ hull).volume() > 0.9 * solid.volume()
+
+
+def test_collision_shapes_are_deterministic():
+    meshes = [_l_shape(), *_ridge_pair()]
+    first = collision_shapes(meshes)
+    second = collision_shapes(meshes)
+    assert all(np.array_equal(p, q) for a, b in zip(first.parts, second.parts) for p, q in zip(a, b))
+
+
+def test_max_overlap_fraction_is_exact():
+    cube = np.array(np.meshgrid([0, 1], [0, 1], [0, 1])).reshape(3, -1).T.astype(float)
+    assert max_overlap_fraction([cube], [cube + [0.5, 0, 0]]) == pytest.approx(0.5)
+    assert max_overlap_fraction([cube], [cube * 2 + [0.5, 0.5, 0.5]]) == pytest.approx(0.125)
+    assert max_overlap_fraction([cube, cube + [1.0, 0, 0]]) == 0.0  # touching faces
+    assert max_overlap_fraction([cube], [cube + [3.0, 0, 0]]) == 0.0
+
+
+def test_volume_beyond_matches_a_boolean():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    solid = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.asarray(sphere.vertices),
+                                                  tri_verts=np.asarray(sphere.faces, dtype=np.uint64)))
+    normal = np.array([1.0, 2.0, -0.5]) / np.linalg.norm([1.0, 2.0, -0.5])
+    offsets = np.array([-1.5, -0.3, 0.0, 0.6, 1.5])
+    expected = [solid.trim_by_plane(normal, o).volume() for o in offsets]
+    assert np.allclose(volume_beyond(sphere.vertices, sphere.faces, normal, offsets), expected, atol=1e-12)
