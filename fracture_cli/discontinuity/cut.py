@@ -20,12 +20,6 @@ from fracture_cli.discontinuity.mincut import MinCut
 # Above this many cells the master LP costs more than the pricing (dense constraint columns: HiGHS
 # time grows ~ cells^2 * constraints); cells on which the master's solution is equal are then merged.
 MERGE_CELLS = 150
-import os
-ALPHA = float(os.environ.get('ALPHA', '0'))
-WANT_MAX_REF = int(os.environ.get('SINK', '0'))
-MERGE_MODE = int(os.environ.get('MERGE_MODE', '0'))
-START_MODE = int(os.environ.get('START_MODE', '0'))
-COARSE = int(os.environ.get('COARSE', '1'))
 
 
 class CutSubproblemSolver:
@@ -115,8 +109,7 @@ class CutSubproblemSolver:
         self._before_merge: np.ndarray | None = None
         # "stalls": pricing found a violated set that is already a union of cells, i.e. the
         # violation is within HiGHS's tolerance; the result stands, min_reduced_cost says by how much.
-        self._regions: np.ndarray | None = None
-        self.counters = {"max_flows": 0, "coarse_flows": 0, "master_lps": 0, "refinements": 0, "stalls": 0, "merges": 0,
+        self.counters = {"max_flows": 0, "master_lps": 0, "refinements": 0, "stalls": 0, "merges": 0,
                          "unmerges": 0, "lp_retries": 0}
 
     @property
@@ -146,19 +139,7 @@ class CutSubproblemSolver:
         """
         ca, cb = self.cells[self._fa], self.cells[self._fb]
         scale = float(np.abs(x).max()) or 1.0
-        same = np.abs(x[ca] - x[cb]) <= 1e-9 * scale
-        if MERGE_MODE:
-            n, edges, edge_omega, _ = self._cell_graph()
-            z = self._master_lp.last_z
-            slack = np.abs(z) < edge_omega * (1 - 1e-9)
-            lo, hi = np.minimum(ca, cb), np.maximum(ca, cb)
-            key = edges[:, 0] * n + edges[:, 1]
-            pos = np.searchsorted(key, lo * n + hi)
-            between = ca != cb
-            ok = np.ones(len(ca), dtype=bool)
-            ok[between] = slack[pos[between]]
-            same &= ok
-        count, cells = self._components(same)
+        count, cells = self._components(np.abs(x[ca] - x[cb]) <= 1e-9 * scale)
         if count == len(x) or count < constraints // 2:
             return x
         self._before_merge = self.cells
@@ -224,17 +205,9 @@ class CutSubproblemSolver:
         before = dict(self.counters, lp_retries=self._master_lp.retries)
         if len(fixed) != self._fixed_count:  # a new mode: start from one cell (see the class notes)
             self._fixed_count = len(fixed)
-            if START_MODE == 0 or len(fixed) == 0:
-                self._set_cells(np.zeros(self.t, dtype=np.int64))
-            elif START_MODE == 1:
-                self._set_cells(self.cells.copy())
-            elif START_MODE == 2:  # pieces of the last mode
-                y = np.asarray(fixed[-1]).reshape(-1)
-                sc = float(np.abs(y).max())
-                self._set_cells(self._components(np.abs(y[self._fa] - y[self._fb]) <= 1e-9 * sc)[1])
+            self._set_cells(np.zeros(self.t, dtype=np.int64))
             self._before_merge = None
         Y, v, v_cost = self._constraint_vectors(c, fixed)
-        self._regions = self._level_regions(Y)
         b = np.zeros(Y.shape[1])
         b[-1] = 1.0
         x, theta, objective, worst_rc = self._cut_loop(Y, b, v_cost)
@@ -274,7 +247,6 @@ class CutSubproblemSolver:
         MY = self.vol[:, None] * Y
         worst_rc = 0.0
         merged_at = np.inf
-        s_in = np.zeros(self.t)
         for _ in range(self.max_iter):
             self.counters["master_lps"] += 1
             x, theta, lam, objective = self._solve_master(Y, b, v_cost)
@@ -282,37 +254,10 @@ class CutSubproblemSolver:
                 x = self._coarsen(x, Y.shape[1])
                 merged_at = objective
             supply = MY @ lam
-            threshold = -self.tol * max(objective, 1e-300)
-            members, rc = None, 0.0
-            if ALPHA > 0 and s_in is not None:
-                s_sep = ALPHA * s_in + (1 - ALPHA) * supply
-                if COARSE:
-                    members, rc = self._price_coarse(s_sep)
-                if members is None or rc >= 0:
-                    members, rc = self._price(s_sep)
-                if members is not None and rc < 0:
-                    inside = np.zeros(self.t, dtype=bool); inside[members] = True
-                    rc = float(self.omega[inside[self._fa] != inside[self._fb]].sum()) - float(supply[members].sum())
-                else:
-                    s_in = s_sep
-                    members, rc = None, 0.0
-            if members is None or rc >= threshold:
-                if COARSE:
-                    members, rc = self._price_coarse(supply)
-                if members is None or rc >= threshold:
-                    members, rc = self._price(supply)
-                    if members is None or rc >= threshold:
-                        pass
+            members, rc = self._price(supply)
             worst_rc = min(rc, 0.0)
-            if members is None or rc >= threshold:
+            if members is None or rc >= -self.tol * max(objective, 1e-300):
                 return x, theta, objective, worst_rc
-            if WANT_MAX_REF and self._max_flow.backend == "ortools" and hasattr(self._max_flow, "last_max") and self._max_flow.last_max is not None:
-                mx = self._max_flow.last_max; self._max_flow.last_max = None
-                if len(mx) != len(members):
-                    self.refine(mx)
-                    self.refine(members)
-                    self.counters["refinements"] += 1
-                    continue
             if not self.refine(members):
                 # The set is a union of cells: the violation is within the master LP's tolerance.
                 self.counters["stalls"] += 1
@@ -362,45 +307,4 @@ class CutSubproblemSolver:
         inside = np.zeros(self.t, dtype=bool)
         inside[members] = True
         rc = float(self.omega[inside[self._fa] != inside[self._fb]].sum()) - float(supply[members].sum())
-        return members, rc
-
-    def _level_regions(self, Y: np.ndarray) -> np.ndarray:
-        """Connected regions (t,) on which every constraint vector is constant (the earlier modes' pieces,
-        and ``c``'s when it is piecewise constant): the super-nodes of the heuristic pricing."""
-        fa, fb = self._fa, self._fb
-        scale = np.maximum(np.abs(Y).max(axis=0), 1e-300)
-        close = np.abs(Y[fa] - Y[fb]) <= 1e-9 * scale
-        keep = close.all(axis=1)
-        count, regions = self._components(keep)
-        if count > self.t // 4 and Y.shape[1] > 1:  # c is smooth (first ICCM round): the fixed vectors only
-            count, regions = self._components(close[:, :-1].all(axis=1))
-        return regions
-
-    def _price_coarse(self, supply: np.ndarray):
-        """Like :meth:`_price`, on the graph contracted to the regions refined by the cells (heuristic:
-        the set found is a true violated set if its value is negative, but a miss proves nothing)."""
-        fa, fb = self._fa, self._fb
-        assert self._regions is not None
-        key = self._regions * (int(self.cells.max()) + 1) + self.cells
-        _, part = np.unique(key, return_inverse=True)
-        part = part.reshape(-1)
-        n = int(part.max()) + 1
-        if n > self.t // 2:
-            return None, 0.0
-        pa, pb = part[fa], part[fb]
-        between = pa != pb
-        lo, hi = np.minimum(pa[between], pb[between]), np.maximum(pa[between], pb[between])
-        ekey, inverse = np.unique(lo * n + hi, return_inverse=True)
-        ew = np.bincount(inverse.reshape(-1), weights=self.omega[between], minlength=len(ekey))
-        edges = np.column_stack([ekey // n, ekey % n])
-        coarse = MinCut(edges, ew, n, self._max_flow.backend)
-        side = coarse.source_side(np.bincount(part, weights=supply, minlength=n))
-        self.counters["coarse_flows"] += 1
-        if len(side) == 0:
-            return None, 0.0
-        inside = np.zeros(n, dtype=bool)
-        inside[side] = True
-        inside = inside[part]
-        members = np.flatnonzero(inside)
-        rc = float(self.omega[inside[fa] != inside[fb]].sum()) - float(supply[members].sum())
         return members, rc

@@ -168,7 +168,6 @@ class MasterLP:
                           np.array([int(v) for v in basis.row_status]))
         solution = h.getSolution()
         lam = np.asarray(solution.col_value)[E:E + m]
-        self.last_z = np.asarray(solution.col_value)[:E]
         row_dual = np.asarray(solution.row_dual)
         return row_dual[:n], max(-float(row_dual[n]), 0.0), lam, -float(h.getInfo().objective_function_value)
 

@@ -23,8 +23,6 @@ _FLOW_UNITS_64 = float(2**52)
 # What ``backend="auto"`` means, process-wide: "auto" (OR-Tools if installed), "ortools" or "scipy".
 # For benchmarks and tests that compare the two; the pipeline leaves it alone.
 MAX_FLOW_BACKEND = "auto"
-import os
-WANT_MAX = int(os.environ.get("SINK", "0"))
 
 
 class MinCut:
@@ -94,10 +92,6 @@ class MinCut:
             if status != self._status_ok:
                 raise RuntimeError(f"OR-Tools max-flow returned status {status}")
             side = np.asarray(self._solver.get_source_side_min_cut(), dtype=np.int64)
-            if WANT_MAX:
-                sink = np.asarray(self._solver.get_sink_side_min_cut(), dtype=np.int64)
-                keep = np.ones(t + 2, dtype=bool); keep[sink] = False
-                self.last_max = np.flatnonzero(keep[:t])
             return np.sort(side[side < t])
         caps = np.minimum(np.rint(caps * (_FLOW_UNITS / total)), _INT32_MAX).astype(np.int32)
         graph = sp.csr_matrix((caps[self._perm], self._indices, self._indptr), shape=(t + 2, t + 2))

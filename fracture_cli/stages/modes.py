@@ -36,7 +36,6 @@ from fracture_cli.types import Modes, TetMesh
 log = logging.getLogger(__name__)
 
 STAGE = "modes"
-_BETA = float(os.environ.get("BETA", "0"))
 
 
 # ARPACK iterations before the eigensolver tries again differently (shift-invert converges in a few when it can).
@@ -332,14 +331,10 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
             u = result.u
             u = u / math.sqrt(inner.dot(u, u))
             change = float(np.abs(u - c).max()) / max(float(np.abs(c).max()), 1e-300)
-            c_prev = c
             c = u
             if change <= opts.tol:
                 converged = True
                 break
-            if _BETA:
-                c = u + _BETA * (u - c_prev)
-                c = c / math.sqrt(inner.dot(c, c))
         if not converged:
             log.warning("%s: mode %d%s did not converge in %d ICCM rounds (last change above tol=%g)", STAGE, i,
                         label, opts.max_iter, opts.tol)
