@@ -186,7 +186,7 @@ class CutSubproblemSolver:
         return self._fixed_cache[k][1]
 
     # ----------------------------------------------------------------- solve
-    def solve(self, c: np.ndarray, fixed=()) -> SubproblemResult:
+    def solve(self, c: np.ndarray, fixed=(), *, max_flows: int | None = None) -> SubproblemResult:
         """Minimise the energy subject to the constraints.
 
         Parameters
@@ -195,6 +195,10 @@ class CutSubproblemSolver:
             The ICCM vector; the solution satisfies ``c^T M_T u = 1``.
         fixed : sequence of (t,) or (t, 1) float
             Vectors ``y_j`` with ``y_j^T M_T u = 0`` (the earlier modes).
+        max_flows : int, optional (default None: no limit)
+            Pricing rounds allowed. When they run out before a certificate, the result is the master's
+            solution on the refined partition: feasible, energy at most that of ``c`` scaled to
+            ``c^T M_T u = 1``, but not certified (``stats["certified"]`` False, ``lower_bound`` nan).
 
         Returns
         -------
@@ -210,7 +214,7 @@ class CutSubproblemSolver:
         Y, v, v_cost = self._constraint_vectors(c, fixed)
         b = np.zeros(Y.shape[1])
         b[-1] = 1.0
-        x, theta, objective, worst_rc = self._cut_loop(Y, b, v_cost)
+        x, theta, objective, worst_rc, certified = self._cut_loop(Y, b, v_cost, max_flows)
         u = x[self.cells]
         if theta > 0.0:
             u = u + theta * v
@@ -219,8 +223,9 @@ class CutSubproblemSolver:
         self.counters["lp_retries"] = self._master_lp.retries
         stats: dict = {key: self.counters[key] - before[key] for key in self.counters}
         stats.update(cells=int(self.cells.max()) + 1, min_reduced_cost=worst_rc * self.scale,
-                     uses_start_vector=bool(theta > 0.0), constraint_residual=residual)
-        return SubproblemResult(u=u[:, None], energy=energy * self.scale, lower_bound=objective * self.scale,
+                     uses_start_vector=bool(theta > 0.0), constraint_residual=residual, certified=certified)
+        bound = objective * self.scale if certified else float("nan")
+        return SubproblemResult(u=u[:, None], energy=energy * self.scale, lower_bound=bound,
                                 iterations=stats["max_flows"], seconds=time.perf_counter() - start, stats=stats)
 
     def _constraint_vectors(self, c, fixed):
@@ -241,27 +246,29 @@ class CutSubproblemSolver:
         v = v / norm
         return Y, v, float(self.omega @ np.abs(v[self._fa] - v[self._fb]))
 
-    def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v_cost: float):
+    def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v_cost: float, max_flows: int | None = None):
         """Master LP and pricing until no tet set is violated; returns ``x`` (cells,), ``theta``, the
-        objective and the last reduced cost."""
+        objective, the last reduced cost and whether it is certified (False: ``max_flows`` ran out)."""
         MY = self.vol[:, None] * Y
         worst_rc = 0.0
         merged_at = np.inf
-        for _ in range(self.max_iter):
+        for flows in range(self.max_iter):
             self.counters["master_lps"] += 1
             x, theta, lam, objective = self._solve_master(Y, b, v_cost)
             if len(x) > self.merge_cells and objective < merged_at - 1e-9 * abs(objective):
                 x = self._coarsen(x, Y.shape[1])
                 merged_at = objective
+            if max_flows is not None and flows >= max_flows:
+                return x, theta, objective, worst_rc, False
             supply = MY @ lam
             members, rc = self._price(supply)
             worst_rc = min(rc, 0.0)
             if members is None or rc >= -self.tol * max(objective, 1e-300):
-                return x, theta, objective, worst_rc
+                return x, theta, objective, worst_rc, True
             if not self.refine(members):
                 # The set is a union of cells: the violation is within the master LP's tolerance.
                 self.counters["stalls"] += 1
-                return x, theta, objective, worst_rc
+                return x, theta, objective, worst_rc, True
             self.counters["refinements"] += 1
         raise RuntimeError(f"no optimality certificate after {self.max_iter} max-flows")
 

@@ -30,8 +30,12 @@ log = logging.getLogger(__name__)
 _HIGHS_SETTINGS = {"solver": "simplex", "simplex_strategy": 1, "primal_feasibility_tolerance": 1e-9,
                    "dual_feasibility_tolerance": 1e-9, "threads": 1, "output_flag": False}
 # Cold retries when the warm-started solve does not end optimal (small masters with nearly dependent
-# constraint rows can leave HiGHS without a status): a fresh dual simplex, primal simplex, then IPM.
-_HIGHS_RETRIES: tuple[dict, ...] = ({}, {"simplex_strategy": 4}, {"solver": "ipm"})
+# constraint rows can leave HiGHS without a status): a fresh dual simplex, primal simplex, both
+# without presolve, then IPM.
+# Without presolve too: a 28-row master (mode 18 at k = 24, 6k tets) ended in kSolveError with
+# presolve and solved at once without it.
+_HIGHS_RETRIES: tuple[dict, ...] = ({}, {"simplex_strategy": 4}, {"presolve": "off"},
+                                    {"simplex_strategy": 4, "presolve": "off"}, {"solver": "ipm"})
 _LINPROG_OPTIONS = (("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9}),
                     ("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9,
                                   "presolve": False}),
