@@ -107,6 +107,7 @@ class CutSubproblemSolver:
         self._fixed_cache: list[tuple[np.ndarray, np.ndarray]] = []
         self._cell_cache = None
         self._before_merge: np.ndarray | None = None
+        self._budget_merge_rayleigh = np.inf
         # "stalls": pricing found a violated set that is already a union of cells, i.e. the
         # violation is within HiGHS's tolerance; the result stands, min_reduced_cost says by how much.
         self.counters = {"max_flows": 0, "master_lps": 0, "refinements": 0, "stalls": 0, "merges": 0,
@@ -130,17 +131,18 @@ class CutSubproblemSolver:
         self._set_cells(cells)
         return True
 
-    def _coarsen(self, x: np.ndarray, constraints: int) -> np.ndarray:
+    def _coarsen(self, x: np.ndarray) -> np.ndarray:
         """Merge neighbouring cells whose master values ``x`` (n,) are equal; returns ``x`` on the new cells.
 
-        With fewer cells than constraint rows the master's duals are underdetermined and HiGHS can
-        end without a status; :meth:`_solve_master` then undoes the merge. Not below ``constraints // 2``
-        cells.
+        With fewer cells than constraint rows the earlier modes' rows can be dependent and HiGHS can
+        end without a status: :class:`MasterLP` then solves on a basis of their row space, and if that
+        fails too :meth:`_solve_master` undoes the merge. (A floor of half the constraint count used
+        to guard against this; it let late modes grow to 300-540 cells, 30-60 ms per master LP.)
         """
         ca, cb = self.cells[self._fa], self.cells[self._fb]
         scale = float(np.abs(x).max()) or 1.0
         count, cells = self._components(np.abs(x[ca] - x[cb]) <= 1e-9 * scale)
-        if count == len(x) or count < constraints // 2:
+        if count == len(x):
             return x
         self._before_merge = self.cells
         merged = np.zeros(count)
@@ -148,6 +150,18 @@ class CutSubproblemSolver:
         self._set_cells(cells)
         self.counters["merges"] += 1
         return merged
+
+    def _coarsen_budgeted(self, x: np.ndarray, theta: float, v: np.ndarray) -> np.ndarray:
+        """:meth:`_coarsen` in a round with a max-flow budget, to any number of cells, but only when the
+        Rayleigh quotient ``E(u) / ||u||_M`` of the master's ``u`` has dropped since the last such merge
+        of this mode: budgeted rounds that make no progress cannot merge away what they refine."""
+        u = x[self.cells] + theta * v
+        norm = float(np.sqrt(u @ (self.vol * u)))
+        rayleigh = float(self.omega @ np.abs(u[self._fa] - u[self._fb])) / max(norm, 1e-300)
+        if not rayleigh < self._budget_merge_rayleigh * (1.0 - 1e-9):
+            return x
+        self._budget_merge_rayleigh = rayleigh
+        return self._coarsen(x)
 
     def _components(self, keep: np.ndarray) -> tuple[int, np.ndarray]:
         """Connected components (count, labels (t,)) of the tets joined by the faces in ``keep`` (f,) bool."""
@@ -211,10 +225,11 @@ class CutSubproblemSolver:
             self._fixed_count = len(fixed)
             self._set_cells(np.zeros(self.t, dtype=np.int64))
             self._before_merge = None
+            self._budget_merge_rayleigh = np.inf
         Y, v, v_cost = self._constraint_vectors(c, fixed)
         b = np.zeros(Y.shape[1])
         b[-1] = 1.0
-        x, theta, objective, worst_rc, certified = self._cut_loop(Y, b, v_cost, max_flows)
+        x, theta, objective, worst_rc, certified = self._cut_loop(Y, b, v, v_cost, max_flows)
         u = x[self.cells]
         if theta > 0.0:
             u = u + theta * v
@@ -246,7 +261,7 @@ class CutSubproblemSolver:
         v = v / norm
         return Y, v, float(self.omega @ np.abs(v[self._fa] - v[self._fb]))
 
-    def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v_cost: float, max_flows: int | None = None):
+    def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v: np.ndarray, v_cost: float, max_flows: int | None = None):
         """Master LP and pricing until no tet set is violated; returns ``x`` (cells,), ``theta``, the
         objective, the last reduced cost and whether it is certified (False: ``max_flows`` ran out)."""
         MY = self.vol[:, None] * Y
@@ -255,9 +270,11 @@ class CutSubproblemSolver:
         for flows in range(self.max_iter):
             self.counters["master_lps"] += 1
             x, theta, lam, objective = self._solve_master(Y, b, v_cost)
-            if len(x) > self.merge_cells and objective < merged_at - 1e-9 * abs(objective):
-                x = self._coarsen(x, Y.shape[1])
+            if len(x) > self.merge_cells and max_flows is None and objective < merged_at - 1e-9 * abs(objective):
+                x = self._coarsen(x)
                 merged_at = objective
+            elif len(x) > self.merge_cells and max_flows is not None:
+                x = self._coarsen_budgeted(x, theta, v)
             if max_flows is not None and flows >= max_flows:
                 return x, theta, objective, worst_rc, False
             supply = MY @ lam
