@@ -82,6 +82,10 @@ class CutSubproblemSolver:
       smaller but still contains that solution; its dual constraints are a
       subset), so no LP is re-solved; requiring a strict decrease between
       merges rules out cycling (a partition cannot recur with a lower objective).
+      In a call with a ``max_flows`` budget (the middle ICCM rounds of a mode,
+      see :func:`fracture_cli.stages.modes._iccm_mode`) the objective of one
+      call says nothing about the next, so there a merge needs a lower
+      Rayleigh quotient than at the mode's last budgeted merge instead.
 
     Safeguards: the returned ``u`` must meet the constraints to 1e-7 (relative
     to ``||y_j||_M ||u||_M``) and its energy must not exceed the master's
