@@ -42,9 +42,10 @@ STAGE = "modes"
 _ARPACK_MAXITER = 1000
 # Largest vertex count for the dense eigensolver fallback (n^2 doubles of memory, n^3 time: ~4 s at 4000).
 _DENSE_EIGEN_MAX = 4000
-# ICCM rounds of a mode with a max-flow budget at most, and that budget (see _iccm_mode): measured at
-# k = 24 on 6k tets, budgets 1, 2, 3, 4 gave 12.7, 10.0, 10.2, 12.2 s CPU and worst/median 4.8, 6.4, 3.6,
-# 5.2, with sums of the 24 energies 35.9, 36.9, 37.1, 37.4 (37.1 with exact rounds only).
+# ICCM rounds of a mode with a max-flow budget at most, and that budget (see _iccm_mode). Measured at
+# k = 24 on 6k tets (one run each, CPU s on a loaded machine, before budgeted rounds could merge cells):
+# budgets 1, 2, 3, 4 gave 12.7, 10.0, 10.2, 12.2 s and worst/median 4.8, 6.4, 3.6, 5.2, with sums of
+# the 24 energies 35.9, 36.9, 37.1, 37.4 (37.1 with exact rounds only, 17-18 s, worst/median 9).
 _BUDGET_ROUNDS = 60
 _ROUND_FLOWS = 3
 
