@@ -115,9 +115,11 @@ def _record_subproblems(monkeypatch, mesh, num_modes):
     calls = []
     original = CutSubproblemSolver.solve
 
-    def recording(self, c, fixed=()):
-        result = original(self, c, fixed)
-        calls.append((np.array(c, dtype=np.float64).reshape(-1), [np.array(y).reshape(-1) for y in fixed], result))
+    def recording(self, c, fixed=(), **kwargs):
+        result = original(self, c, fixed, **kwargs)
+        if result.stats["certified"]:  # rounds stopped on a max-flow budget claim no optimality
+            calls.append((np.array(c, dtype=np.float64).reshape(-1), [np.array(y).reshape(-1) for y in fixed],
+                          result))
         return result
 
     monkeypatch.setattr(CutSubproblemSolver, "solve", recording)
@@ -303,3 +305,49 @@ def test_merging_cells_keeps_the_optimum(monkeypatch):
     recovered = merging.solve(c2, fixed)
     assert calls == ["failed"] and recovered.stats["unmerges"] == 1
     assert abs(recovered.energy - expected.energy) <= 1e-9 * expected.energy
+
+
+def test_round_on_a_max_flow_budget_is_feasible_and_descends():
+    """A subproblem stopped on its max-flow budget is feasible, uncertified, and no worse than c itself."""
+    mesh = asymmetric_mesh()
+    ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
+    x, y, z = (mesh.tet_centroids[:, i] for i in range(3))
+    c = x + 0.5 * y**2 - 0.3 * z
+    fixed = [y - float(np.dot(vol, y)) / vol.sum()]
+    exact = CutSubproblemSolver(ft, w, vol).solve(c, fixed)
+    assert exact.stats["certified"] and exact.stats["max_flows"] > 2
+    short = CutSubproblemSolver(ft, w, vol).solve(c, fixed, max_flows=2)
+    assert not short.stats["certified"] and short.stats["max_flows"] == 2 and np.isnan(short.lower_bound)
+    u = short.u[:, 0]
+    assert _constraint_residual(u, c, fixed, vol) < 1e-8
+    # c made feasible (orthogonal to translations and the fixed vector, c^T M v = 1) is in every master.
+    basis = np.column_stack([np.ones_like(vol), fixed[0]])
+    v = c - basis @ np.linalg.solve(basis.T @ (vol[:, None] * basis), basis.T @ (vol * c))
+    v = v / float(np.dot(vol * c, v))
+    assert exact.energy - 1e-12 <= short.energy <= discontinuity_energy(v, ft, w) * (1 + 1e-9)
+
+
+def test_master_with_dependent_fixed_rows_solves_on_their_row_space(monkeypatch):
+    """When every LP solver fails on a master whose fixed rows are dependent, it is solved with an
+    orthonormal basis of their row space instead: same optimum, certified, multipliers mapped back."""
+    from fracture_cli.discontinuity.master import MasterLP
+
+    mesh = asymmetric_mesh()
+    ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
+    x, y, z = (mesh.tet_centroids[:, i] for i in range(3))
+    c = x + 0.5 * y**2 - 0.3 * z
+    y0 = y - float(np.dot(vol, y)) / vol.sum()
+    expected = CutSubproblemSolver(ft, w, vol).solve(c, [y0])
+    real = MasterLP._solve_any
+
+    def fails_with_all_rows(self, args):
+        if args[6].shape[0] == 3:  # two fixed rows (dependent) and c's
+            raise RuntimeError("master LP failed (test)")
+        return real(self, args)
+
+    monkeypatch.setattr(MasterLP, "_solve_any", fails_with_all_rows)
+    got = CutSubproblemSolver(ft, w, vol).solve(c, [y0, 2.0 * y0])
+    assert got.stats["lp_retries"] >= 1
+    assert abs(got.energy - expected.energy) <= 1e-9 * expected.energy
+    assert got.energy - got.lower_bound <= 1e-7 * got.energy
+    assert _constraint_residual(got.u[:, 0], c, [y0], vol) < 1e-8

@@ -82,6 +82,10 @@ class CutSubproblemSolver:
       smaller but still contains that solution; its dual constraints are a
       subset), so no LP is re-solved; requiring a strict decrease between
       merges rules out cycling (a partition cannot recur with a lower objective).
+      In a call with a ``max_flows`` budget (the middle ICCM rounds of a mode,
+      see :func:`fracture_cli.stages.modes._iccm_mode`) the objective of one
+      call says nothing about the next, so there a merge needs a lower
+      Rayleigh quotient than at the mode's last budgeted merge instead.
 
     Safeguards: the returned ``u`` must meet the constraints to 1e-7 (relative
     to ``||y_j||_M ||u||_M``) and its energy must not exceed the master's
@@ -107,6 +111,7 @@ class CutSubproblemSolver:
         self._fixed_cache: list[tuple[np.ndarray, np.ndarray]] = []
         self._cell_cache = None
         self._before_merge: np.ndarray | None = None
+        self._budget_merge_rayleigh = np.inf
         # "stalls": pricing found a violated set that is already a union of cells, i.e. the
         # violation is within HiGHS's tolerance; the result stands, min_reduced_cost says by how much.
         self.counters = {"max_flows": 0, "master_lps": 0, "refinements": 0, "stalls": 0, "merges": 0,
@@ -130,17 +135,18 @@ class CutSubproblemSolver:
         self._set_cells(cells)
         return True
 
-    def _coarsen(self, x: np.ndarray, constraints: int) -> np.ndarray:
+    def _coarsen(self, x: np.ndarray) -> np.ndarray:
         """Merge neighbouring cells whose master values ``x`` (n,) are equal; returns ``x`` on the new cells.
 
-        With fewer cells than constraint rows the master's duals are underdetermined and HiGHS can
-        end without a status; :meth:`_solve_master` then undoes the merge. Not below ``constraints // 2``
-        cells.
+        With fewer cells than constraint rows the earlier modes' rows can be dependent and HiGHS can
+        end without a status: :class:`MasterLP` then solves on a basis of their row space, and if that
+        fails too :meth:`_solve_master` undoes the merge. (A floor of half the constraint count used
+        to guard against this; it let late modes grow to 300-540 cells, 30-60 ms per master LP.)
         """
         ca, cb = self.cells[self._fa], self.cells[self._fb]
         scale = float(np.abs(x).max()) or 1.0
         count, cells = self._components(np.abs(x[ca] - x[cb]) <= 1e-9 * scale)
-        if count == len(x) or count < constraints // 2:
+        if count == len(x):
             return x
         self._before_merge = self.cells
         merged = np.zeros(count)
@@ -148,6 +154,18 @@ class CutSubproblemSolver:
         self._set_cells(cells)
         self.counters["merges"] += 1
         return merged
+
+    def _coarsen_budgeted(self, x: np.ndarray, theta: float, v: np.ndarray) -> np.ndarray:
+        """:meth:`_coarsen` in a round with a max-flow budget, to any number of cells, but only when the
+        Rayleigh quotient ``E(u) / ||u||_M`` of the master's ``u`` has dropped since the last such merge
+        of this mode: budgeted rounds that make no progress cannot merge away what they refine."""
+        u = x[self.cells] + theta * v
+        norm = float(np.sqrt(u @ (self.vol * u)))
+        rayleigh = float(self.omega @ np.abs(u[self._fa] - u[self._fb])) / max(norm, 1e-300)
+        if not rayleigh < self._budget_merge_rayleigh * (1.0 - 1e-9):
+            return x
+        self._budget_merge_rayleigh = rayleigh
+        return self._coarsen(x)
 
     def _components(self, keep: np.ndarray) -> tuple[int, np.ndarray]:
         """Connected components (count, labels (t,)) of the tets joined by the faces in ``keep`` (f,) bool."""
@@ -186,7 +204,7 @@ class CutSubproblemSolver:
         return self._fixed_cache[k][1]
 
     # ----------------------------------------------------------------- solve
-    def solve(self, c: np.ndarray, fixed=()) -> SubproblemResult:
+    def solve(self, c: np.ndarray, fixed=(), *, max_flows: int | None = None) -> SubproblemResult:
         """Minimise the energy subject to the constraints.
 
         Parameters
@@ -195,6 +213,10 @@ class CutSubproblemSolver:
             The ICCM vector; the solution satisfies ``c^T M_T u = 1``.
         fixed : sequence of (t,) or (t, 1) float
             Vectors ``y_j`` with ``y_j^T M_T u = 0`` (the earlier modes).
+        max_flows : int, optional (default None: no limit)
+            Pricing rounds allowed. When they run out before a certificate, the result is the master's
+            solution on the refined partition: feasible, energy at most that of ``c`` scaled to
+            ``c^T M_T u = 1``, but not certified (``stats["certified"]`` False, ``lower_bound`` nan).
 
         Returns
         -------
@@ -207,10 +229,11 @@ class CutSubproblemSolver:
             self._fixed_count = len(fixed)
             self._set_cells(np.zeros(self.t, dtype=np.int64))
             self._before_merge = None
+            self._budget_merge_rayleigh = np.inf
         Y, v, v_cost = self._constraint_vectors(c, fixed)
         b = np.zeros(Y.shape[1])
         b[-1] = 1.0
-        x, theta, objective, worst_rc = self._cut_loop(Y, b, v_cost)
+        x, theta, objective, worst_rc, certified = self._cut_loop(Y, b, v, v_cost, max_flows)
         u = x[self.cells]
         if theta > 0.0:
             u = u + theta * v
@@ -219,8 +242,9 @@ class CutSubproblemSolver:
         self.counters["lp_retries"] = self._master_lp.retries
         stats: dict = {key: self.counters[key] - before[key] for key in self.counters}
         stats.update(cells=int(self.cells.max()) + 1, min_reduced_cost=worst_rc * self.scale,
-                     uses_start_vector=bool(theta > 0.0), constraint_residual=residual)
-        return SubproblemResult(u=u[:, None], energy=energy * self.scale, lower_bound=objective * self.scale,
+                     uses_start_vector=bool(theta > 0.0), constraint_residual=residual, certified=certified)
+        bound = objective * self.scale if certified else float("nan")
+        return SubproblemResult(u=u[:, None], energy=energy * self.scale, lower_bound=bound,
                                 iterations=stats["max_flows"], seconds=time.perf_counter() - start, stats=stats)
 
     def _constraint_vectors(self, c, fixed):
@@ -241,27 +265,31 @@ class CutSubproblemSolver:
         v = v / norm
         return Y, v, float(self.omega @ np.abs(v[self._fa] - v[self._fb]))
 
-    def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v_cost: float):
+    def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v: np.ndarray, v_cost: float, max_flows: int | None = None):
         """Master LP and pricing until no tet set is violated; returns ``x`` (cells,), ``theta``, the
-        objective and the last reduced cost."""
+        objective, the last reduced cost and whether it is certified (False: ``max_flows`` ran out)."""
         MY = self.vol[:, None] * Y
         worst_rc = 0.0
         merged_at = np.inf
-        for _ in range(self.max_iter):
+        for flows in range(self.max_iter):
             self.counters["master_lps"] += 1
             x, theta, lam, objective = self._solve_master(Y, b, v_cost)
-            if len(x) > self.merge_cells and objective < merged_at - 1e-9 * abs(objective):
-                x = self._coarsen(x, Y.shape[1])
+            if len(x) > self.merge_cells and max_flows is None and objective < merged_at - 1e-9 * abs(objective):
+                x = self._coarsen(x)
                 merged_at = objective
+            elif len(x) > self.merge_cells and max_flows is not None:
+                x = self._coarsen_budgeted(x, theta, v)
+            if max_flows is not None and flows >= max_flows:
+                return x, theta, objective, worst_rc, False
             supply = MY @ lam
             members, rc = self._price(supply)
             worst_rc = min(rc, 0.0)
             if members is None or rc >= -self.tol * max(objective, 1e-300):
-                return x, theta, objective, worst_rc
+                return x, theta, objective, worst_rc, True
             if not self.refine(members):
                 # The set is a union of cells: the violation is within the master LP's tolerance.
                 self.counters["stalls"] += 1
-                return x, theta, objective, worst_rc
+                return x, theta, objective, worst_rc, True
             self.counters["refinements"] += 1
         raise RuntimeError(f"no optimality certificate after {self.max_iter} max-flows")
 

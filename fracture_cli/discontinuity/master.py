@@ -30,8 +30,12 @@ log = logging.getLogger(__name__)
 _HIGHS_SETTINGS = {"solver": "simplex", "simplex_strategy": 1, "primal_feasibility_tolerance": 1e-9,
                    "dual_feasibility_tolerance": 1e-9, "threads": 1, "output_flag": False}
 # Cold retries when the warm-started solve does not end optimal (small masters with nearly dependent
-# constraint rows can leave HiGHS without a status): a fresh dual simplex, primal simplex, then IPM.
-_HIGHS_RETRIES: tuple[dict, ...] = ({}, {"simplex_strategy": 4}, {"solver": "ipm"})
+# constraint rows can leave HiGHS without a status): a fresh dual simplex, primal simplex, both
+# without presolve, then IPM.
+# Without presolve too: a 28-row master (mode 18 at k = 24, 6k tets) ended in kSolveError with
+# presolve and solved at once without it.
+_HIGHS_RETRIES: tuple[dict, ...] = ({}, {"simplex_strategy": 4}, {"presolve": "off"},
+                                    {"simplex_strategy": 4, "presolve": "off"}, {"solver": "ipm"})
 _LINPROG_OPTIONS = (("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9}),
                     ("highs-ds", {"primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9,
                                   "presolve": False}),
@@ -84,6 +88,20 @@ def _highs_model(A: sp.csc_matrix, cost, col_lower, col_upper, row_lower, row_up
     return h
 
 
+def _independent_fixed_rows(G: np.ndarray):
+    """``(W (r, n), back (m - 1, r))``: an orthonormal basis of the row space of the fixed rows ``G[:-1]``
+    and the map of its multipliers to theirs; None if those rows are independent (nothing to reduce)."""
+    fixed = G[:-1]
+    if len(fixed) == 0:
+        return None
+    U, S, Vt = np.linalg.svd(fixed, full_matrices=False)
+    keep = S > 1e-9 * S[0] if len(S) and S[0] > 0 else np.zeros(len(S), dtype=bool)
+    if keep.all():
+        return None
+    # W^T mu = fixed^T (U_r S_r^-1 mu): the same dual constraint, so lambda = U_r S_r^-1 mu.
+    return Vt[keep], U[:, keep] / S[keep]
+
+
 class MasterLP:
     """The master LP over a partition of the tets into cells, warm-started across calls.
 
@@ -115,11 +133,37 @@ class MasterLP:
         G[np.abs(G) < 1e-12] = 0.0  # round-off of sums that cancel; keeps HiGHS's matrix clean
         b = b * row_scale
         args = (cells, version, n, edges, edge_omega, indicator, G, b, row_scale[-1], v_cost)
-        if _highspy is None:
-            x, theta, lam, objective = self._solve_linprog(*args[2:])
-        else:
-            x, theta, lam, objective = self._solve_highs(*args)
+        try:
+            x, theta, lam, objective = self._solve_any(args)
+        except RuntimeError:
+            reduced = _independent_fixed_rows(G)
+            if reduced is None:
+                raise
+            x, theta, lam, objective = self._solve_reduced(args, *reduced)
         return x, theta, lam * row_scale, objective
+
+    def _solve_any(self, args):
+        if _highspy is None:
+            return self._solve_linprog(*args[2:])
+        return self._solve_highs(*args)
+
+    def _solve_reduced(self, args, W: np.ndarray, back: np.ndarray):
+        """The master with the fixed rows replaced by an orthonormal basis ``W`` (r, n) of their row space.
+
+        On a coarse partition the earlier modes' rows can be dependent up to round-off (singular values
+        1e-12 to 1e-19 next to 5e-5 and up, seen at mode 18 of 24 on 27 cells): HiGHS then ends
+        without a status or reports a spurious unbounded ray. Their right-hand sides are 0, so the
+        basis gives the same feasible set; ``lambda`` of the original rows is ``back @ lambda_W``.
+        """
+        cells, version, n, edges, edge_omega, indicator, G, b, g_c, v_cost = args
+        self.retries += 1
+        self._lp = self._lp_basis = None  # another row set: no warm start from or into it
+        G_reduced = np.vstack([W, G[-1:]])
+        b_reduced = np.concatenate([np.zeros(len(W)), b[-1:]])
+        x, theta, lam, objective = self._solve_any((cells, version, n, edges, edge_omega, indicator, G_reduced,
+                                                    b_reduced, g_c, v_cost))
+        self._lp = self._lp_basis = None
+        return x, theta, np.concatenate([back @ lam[:-1], lam[-1:]]), objective
 
     @staticmethod
     def _dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost):

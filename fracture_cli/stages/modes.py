@@ -42,6 +42,12 @@ STAGE = "modes"
 _ARPACK_MAXITER = 1000
 # Largest vertex count for the dense eigensolver fallback (n^2 doubles of memory, n^3 time: ~4 s at 4000).
 _DENSE_EIGEN_MAX = 4000
+# ICCM rounds of a mode with a max-flow budget at most, and that budget (see _iccm_mode). Measured at
+# k = 24 on 6k tets (one run each, CPU s on a loaded machine, before budgeted rounds could merge cells):
+# budgets 1, 2, 3, 4 gave 12.7, 10.0, 10.2, 12.2 s and worst/median 4.8, 6.4, 3.6, 5.2, with sums of
+# the 24 energies 35.9, 36.9, 37.1, 37.4 (37.1 with exact rounds only, 17-18 s, worst/median 9).
+_BUDGET_ROUNDS = 60
+_ROUND_FLOWS = 3
 
 @dataclass(frozen=True)
 class ModesOptions:
@@ -108,16 +114,20 @@ def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.nda
     problem itself and reaches the same energies.
 
     The fast solver (:class:`fracture_cli.discontinuity.CutSubproblemSolver`)
-    is exact: every subproblem ends with a dual certificate (no tet set violates
-    its max-flow/min-cut condition), its solution is piecewise constant, so the
-    pieces do not depend on ``sigma``. ``stats["max_gap"]`` is the largest
+    is exact: a mode is the output of a subproblem that ends with a dual
+    certificate (no tet set violates its max-flow/min-cut condition), its
+    solution is piecewise constant, so the pieces do not depend on ``sigma``.
+    The ICCM rounds between a mode's first and last may stop early, on a
+    max-flow budget (:func:`_iccm_mode`: descent is kept, the fixed point is
+    certified). ``stats["max_gap"]`` is the largest
     primal-dual gap over all subproblems.
 
-    Parallelism (``options.jobs``): mode ``i`` is constrained by modes ``< i``,
-    so one ICCM chain is sequential; only chains that share nothing (``d = 3``
-    with per-axis weights) run in worker processes. BLAS is single-threaded in
-    every chain (threadpoolctl), so results are the same bytes for any ``jobs``
-    and a pool of bakes does not oversubscribe the cores.
+    Parallelism (the global ``--jobs``, :func:`fracture_cli.parallel.current_jobs`):
+    mode ``i`` is constrained by modes ``< i``, so one ICCM chain is sequential;
+    only chains that share nothing (``d = 3`` with per-axis weights) run in worker
+    processes. BLAS is single-threaded in every chain (threadpoolctl), so results
+    are the same bytes for any job count and a pool of bakes does not
+    oversubscribe the cores.
     """
     opts = options
     t = tet_mesh.num_tets
@@ -300,10 +310,12 @@ class _MInner:
         return c / norm
 
 
-def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, random_start):
+def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, random_start,
+          restricted: bool = False):
     """Adapted ICCM (paper Algorithm 1): ``count`` modes (t, d) from start vectors ``starts``.
 
-    ``solve(c, earlier_modes) -> SubproblemResult``.
+    ``solve(c, earlier_modes, max_flows) -> SubproblemResult`` (``max_flows`` None: exact);
+    ``restricted``: the solver takes a max-flow budget (see :func:`_iccm_mode`).
     """
     found: list[np.ndarray] = []
     per_mode: list[dict] = []
@@ -316,45 +328,71 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
         while c is None:  # the start vector lies in the span of the earlier modes
             attempts += 1
             c = inner.orthonormalize(random_start(attempts), inner.translations + found)
-        inner_iterations = 0
-        gaps = []
-        converged = False
-        rounds = 0
-        for rounds in range(1, opts.max_iter + 1):
-            try:
-                result = solve(c, found)
-            except (RuntimeError, ValueError) as error:
-                raise StageError(f"mode {i}{label}: subproblem failed in ICCM round {rounds}: {error}",
-                                 stage=STAGE) from error
-            inner_iterations += result.iterations
-            gaps.append(result.energy - result.lower_bound)
-            u = result.u
-            u = u / math.sqrt(inner.dot(u, u))
-            change = float(np.abs(u - c).max()) / max(float(np.abs(c).max()), 1e-300)
-            c = u
-            if change <= opts.tol:
-                converged = True
-                break
-        if not converged:
-            log.warning("%s: mode %d%s did not converge in %d ICCM rounds (last change above tol=%g)", STAGE, i,
-                        label, opts.max_iter, opts.tol)
+        c, stats = _iccm_mode(solve, c, found, inner, opts, f"mode {i}{label}", restricted)
+        rounds, inner_iterations = stats["rounds"], stats["inner_iterations"]
         found.append(c)
         seconds = time.perf_counter() - mode_start
-        per_mode.append({"rounds": rounds, "converged": converged, "inner_iterations": inner_iterations,
-                         "seconds": seconds, "cpu_seconds": time.process_time() - mode_cpu, "max_gap": float(max(gaps)),
-                         "last_gap": float(gaps[-1])})
+        per_mode.append(dict(stats, seconds=seconds, cpu_seconds=time.process_time() - mode_cpu))
         log.info("%s: mode %d%s: %d ICCM rounds, %d inner iterations, %.3f s", STAGE, i, label, rounds,
                  inner_iterations, seconds)
         progress.advance()
     return found, per_mode
 
 
+def _iccm_mode(solve, c, found, inner: _MInner, opts: ModesOptions, name: str, restricted: bool):
+    """ICCM rounds of one mode from the start vector ``c`` (t, d); returns the mode and its stats.
+
+    The first round is exact: from the smooth start vector it picks the basin (budgeting it too
+    lands later modes in other local minima, about 5% more energy in total). With ``restricted``,
+    the rounds after it get a budget of :data:`_ROUND_FLOWS` max-flows each: a round that runs out
+    returns the master's solution on the refined partition, uncertified. It is feasible and its
+    energy is at most ``E(c)`` (``c`` itself, rescaled, is in the master), so the Rayleigh quotient
+    ``E(u) / ||u||_M`` never increases, and the partition keeps growing where the next rounds need
+    it instead of being refined to the end for vectors ``c`` that ICCM is about to leave (late
+    modes took 8-10 exact rounds of ~8 max-flows each). The mode returned is always the output of
+    a certified round that moved ``c`` by at most ``tol``: a fixed point of the exact ICCM map, as
+    with exact rounds only. After :data:`_BUDGET_ROUNDS` budgeted rounds every round is exact;
+    ``opts.max_iter`` caps the exact ones.
+    """
+    rounds = budgeted = inner_iterations = 0
+    gaps: list[float] = []
+    converged = False
+    while rounds < opts.max_iter:
+        budget = _ROUND_FLOWS if restricted and rounds > 0 and budgeted < _BUDGET_ROUNDS else None
+        try:
+            result = solve(c, found, budget)
+        except (RuntimeError, ValueError) as error:
+            raise StageError(f"{name}: subproblem failed in ICCM round {rounds + budgeted + 1}: {error}",
+                             stage=STAGE) from error
+        inner_iterations += result.iterations
+        certified = result.stats.get("certified", True)
+        if budget is None:
+            rounds += 1
+        else:
+            budgeted += 1
+        if certified:
+            gaps.append(result.energy - result.lower_bound)
+        u = result.u / math.sqrt(inner.dot(result.u, result.u))
+        change = float(np.abs(u - c).max()) / max(float(np.abs(c).max()), 1e-300)
+        c = u
+        if change <= opts.tol and certified:
+            converged = True
+            break
+    if not converged:
+        log.warning("%s: %s did not converge in %d ICCM rounds (last change above tol=%g)", STAGE, name,
+                    opts.max_iter, opts.tol)
+    return c, {"rounds": rounds + budgeted, "budgeted_rounds": budgeted, "converged": converged,
+               "inner_iterations": inner_iterations, "max_gap": float(max(gaps, default=float("nan"))),
+               "last_gap": float(gaps[-1]) if gaps else float("nan")}
+
+
 def _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
     """Scalar modes per distinct axis weight (see the Notes of :func:`modes`).
 
-    Axes with equal weights share one ICCM chain; distinct chains are independent and run in
-    ``opts.jobs`` worker processes. Each chain has its own random generator and BLAS runs
-    single-threaded in every chain, so the result does not depend on the number of workers.
+    Axes with equal weights share one ICCM chain; distinct chains are independent and run in the
+    worker processes of :func:`fracture_cli.parallel.ordered_map` (the global ``--jobs``). Each
+    chain has its own random generator and BLAS runs single-threaded in every chain, so the
+    result does not depend on the number of workers.
     """
     axis_count = [len(range(a, k, d)) for a in range(d)]
     chains = []  # (axis that runs the chain, axes it serves, modes to compute)
@@ -403,8 +441,8 @@ def _axis_chain(_shared, task):
                                  weight_scale=weight_scale)
     label = "" if d == 1 else f" (axis {'xyz'[axis]})"
     with threadpool_limits(limits=1, user_api="blas"):
-        found, stats = _iccm(lambda c, fixed: solver.solve(c, fixed), scalar_init[:, :, None], count, inner, opts,
-                             label, lambda n: rng.standard_normal((t, 1)))
+        found, stats = _iccm(lambda c, fixed, budget: solver.solve(c, fixed, max_flows=budget), scalar_init[:, :, None],
+                             count, inner, opts, label, lambda n: rng.standard_normal((t, 1)), restricted=True)
     return found, stats, solver.max_flow_backend
 
 
@@ -419,7 +457,7 @@ def _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
         s[:, i % d] = scalar_init[i // d]
         starts.append(s)
     rng = np.random.default_rng(opts.seed + 1)
-    found, per_mode = _iccm(lambda c, fixed: solver.solve(c, fixed), starts, k, inner, opts, "",
+    found, per_mode = _iccm(lambda c, fixed, budget: solver.solve(c, fixed), starts, k, inner, opts, "",
                             lambda n: rng.standard_normal((t, d)))
     return np.stack(found), _summary(per_mode)
 
