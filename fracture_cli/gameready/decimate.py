@@ -1,0 +1,204 @@
+"""Half-edge collapses on the shared surface complex of all fragments (see :mod:`.simplify`).
+
+The complex holds every face of every fragment once: a fault face shared by two
+fragments is one face of both, an outer face belongs to one. Each face carries
+a *label* (a fault patch between two fragments, or the part of one input
+triangle inside one fragment) and the fragments whose surface it is part of. A
+collapse merges a vertex ``u`` into a neighbour ``v`` (no new positions) when
+
+* ``u`` is free and the faces along the edge ``uv`` carry every label ``u``
+  touches: a vertex inside a patch moves within it, a vertex on a curve where
+  patches meet moves along the curve, a corner (input vertex, a point where a
+  fault curve crosses an input edge, the end of a junction curve) never moves.
+  Outer faces therefore stay inside their input triangle, with the input's UVs
+  and normals at every corner;
+* in the surface of every fragment around ``u`` the edge has exactly two faces
+  and the link condition holds (the collapse pinches no fragment);
+* no face turns over or becomes degenerate;
+* every fault vertex removed so far stays within the tolerance of the new fault faces.
+"""
+
+from __future__ import annotations
+
+import heapq
+
+import numpy as np
+
+from fracture_cli.trigeom import point_triangle_distance
+
+# A collapse may not turn a triangle by more than this (cosine of the angle between old and new normal).
+MIN_NORMAL_COS = 0.5
+# A face is degenerate when twice its area is below this fraction of its longest edge squared.
+MIN_SHAPE = 1e-6
+
+
+class SurfaceComplex:
+    """Mutable faces of all fragments with labels, for collapses (vertex ids global; positions never change).
+
+    Parameters
+    ----------
+    V : (g, 3) float
+        Welded vertex positions.
+    faces : (m, 3) int
+        Faces, each in the orientation of its first fragment.
+    labels : (m,) int
+        Label of every face (equal labels: one patch).
+    owners : list of tuple of int
+        Fragments each face bounds (one for an outer face, two for a fault face).
+    fault : (m,) bool
+        Which faces are on a fault (their vertices are held to the tolerance).
+    locked : set of int
+        Vertices that never move.
+    """
+
+    def __init__(self, V: np.ndarray, faces: np.ndarray, labels: np.ndarray, owners: list[tuple[int, ...]],
+                 fault: np.ndarray, locked: set[int]):
+        self.V = V
+        self.faces = {t: (int(a), int(b), int(c)) for t, (a, b, c) in enumerate(np.asarray(faces).tolist())}
+        self.labels = [int(x) for x in labels]
+        self.owners = owners
+        self.fault = [bool(x) for x in fault]
+        self.locked = locked
+        self.vertex_faces: dict[int, set[int]] = {}
+        for t, f in self.faces.items():
+            for x in f:
+                self.vertex_faces.setdefault(x, set()).add(t)
+        self.stamp: dict[int, int] = {}
+        # Original fault vertices removed so far, kept with the face nearest to them (for the error bound).
+        self.assigned: dict[int, list[int]] = {t: [] for t in self.faces}
+        # Vertices whose collapse changed each face (to lock them when the face ends up in an invalid fragment).
+        self.history: dict[int, set[int]] = {t: set() for t in self.faces}
+        self.quadric = _quadrics(V, faces, fault, len(V))
+
+    def decimate(self, tolerance: dict[int, float] | float, vertices: list[int] | None = None) -> int:
+        """Collapse, cheapest first, until no allowed collapse is left; returns how many were done.
+
+        ``tolerance`` is one bound or a bound per fragment (a vertex takes the largest of its fragments').
+        """
+        heap: list = []
+        for u in sorted(self.vertex_faces) if vertices is None else sorted(vertices):
+            self._push(heap, u)
+        done = 0
+        while heap:
+            _, _, u, v, stamp = heapq.heappop(heap)
+            if self.stamp.get(u) != stamp or u not in self.vertex_faces:
+                continue
+            if self._collapse(u, v, self._tolerance(u, tolerance)):
+                done += 1
+                for w in sorted(self._neighbours(v) | {v}):
+                    self._push(heap, w)
+        return done
+
+    def _tolerance(self, u: int, tolerance: dict[int, float] | float) -> float:
+        if not isinstance(tolerance, dict):
+            return tolerance
+        return max(tolerance[k] for t in self.vertex_faces[u] for k in self.owners[t])
+
+    def _neighbours(self, u: int) -> set[int]:
+        return {x for t in self.vertex_faces.get(u, ()) for x in self.faces[t]} - {u}
+
+    def _push(self, heap: list, u: int) -> None:
+        """Queue every collapse of ``u`` into a neighbour, by quadric error; a new stamp obsoletes older entries."""
+        if u in self.locked or u not in self.vertex_faces:
+            return
+        stamp = self.stamp[u] = self.stamp.get(u, 0) + 1
+        targets = sorted(self._neighbours(u))
+        P = np.column_stack([self.V[targets], np.ones(len(targets))])
+        costs = np.einsum("ij,jk,ik->i", P, self.quadric[u], P)
+        for cost, v in zip(costs.tolist(), targets):
+            heapq.heappush(heap, (cost, u, u, v, stamp))
+
+    def _allowed(self, u: int, v: int) -> list[int] | None:
+        """The faces a collapse of ``u`` into ``v`` removes, or None if labels or topology forbid it."""
+        fan = self.vertex_faces[u]
+        removed = [t for t in fan if v in self.faces[t]]
+        if {self.labels[t] for t in removed} != {self.labels[t] for t in fan}:
+            return None  # u would leave a patch, curve or corner it is on
+        v_fan = self.vertex_faces[v]
+        for k in {k for t in fan for k in self.owners[t]}:
+            mine = [t for t in removed if k in self.owners[t]]
+            if len(mine) != 2:
+                return None
+            opposite = {x for t in mine for x in self.faces[t]} - {u, v}
+            around_u = {x for t in fan if k in self.owners[t] for x in self.faces[t]}
+            around_v = {x for t in v_fan if k in self.owners[t] for x in self.faces[t]}
+            if (around_u & around_v) - {u, v} != opposite:
+                return None  # link condition in fragment k: the collapse would pinch its surface
+        return removed
+
+    def _collapse(self, u: int, v: int, tolerance: float) -> bool:
+        """Merge ``u`` into ``v`` if labels, topology, orientation and the error bound allow; True if done."""
+        removed = self._allowed(u, v)
+        if removed is None:
+            return False
+        kept = sorted(self.vertex_faces[u] - set(removed))
+        new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
+        if not all(_turns_little(self.V, self.faces[t], new_faces[t]) for t in kept):
+            return False
+        fault_kept = [t for t in kept if self.fault[t]]
+        points: list[int] = []
+        nearest: list[int] = []
+        if any(self.fault[t] for t in self.vertex_faces[u]):
+            points = [u] + [p for t in self.vertex_faces[u] for p in self.assigned[t]]
+            if not fault_kept:
+                return False
+            triangles = self.V[np.array([new_faces[t] for t in fault_kept])]
+            P = self.V[points]
+            distance = np.stack([point_triangle_distance(P, np.broadcast_to(tri, (len(P), 3, 3)))
+                                 for tri in triangles])
+            if distance.min(axis=0).max() > tolerance:
+                return False
+            nearest = [fault_kept[i] for i in np.argmin(distance, axis=0).tolist()]
+        self._apply(u, v, removed, kept, new_faces, points, nearest)
+        return True
+
+    def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
+               nearest: list[int]) -> None:
+        touched = {u}.union(*(self.history[t] for t in self.vertex_faces[u]))
+        for t in removed:
+            for x in self.faces[t]:
+                self.vertex_faces[x].discard(t)
+            del self.faces[t], self.assigned[t], self.history[t]
+        for t in kept:
+            self.faces[t] = new_faces[t]
+            self.history[t] = set(touched)
+            if self.fault[t]:
+                self.assigned[t] = []
+        for point, t in zip(points, nearest):
+            self.assigned[t].append(point)
+        self.vertex_faces[v].update(kept)
+        del self.vertex_faces[u]
+        self.quadric[v] = self.quadric[v] + self.quadric[u]
+
+    def face_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Ids (m',) of the faces left, ascending, and their corners (m', 3)."""
+        ids = np.array(sorted(self.faces), dtype=np.int64)
+        return ids, np.array([self.faces[t] for t in ids.tolist()], dtype=np.int64).reshape(-1, 3)
+
+
+def _quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np.ndarray:
+    """Area-weighted plane quadrics (n, 4, 4) of the fault faces around every vertex (zero on outer faces)."""
+    F = np.asarray(faces, dtype=np.int64)[np.asarray(fault, dtype=bool)]
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    normal = np.cross(b - a, c - a)
+    area = np.linalg.norm(normal, axis=1)
+    unit = normal / np.maximum(area, 1e-300)[:, None]
+    plane = np.sqrt(area)[:, None] * np.column_stack([unit, -np.einsum("ij,ij->i", unit, a)])
+    outer = np.einsum("fi,fj->fij", plane, plane)
+    Q = np.zeros((n, 4, 4))
+    for k in range(3):
+        np.add.at(Q, F[:, k], outer)
+    return Q
+
+
+def _turns_little(V: np.ndarray, old: tuple, new: tuple) -> bool:
+    """Whether face ``new`` is not degenerate and faces within ``MIN_NORMAL_COS`` of ``old``."""
+    a, b, c = V[list(old)]
+    n_old = np.cross(b - a, c - a)
+    a, b, c = V[list(new)]
+    n_new = np.cross(b - a, c - a)
+    length = float(np.linalg.norm(n_new))
+    longest = max(float((b - a) @ (b - a)), float((c - b) @ (c - b)), float((a - c) @ (a - c)))
+    if length <= MIN_SHAPE * longest or length == 0.0:
+        return False
+    return float(n_old @ n_new) >= MIN_NORMAL_COS * float(np.linalg.norm(n_old)) * length
