@@ -6,14 +6,14 @@ a *label* (a fault patch between two fragments, or the part of one input
 triangle inside one fragment) and the fragments whose surface it is part of. A
 collapse merges a vertex ``u`` into a neighbour ``v`` (no new positions) when
 
-* ``u`` is free and the faces along the edge ``uv`` carry every label ``u``
-  touches: a vertex inside a patch moves within it, a vertex on a curve where
-  patches meet moves along the curve, a corner (input vertex, a point where a
-  fault curve crosses an input edge, the end of a junction curve) never moves.
-  Outer faces therefore stay inside their input triangle, with the input's UVs
-  and normals at every corner;
-* in the surface of every fragment around ``u`` the edge has exactly two faces
-  and the link condition holds (the collapse pinches no fragment);
+* ``u`` is free (not an input vertex) and, for every input polygon (coplanar
+  input triangles) ``u`` lies on, ``v`` is a corner of a face in that polygon
+  next to ``u``: outer faces stay in their polygon, and a point where a fault
+  curve crosses an input edge can only slide along that edge, so the curve
+  snaps to input vertices. Outer corners keep the input's UVs and normals;
+* in the surface of every fragment that has both ``u`` and ``v`` the edge has
+  exactly two faces and the link condition holds (the collapse pinches no
+  fragment); for a fragment without ``v``, ``u`` only moves;
 * no face turns over or becomes degenerate;
 * every fault vertex removed so far stays within the tolerance of the new fault faces.
 """
@@ -33,7 +33,7 @@ MIN_SHAPE = 1e-6
 
 
 class SurfaceComplex:
-    """Mutable faces of all fragments with labels, for collapses (vertex ids global; positions never change).
+    """Mutable faces of all fragments with their input polygons, for collapses (vertex ids global; positions never change).
 
     Parameters
     ----------
@@ -41,8 +41,8 @@ class SurfaceComplex:
         Welded vertex positions.
     faces : (m, 3) int
         Faces, each in the orientation of its first fragment.
-    labels : (m,) int
-        Label of every face (equal labels: one patch).
+    groups : (m,) int
+        The input polygon every outer face lies in; -1 for a fault face.
     owners : list of tuple of int
         Fragments each face bounds (one for an outer face, two for a fault face).
     fault : (m,) bool
@@ -51,11 +51,12 @@ class SurfaceComplex:
         Vertices that never move.
     """
 
-    def __init__(self, V: np.ndarray, faces: np.ndarray, labels: np.ndarray, owners: list[tuple[int, ...]],
+    def __init__(self, V: np.ndarray, faces: np.ndarray, groups: np.ndarray, owners: list[tuple[int, ...]],
                  fault: np.ndarray, locked: set[int]):
         self.V = V
+        self.points = [tuple(p) for p in np.asarray(V, dtype=float).tolist()]
         self.faces = {t: (int(a), int(b), int(c)) for t, (a, b, c) in enumerate(np.asarray(faces).tolist())}
-        self.labels = [int(x) for x in labels]
+        self.groups = [int(x) for x in groups]
         self.owners = owners
         self.fault = [bool(x) for x in fault]
         self.locked = locked
@@ -109,13 +110,15 @@ class SurfaceComplex:
             heapq.heappush(heap, (cost, u, u, v, stamp))
 
     def _allowed(self, u: int, v: int) -> list[int] | None:
-        """The faces a collapse of ``u`` into ``v`` removes, or None if labels or topology forbid it."""
+        """The faces a collapse of ``u`` into ``v`` removes, or None if polygons or topology forbid it."""
         fan = self.vertex_faces[u]
         removed = [t for t in fan if v in self.faces[t]]
-        if {self.labels[t] for t in removed} != {self.labels[t] for t in fan}:
-            return None  # u would leave a patch, curve or corner it is on
+        polygons = {self.groups[t] for t in fan} - {-1}
+        if polygons - {self.groups[t] for t in removed}:
+            return None  # v is not on every input polygon u is on: outer faces would leave the input surface
         v_fan = self.vertex_faces[v]
-        for k in {k for t in fan for k in self.owners[t]}:
+        v_fragments = {k for t in v_fan for k in self.owners[t]}
+        for k in {k for t in fan for k in self.owners[t]} & v_fragments:
             mine = [t for t in removed if k in self.owners[t]]
             if len(mine) != 2:
                 return None
@@ -127,13 +130,13 @@ class SurfaceComplex:
         return removed
 
     def _collapse(self, u: int, v: int, tolerance: float) -> bool:
-        """Merge ``u`` into ``v`` if labels, topology, orientation and the error bound allow; True if done."""
+        """Merge ``u`` into ``v`` if polygons, topology, orientation and the error bound allow; True if done."""
         removed = self._allowed(u, v)
         if removed is None:
             return False
         kept = sorted(self.vertex_faces[u] - set(removed))
         new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
-        if not all(_turns_little(self.V, self.faces[t], new_faces[t]) for t in kept):
+        if not all(_turns_little(self.points, self.faces[t], new_faces[t]) for t in kept):
             return False
         fault_kept = [t for t in kept if self.fault[t]]
         points: list[int] = []
@@ -144,8 +147,9 @@ class SurfaceComplex:
                 return False
             triangles = self.V[np.array([new_faces[t] for t in fault_kept])]
             P = self.V[points]
-            distance = np.stack([point_triangle_distance(P, np.broadcast_to(tri, (len(P), 3, 3)))
-                                 for tri in triangles])
+            # Every point against every new fault face in one call: (faces, points).
+            distance = point_triangle_distance(np.tile(P, (len(triangles), 1)),
+                                               np.repeat(triangles, len(P), axis=0)).reshape(len(triangles), -1)
             if distance.min(axis=0).max() > tolerance:
                 return False
             nearest = [fault_kept[i] for i in np.argmin(distance, axis=0).tolist()]
@@ -191,14 +195,23 @@ def _quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np
     return Q
 
 
-def _turns_little(V: np.ndarray, old: tuple, new: tuple) -> bool:
-    """Whether face ``new`` is not degenerate and faces within ``MIN_NORMAL_COS`` of ``old``."""
-    a, b, c = V[list(old)]
-    n_old = np.cross(b - a, c - a)
-    a, b, c = V[list(new)]
-    n_new = np.cross(b - a, c - a)
-    length = float(np.linalg.norm(n_new))
-    longest = max(float((b - a) @ (b - a)), float((c - b) @ (c - b)), float((a - c) @ (a - c)))
-    if length <= MIN_SHAPE * longest or length == 0.0:
+def _turns_little(points: list, old: tuple, new: tuple) -> bool:
+    """Whether face ``new`` is not degenerate and faces within ``MIN_NORMAL_COS`` of ``old`` (corners: ids into
+    ``points``, a list of (x, y, z); plain floats, as numpy is slow on single triangles)."""
+    n_old = _normal(points, old)
+    n_new = _normal(points, new)
+    length2 = n_new[0] ** 2 + n_new[1] ** 2 + n_new[2] ** 2
+    a, b, c = (points[x] for x in new)
+    longest = max(sum((p - q) ** 2 for p, q in zip(a, b)), sum((p - q) ** 2 for p, q in zip(b, c)),
+                  sum((p - q) ** 2 for p, q in zip(c, a)))
+    if length2 == 0.0 or length2 <= (MIN_SHAPE * longest) ** 2:
         return False
-    return float(n_old @ n_new) >= MIN_NORMAL_COS * float(np.linalg.norm(n_old)) * length
+    dot = n_old[0] * n_new[0] + n_old[1] * n_new[1] + n_old[2] * n_new[2]
+    old2 = n_old[0] ** 2 + n_old[1] ** 2 + n_old[2] ** 2
+    return dot > 0 and dot * dot >= MIN_NORMAL_COS**2 * old2 * length2
+
+
+def _normal(points: list, f: tuple) -> tuple[float, float, float]:
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[f[0]], points[f[1]], points[f[2]]
+    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+    return uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx

@@ -7,7 +7,7 @@ are most of a bake's triangles (chair, wood: 32,000 for a 2,500-triangle input).
 1. **One shared complex.** Vertices of all fragments are welded (within
    :data:`WELD_TOLERANCE`); every interior face is matched with the opposite
    face of the fragment on the other side and kept once, for both. Outer faces
-   are labelled with the input triangle they lie in. Faces that are neither
+   are labelled with the input polygon (coplanar input triangles) they lie in. Faces that are neither
    (a fault face without a twin) keep their corners locked.
 2. **Collapses** (:mod:`.decimate`): half-edge collapses, cheapest first by
    the fault's quadric error, each kept only if every fault vertex removed so
@@ -34,9 +34,12 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fracture_cli.gameready.decimate import SurfaceComplex
+from fracture_cli.meshtopo import manifold_patches, undirected_edges
 from fracture_cli.stages.fragments import _box_uvs
 from fracture_cli.trigeom import edge_manifold_closed, point_triangle_distance, self_intersections, vertex_manifold
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, SurfaceMesh
@@ -90,11 +93,11 @@ class _Classified:
     """The fragments' faces as one complex (see :class:`~fracture_cli.gameready.decimate.SurfaceComplex`)."""
 
     faces: np.ndarray  # (m, 3) global vertex ids, in the first owner's orientation
-    labels: np.ndarray  # (m,) patch / input-triangle label
+    groups: np.ndarray  # (m,) input polygon of an outer face; -1 on a fault; -2 - face for a loose face
     owners: list  # per face: (fragment,) or (fragment A, fragment B)
     fault: np.ndarray  # (m,) bool: a matched fault face (rebuilt flat); else the original corners are kept
     material: np.ndarray  # (m,) material slot
-    corner: dict  # (fragment, label, global id) -> the fragment's original vertex, for kept-corner faces
+    corner: dict  # (group, global id) -> (fragment, its original vertex): the UV and normal of that corner
     locked: set  # vertices of faces that match nothing
     unmatched: int
     patches: int
@@ -129,6 +132,8 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     positions = np.vstack([f.vertices for f in fragments.fragments])
     owner = np.repeat(np.arange(len(fragments.fragments)), np.diff(offsets))
     gid, welded = _weld(positions, owner, WELD_TOLERANCE)
+    original = fragments
+    fragments = _share_unmatched(fragments, gid, offsets, interior)
     classified = _classify(fragments, surface, gid, offsets, welded, interior)
     exempt = {k for k, f in enumerate(fragments.fragments) if not _valid(f)}
     locked = set(classified.locked)
@@ -150,9 +155,9 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
                 locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
             else:
                 locked.update(*[complex_.history[t] for t in face_ids[k][b].tolist()])
-    before = sum(len(f.faces) for f in fragments.fragments)
+    before = sum(len(f.faces) for f in original.fragments)
     after = sum(len(f.faces) for f in results)
-    report = FaultReport(before, after, sum(int(np.sum(f.material_ids == interior)) for f in fragments.fragments),
+    report = FaultReport(before, after, sum(int(np.sum(f.material_ids == interior)) for f in original.fragments),
                          sum(int(np.sum(f.material_ids == interior)) for f in results), classified.unmatched,
                          classified.patches, retries, over)
     log.info("faults: %d -> %d triangles (interior %d -> %d) at tolerance %.3g", before, after,
@@ -165,7 +170,7 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
 def _decimate(welded: np.ndarray, classified: _Classified, locked: set, tolerance: float, max_triangles: int,
               count: int) -> tuple[SurfaceComplex, int]:
     """The complex after collapses to ``tolerance``, then to the budget; and how many fragments stay above it."""
-    complex_ = SurfaceComplex(welded, classified.faces, classified.labels, classified.owners, classified.fault,
+    complex_ = SurfaceComplex(welded, classified.faces, classified.groups, classified.owners, classified.fault,
                               locked)
     if tolerance <= 0:
         return complex_, 0
@@ -289,28 +294,104 @@ def _opposite(f: np.ndarray, g: np.ndarray) -> bool:
     return bool(g[(k + 1) % 3] == f[2])
 
 
-def _source_triangles(surface: SurfaceMesh, points: np.ndarray, thorough: np.ndarray) -> np.ndarray:
-    """For triangles (m, 3, 3) the input triangle (m,) holding all three corners, or -1 if none does.
+def _coplanar_groups(surface: SurfaceMesh) -> np.ndarray:
+    """Group id (t,) of every input triangle: triangles in one plane joined across edges with no seam.
 
-    The input triangles nearest to each are tried; where none holds it, all are for the ``thorough`` (m,) ones.
+    The booleans merge such triangles into one polygon and triangulate it anew, so an outer face may span
+    several of them; UVs and normals are continuous inside a group (its edges join vertex ids, not positions).
+    """
+    V, F = surface.vertices, surface.faces
+    normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    plane = np.column_stack([np.round(normal * 1e6), np.round(np.einsum("ij,ij->i", normal, V[F[:, 0]]) * 1e9)])
+    _, plane_id = np.unique(plane.astype(np.int64), axis=0, return_inverse=True)
+    plane_id = plane_id.reshape(-1)
+    _, edge_id, face = undirected_edges(F)
+    order = np.argsort(edge_id, kind="stable")
+    pair = order[np.bincount(edge_id)[edge_id[order]] == 2].reshape(-1, 2)
+    a, b = face[pair[:, 0]], face[pair[:, 1]]
+    same = plane_id[a] == plane_id[b]
+    graph = sp.coo_matrix((np.ones(int(same.sum())), (a[same], b[same])), shape=(len(F), len(F)))
+    return connected_components(graph, directed=False)[1]
+
+
+def _source_groups(surface: SurfaceMesh, points: np.ndarray, thorough: np.ndarray) -> np.ndarray:
+    """For triangles (m, 3, 3) the coplanar group (m,) of input triangles holding them, or -1 if none does.
+
+    A face belongs to the group of the input triangle nearest to its centroid (those with the nearest
+    centroids are tried, all of them for the ``thorough`` (m,) faces not placed so) when its centroid is on
+    that triangle and its corners on the group's plane.
     """
     S = surface.vertices[surface.faces]
-    tree = cKDTree(S.mean(axis=1))
+    group = _coplanar_groups(surface)
+    centroid = points.mean(axis=1)
     k = min(_CANDIDATES, len(S))
-    _, near = tree.query(points.mean(axis=1), k=k)
+    _, near = cKDTree(S.mean(axis=1)).query(centroid, k=k)
     near = near.reshape(len(points), k)
     best = np.full(len(points), -1, dtype=np.int64)
     best_distance = np.full(len(points), np.inf)
     for j in range(k):
-        distance = np.max([point_triangle_distance(points[:, c], S[near[:, j]]) for c in range(3)], axis=0)
+        distance = point_triangle_distance(centroid, S[near[:, j]])
         better = distance < best_distance
         best[better], best_distance[better] = near[better, j], distance[better]
-    for i in np.flatnonzero((best_distance > ON_SURFACE) & thorough).tolist():  # a big input triangle: try them all
-        distance = np.max([point_triangle_distance(np.broadcast_to(points[i, c], (len(S), 3)), S) for c in range(3)],
-                          axis=0)
+    for i in np.flatnonzero((best_distance > ON_SURFACE) & thorough).tolist():  # beside a big input triangle
+        distance = point_triangle_distance(np.broadcast_to(centroid[i], (len(S), 3)), S)
         best[i], best_distance[i] = int(np.argmin(distance)), float(distance.min())
-    best[best_distance > ON_SURFACE] = -1
-    return best
+    T = S[np.maximum(best, 0)]
+    normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    off_plane = np.abs(np.einsum("mcj,mj->mc", points - T[:, :1], normal)).max(axis=1)
+    return np.where((best_distance <= ON_SURFACE) & (off_plane <= ON_SURFACE), group[np.maximum(best, 0)], -1)
+
+
+def _share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, interior: int) -> Fragments:
+    """Fragments whose untwinned fault faces, where both sides triangulate one polygon differently, agree.
+
+    Untwinned fault faces of one fragment are grouped in clusters (joined across edges); when a cluster of
+    fragment B has the same vertices and boundary as one of fragment A (A < B), B takes A's faces, reversed.
+    A fragment this would make invalid keeps its own faces.
+    """
+    G = np.vstack([gid[f.faces + offsets[k]] for k, f in enumerate(fragments.fragments)])
+    owner = np.concatenate([np.full(len(f.faces), k) for k, f in enumerate(fragments.fragments)])
+    material = np.concatenate([f.material_ids for f in fragments.fragments])
+    start = np.cumsum([0] + [len(f.faces) for f in fragments.fragments])
+    untwinned = (material == interior) & (_twins(G, owner, material == interior) < 0)
+    clusters: dict = {}
+    for k in np.unique(owner[untwinned]).tolist():
+        rows = np.flatnonzero(untwinned[start[k]:start[k + 1]])
+        patch = manifold_patches(G[start[k] + rows])[0]
+        for p in np.unique(patch).tolist():
+            faces = rows[patch == p]
+            clusters.setdefault(_cluster_key(G[start[k] + faces]), []).append((k, faces))
+    swaps: dict[int, list] = {}
+    for key in sorted(clusters, key=lambda c: min(k for k, _ in clusters[c])):
+        found = clusters[key]
+        if len(found) == 2 and found[0][0] != found[1][0]:
+            (a, fa), (b, fb) = sorted(found, key=lambda x: x[0])
+            swaps.setdefault(b, []).append((gid[fragments.fragments[a].faces[fa] + offsets[a]][:, ::-1], fb))
+    out = list(fragments.fragments)
+    for b, items in sorted(swaps.items()):
+        frag = fragments.fragments[b]
+        local = {int(g): v for g, v in zip(gid[offsets[b]:offsets[b + 1]].tolist(), range(len(frag.vertices)))}
+        drop = np.concatenate([fb for _, fb in items])
+        new = np.vstack([np.vectorize(local.__getitem__, otypes=[np.int64])(faces) for faces, _ in items])
+        keep = np.setdiff1d(np.arange(len(frag.faces)), drop)
+        candidate = Fragment(vertices=frag.vertices, faces=np.vstack([frag.faces[keep], new]), uvs=frag.uvs,
+                             normals=frag.normals,
+                             material_ids=np.concatenate([frag.material_ids[keep],
+                                                          np.full(len(new), interior, dtype=np.int32)]),
+                             piece=frag.piece)
+        if _valid(candidate) or not _valid(frag):
+            out[b] = candidate
+    return Fragments(fragments=tuple(out), materials=fragments.materials, normalization=fragments.normalization,
+                     input_volume=fragments.input_volume)
+
+
+def _cluster_key(G: np.ndarray) -> tuple:
+    """What two triangulations of one polygon share: their vertices and their boundary's (undirected) edges."""
+    directed, edge_id, _ = undirected_edges(G)
+    boundary = np.sort(directed[np.bincount(edge_id)[edge_id] == 1], axis=1)
+    return tuple(np.unique(G).tolist()), tuple(map(tuple, np.unique(boundary, axis=0).tolist()))
 
 
 def _classify(fragments: Fragments, surface: SurfaceMesh, gid: np.ndarray, offsets: np.ndarray, welded: np.ndarray,
@@ -323,24 +404,21 @@ def _classify(fragments: Fragments, surface: SurfaceMesh, gid: np.ndarray, offse
     twin = _twins(G, owner, material == interior)
     paired = twin >= 0
     source = np.full(len(G), -1, dtype=np.int64)
-    source[~paired] = _source_triangles(surface, welded[G[~paired]], material[~paired] != interior)
+    source[~paired] = _source_groups(surface, welded[G[~paired]], material[~paired] != interior)
     loose = ~paired & (source < 0)
-    # Labels: fault patches by fragment pair, outer faces by (fragment, input triangle), loose faces one each.
-    pair_key = np.where(paired, np.minimum(owner, np.where(paired, owner[np.maximum(twin, 0)], 0)), owner)
-    other = np.where(paired, np.maximum(owner, owner[np.maximum(twin, 0)]), -1)
-    key = np.column_stack([np.where(paired, 0, np.where(loose, 2, 1)), pair_key, other,
-                           np.where(paired, 0, np.where(loose, np.arange(len(G)), source))])
-    _, label = np.unique(key, axis=0, return_inverse=True)
-    label = label.reshape(-1)
+    groups = np.where(paired, -1, np.where(loose, -2 - np.arange(len(G)), source))
     keep = ~paired | (owner < owner[np.maximum(twin, 0)])  # one face per twin pair: the lower fragment's
     rows = np.flatnonzero(keep)
     owners = [(int(owner[i]), int(owner[twin[i]])) if paired[i] else (int(owner[i]),) for i in rows.tolist()]
     corner: dict = {}
     for i in np.flatnonzero(~paired).tolist():
         for g, v in zip(G[i].tolist(), local[i].tolist()):
-            corner.setdefault((int(owner[i]), int(label[i]), g), v)
-    return _Classified(faces=G[rows], labels=label[rows], owners=owners, fault=paired[rows], material=material[rows],
-                       corner=corner, locked=set(np.unique(G[loose]).tolist()),
+            corner.setdefault((int(groups[i]), g), (int(owner[i]), v))
+    # The input's own vertices stay: the outer surface keeps its triangulation's corners, only cuts move.
+    near, _ = cKDTree(surface.vertices).query(welded, distance_upper_bound=WELD_TOLERANCE)
+    on_input = np.flatnonzero(np.isfinite(near))
+    return _Classified(faces=G[rows], groups=groups[rows], owners=owners, fault=paired[rows], material=material[rows],
+                       corner=corner, locked=set(np.unique(G[loose]).tolist()) | set(on_input.tolist()),
                        unmatched=int(np.sum(loose & (material == interior))),
                        patches=len({o for o in owners if len(o) == 2}))
 
@@ -359,22 +437,29 @@ def _rebuild(fragments: Fragments, k: int, welded: np.ndarray, classified: _Clas
     faces[flip] = faces[flip][:, ::-1]
     fault = classified.fault[ids]
     kept_faces = faces[~fault]
-    labels = classified.labels[ids[~fault]]
-    original = np.array([classified.corner[(k, int(lab), int(g))] for lab, row in zip(labels.tolist(), kept_faces)
-                         for g in row.tolist()], dtype=np.int64)
-    used, local = np.unique(original, return_inverse=True)
-    position = np.unique(np.column_stack([original, kept_faces.reshape(-1)]), axis=0)
-    kept_positions = frag.vertices[used].copy()
-    kept_positions[np.searchsorted(used, position[:, 0])] = welded[position[:, 1]]
+    groups = classified.groups[ids[~fault]]
+    # Every outer corner takes the UV and normal its input polygon has there (from whichever fragment had
+    # that corner); corners with one position and the same attributes are one vertex.
+    source = [classified.corner[(grp, g)] for grp, row in zip(groups.tolist(), kept_faces.tolist()) for g in row]
+    normals = np.array([fragments.fragments[f].normals[v] for f, v in source]).reshape(-1, 3)
+    uvs = np.array([fragments.fragments[f].uvs[v] if fragments.fragments[f].uvs is not None else (0.0, 0.0)
+                    for f, v in source]).reshape(-1, 2)
+    corner = np.column_stack([kept_faces.reshape(-1), normals, uvs])
+    _, first, local = np.unique(corner, axis=0, return_index=True, return_inverse=True)
+    first = np.sort(first)  # vertices in the order of first use
+    _, local = np.unique(corner, axis=0, return_inverse=True)
+    order_of = np.empty(len(first), dtype=np.int64)
+    order_of[np.argsort(np.unique(corner, axis=0, return_index=True)[1])] = np.arange(len(first))
+    local = order_of[local.reshape(-1)]
     flat_vertices, flat_normals, flat_faces = _flat(welded, faces[fault])
-    uvs = None
+    all_uvs = None
     if frag.uvs is not None:
         world = fragments.normalization.to_world(flat_vertices)
-        uvs = np.vstack([frag.uvs[used], _box_uvs(world, flat_normals, uv_scale)])
+        all_uvs = np.vstack([uvs[first], _box_uvs(world, flat_normals, uv_scale)])
     order = np.concatenate([np.flatnonzero(~fault), np.flatnonzero(fault)])
-    rebuilt = Fragment(vertices=np.vstack([kept_positions, flat_vertices]),
-                       faces=np.vstack([local.reshape(-1, 3), len(used) + flat_faces]),
-                       uvs=uvs, normals=np.vstack([frag.normals[used], flat_normals]),
+    rebuilt = Fragment(vertices=np.vstack([welded[kept_faces.reshape(-1)[first]], flat_vertices]),
+                       faces=np.vstack([local.reshape(-1, 3), len(first) + flat_faces]),
+                       uvs=all_uvs, normals=np.vstack([normals[first], flat_normals]),
                        material_ids=np.concatenate([classified.material[ids[~fault]],
                                                     np.full(int(fault.sum()), interior, dtype=np.int32)]),
                        piece=frag.piece)
