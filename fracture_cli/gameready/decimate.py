@@ -75,16 +75,20 @@ class SurfaceComplex:
         """Collapse, cheapest first, until no allowed collapse is left; returns how many were done.
 
         ``tolerance`` is one bound or a bound per fragment (a vertex takes the largest of its fragments').
+        Each vertex is queued once, at the cost of its cheapest collapse; when that one is refused the
+        next cheapest are tried. A new stamp (a neighbour changed) makes its older entry obsolete.
         """
         heap: list = []
         for u in sorted(self.vertex_faces) if vertices is None else sorted(vertices):
             self._push(heap, u)
         done = 0
         while heap:
-            _, _, u, v, stamp = heapq.heappop(heap)
+            _, u, stamp = heapq.heappop(heap)
             if self.stamp.get(u) != stamp or u not in self.vertex_faces:
                 continue
-            if self._collapse(u, v, self._tolerance(u, tolerance)):
+            bound = self._tolerance(u, tolerance)
+            v = next((v for v in self._targets(u) if self._collapse(u, v, bound)), None)
+            if v is not None:
                 done += 1
                 for w in sorted(self._neighbours(v) | {v}):
                     self._push(heap, w)
@@ -98,16 +102,24 @@ class SurfaceComplex:
     def _neighbours(self, u: int) -> set[int]:
         return {x for t in self.vertex_faces.get(u, ()) for x in self.faces[t]} - {u}
 
+    def _costs(self, u: int) -> tuple[list[int], list[float]]:
+        """The neighbours of ``u`` and the quadric error of moving ``u`` onto each."""
+        targets = sorted(self._neighbours(u))
+        P = np.column_stack([self.V[targets], np.ones(len(targets))])
+        return targets, np.einsum("ij,jk,ik->i", P, self.quadric[u], P).tolist()
+
+    def _targets(self, u: int) -> list[int]:
+        targets, costs = self._costs(u)
+        return [v for _, v in sorted(zip(costs, targets))]
+
     def _push(self, heap: list, u: int) -> None:
-        """Queue every collapse of ``u`` into a neighbour, by quadric error; a new stamp obsoletes older entries."""
+        """Queue ``u`` at the cost of its cheapest collapse, if it may move."""
         if u in self.locked or u not in self.vertex_faces:
             return
         stamp = self.stamp[u] = self.stamp.get(u, 0) + 1
-        targets = sorted(self._neighbours(u))
-        P = np.column_stack([self.V[targets], np.ones(len(targets))])
-        costs = np.einsum("ij,jk,ik->i", P, self.quadric[u], P)
-        for cost, v in zip(costs.tolist(), targets):
-            heapq.heappush(heap, (cost, u, u, v, stamp))
+        _, costs = self._costs(u)
+        if costs:
+            heapq.heappush(heap, (min(costs), u, stamp))
 
     def _allowed(self, u: int, v: int) -> list[int] | None:
         """The faces a collapse of ``u`` into ``v`` removes, or None if polygons or topology forbid it."""

@@ -135,17 +135,16 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     original = fragments
     fragments = _share_unmatched(fragments, gid, offsets, interior)
     classified = _classify(fragments, surface, gid, offsets, welded, interior)
-    exempt = {k for k, f in enumerate(fragments.fragments) if not _valid(f)}
     locked = set(classified.locked)
-    for k in sorted(exempt):  # already invalid (not held against the simplification): left as they are
-        locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
+    known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
     retries = over = 0
     for attempt in range(_RETRIES + 1):
         complex_, over = _decimate(welded, classified, locked, tolerance, max_triangles, len(fragments.fragments))
         ids, faces = complex_.face_arrays()
         results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
                                   for k in range(len(fragments.fragments))])
-        bad = {k: b for k, f in enumerate(results) if k not in exempt and (b := _bad_faces(f)) is not None}
+        bad = {k: b for k, f in enumerate(results) if (b := _new_bad_faces(f, face_ids[k], complex_, known, k,
+                                                                       fragments, gid, offsets)) is not None}
         if not bad or tolerance <= 0:
             break
         retries += 1
@@ -207,6 +206,24 @@ def _bad_faces(fragment: Fragment) -> np.ndarray | None:
         return np.arange(len(W))
     pairs = self_intersections(V, W)
     return np.unique(pairs) if len(pairs) else None
+
+
+def _new_bad_faces(fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex, known: dict, k: int,
+                   fragments: Fragments, gid: np.ndarray, offsets: np.ndarray) -> np.ndarray | None:
+    """The faces making a rebuilt fragment invalid (see :func:`_bad_faces`), unless they were so before.
+
+    A fragment cut with faces that already intersect (rare: folds the booleans left) is not held against
+    the simplification: faces of it that no collapse touched, and that were bad before, are let through.
+    """
+    bad = _bad_faces(fragment)
+    if bad is None or len(bad) == len(fragment.faces):
+        return bad
+    if k not in known:
+        before = fragments.fragments[k]
+        was = _bad_faces(before)
+        known[k] = set() if was is None else {tuple(sorted(f)) for f in gid[before.faces[was] + offsets[k]].tolist()}
+    new = [i for i, t in zip(bad.tolist(), ids[bad].tolist()) if tuple(sorted(complex_.faces[t])) not in known[k]]
+    return np.array(new, dtype=np.int64) if new else None
 
 
 def _interior_slot(fragments: Fragments) -> int:
@@ -381,7 +398,7 @@ def _share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray,
                              material_ids=np.concatenate([frag.material_ids[keep],
                                                           np.full(len(new), interior, dtype=np.int32)]),
                              piece=frag.piece)
-        if _valid(candidate) or not _valid(frag):
+        if _valid(candidate):
             out[b] = candidate
     return Fragments(fragments=tuple(out), materials=fragments.materials, normalization=fragments.normalization,
                      input_volume=fragments.input_volume)
