@@ -1,4 +1,4 @@
-"""Fault simplification: shared faults stay identical, fragments stay closed and valid, the outer surface the input's."""
+"""Fault simplification: shared faults stay identical, fragments closed and valid, the outer surface the input's."""
 
 from __future__ import annotations
 

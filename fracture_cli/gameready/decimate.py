@@ -33,7 +33,7 @@ MIN_SHAPE = 1e-6
 
 
 class SurfaceComplex:
-    """Mutable faces of all fragments with their input polygons, for collapses (vertex ids global; positions never change).
+    """Mutable faces of all fragments with their input polygons, for collapses (global vertex ids, fixed positions).
 
     Parameters
     ----------

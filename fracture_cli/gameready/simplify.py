@@ -463,11 +463,9 @@ def _rebuild(fragments: Fragments, k: int, welded: np.ndarray, classified: _Clas
                     for f, v in source]).reshape(-1, 2)
     corner = np.column_stack([kept_faces.reshape(-1), normals, uvs])
     _, first, local = np.unique(corner, axis=0, return_index=True, return_inverse=True)
-    first = np.sort(first)  # vertices in the order of first use
-    _, local = np.unique(corner, axis=0, return_inverse=True)
-    order_of = np.empty(len(first), dtype=np.int64)
-    order_of[np.argsort(np.unique(corner, axis=0, return_index=True)[1])] = np.arange(len(first))
-    local = order_of[local.reshape(-1)]
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(len(first))  # vertices in the order of first use
+    first, local = np.sort(first), rank[local.reshape(-1)]
     flat_vertices, flat_normals, flat_faces = _flat(welded, faces[fault])
     all_uvs = None
     if frag.uvs is not None:
