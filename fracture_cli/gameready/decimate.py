@@ -49,10 +49,12 @@ class SurfaceComplex:
         Which faces are on a fault (their vertices are held to the tolerance).
     locked : set of int
         Vertices that never move.
+    damp : dict of int -> float, optional
+        Factor on the tolerance of some vertices (where an earlier try made a fragment intersect itself).
     """
 
     def __init__(self, V: np.ndarray, faces: np.ndarray, groups: np.ndarray, owners: list[tuple[int, ...]],
-                 fault: np.ndarray, locked: set[int]):
+                 fault: np.ndarray, locked: set[int], damp: dict[int, float] | None = None):
         self.V = V
         self.points = [tuple(p) for p in np.asarray(V, dtype=float).tolist()]
         self.faces = {t: (int(a), int(b), int(c)) for t, (a, b, c) in enumerate(np.asarray(faces).tolist())}
@@ -60,6 +62,7 @@ class SurfaceComplex:
         self.owners = owners
         self.fault = [bool(x) for x in fault]
         self.locked = locked
+        self.damp = damp or {}
         self.vertex_faces: dict[int, set[int]] = {}
         for t, f in self.faces.items():
             for x in f:
@@ -95,9 +98,10 @@ class SurfaceComplex:
         return done
 
     def _tolerance(self, u: int, tolerance: dict[int, float] | float) -> float:
+        damp = self.damp.get(u, 1.0)
         if not isinstance(tolerance, dict):
-            return tolerance
-        return max(tolerance[k] for t in self.vertex_faces[u] for k in self.owners[t])
+            return tolerance * damp
+        return damp * max(tolerance[k] for t in self.vertex_faces[u] for k in self.owners[t])
 
     def _neighbours(self, u: int) -> set[int]:
         return {x for t in self.vertex_faces.get(u, ()) for x in self.faces[t]} - {u}
@@ -170,14 +174,14 @@ class SurfaceComplex:
 
     def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
                nearest: list[int]) -> None:
-        touched = {u}.union(*(self.history[t] for t in self.vertex_faces[u]))
+        touched = {u}.union(*(self.history[t] for t in removed))
         for t in removed:
             for x in self.faces[t]:
                 self.vertex_faces[x].discard(t)
             del self.faces[t], self.assigned[t], self.history[t]
         for t in kept:
             self.faces[t] = new_faces[t]
-            self.history[t] = set(touched)
+            self.history[t] = self.history[t] | touched
             if self.fault[t]:
                 self.assigned[t] = []
         for point, t in zip(points, nearest):

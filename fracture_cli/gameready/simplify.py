@@ -24,8 +24,9 @@ are most of a bake's triangles (chair, wood: 32,000 for a 2,500-triangle input).
 4. **Rebuild and check.** Each fragment is rebuilt (fault vertices split per
    plane, flat normals, box-projected UVs as the fragments stage makes them)
    and checked closed, manifold and free of self-intersections; when one is
-   not, the vertices whose collapses made its bad faces are locked and
-   everything is simplified again (at last: every vertex of that fragment).
+   not, everything is simplified again with the vertices whose collapses made
+   its bad faces held to a quarter of the tolerance, then locked, at last with
+   every vertex of that fragment locked (which leaves it as it was cut).
 """
 
 from __future__ import annotations
@@ -50,8 +51,9 @@ log = logging.getLogger(__name__)
 WELD_TOLERANCE = 1e-6
 # An outer face lies in an input triangle when its corners are this close to it (normalized units).
 ON_SURFACE = 1e-7
-# Rounds of locking the vertices behind invalid faces; the last one locks whole fragments.
-_RETRIES = 3
+# Tries after the first when a fragment comes out invalid: the vertices whose collapses made its bad faces get
+# a quarter of the tolerance (cumulative), the next to last try locks them, the last one its whole fragment.
+_RETRIES = 4
 # Times a fragment above its triangle budget gets its tolerance doubled.
 _BUDGET_ROUNDS = 6
 # Input triangles tried per outer face (nearest centroids first) before all of them are.
@@ -137,9 +139,11 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     classified = _classify(fragments, surface, gid, offsets, welded, interior)
     locked = set(classified.locked)
     known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
+    damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
     retries = over = 0
     for attempt in range(_RETRIES + 1):
-        complex_, over = _decimate(welded, classified, locked, tolerance, max_triangles, len(fragments.fragments))
+        complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles,
+                                   len(fragments.fragments))
         ids, faces = complex_.face_arrays()
         results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
                                   for k in range(len(fragments.fragments))])
@@ -150,10 +154,13 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
         retries += 1
         log.debug("faults: attempt %d, %d fragment(s) invalid; locking and simplifying again", attempt, len(bad))
         for k, b in sorted(bad.items()):
+            behind = set().union(*[complex_.history[t] for t in face_ids[k][b].tolist()])
             if attempt + 1 >= _RETRIES:
                 locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
+            elif attempt + 2 >= _RETRIES:
+                locked.update(behind)
             else:
-                locked.update(*[complex_.history[t] for t in face_ids[k][b].tolist()])
+                damp.update({u: damp.get(u, 1.0) / 4.0 for u in behind})
     before = sum(len(f.faces) for f in original.fragments)
     after = sum(len(f.faces) for f in results)
     report = FaultReport(before, after, sum(int(np.sum(f.material_ids == interior)) for f in original.fragments),
@@ -166,11 +173,11 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     return new, report
 
 
-def _decimate(welded: np.ndarray, classified: _Classified, locked: set, tolerance: float, max_triangles: int,
-              count: int) -> tuple[SurfaceComplex, int]:
+def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: dict, tolerance: float,
+              max_triangles: int, count: int) -> tuple[SurfaceComplex, int]:
     """The complex after collapses to ``tolerance``, then to the budget; and how many fragments stay above it."""
     complex_ = SurfaceComplex(welded, classified.faces, classified.groups, classified.owners, classified.fault,
-                              locked)
+                              locked, damp)
     if tolerance <= 0:
         return complex_, 0
     bound = {k: tolerance for k in range(count)}
