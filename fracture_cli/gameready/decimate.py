@@ -26,8 +26,11 @@ import numpy as np
 
 from fracture_cli.trigeom import point_triangle_distance
 
-# A collapse may not turn a triangle by more than this (cosine of the angle between old and new normal).
-MIN_NORMAL_COS = 0.5
+# A collapse may not turn a triangle by more than this (cosine of the angle between old and new normal): inside a
+# fault 30 degrees, so a smooth fault stays smooth under flat shading; 60 degrees for a vertex on the outer
+# surface, where a fault curve straightens or snaps to input vertices across a thin wall.
+MIN_NORMAL_COS = 0.85
+MIN_NORMAL_COS_OUTER = 0.5
 # A face is degenerate when twice its area is below this fraction of its longest edge squared.
 MIN_SHAPE = 1e-6
 
@@ -152,7 +155,8 @@ class SurfaceComplex:
             return False
         kept = sorted(self.vertex_faces[u] - set(removed))
         new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
-        if not all(_turns_little(self.points, self.faces[t], new_faces[t]) for t in kept):
+        limit = MIN_NORMAL_COS_OUTER if any(not self.fault[t] for t in self.vertex_faces[u]) else MIN_NORMAL_COS
+        if not all(_turns_little(self.points, self.faces[t], new_faces[t], limit) for t in kept):
             return False
         fault_kept = [t for t in kept if self.fault[t]]
         points: list[int] = []
@@ -211,9 +215,11 @@ def _quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np
     return Q
 
 
-def _turns_little(points: list, old: tuple, new: tuple) -> bool:
-    """Whether face ``new`` is not degenerate and faces within ``MIN_NORMAL_COS`` of ``old`` (corners: ids into
-    ``points``, a list of (x, y, z); plain floats, as numpy is slow on single triangles)."""
+def _turns_little(points: list, old: tuple, new: tuple, limit: float) -> bool:
+    """Whether face ``new`` is not degenerate and its normal's cosine with ``old``'s is ``limit`` or more.
+
+    Corners are ids into ``points``, a list of (x, y, z): plain floats, as numpy is slow on single triangles.
+    """
     n_old = _normal(points, old)
     n_new = _normal(points, new)
     length2 = n_new[0] ** 2 + n_new[1] ** 2 + n_new[2] ** 2
@@ -224,7 +230,7 @@ def _turns_little(points: list, old: tuple, new: tuple) -> bool:
         return False
     dot = n_old[0] * n_new[0] + n_old[1] * n_new[1] + n_old[2] * n_new[2]
     old2 = n_old[0] ** 2 + n_old[1] ** 2 + n_old[2] ** 2
-    return dot > 0 and dot * dot >= MIN_NORMAL_COS**2 * old2 * length2
+    return dot > 0 and dot * dot >= limit**2 * old2 * length2
 
 
 def _normal(points: list, f: tuple) -> tuple[float, float, float]:
