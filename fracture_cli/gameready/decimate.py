@@ -24,6 +24,8 @@ import heapq
 
 import numpy as np
 
+from scipy.spatial import cKDTree
+
 from fracture_cli.trigeom import point_triangle_distance
 
 # A collapse may not turn a triangle by more than this (cosine of the angle between old and new normal): inside a
@@ -31,6 +33,8 @@ from fracture_cli.trigeom import point_triangle_distance
 # surface, where a fault curve straightens or snaps to input vertices across a thin wall.
 MIN_NORMAL_COS = 0.85
 MIN_NORMAL_COS_OUTER = 0.5
+# Cut fault faces (nearest centroids) a point of a new fault face is measured against.
+_REFERENCE_CANDIDATES = 8
 # A face is degenerate when twice its area is below this fraction of its longest edge squared.
 MIN_SHAPE = 1e-6
 
@@ -71,11 +75,26 @@ class SurfaceComplex:
             for x in f:
                 self.vertex_faces.setdefault(x, set()).add(t)
         self.stamp: dict[int, int] = {}
+        self.done: list[tuple[int, int]] = []  # the collapses made, in order
         # Original fault vertices removed so far, kept with the face nearest to them (for the error bound).
         self.assigned: dict[int, list[int]] = {t: [] for t in self.faces}
         # Vertices whose collapse changed each face (to lock them when the face ends up in an invalid fragment).
         self.history: dict[int, set[int]] = {t: set() for t in self.faces}
         self.quadric = _quadrics(V, faces, fault, len(V))
+        # The cut fault faces, to measure how far new faces stray from them.
+        F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)[np.asarray(fault, dtype=bool)]
+        self.reference = V[F] if len(F) else np.zeros((1, 3, 3))
+        self.reference_tree = cKDTree(self.reference.mean(axis=1))
+
+    def replay(self, collapses: list[tuple[int, int]], tolerance: dict[int, float] | float) -> None:
+        """Redo the collapses ``(u, v)`` of an earlier try, in order, each only if still allowed.
+
+        A retry with a few vertices held back repeats most of the first try: replaying its collapses first
+        leaves :meth:`decimate` little to search for.
+        """
+        for u, v in collapses:
+            if u not in self.locked and u in self.vertex_faces and v in self.vertex_faces:
+                self._collapse(u, v, self._tolerance(u, tolerance))
 
     def decimate(self, tolerance: dict[int, float] | float, vertices: list[int] | None = None) -> int:
         """Collapse, cheapest first, until no allowed collapse is left; returns how many were done.
@@ -173,8 +192,20 @@ class SurfaceComplex:
             if distance.min(axis=0).max() > tolerance:
                 return False
             nearest = [fault_kept[i] for i in np.argmin(distance, axis=0).tolist()]
+            if self._strays(triangles, tolerance):
+                return False
         self._apply(u, v, removed, kept, new_faces, points, nearest)
         return True
+
+    def _strays(self, triangles: np.ndarray, tolerance: float) -> bool:
+        """Whether a new fault face (k, 3, 3) leaves the cut fault by more than ``tolerance`` at its centroid
+        or an edge midpoint (the other side of the bound: removed vertices near the new faces is not enough,
+        a fold between them would pass)."""
+        P = np.concatenate([triangles.mean(axis=1), (triangles + triangles[:, [1, 2, 0]]).reshape(-1, 3) / 2.0])
+        _, near = self.reference_tree.query(P, k=min(_REFERENCE_CANDIDATES, len(self.reference)))
+        near = near.reshape(len(P), -1)
+        distance = point_triangle_distance(np.repeat(P, near.shape[1], axis=0), self.reference[near.reshape(-1)])
+        return bool(distance.reshape(len(P), -1).min(axis=1).max() > tolerance)
 
     def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
                nearest: list[int]) -> None:
@@ -192,6 +223,7 @@ class SurfaceComplex:
             self.assigned[t].append(point)
         self.vertex_faces[v].update(kept)
         del self.vertex_faces[u]
+        self.done.append((u, v))
         self.quadric[v] = self.quadric[v] + self.quadric[u]
 
     def face_arrays(self) -> tuple[np.ndarray, np.ndarray]:

@@ -140,15 +140,27 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     locked = set(classified.locked)
     known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
     damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
+    replay: list = []
+    valid: set[bytes] = set()
     retries = over = 0
     for attempt in range(_RETRIES + 1):
         complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles,
-                                   len(fragments.fragments))
+                                   len(fragments.fragments), replay)
+        replay = complex_.done
         ids, faces = complex_.face_arrays()
         results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
                                   for k in range(len(fragments.fragments))])
-        bad = {k: b for k, f in enumerate(results) if (b := _new_bad_faces(f, face_ids[k], complex_, known, k,
-                                                                       fragments, gid, offsets)) is not None}
+        bad = {}
+        for k, frag in enumerate(results):
+            # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
+            signature = np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
+            if signature in valid:
+                continue
+            b = _new_bad_faces(frag, face_ids[k], complex_, known, k, fragments, gid, offsets)
+            if b is None:
+                valid.add(signature)
+            else:
+                bad[k] = b
         if not bad or tolerance <= 0:
             break
         retries += 1
@@ -174,13 +186,17 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
 
 
 def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: dict, tolerance: float,
-              max_triangles: int, count: int) -> tuple[SurfaceComplex, int]:
-    """The complex after collapses to ``tolerance``, then to the budget; and how many fragments stay above it."""
+              max_triangles: int, count: int, replay: list | None = None) -> tuple[SurfaceComplex, int]:
+    """The complex after collapses to ``tolerance``, then to the budget; and how many fragments stay above it.
+
+    ``replay``: the collapses of an earlier try, redone first where still allowed.
+    """
     complex_ = SurfaceComplex(welded, classified.faces, classified.groups, classified.owners, classified.fault,
                               locked, damp)
     if tolerance <= 0:
         return complex_, 0
     bound = {k: tolerance for k in range(count)}
+    complex_.replay(replay or [], bound)
     complex_.decimate(bound)
     over: list[int] = []
     for _ in range(_BUDGET_ROUNDS + 1):
