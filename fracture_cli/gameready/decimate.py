@@ -23,7 +23,6 @@ from __future__ import annotations
 import heapq
 
 import numpy as np
-
 from scipy.spatial import cKDTree
 
 from fracture_cli.trigeom import point_triangle_distance
