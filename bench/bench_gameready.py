@@ -42,10 +42,10 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
+from fracture_cli import parallel  # noqa: E402
 from fracture_cli.gameready.collision import _solid, collision_shapes, hull_corners, max_overlap_fraction  # noqa: E402
 from fracture_cli.gameready.components import body_faces, split_fragments  # noqa: E402
 from fracture_cli.gameready.mass import mass_properties  # noqa: E402
-from fracture_cli import parallel  # noqa: E402
 from fracture_cli.io.gltf import read_glb  # noqa: E402
 from fracture_cli.types import Fragment, Fragments, Material, Normalization  # noqa: E402
 
@@ -101,7 +101,6 @@ def _measure(fragments: Fragments) -> dict:
 
 def _lean(asset: str, recipe_name: str, tmp: str) -> tuple[Fragments, tuple]:
     """The pipeline up to ``simplify`` on one sample asset; its fragments and the lean-mesh row's figures."""
-    from fracture_cli.bake import run_pipeline
     from fracture_cli.io.write import write_fragments_glb
     from fracture_cli.pipeline import STAGE_NAMES, PipelineState, Runner
     from fracture_cli.recipe import load_recipe

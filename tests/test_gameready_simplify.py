@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fracture_cli.gameready.mass import mass_properties
-from fracture_cli.gameready.simplify import _valid, simplify_faults
+from fracture_cli.gameready.simplify import simplify_faults, valid
 from fracture_cli.pipeline import STAGE_NAMES
 from fracture_cli.recipe import load_recipe
 from fracture_cli.stages.simplify import SimplifyOptions, triangle_budget
@@ -95,7 +95,7 @@ def test_flat_fault_collapses_to_a_few_triangles():
     assert report.fault_before == 256 and report.unmatched == 0 and report.patches == 1
     assert report.fault_after <= 8  # a flat square: a few triangles per side once its edges are straight
     assert report.triangles_after < report.triangles_before / 4
-    assert all(_valid(f) for f in result.fragments)
+    assert all(valid(f) for f in result.fragments)
     assert _fault(result.fragments[0]) == _fault(result.fragments[1])
     for before, after in zip(fragments.fragments, result.fragments):
         assert mass_properties(after.vertices, after.faces).volume == pytest.approx(
@@ -109,7 +109,7 @@ def test_curved_fault_keeps_its_shape_within_the_tolerance():
     loose, report = simplify_faults(fragments, surface, tolerance=0.02)
     assert report.fault_after < report.fault_before
     assert len(_fault(tight.fragments[0])) >= len(_fault(loose.fragments[0]))
-    assert all(_valid(f) for f in loose.fragments)
+    assert all(valid(f) for f in loose.fragments)
     assert _fault(loose.fragments[0]) == _fault(loose.fragments[1])
     total = sum(mass_properties(f.vertices, f.faces).volume for f in loose.fragments)
     assert total == pytest.approx(fragments.input_volume, rel=1e-12)  # the partition is kept exactly
@@ -128,7 +128,7 @@ def test_budget_simplifies_further():
     free, _ = simplify_faults(fragments, surface, tolerance=1e-4)
     capped, report = simplify_faults(fragments, surface, tolerance=1e-4, max_triangles=60)
     assert max(len(f.faces) for f in capped.fragments) < max(len(f.faces) for f in free.fragments)
-    assert all(_valid(f) for f in capped.fragments)
+    assert all(valid(f) for f in capped.fragments)
     assert report.over_budget == sum(len(f.faces) > 60 for f in capped.fragments)
 
 

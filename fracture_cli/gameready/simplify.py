@@ -35,29 +35,30 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fracture_cli.gameready.decimate import SurfaceComplex
-from fracture_cli.meshtopo import manifold_patches, undirected_edges
+from fracture_cli.gameready.faultmatch import (
+    WELD_TOLERANCE,
+    bad_faces,
+    share_unmatched,
+    source_groups,
+    twins,
+    valid,
+    weld,
+)
 from fracture_cli.stages.fragments import _box_uvs
-from fracture_cli.trigeom import edge_manifold_closed, point_triangle_distance, self_intersections, vertex_manifold
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, SurfaceMesh
+
+__all__ = ["FaultReport", "simplify_faults", "valid"]
 
 log = logging.getLogger(__name__)
 
-# Vertices of different fragments closer than this (normalized units) are one point.
-WELD_TOLERANCE = 1e-6
-# An outer face lies in an input triangle when its corners are this close to it (normalized units).
-ON_SURFACE = 1e-7
 # Tries after the first when a fragment comes out invalid: the vertices whose collapses made its bad faces get
 # a quarter of the tolerance (cumulative), the next to last try locks them, the last one its whole fragment.
 _RETRIES = 4
 # Times a fragment above its triangle budget gets its tolerance doubled.
 _BUDGET_ROUNDS = 6
-# Input triangles tried per outer face (nearest centroids first) before all of them are.
-_CANDIDATES = 16
 
 
 @dataclass(frozen=True)
@@ -129,50 +130,15 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     report : FaultReport
     """
     interior = _interior_slot(fragments)
-    uv_scale = _uv_scale(fragments, interior)
     offsets = np.cumsum([0] + [len(f.vertices) for f in fragments.fragments])
     positions = np.vstack([f.vertices for f in fragments.fragments])
     owner = np.repeat(np.arange(len(fragments.fragments)), np.diff(offsets))
-    gid, welded = _weld(positions, owner, WELD_TOLERANCE)
+    gid, welded = weld(positions, owner, WELD_TOLERANCE)
     original = fragments
-    fragments = _share_unmatched(fragments, gid, offsets, interior)
+    fragments = share_unmatched(fragments, gid, offsets, interior)
     classified = _classify(fragments, surface, gid, offsets, welded, interior)
-    locked = set(classified.locked)
-    known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
-    damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
-    replay: list = []
-    valid: set[bytes] = set()
-    retries = over = 0
-    for attempt in range(_RETRIES + 1):
-        complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles,
-                                   len(fragments.fragments), replay)
-        replay = complex_.done
-        ids, faces = complex_.face_arrays()
-        results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
-                                  for k in range(len(fragments.fragments))])
-        bad = {}
-        for k, frag in enumerate(results):
-            # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
-            signature = np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
-            if signature in valid:
-                continue
-            b = _new_bad_faces(frag, face_ids[k], complex_, known, k, fragments, gid, offsets)
-            if b is None:
-                valid.add(signature)
-            else:
-                bad[k] = b
-        if not bad or tolerance <= 0:
-            break
-        retries += 1
-        log.debug("faults: attempt %d, %d fragment(s) invalid; locking and simplifying again", attempt, len(bad))
-        for k, b in sorted(bad.items()):
-            behind = set().union(*[complex_.history[t] for t in face_ids[k][b].tolist()])
-            if attempt + 1 >= _RETRIES:
-                locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
-            elif attempt + 2 >= _RETRIES:
-                locked.update(behind)
-            else:
-                damp.update({u: damp.get(u, 1.0) / 4.0 for u in behind})
+    results, retries, over = _valid_simplification(fragments, surface, classified, gid, offsets, welded, interior,
+                                                   tolerance, max_triangles)
     before = sum(len(f.faces) for f in original.fragments)
     after = sum(len(f.faces) for f in results)
     report = FaultReport(before, after, sum(int(np.sum(f.material_ids == interior)) for f in original.fragments),
@@ -183,6 +149,53 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     new = Fragments(fragments=tuple(results), materials=fragments.materials, normalization=fragments.normalization,
                     input_volume=fragments.input_volume)
     return new, report
+
+
+def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified: _Classified, gid: np.ndarray,
+                          offsets: np.ndarray, welded: np.ndarray, interior: int, tolerance: float,
+                          max_triangles: int) -> tuple[list[Fragment], int, int]:
+    """The simplified fragments, every one valid; how many retries that took and how many stay over budget.
+
+    After :data:`_RETRIES` tries every fragment still invalid is locked whole; that ends, since a locked
+    fragment is as it was cut.
+    """
+    uv_scale = _uv_scale(fragments, interior)
+    locked = set(classified.locked)
+    known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
+    damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
+    replay: list = []
+    valid_faces: set[bytes] = set()
+    attempt = 0
+    while True:
+        complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles,
+                                   len(fragments.fragments), replay)
+        replay = complex_.done
+        ids, faces = complex_.face_arrays()
+        results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
+                                  for k in range(len(fragments.fragments))])
+        bad = {}
+        for k, frag in enumerate(results):
+            # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
+            signature = np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
+            if signature in valid_faces:
+                continue
+            b = _new_bad_faces(frag, face_ids[k], complex_, known, k, fragments, gid, offsets)
+            if b is None:
+                valid_faces.add(signature)
+            else:
+                bad[k] = b
+        if not bad or tolerance <= 0:
+            return list(results), attempt, over
+        log.debug("faults: try %d, %d fragment(s) invalid; simplifying again with more held back", attempt, len(bad))
+        for k, b in sorted(bad.items()):
+            behind = set().union(*[complex_.history[t] for t in face_ids[k][b].tolist()])
+            if attempt + 1 >= _RETRIES:
+                locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
+            elif attempt + 2 >= _RETRIES:
+                locked.update(behind)
+            else:
+                damp.update({u: damp.get(u, 1.0) / 4.0 for u in behind})
+        attempt += 1
 
 
 def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: dict, tolerance: float,
@@ -216,21 +229,6 @@ def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: di
     return complex_, len(over)
 
 
-def _valid(fragment: Fragment) -> bool:
-    """Closed, manifold and free of self-intersections once vertices at one position are welded."""
-    return _bad_faces(fragment) is None
-
-
-def _bad_faces(fragment: Fragment) -> np.ndarray | None:
-    """None if the fragment is valid (see :func:`_valid`); else the faces (k,) at fault, all if it is not closed."""
-    V, weld = np.unique(fragment.vertices, axis=0, return_inverse=True)
-    W = weld.reshape(-1)[fragment.faces]
-    if not (edge_manifold_closed(W) and vertex_manifold(W)):
-        return np.arange(len(W))
-    pairs = self_intersections(V, W)
-    return np.unique(pairs) if len(pairs) else None
-
-
 def _new_bad_faces(fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex, known: dict, k: int,
                    fragments: Fragments, gid: np.ndarray, offsets: np.ndarray) -> np.ndarray | None:
     """The faces making a rebuilt fragment invalid (see :func:`_bad_faces`), unless they were so before.
@@ -238,12 +236,12 @@ def _new_bad_faces(fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex
     A fragment cut with faces that already intersect (rare: folds the booleans left) is not held against
     the simplification: faces of it that no collapse touched, and that were bad before, are let through.
     """
-    bad = _bad_faces(fragment)
+    bad = bad_faces(fragment)
     if bad is None or len(bad) == len(fragment.faces):
         return bad
     if k not in known:
         before = fragments.fragments[k]
-        was = _bad_faces(before)
+        was = bad_faces(before)
         known[k] = set() if was is None else {tuple(sorted(f)) for f in gid[before.faces[was] + offsets[k]].tolist()}
     new = [i for i, t in zip(bad.tolist(), ids[bad].tolist()) if tuple(sorted(complex_.faces[t])) not in known[k]]
     return np.array(new, dtype=np.int64) if new else None
@@ -273,167 +271,6 @@ def _uv_scale(fragments: Fragments, interior: int) -> float:
     return num / den if den > 0 and num > 0 else 1.0
 
 
-def _weld(positions: np.ndarray, owner: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
-    """Global id (n,) of every vertex and one position (g, 3) per id.
-
-    Vertices of one fragment are one point only at the same exact position;
-    vertices of different fragments are joined when closer than
-    ``tolerance``, closest pairs first, never so that two distinct points of
-    one fragment end up as one (which would collapse a sliver edge).
-    """
-    _, exact = np.unique(np.column_stack([owner, positions]), axis=0, return_inverse=True)
-    exact = exact.reshape(-1)
-    m = exact.max() + 1
-    first = np.full(m, len(positions))
-    np.minimum.at(first, exact, np.arange(len(positions)))
-    points, point_owner = positions[first], owner[first]
-    pairs = cKDTree(points).query_pairs(tolerance, output_type="ndarray")
-    pairs = pairs[point_owner[pairs[:, 0]] != point_owner[pairs[:, 1]]]
-    distance = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
-    parent = list(range(m))
-    members = [{int(point_owner[i])} for i in range(m)]
-
-    def find(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
-    for i, j in pairs[np.lexsort((pairs[:, 1], pairs[:, 0], distance))].tolist():
-        a, b = find(i), find(j)
-        if a != b and not (members[a] & members[b]):
-            a, b = min(a, b), max(a, b)
-            parent[b] = a
-            members[a] |= members[b]
-    root = np.array([find(i) for i in range(m)])
-    _, gid = np.unique(root, return_inverse=True)
-    gid = gid.reshape(-1)
-    rep = np.full(gid.max() + 1, m)
-    np.minimum.at(rep, gid, np.arange(m))
-    return gid[exact], points[rep]
-
-
-def _twins(G: np.ndarray, owner: np.ndarray, candidate: np.ndarray) -> np.ndarray:
-    """For each face (n,) the index of its opposite twin in another fragment, or -1 (only ``candidate`` faces)."""
-    twin = np.full(len(G), -1, dtype=np.int64)
-    rows = np.flatnonzero(candidate)
-    _, group, counts = np.unique(np.sort(G[rows], axis=1), axis=0, return_inverse=True, return_counts=True)
-    group = group.reshape(-1)
-    order = np.argsort(group, kind="stable")
-    starts = np.searchsorted(group[order], np.arange(len(counts)))
-    for g in np.flatnonzero(counts == 2).tolist():
-        i, j = rows[order[starts[g]]], rows[order[starts[g] + 1]]
-        if owner[i] != owner[j] and _opposite(G[i], G[j]):
-            twin[i], twin[j] = j, i
-    return twin
-
-
-def _opposite(f: np.ndarray, g: np.ndarray) -> bool:
-    """Whether triangles f and g have the same corners in opposite cyclic order."""
-    k = int(np.flatnonzero(g == f[0])[0])
-    return bool(g[(k + 1) % 3] == f[2])
-
-
-def _coplanar_groups(surface: SurfaceMesh) -> np.ndarray:
-    """Group id (t,) of every input triangle: triangles in one plane joined across edges with no seam.
-
-    The booleans merge such triangles into one polygon and triangulate it anew, so an outer face may span
-    several of them; UVs and normals are continuous inside a group (its edges join vertex ids, not positions).
-    """
-    V, F = surface.vertices, surface.faces
-    normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    plane = np.column_stack([np.round(normal * 1e6), np.round(np.einsum("ij,ij->i", normal, V[F[:, 0]]) * 1e9)])
-    _, plane_id = np.unique(plane.astype(np.int64), axis=0, return_inverse=True)
-    plane_id = plane_id.reshape(-1)
-    _, edge_id, face = undirected_edges(F)
-    order = np.argsort(edge_id, kind="stable")
-    pair = order[np.bincount(edge_id)[edge_id[order]] == 2].reshape(-1, 2)
-    a, b = face[pair[:, 0]], face[pair[:, 1]]
-    same = plane_id[a] == plane_id[b]
-    graph = sp.coo_matrix((np.ones(int(same.sum())), (a[same], b[same])), shape=(len(F), len(F)))
-    return connected_components(graph, directed=False)[1]
-
-
-def _source_groups(surface: SurfaceMesh, points: np.ndarray, thorough: np.ndarray) -> np.ndarray:
-    """For triangles (m, 3, 3) the coplanar group (m,) of input triangles holding them, or -1 if none does.
-
-    A face belongs to the group of the input triangle nearest to its centroid (those with the nearest
-    centroids are tried, all of them for the ``thorough`` (m,) faces not placed so) when its centroid is on
-    that triangle and its corners on the group's plane.
-    """
-    S = surface.vertices[surface.faces]
-    group = _coplanar_groups(surface)
-    centroid = points.mean(axis=1)
-    k = min(_CANDIDATES, len(S))
-    _, near = cKDTree(S.mean(axis=1)).query(centroid, k=k)
-    near = near.reshape(len(points), k)
-    best = np.full(len(points), -1, dtype=np.int64)
-    best_distance = np.full(len(points), np.inf)
-    for j in range(k):
-        distance = point_triangle_distance(centroid, S[near[:, j]])
-        better = distance < best_distance
-        best[better], best_distance[better] = near[better, j], distance[better]
-    for i in np.flatnonzero((best_distance > ON_SURFACE) & thorough).tolist():  # beside a big input triangle
-        distance = point_triangle_distance(np.broadcast_to(centroid[i], (len(S), 3)), S)
-        best[i], best_distance[i] = int(np.argmin(distance)), float(distance.min())
-    T = S[np.maximum(best, 0)]
-    normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    off_plane = np.abs(np.einsum("mcj,mj->mc", points - T[:, :1], normal)).max(axis=1)
-    return np.where((best_distance <= ON_SURFACE) & (off_plane <= ON_SURFACE), group[np.maximum(best, 0)], -1)
-
-
-def _share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, interior: int) -> Fragments:
-    """Fragments whose untwinned fault faces, where both sides triangulate one polygon differently, agree.
-
-    Untwinned fault faces of one fragment are grouped in clusters (joined across edges); when a cluster of
-    fragment B has the same vertices and boundary as one of fragment A (A < B), B takes A's faces, reversed.
-    A fragment this would make invalid keeps its own faces.
-    """
-    G = np.vstack([gid[f.faces + offsets[k]] for k, f in enumerate(fragments.fragments)])
-    owner = np.concatenate([np.full(len(f.faces), k) for k, f in enumerate(fragments.fragments)])
-    material = np.concatenate([f.material_ids for f in fragments.fragments])
-    start = np.cumsum([0] + [len(f.faces) for f in fragments.fragments])
-    untwinned = (material == interior) & (_twins(G, owner, material == interior) < 0)
-    clusters: dict = {}
-    for k in np.unique(owner[untwinned]).tolist():
-        rows = np.flatnonzero(untwinned[start[k]:start[k + 1]])
-        patch = manifold_patches(G[start[k] + rows])[0]
-        for p in np.unique(patch).tolist():
-            faces = rows[patch == p]
-            clusters.setdefault(_cluster_key(G[start[k] + faces]), []).append((k, faces))
-    swaps: dict[int, list] = {}
-    for key in sorted(clusters, key=lambda c: min(k for k, _ in clusters[c])):
-        found = clusters[key]
-        if len(found) == 2 and found[0][0] != found[1][0]:
-            (a, fa), (b, fb) = sorted(found, key=lambda x: x[0])
-            swaps.setdefault(b, []).append((gid[fragments.fragments[a].faces[fa] + offsets[a]][:, ::-1], fb))
-    out = list(fragments.fragments)
-    for b, items in sorted(swaps.items()):
-        frag = fragments.fragments[b]
-        local = {int(g): v for g, v in zip(gid[offsets[b]:offsets[b + 1]].tolist(), range(len(frag.vertices)))}
-        drop = np.concatenate([fb for _, fb in items])
-        new = np.vstack([np.vectorize(local.__getitem__, otypes=[np.int64])(faces) for faces, _ in items])
-        keep = np.setdiff1d(np.arange(len(frag.faces)), drop)
-        candidate = Fragment(vertices=frag.vertices, faces=np.vstack([frag.faces[keep], new]), uvs=frag.uvs,
-                             normals=frag.normals,
-                             material_ids=np.concatenate([frag.material_ids[keep],
-                                                          np.full(len(new), interior, dtype=np.int32)]),
-                             piece=frag.piece)
-        if _valid(candidate):
-            out[b] = candidate
-    return Fragments(fragments=tuple(out), materials=fragments.materials, normalization=fragments.normalization,
-                     input_volume=fragments.input_volume)
-
-
-def _cluster_key(G: np.ndarray) -> tuple:
-    """What two triangulations of one polygon share: their vertices and their boundary's (undirected) edges."""
-    directed, edge_id, _ = undirected_edges(G)
-    boundary = np.sort(directed[np.bincount(edge_id)[edge_id] == 1], axis=1)
-    return tuple(np.unique(G).tolist()), tuple(map(tuple, np.unique(boundary, axis=0).tolist()))
-
-
 def _classify(fragments: Fragments, surface: SurfaceMesh, gid: np.ndarray, offsets: np.ndarray, welded: np.ndarray,
               interior: int) -> _Classified:
     """Every face of every fragment as a face of the complex: a shared fault face, an outer face, or a locked one."""
@@ -441,10 +278,10 @@ def _classify(fragments: Fragments, surface: SurfaceMesh, gid: np.ndarray, offse
     owner = np.concatenate([np.full(len(f.faces), k) for k, f in enumerate(fragments.fragments)])
     local = np.vstack([f.faces for f in fragments.fragments])
     material = np.concatenate([f.material_ids for f in fragments.fragments]).astype(np.int32)
-    twin = _twins(G, owner, material == interior)
+    twin = twins(G, owner, material == interior)
     paired = twin >= 0
     source = np.full(len(G), -1, dtype=np.int64)
-    source[~paired] = _source_groups(surface, welded[G[~paired]], material[~paired] != interior)
+    source[~paired] = source_groups(surface, welded[G[~paired]], material[~paired] != interior)
     loose = ~paired & (source < 0)
     groups = np.where(paired, -1, np.where(loose, -2 - np.arange(len(G)), source))
     keep = ~paired | (owner < owner[np.maximum(twin, 0)])  # one face per twin pair: the lower fragment's
