@@ -2,9 +2,8 @@
 
 The complex holds every face of every fragment once: a fault face shared by two
 fragments is one face of both, an outer face belongs to one. Each face carries
-a *label* (a fault patch between two fragments, or the part of one input
-triangle inside one fragment) and the fragments whose surface it is part of. A
-collapse merges a vertex ``u`` into a neighbour ``v`` (no new positions) when
+the fragments whose surface it is part of and, for an outer face, the input
+polygon (connected coplanar input triangles) it lies in. A collapse merges a vertex ``u`` into a neighbour ``v`` (no new positions) when
 
 * ``u`` is free (not an input vertex) and, for every input polygon (coplanar
   input triangles) ``u`` lies on, ``v`` is a corner of a face in that polygon
@@ -14,8 +13,11 @@ collapse merges a vertex ``u`` into a neighbour ``v`` (no new positions) when
 * in the surface of every fragment that has both ``u`` and ``v`` the edge has
   exactly two faces and the link condition holds (the collapse pinches no
   fragment); for a fragment without ``v``, ``u`` only moves;
-* no face turns over or becomes degenerate;
-* every fault vertex removed so far stays within the tolerance of the new fault faces.
+* no face turns by more than 30 degrees (60 around a vertex on the outer
+  surface) or becomes degenerate;
+* every fault vertex removed so far stays within the tolerance of the new fault
+  faces, and the new fault faces (centroids, edge midpoints) within the
+  tolerance of the cut fault.
 """
 
 from __future__ import annotations
