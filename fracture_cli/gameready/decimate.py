@@ -3,7 +3,8 @@
 The complex holds every face of every fragment once: a fault face shared by two
 fragments is one face of both, an outer face belongs to one. Each face carries
 the fragments whose surface it is part of and, for an outer face, the input
-polygon (connected coplanar input triangles) it lies in. A collapse merges a vertex ``u`` into a neighbour ``v`` (no new positions) when
+polygon (connected coplanar input triangles) it lies in. A collapse merges a
+vertex ``u`` into a neighbour ``v`` (no new positions) when
 
 * ``u`` is free (not an input vertex) and, for every input polygon (coplanar
   input triangles) ``u`` lies on, ``v`` is a corner of a face in that polygon
