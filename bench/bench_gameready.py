@@ -186,6 +186,19 @@ def run(quick: bool = False, source: str | None = None, lean_only: bool = False)
                 f"| {c[8]:.3f} / {c[9]:.3f} | {c[10]:.3f} | {c[11]:.1e} | {c[12]:.1f} |")
             if measured["rest"] is not None:
                 rows["rest"].append(f"| {name} | {measured['rest'][0]:.3f} | {measured['rest'][1]:.4f} |")
+    lean = [
+        ("Lean meshes (the simplify stage, recipe defaults; budget = 2 x cut solid's triangles + 64 x fragments; "
+         "input = as read / the solid that is cut, after repair; KiB of the fragments GLB; CPU s of the stage, "
+         "including checking the fragments again)."),
+        "",
+        ("| asset | input triangles | fragments | triangles cut | triangles lean | budget | lean / input "
+         "| GLB KiB cut | GLB KiB lean | stage CPU s | tolerance | watertight / volume error |"),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        *(rows["lean"] or ["| (not measured with --from) |"]),
+        "",
+    ]
+    if lean_only:
+        return "\n".join(["## gameready (lean meshes only)", "", *lean])
     return "\n".join([
         "## gameready",
         "",
@@ -205,15 +218,7 @@ def run(quick: bool = False, source: str | None = None, lean_only: bool = False)
         "|---|---|---|---|---|---|---|---|---|---|",
         *rows["collision"],
         "",
-        ("Lean meshes (the simplify stage, recipe defaults; budget = 2 x cut solid's triangles + 64 x fragments; "
-         "input = as read / the solid that is cut, after repair; KiB of the fragments GLB; CPU s of the stage, "
-         "including checking the fragments again)."),
-        "",
-        ("| asset | input triangles | fragments | triangles cut | triangles lean | budget | lean / input "
-         "| GLB KiB cut | GLB KiB lean | stage CPU s | tolerance | watertight / volume error |"),
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
-        *(rows["lean"] or ["| (not measured with --from) |"]),
-        "",
+        *lean,
         "At rest in Godot 3 (largest speed after 1 s, m/s; target: under 0.05), on the split fragments."
         if rows["rest"] else "At rest in Godot 3: not measured (godot3-server not installed).",
         "",
