@@ -26,6 +26,13 @@ ON_SURFACE = 1e-7
 _CANDIDATES = 16
 
 
+def closed_when_welded(fragment: Fragment) -> bool:
+    """Whether the fragment is closed and manifold once vertices at one position are welded."""
+    _, weld = np.unique(fragment.vertices, axis=0, return_inverse=True)
+    W = weld.reshape(-1)[fragment.faces]
+    return bool(edge_manifold_closed(W) and vertex_manifold(W))
+
+
 def valid(fragment: Fragment) -> bool:
     """Closed, manifold and free of self-intersections once vertices at one position are welded."""
     return bad_faces(fragment) is None

@@ -41,6 +41,7 @@ from fracture_cli.gameready.decimate import SurfaceComplex
 from fracture_cli.gameready.faultmatch import (
     WELD_TOLERANCE,
     bad_faces,
+    closed_when_welded,
     share_unmatched,
     source_groups,
     twins,
@@ -156,11 +157,16 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
                           max_triangles: int) -> tuple[list[Fragment], int, int]:
     """The simplified fragments, every one valid; how many retries that took and how many stay over budget.
 
-    After :data:`_RETRIES` tries every fragment still invalid is locked whole; that ends, since a locked
-    fragment is as it was cut.
+    After :data:`_RETRIES` tries every fragment still invalid is locked whole; one still invalid then, or not
+    closed and manifold once its vertices are welded by position even as cut (bodies touching along an edge,
+    which only the fragments' own vertex copies keep apart), is returned as it was cut.
     """
     uv_scale = _uv_scale(fragments, interior)
     locked = set(classified.locked)
+    as_cut = {k for k, f in enumerate(fragments.fragments) if not closed_when_welded(f)}
+    whole: set[int] = set()  # fragments locked whole
+    for k in sorted(as_cut):
+        locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
     known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
     damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
     replay: list = []
@@ -175,6 +181,8 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
                                   for k in range(len(fragments.fragments))])
         bad = {}
         for k, frag in enumerate(results):
+            if k in as_cut:
+                continue
             # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
             signature = np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
             if signature in valid_faces:
@@ -185,11 +193,12 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
             else:
                 bad[k] = b
         if not bad or tolerance <= 0:
-            return list(results), attempt, over
+            return [fragments.fragments[k] if k in as_cut else f for k, f in enumerate(results)], attempt, over
         log.debug("faults: try %d, %d fragment(s) invalid; simplifying again with more held back", attempt, len(bad))
         for k, b in sorted(bad.items()):
             behind = set().union(*[complex_.history[t] for t in face_ids[k][b].tolist()])
             if attempt + 1 >= _RETRIES:
+                (as_cut if k in whole else whole).add(k)
                 locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
             elif attempt + 2 >= _RETRIES:
                 locked.update(behind)
