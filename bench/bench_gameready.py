@@ -1,10 +1,11 @@
 """Benchmark of the game-ready modules on the sample assets (fracture_cli.gameready).
 
-    python bench/bench_gameready.py [--quick] [--from DIR]
+    python bench/bench_gameready.py [--quick] [--from DIR] [--only-lean]
 
-Each sample asset is baked with the recipe its manifest names (or its GLB is
-taken from ``DIR/<stem>/<stem>.glb``), the fragment meshes are read back from
-the GLB, and the game-ready steps run on them:
+Each sample asset runs through the pipeline with the recipe its manifest names
+(one process, ``--jobs 1``), and the game-ready steps run on its fragments
+(with ``--from DIR`` bodies and collision read ``DIR/<stem>/<stem>.glb`` instead
+and the lean-mesh table is left out):
 
 * bodies: closed bodies per fragment, fragments after splitting (tiny bodies,
   below 1e-4 of the asset's volume, merged into their neighbour);
@@ -12,9 +13,11 @@ the GLB, and the game-ready steps run on them:
   before (its plain hull) and after (its parts), the share of each fragment's
   volume inside its parts, the largest overlap between two collision shapes
   (fraction of the smaller) with plain hulls and with the parts;
-* faults: triangles before and after simplifying the shared faults to 1e-3 of
-  the bounding-box diagonal (prototype; every fragment checked closed and free
-  of self-intersections);
+* lean meshes (the ``simplify`` stage at the recipe's settings): triangles of
+  the input, of the fragments as cut and as simplified, the budget of issue 20
+  (twice the cut solid's triangles plus 64 per fragment), GLB bytes as cut and
+  as simplified, and the CPU seconds the stage adds to the bake (simplifying
+  and checking the fragments again), one process;
 * rest (when Godot 3 is installed): one rigid body per fragment, gravity off,
   one second of physics (Bullet, shape margin 1e-4), largest speed with each
   fragment's convex hull and with its exported parts (``UCX_`` meshes).
@@ -39,10 +42,10 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
+from fracture_cli import parallel  # noqa: E402
 from fracture_cli.gameready.collision import _solid, collision_shapes, hull_corners, max_overlap_fraction  # noqa: E402
 from fracture_cli.gameready.components import body_faces, split_fragments  # noqa: E402
 from fracture_cli.gameready.mass import mass_properties  # noqa: E402
-from fracture_cli.gameready.simplify import _valid, simplify_faults  # noqa: E402
 from fracture_cli.io.gltf import read_glb  # noqa: E402
 from fracture_cli.types import Fragment, Fragments, Material, Normalization  # noqa: E402
 
@@ -69,15 +72,9 @@ def read_fragments(path: str) -> Fragments:
     return Fragments(tuple(frags), tuple(Material(n) for n in names), norm, volume)
 
 
-def _glb(asset: str, recipe: str, source: str | None, tmp: str) -> str:
+def _glb(asset: str, source: str) -> str:
     stem = os.path.splitext(asset)[0]
-    if source:
-        return os.path.join(source, stem, f"{stem}.glb")
-    from fracture_cli.bake import bake
-    from fracture_cli.recipe import load_recipe
-
-    bake(os.path.join(REPO, "sample_assets", asset), os.path.join(tmp, stem), load_recipe(recipe))
-    return os.path.join(tmp, stem, f"{stem}.glb")
+    return os.path.join(source, stem, f"{stem}.glb")
 
 
 def _measure(fragments: Fragments) -> dict:
@@ -99,14 +96,37 @@ def _measure(fragments: Fragments) -> dict:
                         np.median(shapes.coverage), max_overlap_fraction(hulls),
                         max_overlap_fraction([p for ps in shapes.parts for p in ps]), seconds)
     out["rest"] = _rest_in_godot(split, shapes) if shutil.which("godot3-server") else None
-    t = time.process_time()
-    simplified, faults = simplify_faults(fragments, 1e-3)
-    seconds = time.process_time() - t
-    invalid_before = sum(not _valid(f) for f in fragments.fragments)
-    invalid = sum(not _valid(f) for f in simplified.fragments)
-    out["faults"] = (faults.triangles_before, faults.triangles_after, faults.fault_before, faults.fault_after,
-                     faults.unmatched, invalid_before, invalid, seconds)
     return out
+
+
+def _lean(asset: str, recipe_name: str, tmp: str) -> tuple[Fragments, tuple]:
+    """The pipeline up to ``simplify`` on one sample asset; its fragments and the lean-mesh row's figures."""
+    from fracture_cli.io.write import write_fragments_glb
+    from fracture_cli.pipeline import STAGE_NAMES, PipelineState, Runner
+    from fracture_cli.recipe import load_recipe
+    from fracture_cli.stages.simplify import triangle_budget
+
+    recipe = load_recipe(recipe_name)
+    runner = Runner(asset)
+    state = PipelineState(source=os.path.join(REPO, "sample_assets", asset))
+    with parallel.using(1):
+        for name in STAGE_NAMES[:STAGE_NAMES.index("simplify")]:
+            state = runner.run(name, state, recipe[name])
+        cut = state.fragments
+        t = time.process_time()
+        state = runner.run("simplify", state, recipe["simplify"])
+        seconds = time.process_time() - t
+    sizes = []
+    for label, frags in (("cut", cut), ("lean", state.fragments)):
+        path = os.path.join(tmp, f"{label}.glb")
+        write_fragments_glb(path, frags)
+        sizes.append(os.path.getsize(path))
+    triangles = [sum(len(f.faces) for f in frags.fragments) for frags in (cut, state.fragments)]
+    budget = triangle_budget(len(state.surface.faces), len(state.fragments.fragments))
+    row = (state.loaded.num_faces, len(state.surface.faces), len(cut.fragments), triangles[0], triangles[1], budget,
+           sizes[0], sizes[1], seconds, recipe["simplify"].tolerance, state.checks["watertight"],
+           state.checks["volume_error"])
+    return state.fragments, row
 
 
 def _rest_in_godot(fragments: Fragments, shapes) -> tuple[float, float]:
@@ -139,16 +159,25 @@ def _rest_in_godot(fragments: Fragments, shapes) -> tuple[float, float]:
     return speeds[0], speeds[1]
 
 
-def run(quick: bool = False, source: str | None = None) -> str:
+def run(quick: bool = False, source: str | None = None, lean_only: bool = False) -> str:
     with open(os.path.join(REPO, "sample_assets", "manifest.toml"), "rb") as fh:
         assets = sorted(tomllib.load(fh)["assets"].items())
     if quick:
         assets = [a for a in assets if a[0] == "chair.glb"]
-    rows: dict[str, list[str]] = {"bodies": [], "collision": [], "faults": [], "rest": []}
+    rows: dict[str, list[str]] = {"bodies": [], "collision": [], "lean": [], "rest": []}
     with tempfile.TemporaryDirectory() as tmp:
         for asset, recipe in assets:
-            measured = _measure(read_fragments(_glb(asset, recipe, source, tmp)))
             name = f"{asset} ({recipe})"
+            if source:
+                fragments = read_fragments(_glb(asset, source))
+            else:
+                fragments, r = _lean(asset, recipe, tmp)
+                rows["lean"].append(
+                    f"| {name} | {r[0]:,} / {r[1]:,} | {r[2]} | {r[3]:,} | {r[4]:,} | {r[5]:,} | {r[4] / r[1]:.2f} "
+                    f"| {r[6] / 1024:,.0f} | {r[7] / 1024:,.0f} | {r[8]:.1f} | {r[9]:g} | {r[10]} / {r[11]:.1e} |")
+            if lean_only:
+                continue
+            measured = _measure(fragments)
             b = measured["bodies"]
             rows["bodies"].append(f"| {name} | {b[0]} | {b[1]} | {b[2]} | {b[3]} | {b[4]} | {b[5]:.2f} |")
             c = measured["collision"]
@@ -157,9 +186,19 @@ def run(quick: bool = False, source: str | None = None) -> str:
                 f"| {c[8]:.3f} / {c[9]:.3f} | {c[10]:.3f} | {c[11]:.1e} | {c[12]:.1f} |")
             if measured["rest"] is not None:
                 rows["rest"].append(f"| {name} | {measured['rest'][0]:.3f} | {measured['rest'][1]:.4f} |")
-            f = measured["faults"]
-            rows["faults"].append(f"| {name} | {f[0]} -> {f[1]} | {f[2]} -> {f[3]} | {f[4]} | {f[5]} -> {f[6]} "
-                                  f"| {f[7]:.1f} |")
+    lean = [
+        ("Lean meshes (the simplify stage, recipe defaults; budget = 2 x cut solid's triangles + 64 x fragments; "
+         "input = as read / the solid that is cut, after repair; KiB of the fragments GLB; CPU s of the stage, "
+         "including checking the fragments again)."),
+        "",
+        ("| asset | input triangles | fragments | triangles cut | triangles lean | budget | lean / input "
+         "| GLB KiB cut | GLB KiB lean | stage CPU s | tolerance | watertight / volume error |"),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        *(rows["lean"] or ["| (not measured with --from) |"]),
+        "",
+    ]
+    if lean_only:
+        return "\n".join(["## gameready (lean meshes only)", "", *lean])
     return "\n".join([
         "## gameready",
         "",
@@ -179,13 +218,7 @@ def run(quick: bool = False, source: str | None = None) -> str:
         "|---|---|---|---|---|---|---|---|---|---|",
         *rows["collision"],
         "",
-        "Faults simplified to 1e-3 of the diagonal (prototype, on the finished fragments).",
-        "",
-        ("| asset | triangles | fault triangles | unmatched fault faces | fragments not closed or self-intersecting "
-         "(as read back from the GLB's float32 -> after) | s |"),
-        "|---|---|---|---|---|---|",
-        *rows["faults"],
-        "",
+        *lean,
         "At rest in Godot 3 (largest speed after 1 s, m/s; target: under 0.05), on the split fragments."
         if rows["rest"] else "At rest in Godot 3: not measured (godot3-server not installed).",
         "",
@@ -196,7 +229,8 @@ def run(quick: bool = False, source: str | None = None) -> str:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="the chair only")
+    parser.add_argument("--only-lean", action="store_true", help="the lean-mesh table only")
     parser.add_argument("--from", dest="source", default=None,
-                        help="take <stem>/<stem>.glb from this folder instead of baking")
+                        help="take <stem>/<stem>.glb from this folder instead of baking (no lean-mesh table)")
     args = parser.parse_args()
-    print(run(quick=args.quick, source=args.source))
+    print(run(quick=args.quick, source=args.source, lean_only=args.only_lean))

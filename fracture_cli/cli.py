@@ -36,8 +36,8 @@ Examples:
 \b
   # the same, step by step (same bytes), saving the cage and tets for inspection
   fracture -r wood load chair.glb repair cage save-cage build/cage.obj tetra \\
-      save-tets build/tets.npz material modes pieces smooth fragments runtime \\
-      export build/chair
+      save-tets build/tets.npz material modes pieces smooth fragments simplify \\
+      runtime export build/chair
 \b
   # every stage's flags, with the values the recipe gives them
   fracture -r wood smooth --help

@@ -169,6 +169,16 @@ def _smooth(state: PipelineState, options: Any) -> PipelineState:
 
 
 def _fragments(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.fragments import fragments
+
+    surface = state.need("surface", "fragments")
+    frags = fragments(surface, state.need("regions", "fragments"), options)
+    frags, checks = _checked(surface, frags)
+    return dataclasses.replace(state, fragments=frags, checks=checks)
+
+
+def _checked(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments, dict[str, CheckValue]]:
+    """The fragments as they will be written and the report's checks; a broken fragment stops the bake here."""
     from fracture_cli.checks import (
         fragment_fault_shape,
         fragment_invariants,
@@ -176,11 +186,8 @@ def _fragments(state: PipelineState, options: Any) -> PipelineState:
         require_volume,
         written_fragments,
     )
-    from fracture_cli.stages.fragments import fragments
 
-    surface = state.need("surface", "fragments")
-    frags = fragments(surface, state.need("regions", "fragments"), options)
-    # Checked as they will be written (float32 about each pivot); a broken fragment stops the bake here.
+    # Checked as they will be written (float32 about each pivot).
     frags, written = written_fragments(frags)
     require_sound(written)
     checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written))
@@ -190,6 +197,22 @@ def _fragments(state: PipelineState, options: Any) -> PipelineState:
     shape = fragment_fault_shape(frags)
     checks["fault_mean_dihedral_degrees"] = round(shape["mean_dihedral_degrees"], 6)
     checks["fault_crease_density"] = round(shape["crease_density"], 6)
+    return frags, checks
+
+
+def _simplify(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.simplify import simplify, triangle_budget
+
+    surface, frags = state.need("surface", "simplify"), state.need("fragments", "simplify")
+    before = sum(len(f.faces) for f in frags.fragments)
+    if options.tolerance > 0:
+        frags, checks = _checked(surface, simplify(frags, surface, options)[0])
+    else:
+        checks = dict(state.checks or {})
+    # Triangle counts as written, against the budget of issue 20 (input = the solid that was cut).
+    checks["triangles_cut"] = before
+    checks["triangles"] = sum(len(f.faces) for f in frags.fragments)
+    checks["triangle_budget"] = triangle_budget(len(surface.faces), len(frags.fragments))
     return dataclasses.replace(state, fragments=frags, checks=checks)
 
 
@@ -227,6 +250,9 @@ STAGES: tuple[Stage, ...] = (
           produces=("regions",)),
     Stage("fragments", "Cut the input into one closed fragment per piece region, and check them.",
           "fracture_cli.stages.fragments:FragmentOptions", _fragments, consumes=("surface", "regions"),
+          produces=("fragments", "checks")),
+    Stage("simplify", "Simplify the fragments' faults to a tolerance (outer surface kept), and check them again.",
+          "fracture_cli.stages.simplify:SimplifyOptions", _simplify, consumes=("surface", "fragments"),
           produces=("fragments", "checks")),
     Stage("runtime", "Precompute the impact-projection data for the game (the runtime file).",
           "fracture_cli.stages.precompute:RuntimeOptions", _runtime,

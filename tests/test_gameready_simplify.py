@@ -1,20 +1,34 @@
-"""Fault simplification prototype: shared faults stay identical, fragments stay closed and valid."""
+"""Fault simplification: shared faults stay identical, fragments closed and valid, the outer surface the input's."""
 
 from __future__ import annotations
+
+import json
+import os
 
 import manifold3d
 import numpy as np
 import pytest
 
 from fracture_cli.gameready.mass import mass_properties
-from fracture_cli.gameready.simplify import _valid, simplify_faults
-from fracture_cli.types import Fragment, Fragments, Material, Normalization
+from fracture_cli.gameready.simplify import simplify_faults, valid
+from fracture_cli.pipeline import STAGE_NAMES
+from fracture_cli.recipe import load_recipe
+from fracture_cli.stages.simplify import SimplifyOptions, triangle_budget
+from fracture_cli.trigeom import point_triangle_distance
+from fracture_cli.types import Fragment, Fragments, Material, Normalization, SurfaceMesh
+
+from conftest import SAMPLE_ASSETS
 
 OUTER, INTERIOR = 0, 1
 
 
-def _fault_x(y: np.ndarray, bend: float) -> np.ndarray:
-    return 1.0 + bend * np.sin(np.pi * y)
+def _uv(P: np.ndarray) -> np.ndarray:
+    """The input's UVs: a linear function of position, so any point of the surface has a known UV."""
+    return np.column_stack([P[:, 0] + 0.5 * P[:, 1], P[:, 2] - 0.25 * P[:, 0]])
+
+
+def _fault_x(y: np.ndarray, z: np.ndarray, bend: float) -> np.ndarray:
+    return 1.0 + bend * np.sin(np.pi * y) * np.sin(np.pi * z)
 
 
 def _fragment(solid: manifold3d.Manifold, piece: int, bend: float) -> Fragment:
@@ -22,28 +36,35 @@ def _fragment(solid: manifold3d.Manifold, piece: int, bend: float) -> Fragment:
     V = np.array(mesh.vert_properties, dtype=float)[:, :3].copy()
     F = np.array(mesh.tri_verts, dtype=np.int64).reshape(-1, 3)
     T = V[F]
-    on_fault = np.all(np.abs(T[:, :, 0] - _fault_x(T[:, :, 1], bend)) < 1e-9, axis=1)
+    on_fault = np.all(np.abs(T[:, :, 0] - _fault_x(T[:, :, 1], T[:, :, 2], bend)) < 1e-9, axis=1)
     material = np.where(on_fault, INTERIOR, OUTER).astype(np.int32)
-    return Fragment(vertices=V, faces=F, uvs=np.zeros((len(V), 2)), normals=np.zeros_like(V),
-                    material_ids=material, piece=piece)
+    return Fragment(vertices=V, faces=F, uvs=_uv(V), normals=np.zeros_like(V), material_ids=material, piece=piece)
 
 
-def _pair(bend: float = 0.0) -> Fragments:
+def _pair(bend: float = 0.0) -> tuple[Fragments, SurfaceMesh]:
     """Two cubes sharing the face x = 1 (finely triangulated, alike on both sides); ``bend`` curves it.
 
     The right cube is the mirror image of the left one, so their shared face has the same triangles;
-    the bend moves points by ``bend sin(pi y)`` along x, fading to nothing at x = 0 and x = 2.
+    the bend moves points by ``bend sin(pi y) sin(pi z)`` along x, fading to nothing at x = 0 and x = 2. The input
+    is the box [0, 2] x [0, 1] x [0, 1] (12 triangles).
     """
-    left = manifold3d.Manifold.cube([1.0, 1.0, 1.0]).refine(4)
+    left = manifold3d.Manifold.cube([1.0, 1.0, 1.0]).refine(8)
     right = left.mirror([1.0, 0.0, 0.0]).translate([2.0, 0.0, 0.0])
 
     def warp(p):
-        return [p[0] + bend * np.sin(np.pi * p[1]) * (1.0 - abs(p[0] - 1.0)), p[1], p[2]]
+        return [p[0] + bend * np.sin(np.pi * p[1]) * np.sin(np.pi * p[2]) * (1.0 - abs(p[0] - 1.0)), p[1], p[2]]
 
     frags = tuple(_fragment(solid.warp(warp) if bend else solid, k, bend) for k, solid in enumerate((left, right)))
     volume = sum(mass_properties(f.vertices, f.faces).volume for f in frags)
-    return Fragments(fragments=frags, materials=(Material("outer"), Material("interior")),
-                     normalization=Normalization.identity(), input_volume=volume)
+    box = manifold3d.Manifold.cube([2.0, 1.0, 1.0]).to_mesh64()
+    V = np.array(box.vert_properties, dtype=float)[:, :3].copy()
+    F = np.array(box.tri_verts, dtype=np.int64).reshape(-1, 3)
+    surface = SurfaceMesh(vertices=V, faces=F, uvs=_uv(V), normals=None, colors=None,
+                          material_ids=np.zeros(len(F), dtype=np.int32), materials=(Material("outer"),),
+                          normalization=Normalization.identity())
+    fragments = Fragments(fragments=frags, materials=(Material("outer"), Material("interior")),
+                          normalization=Normalization.identity(), input_volume=volume)
+    return fragments, surface
 
 
 def _fault(frag: Fragment) -> set:
@@ -52,41 +73,90 @@ def _fault(frag: Fragment) -> set:
     return {frozenset(map(tuple, t)) for t in T}
 
 
-def _outer(frag: Fragment) -> np.ndarray:
-    """The outer triangles' corners, rows sorted (order-free)."""
-    return np.sort(np.round(frag.vertices[frag.faces[frag.material_ids == OUTER]], 12).reshape(-1, 9), axis=0)
+def _check_outer(before: Fragments, after: Fragments) -> None:
+    """Outer faces on the input box with its UVs, and covering what they covered."""
+    for old, new in zip(before.fragments, after.fragments):
+        outer = new.faces[new.material_ids == OUTER]
+        P = new.vertices[np.unique(outer)]
+        on_box = np.min(np.column_stack([P, 1.0 - P[:, 1:], 2.0 - P[:, :1]]), axis=1)
+        assert np.abs(on_box).max() < 1e-12
+        np.testing.assert_allclose(new.uvs[np.unique(outer)], _uv(P), atol=1e-12)
+
+        def area(f: Fragment) -> float:
+            T = f.vertices[f.faces[f.material_ids == OUTER]]
+            return float(np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1).sum() / 2)
+
+        assert area(new) == pytest.approx(area(old), rel=1e-12)
 
 
-def test_flat_fault_collapses_to_its_boundary():
-    fragments = _pair()
-    result, report = simplify_faults(fragments, tolerance=1e-3)
-    assert report.fault_before == 64 and report.unmatched == 0 and report.patches == 1
-    # 16 locked boundary vertices and 9 free ones: most of the free ones go (collinear boundary points
-    # keep a few, since no collapse may leave a flat triangle).
-    assert report.fault_after <= 40
-    assert all(_valid(f) for f in result.fragments)
+def test_flat_fault_collapses_to_a_few_triangles():
+    fragments, surface = _pair()
+    result, report = simplify_faults(fragments, surface, tolerance=1e-3)
+    assert report.fault_before == 256 and report.unmatched == 0 and report.patches == 1
+    assert report.fault_after <= 8  # a flat square: a few triangles per side once its edges are straight
+    assert report.triangles_after < report.triangles_before / 4
+    assert all(valid(f) for f in result.fragments)
     assert _fault(result.fragments[0]) == _fault(result.fragments[1])
     for before, after in zip(fragments.fragments, result.fragments):
         assert mass_properties(after.vertices, after.faces).volume == pytest.approx(
             mass_properties(before.vertices, before.faces).volume, rel=1e-12)
-        assert np.array_equal(_outer(before), _outer(after))  # outer faces untouched
+    _check_outer(fragments, result)
 
 
 def test_curved_fault_keeps_its_shape_within_the_tolerance():
-    fragments = _pair(bend=0.2)
-    tight, _ = simplify_faults(fragments, tolerance=1e-6)
-    loose, report = simplify_faults(fragments, tolerance=0.05)
+    fragments, surface = _pair(bend=0.2)
+    tight, _ = simplify_faults(fragments, surface, tolerance=1e-6)
+    loose, report = simplify_faults(fragments, surface, tolerance=0.02)
     assert report.fault_after < report.fault_before
     assert len(_fault(tight.fragments[0])) >= len(_fault(loose.fragments[0]))
-    assert all(_valid(f) for f in loose.fragments)
+    assert all(valid(f) for f in loose.fragments)
     assert _fault(loose.fragments[0]) == _fault(loose.fragments[1])
     total = sum(mass_properties(f.vertices, f.faces).volume for f in loose.fragments)
     assert total == pytest.approx(fragments.input_volume, rel=1e-12)  # the partition is kept exactly
+    # Every vertex of the cut fault lies within the tolerance of the simplified one.
+    old = fragments.fragments[0]
+    points = np.unique(old.vertices[old.faces[old.material_ids == INTERIOR]].reshape(-1, 3), axis=0)
+    new = loose.fragments[0]
+    T = new.vertices[new.faces[new.material_ids == INTERIOR]]
+    distance = np.min([point_triangle_distance(points, np.broadcast_to(t, (len(points), 3, 3))) for t in T], axis=0)
+    assert distance.max() <= 0.02 + 1e-12
+    _check_outer(fragments, loose)
+
+
+def test_budget_simplifies_further():
+    fragments, surface = _pair(bend=0.2)
+    free, _ = simplify_faults(fragments, surface, tolerance=1e-4)
+    capped, report = simplify_faults(fragments, surface, tolerance=1e-4, max_triangles=60)
+    assert max(len(f.faces) for f in capped.fragments) < max(len(f.faces) for f in free.fragments)
+    assert all(valid(f) for f in capped.fragments)
+    assert report.over_budget == sum(len(f.faces) > 60 for f in capped.fragments)
 
 
 def test_zero_tolerance_changes_nothing():
-    fragments = _pair(bend=0.2)
-    result, report = simplify_faults(fragments, tolerance=0.0)
+    fragments, surface = _pair(bend=0.2)
+    result, report = simplify_faults(fragments, surface, tolerance=0.0)
     assert report.fault_after == report.fault_before
     for before, after in zip(fragments.fragments, result.fragments):
         assert _fault(before) == _fault(after)
+
+
+def test_stage_runs_after_fragments_with_recipe_keys():
+    assert STAGE_NAMES.index("simplify") == STAGE_NAMES.index("fragments") + 1
+    recipe = load_recipe("default")
+    assert isinstance(recipe["simplify"], SimplifyOptions)
+    assert recipe["simplify"].tolerance > 0 and recipe["simplify"].max_triangles == 0
+
+
+def test_chair_bake_within_the_triangle_budget(tmp_path):
+    """Issue 20: at default settings, at most twice the input's triangles plus 64 per fragment."""
+    from fracture_cli.bake import bake
+
+    bake(os.path.join(SAMPLE_ASSETS, "chair.glb"), str(tmp_path), load_recipe("wood"))
+    with open(tmp_path / "chair.report.json") as fh:
+        report = json.load(fh)
+    checks = report["checks"]
+    triangles = sum(f["triangles"] for f in report["fragments"])
+    assert checks["triangles"] == triangles
+    assert checks["triangle_budget"] == triangle_budget(report["input"]["triangles"], len(report["fragments"]))
+    assert triangles <= checks["triangle_budget"] < checks["triangles_cut"]
+    assert checks["watertight"] and checks["volume_error"] <= 1e-9 and checks["max_outer_distance"] <= 1e-9

@@ -169,14 +169,6 @@ def test_corpus_repairs_are_reported(name, tmp_path_factory):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="re-baking an output GLB: repair snaps the fragments' shared vertices (float32 about different pivots) "
-    "and unites the fragments into the first bake's volume, but where a fault meets the outer surface their "
-    "rounded faces are not coplanar, so the union keeps hairline cracks that close along edges (9 pinched edges "
-    "on the pillar); fragments cut across them are pinched and the bake stops with one line "
-    "(test_rebaked_output_glb_is_never_written_broken)",
-)
 def test_rebaking_an_output_glb(tmp_path_factory):
     """Bake a sample asset, then bake its output GLB: one solid of the same volume, every fragment closed."""
     path, exit_code, output, out = _rebake(tmp_path_factory)

@@ -1,52 +1,65 @@
-"""Prototype: fewer fault (interior) triangles, with both sides of every fault kept identical.
+"""Lean fragment meshes: the fault (interior) surfaces simplified, every fragment still closed and exact.
 
-The faults between fragments are most of a bake's triangles (chair, wood: 76%).
-This prototype works on finished fragments:
+The faults between fragments and the curves where they cut the outer surface
+are most of a bake's triangles (chair, wood: 32,000 for a 2,500-triangle input).
+:func:`simplify_faults` works on the finished fragments, all at once:
 
-1. **Shared faults.** Vertices of all fragments are welded (within a tolerance)
-   and every interior face is matched with the opposite face of the fragment
-   on the other side. Matched faces form one *patch* per pair of fragments;
-   faces without a twin (the two sides triangulated differently, near the
-   outer surface) are left alone.
-2. **Locked curves.** Every vertex on a patch's boundary is locked: the
-   curves where a fault meets the outer surface, another fault (a junction of
-   three fragments) or an unmatched face. So are vertices of non-fault faces.
-3. **Decimation.** Each patch is simplified once, by half-edge collapses
-   (a vertex merges into a neighbour; no new positions), cheapest first by the
-   quadric error, each accepted only if every original vertex removed so far
-   stays within ``tolerance`` of the new surface, no triangle flips or
-   degenerates, and the link condition holds. Flat regions collapse to a few
-   triangles; curved ones to the tolerance.
-4. **Rebuild.** Both fragments of a patch get the same simplified triangles
-   (opposite orientation), so the fragments still partition the input exactly
-   and stay closed. Interior vertices are split per face (flat normals) with
-   box-projected UVs, as the fragments stage does.
-
-The module is a research prototype: it is not wired into the pipeline (see
-the report for where it belongs).
+1. **One shared complex.** Vertices of all fragments are welded (within
+   :data:`WELD_TOLERANCE`); every interior face is matched with the opposite
+   face of the fragment on the other side and kept once, for both. Outer faces
+   are labelled with the input polygon (coplanar input triangles) they lie in. Faces that are neither
+   (a fault face without a twin) keep their corners locked.
+2. **Collapses** (:mod:`.decimate`): half-edge collapses, cheapest first by
+   the fault's quadric error, each kept only if every fault vertex removed so
+   far stays within ``tolerance`` of the new fault, no face turns over, no
+   fragment is pinched, and a vertex moves only within the patch, along the
+   curve or inside the input triangle it lies on. Flat fault regions collapse
+   to a few triangles, curved ones to the tolerance, and a fault curve across
+   an input triangle becomes one straight segment. Both sides of a fault get
+   the same faces, so the fragments still partition the input exactly: their
+   volumes sum to the input's, and the outer surface is the input's, with its
+   UVs and normals.
+3. **Budget.** With ``max_triangles``, fragments still above it get their
+   tolerance doubled, a few times, and are simplified further.
+4. **Rebuild and check.** Each fragment is rebuilt (fault vertices split per
+   plane, flat normals, box-projected UVs as the fragments stage makes them)
+   and checked closed, manifold and free of self-intersections; when one is
+   not, everything is simplified again with the vertices whose collapses made
+   its bad faces held to a quarter of the tolerance, then locked, at last with
+   every vertex of that fragment locked (which leaves it as it was cut).
 """
 
 from __future__ import annotations
 
-import heapq
 import logging
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fracture_cli.gameready.decimate import SurfaceComplex
+from fracture_cli.gameready.faultmatch import (
+    WELD_TOLERANCE,
+    bad_faces,
+    closed_when_welded,
+    share_unmatched,
+    source_groups,
+    twins,
+    valid,
+    weld,
+)
 from fracture_cli.stages.fragments import _box_uvs
-from fracture_cli.trigeom import edge_manifold_closed, point_triangle_distance, self_intersections, vertex_manifold
-from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments
+from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, SurfaceMesh
+
+__all__ = ["FaultReport", "simplify_faults", "valid"]
 
 log = logging.getLogger(__name__)
 
-# Vertices of different fragments closer than this (normalized units) are one point.
-WELD_TOLERANCE = 1e-6
-# Rounds of re-simplifying the patches of fragments that came out invalid (tolerance / 4 each, then none).
-_RETRIES = 3
-# A collapse may not turn a triangle by more than this (cosine of the angle between old and new normal).
-_MIN_NORMAL_COS = 0.5
+# Tries after the first when a fragment comes out invalid: the vertices whose collapses made its bad faces get
+# a quarter of the tolerance (cumulative), the next to last try locks them, the last one its whole fragment.
+_RETRIES = 4
+# Times a fragment above its triangle budget gets its tolerance doubled.
+_BUDGET_ROUNDS = 6
 
 
 @dataclass(frozen=True)
@@ -60,9 +73,13 @@ class FaultReport:
     fault_before, fault_after : int
         Interior (fault) triangles of all fragments.
     unmatched : int
-        Interior faces with no opposite twin (left as they were).
+        Interior faces with no opposite twin and not on the input (left as they were).
     patches : int
-        Shared fault patches simplified.
+        Shared fault patches (pairs of touching fragments).
+    retries : int
+        Times the simplification was redone with more vertices locked.
+    over_budget : int
+        Fragments still above ``max_triangles`` (0 without a budget).
     """
 
     triangles_before: int
@@ -71,105 +88,172 @@ class FaultReport:
     fault_after: int
     unmatched: int
     patches: int
+    retries: int = 0
+    over_budget: int = 0
 
 
-def simplify_faults(fragments: Fragments, tolerance: float = 1e-3, uv_scale: float = 1.0):
-    """Simplify the shared fault surfaces of all fragments to ``tolerance``.
+@dataclass(frozen=True)
+class _Classified:
+    """The fragments' faces as one complex (see :class:`~fracture_cli.gameready.decimate.SurfaceComplex`)."""
+
+    faces: np.ndarray  # (m, 3) global vertex ids, in the first owner's orientation
+    groups: np.ndarray  # (m,) input polygon of an outer face; -1 on a fault; -2 - face for a loose face
+    owners: list  # per face: (fragment,) or (fragment A, fragment B)
+    fault: np.ndarray  # (m,) bool: a matched fault face (rebuilt flat); else the original corners are kept
+    material: np.ndarray  # (m,) material slot
+    corner: dict  # (group, global id) -> (fragment, its original vertex): the UV and normal of that corner
+    locked: set  # vertices of faces that match nothing
+    unmatched: int
+    patches: int
+
+
+def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float = 1e-3,
+                    max_triangles: int = 0) -> tuple[Fragments, FaultReport]:
+    """Simplify the fault surfaces of all fragments to ``tolerance``.
 
     Parameters
     ----------
     fragments : Fragments
-        Closed fragments, normalized coordinates (unit bounding-box diagonal).
+        Closed fragments cut from ``surface``, normalized coordinates (unit bounding-box diagonal).
+    surface : SurfaceMesh
+        The (repaired) input they were cut from: outer faces are found in its triangles.
     tolerance : float, optional (default 1e-3)
         Largest distance of any original fault vertex from the simplified
-        fault, as a fraction of the bounding-box diagonal.
-    uv_scale : float, optional (default 1)
-        World units per UV unit of the rebuilt interior faces (the fragments
-        stage's ``uv_scale``).
+        fault, as a fraction of the bounding-box diagonal; 0 changes nothing.
+    max_triangles : int, optional (default 0: no budget)
+        Triangles per fragment to aim for: fragments above it are simplified
+        with up to 64 times the tolerance.
 
     Returns
     -------
     fragments : Fragments
-        Same fragments, order and pieces; outer faces untouched.
+        Same fragments, order and pieces.
     report : FaultReport
     """
     interior = _interior_slot(fragments)
     offsets = np.cumsum([0] + [len(f.vertices) for f in fragments.fragments])
     positions = np.vstack([f.vertices for f in fragments.fragments])
     owner = np.repeat(np.arange(len(fragments.fragments)), np.diff(offsets))
-    gid, welded = _weld(positions, owner, WELD_TOLERANCE)
-    faults = [gid[f.faces[f.material_ids == interior] + offsets[k]] for k, f in enumerate(fragments.fragments)]
-    patches, unmatched = _match_patches(faults)
-    locked = _locked_vertices(fragments, gid, offsets, interior, patches, faults, unmatched)
-    tolerances = {key: tolerance for key in patches}
-    simplified = dict(patches)
-    taken = _LockedEdges(locked)
-    for k, frag in enumerate(fragments.fragments):
-        taken.add(gid[frag.faces[frag.material_ids != interior] + offsets[k]])
-        taken.add(faults[k][unmatched[k]])
-    for key in sorted(patches):
-        taken.add(patches[key])
-
-    def redo(key):
-        taken.remove(simplified[key])
-        simplified[key] = (_decimate(welded, patches[key], locked, tolerances[key], taken.count)
-                           if tolerances[key] > 0 else patches[key])
-        taken.add(simplified[key])
-
-    for key in sorted(patches):
-        redo(key)
-    def rebuild(k: int) -> Fragment:
-        return _rebuild(fragments.fragments[k], k, gid[offsets[k]:offsets[k + 1]], welded, faults[k], unmatched[k],
-                        simplified, interior, fragments, uv_scale)
-
-    # Fragments failing the check with every patch as it was (e.g. read back from float32, then welded) are
-    # not held against the simplification.
-    current = dict(simplified)
-    simplified.update(patches)
-    exempt = {k for k in range(len(fragments.fragments)) if not _valid(rebuild(k))}
-    simplified.update(current)
-    results = [rebuild(k) for k in range(len(fragments.fragments))]
-    for attempt in range(_RETRIES + 1):
-        culprits = set()
-        for k, frag in enumerate(results):
-            bad = None if k in exempt else _bad_faces(frag)
-            if bad is not None:
-                culprits.update(_patches_of(k, bad, frag, interior, unmatched[k], simplified))
-        if not culprits:
-            break
-        log.debug("faults: attempt %d, %d patch(es) make a fragment invalid", attempt, len(culprits))
-        # Simplify those patches again, more gently, the last time not at all (the original faces are valid).
-        for key in sorted(culprits):
-            tolerances[key] = tolerances[key] / 4.0 if attempt < _RETRIES else 0.0
-            redo(key)
-        for k in sorted({k for key in culprits for k in key}):
-            results[k] = rebuild(k)
-    before = sum(len(f.faces) for f in fragments.fragments)
+    gid, welded = weld(positions, owner, WELD_TOLERANCE)
+    original = fragments
+    fragments = share_unmatched(fragments, gid, offsets, interior)
+    classified = _classify(fragments, surface, gid, offsets, welded, interior)
+    results, retries, over = _valid_simplification(fragments, surface, classified, gid, offsets, welded, interior,
+                                                   tolerance, max_triangles)
+    before = sum(len(f.faces) for f in original.fragments)
     after = sum(len(f.faces) for f in results)
-    fault_before = sum(len(t) for t in faults)
-    fault_after = sum(int(np.sum(f.material_ids == interior)) for f in results)
-    report = FaultReport(before, after, fault_before, fault_after, int(sum(int(u.sum()) for u in unmatched)),
-                         len(patches))
-    log.info("faults: %d -> %d interior triangles (%d -> %d in all) at tolerance %.3g", fault_before, fault_after,
-             before, after, tolerance)
+    report = FaultReport(before, after, sum(int(np.sum(f.material_ids == interior)) for f in original.fragments),
+                         sum(int(np.sum(f.material_ids == interior)) for f in results), classified.unmatched,
+                         classified.patches, retries, over)
+    log.info("faults: %d -> %d triangles (interior %d -> %d) at tolerance %.3g", before, after,
+             report.fault_before, report.fault_after, tolerance)
     new = Fragments(fragments=tuple(results), materials=fragments.materials, normalization=fragments.normalization,
                     input_volume=fragments.input_volume)
     return new, report
 
 
-def _valid(fragment: Fragment) -> bool:
-    """Closed, manifold and free of self-intersections once vertices at one position are welded."""
-    return _bad_faces(fragment) is None
+def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified: _Classified, gid: np.ndarray,
+                          offsets: np.ndarray, welded: np.ndarray, interior: int, tolerance: float,
+                          max_triangles: int) -> tuple[list[Fragment], int, int]:
+    """The simplified fragments, every one valid; how many retries that took and how many stay over budget.
+
+    After :data:`_RETRIES` tries every fragment still invalid is locked whole; one still invalid then, or not
+    closed and manifold once its vertices are welded by position even as cut (bodies touching along an edge,
+    which only the fragments' own vertex copies keep apart), is returned as it was cut.
+    """
+    uv_scale = _uv_scale(fragments, interior)
+    locked = set(classified.locked)
+    as_cut = {k for k, f in enumerate(fragments.fragments) if not closed_when_welded(f)}
+    whole: set[int] = set()  # fragments locked whole
+    for k in sorted(as_cut):
+        locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
+    known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
+    damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
+    replay: list = []
+    valid_faces: set[bytes] = set()
+    attempt = 0
+    while True:
+        complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles,
+                                   len(fragments.fragments), replay)
+        replay = complex_.done
+        ids, faces = complex_.face_arrays()
+        results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
+                                  for k in range(len(fragments.fragments))])
+        bad = {}
+        for k, frag in enumerate(results):
+            if k in as_cut:
+                continue
+            # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
+            signature = np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
+            if signature in valid_faces:
+                continue
+            b = _new_bad_faces(frag, face_ids[k], complex_, known, k, fragments, gid, offsets)
+            if b is None:
+                valid_faces.add(signature)
+            else:
+                bad[k] = b
+        if not bad or tolerance <= 0:
+            return [fragments.fragments[k] if k in as_cut else f for k, f in enumerate(results)], attempt, over
+        log.debug("faults: try %d, %d fragment(s) invalid; simplifying again with more held back", attempt, len(bad))
+        for k, b in sorted(bad.items()):
+            behind = set().union(*[complex_.history[t] for t in face_ids[k][b].tolist()])
+            if attempt + 1 >= _RETRIES:
+                (as_cut if k in whole else whole).add(k)
+                locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
+            elif attempt + 2 >= _RETRIES:
+                locked.update(behind)
+            else:
+                damp.update({u: damp.get(u, 1.0) / 4.0 for u in behind})
+        attempt += 1
 
 
-def _bad_faces(fragment: Fragment):
-    """None if the fragment is valid (see :func:`_valid`); else the faces (k,) at fault, all if it is not closed."""
-    V, weld = np.unique(fragment.vertices, axis=0, return_inverse=True)
-    W = weld.reshape(-1)[fragment.faces]
-    if not (edge_manifold_closed(W) and vertex_manifold(W)):
-        return np.arange(len(W))
-    pairs = self_intersections(V, W)
-    return np.unique(pairs) if len(pairs) else None
+def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: dict, tolerance: float,
+              max_triangles: int, count: int, replay: list | None = None) -> tuple[SurfaceComplex, int]:
+    """The complex after collapses to ``tolerance``, then to the budget; and how many fragments stay above it.
+
+    ``replay``: the collapses of an earlier try, redone first where still allowed.
+    """
+    complex_ = SurfaceComplex(welded, classified.faces, classified.groups, classified.owners, classified.fault,
+                              locked, damp)
+    if tolerance <= 0:
+        return complex_, 0
+    bound = {k: tolerance for k in range(count)}
+    complex_.replay(replay or [], bound)
+    complex_.decimate(bound)
+    over: list[int] = []
+    for _ in range(_BUDGET_ROUNDS + 1):
+        if max_triangles <= 0:
+            break
+        sizes = np.zeros(count, dtype=np.int64)
+        for t in complex_.faces:
+            for k in classified.owners[t]:
+                sizes[k] += 1
+        over = np.flatnonzero(sizes > max_triangles).tolist()
+        if not over or bound[over[0]] >= tolerance * 2**_BUDGET_ROUNDS:
+            break
+        for k in over:
+            bound[k] *= 2.0
+        todo = {x for t, f in complex_.faces.items() if set(classified.owners[t]) & set(over) for x in f}
+        complex_.decimate(bound, sorted(todo))
+    return complex_, len(over)
+
+
+def _new_bad_faces(fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex, known: dict, k: int,
+                   fragments: Fragments, gid: np.ndarray, offsets: np.ndarray) -> np.ndarray | None:
+    """The faces making a rebuilt fragment invalid (see :func:`_bad_faces`), unless they were so before.
+
+    A fragment cut with faces that already intersect (rare: folds the booleans left) is not held against
+    the simplification: faces of it that no collapse touched, and that were bad before, are let through.
+    """
+    bad = bad_faces(fragment)
+    if bad is None or len(bad) == len(fragment.faces):
+        return bad
+    if k not in known:
+        before = fragments.fragments[k]
+        was = bad_faces(before)
+        known[k] = set() if was is None else {tuple(sorted(f)) for f in gid[before.faces[was] + offsets[k]].tolist()}
+    new = [i for i, t in zip(bad.tolist(), ids[bad].tolist()) if tuple(sorted(complex_.faces[t])) not in known[k]]
+    return np.array(new, dtype=np.int64) if new else None
 
 
 def _interior_slot(fragments: Fragments) -> int:
@@ -177,262 +261,111 @@ def _interior_slot(fragments: Fragments) -> int:
     return names.index(INTERIOR_MATERIAL_NAME) if INTERIOR_MATERIAL_NAME in names else len(names) - 1
 
 
-def _weld(positions: np.ndarray, owner: np.ndarray, tolerance: float):
-    """Global id (n,) of every vertex and one position (g, 3) per id.
+def _uv_scale(fragments: Fragments, interior: int) -> float:
+    """World units per UV unit of the fragments stage's box projection, read back from its fault vertices.
 
-    Vertices of one fragment are one point only at the same exact position;
-    vertices of different fragments are joined when closer than
-    ``tolerance``, closest pairs first, never so that two distinct points of
-    one fragment end up as one (which would collapse a sliver edge).
+    The projection is linear in the world position (``uv = world / uv_scale``), so one least-squares ratio
+    recovers the recipe's ``fragments.uv_scale`` exactly; 1 without fault faces or UVs.
     """
-    _, exact = np.unique(np.column_stack([owner, positions]), axis=0, return_inverse=True)
-    exact = exact.reshape(-1)
-    m = exact.max() + 1
-    first = np.full(m, len(positions))
-    np.minimum.at(first, exact, np.arange(len(positions)))
-    points, point_owner = positions[first], owner[first]
-    pairs = cKDTree(points).query_pairs(tolerance, output_type="ndarray")
-    pairs = pairs[point_owner[pairs[:, 0]] != point_owner[pairs[:, 1]]]
-    distance = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
-    parent = list(range(m))
-    members = [{int(point_owner[i])} for i in range(m)]
-
-    def find(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
-    for i, j in pairs[np.lexsort((pairs[:, 1], pairs[:, 0], distance))].tolist():
-        a, b = find(i), find(j)
-        if a != b and not (members[a] & members[b]):
-            a, b = min(a, b), max(a, b)
-            parent[b] = a
-            members[a] |= members[b]
-    root = np.array([find(i) for i in range(m)])
-    _, gid = np.unique(root, return_inverse=True)
-    gid = gid.reshape(-1)
-    rep = np.full(gid.max() + 1, m)
-    np.minimum.at(rep, gid, np.arange(m))
-    return gid[exact], points[rep]
-
-
-def _match_patches(faults: list[np.ndarray]):
-    """Patches ``{(A, B): faces (m, 3) in A's orientation}`` of faces with an opposite twin, and the unmatched faces.
-
-    Returns the patches and, per fragment, a bool mask of its fault faces that have no twin.
-    """
-    owner = np.concatenate([np.full(len(t), k) for k, t in enumerate(faults)]) if faults else np.zeros(0, int)
-    local = np.concatenate([np.arange(len(t)) for t in faults]) if faults else np.zeros(0, int)
-    T = np.vstack(faults) if faults else np.zeros((0, 3), int)
-    _, group, counts = np.unique(np.sort(T, axis=1), axis=0, return_inverse=True, return_counts=True)
-    group = group.reshape(-1)
-    unmatched = [np.ones(len(t), dtype=bool) for t in faults]
-    patches: dict[tuple[int, int], list] = {}
-    order = np.argsort(group, kind="stable")
-    starts = np.searchsorted(group[order], np.arange(len(counts)))
-    for g in np.flatnonzero(counts == 2).tolist():
-        i, j = order[starts[g]], order[starts[g] + 1]
-        a, b = (i, j) if owner[i] < owner[j] else (j, i)
-        if owner[a] == owner[b] or not _opposite(T[a], T[b]):
+    num = den = 0.0
+    for frag in fragments.fragments:
+        if frag.uvs is None:
             continue
-        patches.setdefault((int(owner[a]), int(owner[b])), []).append(T[a])
-        unmatched[owner[a]][local[a]] = unmatched[owner[b]][local[b]] = False
-    return {key: np.array(faces) for key, faces in patches.items()}, unmatched
-
-
-def _opposite(f: np.ndarray, g: np.ndarray) -> bool:
-    """Whether triangles f and g have the same corners in opposite cyclic order."""
-    k = int(np.flatnonzero(g == f[0])[0])
-    return bool(g[(k + 1) % 3] == f[2])
-
-
-def _locked_vertices(fragments, gid, offsets, interior, patches, faults, unmatched) -> set:
-    """Vertices no collapse may move: on non-fault faces, unmatched faces, or a patch's boundary."""
-    locked = set()
-    for k, frag in enumerate(fragments.fragments):
-        locked.update(np.unique(gid[frag.faces[frag.material_ids != interior] + offsets[k]]).tolist())
-        locked.update(np.unique(faults[k][unmatched[k]]).tolist())
-    for faces in patches.values():
-        edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-        uniq, counts = np.unique(edges, axis=0, return_counts=True)
-        locked.update(np.unique(uniq[counts != 2]).tolist())
-    return locked
-
-
-class _LockedEdges:
-    """How many faces use each edge between two locked vertices (a multiset, updated as patches change)."""
-
-    def __init__(self, locked: set):
-        self.locked = locked
-        self.count: dict[tuple[int, int], int] = {}
-
-    def _edges(self, faces: np.ndarray):
-        for f in np.asarray(faces, dtype=np.int64).reshape(-1, 3).tolist():
-            for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])):
-                if a in self.locked and b in self.locked:
-                    yield (min(a, b), max(a, b))
-
-    def add(self, faces: np.ndarray) -> None:
-        for edge in self._edges(faces):
-            self.count[edge] = self.count.get(edge, 0) + 1
-
-    def remove(self, faces: np.ndarray) -> None:
-        for edge in self._edges(faces):
-            self.count[edge] -= 1
-
-
-def _decimate(V: np.ndarray, faces: np.ndarray, locked: set, tolerance: float, taken: dict) -> np.ndarray:
-    """Half-edge-collapse decimation of one patch with its boundary locked; returns the new faces (m', 3).
-
-    ``taken`` counts the edges between two locked vertices used by faces elsewhere (outer faces, other
-    patches): a collapse may not create one of them again, or the fragment would get an edge of four faces.
-    """
-    mesh = _PatchMesh(V, faces, locked, taken)
-    heap: list = []
-    for u in sorted(mesh.vertex_faces):
-        mesh.push(heap, u)
-    while heap:
-        _, _, u, v, stamp = heapq.heappop(heap)
-        if mesh.stamp.get(u) != stamp or u not in mesh.vertex_faces:
+        used = np.unique(frag.faces[frag.material_ids == interior])
+        if len(used) == 0:
             continue
-        if mesh.collapse(u, v, tolerance):
-            for w in sorted(mesh.neighbours(v) | {v}):
-                mesh.push(heap, w)
-    return mesh.faces_array()
+        unit = _box_uvs(fragments.normalization.to_world(frag.vertices[used]), frag.normals[used], 1.0)
+        num += float(np.sum(unit * frag.uvs[used]))
+        den += float(np.sum(frag.uvs[used] ** 2))
+    return num / den if den > 0 and num > 0 else 1.0
 
 
-class _PatchMesh:
-    """A mutable triangle patch for half-edge collapses (vertex ids are global; positions never change)."""
-
-    def __init__(self, V: np.ndarray, faces: np.ndarray, locked: set, taken: dict):
-        self.V = V
-        self.taken = taken
-        self.faces = {t: tuple(int(x) for x in f) for t, f in enumerate(faces)}
-        self.vertex_faces: dict[int, set] = {}
-        for t, f in self.faces.items():
-            for x in f:
-                self.vertex_faces.setdefault(x, set()).add(t)
-        self.locked = locked
-        self.stamp: dict[int, int] = {}
-        # Original vertices removed so far, kept with the face nearest to them (for the error bound).
-        self.assigned: dict[int, list] = {t: [] for t in self.faces}
-        self.quadric = {x: np.zeros((4, 4)) for x in self.vertex_faces}
-        for f in self.faces.values():
-            p = self._plane(f)
-            for x in f:
-                self.quadric[x] += np.outer(p, p)
-
-    def _plane(self, f) -> np.ndarray:
-        a, b, c = self.V[list(f)]
-        n = np.cross(b - a, c - a)
-        area = np.linalg.norm(n)
-        n = n / area if area > 0 else n
-        return np.sqrt(area) * np.append(n, -n @ a)
-
-    def neighbours(self, u: int) -> set:
-        return {x for t in self.vertex_faces.get(u, ()) for x in self.faces[t]} - {u}
-
-    def push(self, heap: list, u: int) -> None:
-        """Queue every collapse of ``u`` into a neighbour, by quadric error, if ``u`` may move.
-
-        A new stamp makes the entries queued for ``u`` before obsolete; when the cheapest collapse is
-        refused, the next one of the same stamp is tried.
-        """
-        if u in self.locked or u not in self.vertex_faces:
-            return
-        stamp = self.stamp[u] = self.stamp.get(u, 0) + 1
-        for v in sorted(self.neighbours(u)):
-            p = np.append(self.V[v], 1.0)
-            heapq.heappush(heap, (float(p @ self.quadric[u] @ p), u, u, v, stamp))
-
-    def collapse(self, u: int, v: int, tolerance: float) -> bool:
-        """Merge ``u`` into ``v`` if topology, orientation and the error bound allow; True if done."""
-        fan = self.vertex_faces[u]
-        removed = [t for t in fan if v in self.faces[t]]
-        if len(removed) != 2:
-            return False
-        opposite = {x for t in removed for x in self.faces[t]} - {u, v}
-        if self.neighbours(u) & self.neighbours(v) != opposite:
-            return False  # link condition: the collapse would pinch the surface
-        if v in self.locked and any(self.taken.get((min(v, x), max(v, x)), 0) > 0
-                                    for x in self.neighbours(u) - self.neighbours(v) - {v} if x in self.locked):
-            return False  # the new edge between two locked vertices is already an edge of another surface
-        kept = sorted(t for t in fan if t not in removed)
-        new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
-        for t, f in new_faces.items():
-            old = self._normal(self.faces[t])
-            new = self._normal(f)
-            length = np.linalg.norm(new)
-            if length <= 1e-14 or (old @ new) / (np.linalg.norm(old) * length) < _MIN_NORMAL_COS:
-                return False
-        points = [u] + [p for t in fan for p in self.assigned[t]]
-        triangles = np.array([self.V[list(f)] for f in new_faces.values()])
-        P = self.V[points]
-        distance = np.stack([point_triangle_distance(P, np.repeat(tri[None], len(P), axis=0)) for tri in triangles])
-        if distance.min(axis=0).max() > tolerance:
-            return False
-        nearest = np.argmin(distance, axis=0)
-        for t in removed:
-            for x in self.faces[t]:
-                self.vertex_faces[x].discard(t)
-            del self.faces[t], self.assigned[t]
-        for t in kept:
-            self.faces[t] = new_faces[t]
-            self.assigned[t] = []
-        for point, k in zip(points, nearest.tolist()):
-            self.assigned[kept[k]].append(point)
-        self.vertex_faces[v].update(kept)
-        del self.vertex_faces[u]
-        self.quadric[v] = self.quadric[v] + self.quadric[u]
-        return True
-
-    def _normal(self, f) -> np.ndarray:
-        a, b, c = self.V[list(f)]
-        return np.cross(b - a, c - a)
-
-    def faces_array(self) -> np.ndarray:
-        return np.array([self.faces[t] for t in sorted(self.faces)], dtype=np.int64).reshape(-1, 3)
+def _classify(fragments: Fragments, surface: SurfaceMesh, gid: np.ndarray, offsets: np.ndarray, welded: np.ndarray,
+              interior: int) -> _Classified:
+    """Every face of every fragment as a face of the complex: a shared fault face, an outer face, or a locked one."""
+    G = np.vstack([gid[f.faces + offsets[k]] for k, f in enumerate(fragments.fragments)])
+    owner = np.concatenate([np.full(len(f.faces), k) for k, f in enumerate(fragments.fragments)])
+    local = np.vstack([f.faces for f in fragments.fragments])
+    material = np.concatenate([f.material_ids for f in fragments.fragments]).astype(np.int32)
+    twin = twins(G, owner, material == interior)
+    paired = twin >= 0
+    source = np.full(len(G), -1, dtype=np.int64)
+    source[~paired] = source_groups(surface, welded[G[~paired]], material[~paired] != interior)
+    loose = ~paired & (source < 0)
+    groups = np.where(paired, -1, np.where(loose, -2 - np.arange(len(G)), source))
+    keep = ~paired | (owner < owner[np.maximum(twin, 0)])  # one face per twin pair: the lower fragment's
+    rows = np.flatnonzero(keep)
+    owners = [(int(owner[i]), int(owner[twin[i]])) if paired[i] else (int(owner[i]),) for i in rows.tolist()]
+    corner: dict = {}
+    for i in np.flatnonzero(~paired).tolist():
+        for g, v in zip(G[i].tolist(), local[i].tolist()):
+            corner.setdefault((int(groups[i]), g), (int(owner[i]), v))
+    # The input's own vertices stay: the outer surface keeps its triangulation's corners, only cuts move.
+    near, _ = cKDTree(surface.vertices).query(welded, distance_upper_bound=WELD_TOLERANCE)
+    on_input = np.flatnonzero(np.isfinite(near))
+    return _Classified(faces=G[rows], groups=groups[rows], owners=owners, fault=paired[rows], material=material[rows],
+                       corner=corner, locked=set(np.unique(G[loose]).tolist()) | set(on_input.tolist()),
+                       unmatched=int(np.sum(loose & (material == interior))),
+                       patches=len({o for o in owners if len(o) == 2}))
 
 
-def _patches_of(k: int, faces: np.ndarray, frag: Fragment, interior: int, unmatched: np.ndarray,
-                simplified: dict) -> set:
-    """The patches (keys) that faces of fragment ``k`` as built by :func:`_rebuild` belong to.
+def _rebuild(fragments: Fragments, k: int, welded: np.ndarray, classified: _Classified, ids: np.ndarray,
+             faces: np.ndarray, interior: int, uv_scale: float) -> tuple[Fragment, np.ndarray]:
+    """Fragment ``k`` from the complex's faces ``ids`` (m',), ``faces`` (m', 3); and its faces' complex ids.
 
-    Faces of no patch (outer, unmatched) do not name one; if only such faces are listed, every patch of the
-    fragment is named (the fault of a topology failure is not local).
+    Faces not on a fault keep the fragment's own corners (positions welded, UVs and normals as they were);
+    fault faces get one vertex per (corner, plane): flat normals, box-projected UVs.
     """
-    keys = [key for key in sorted(simplified) if k in key]
-    start = int(np.sum(frag.material_ids != interior)) + int(unmatched.sum())
-    bounds = start + np.cumsum([0] + [len(simplified[key]) for key in keys])
-    index = np.searchsorted(bounds, faces, side="right") - 1
-    named = {keys[i] for i in index[(index >= 0) & (index < len(keys))].tolist()}
-    return named if named else set(keys)
+    frag = fragments.fragments[k]
+    mine = np.array([k in classified.owners[t] for t in ids.tolist()], dtype=bool)
+    ids, faces = ids[mine], faces[mine].copy()
+    flip = np.array([classified.owners[t][0] != k for t in ids.tolist()], dtype=bool)
+    faces[flip] = faces[flip][:, ::-1]
+    fault = classified.fault[ids]
+    kept_faces = faces[~fault]
+    groups = classified.groups[ids[~fault]]
+    # Every outer corner takes the UV and normal its input polygon has there (from whichever fragment had
+    # that corner); corners with one position and the same attributes are one vertex.
+    source = [classified.corner[(grp, g)] for grp, row in zip(groups.tolist(), kept_faces.tolist()) for g in row]
+    normals = np.array([fragments.fragments[f].normals[v] for f, v in source]).reshape(-1, 3)
+    uvs = np.array([fragments.fragments[f].uvs[v] if fragments.fragments[f].uvs is not None else (0.0, 0.0)
+                    for f, v in source]).reshape(-1, 2)
+    corner = np.column_stack([kept_faces.reshape(-1), normals, uvs])
+    _, first, local = np.unique(corner, axis=0, return_index=True, return_inverse=True)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(len(first))  # vertices in the order of first use
+    first, local = np.sort(first), rank[local.reshape(-1)]
+    flat_vertices, flat_normals, flat_faces = _flat(welded, faces[fault])
+    all_uvs = None
+    if frag.uvs is not None:
+        world = fragments.normalization.to_world(flat_vertices)
+        all_uvs = np.vstack([uvs[first], _box_uvs(world, flat_normals, uv_scale)])
+    order = np.concatenate([np.flatnonzero(~fault), np.flatnonzero(fault)])
+    rebuilt = Fragment(vertices=np.vstack([welded[kept_faces.reshape(-1)[first]], flat_vertices]),
+                       faces=np.vstack([local.reshape(-1, 3), len(first) + flat_faces]),
+                       uvs=all_uvs, normals=np.vstack([normals[first], flat_normals]),
+                       material_ids=np.concatenate([classified.material[ids[~fault]],
+                                                    np.full(int(fault.sum()), interior, dtype=np.int32)]),
+                       piece=frag.piece)
+    return rebuilt, ids[order]
 
 
-def _rebuild(frag: Fragment, k: int, frag_gid: np.ndarray, welded: np.ndarray, fault: np.ndarray,
-             unmatched: np.ndarray, simplified: dict, interior: int, fragments: Fragments, uv_scale: float) -> Fragment:
-    """Fragment ``k`` with its matched fault faces replaced by the simplified patches (split, flat-shaded)."""
-    outer = frag.material_ids != interior
-    new_fault = [fault[unmatched]]
-    for (a, b), faces in sorted(simplified.items()):
-        if a == k:
-            new_fault.append(faces)
-        elif b == k:
-            new_fault.append(faces[:, ::-1])
-    T = np.vstack(new_fault)
-    outer_faces = frag.faces[outer]
-    used, local = np.unique(outer_faces, return_inverse=True)
-    P = welded[T].reshape(-1, 3)
-    normals = np.cross(P[1::3] - P[0::3], P[2::3] - P[0::3])
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-    corner_normals = np.repeat(normals, 3, axis=0)
-    uvs = _box_uvs(fragments.normalization.to_world(P), corner_normals, uv_scale)
-    # Outer vertices take their welded position too, so both sides of every locked curve are one point.
-    vertices = np.vstack([welded[frag_gid[used]], P])
-    all_normals = np.vstack([frag.normals[used], corner_normals])
-    all_uvs = None if frag.uvs is None else np.vstack([frag.uvs[used], uvs])
-    faces = np.vstack([local.reshape(-1, 3), len(used) + np.arange(3 * len(T)).reshape(-1, 3)])
-    material = np.concatenate([frag.material_ids[outer], np.full(len(T), interior, dtype=np.int32)])
-    return Fragment(vertices=vertices, faces=faces, uvs=all_uvs, normals=all_normals, material_ids=material,
-                    piece=frag.piece)
+def _flat(V: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fault faces (m, 3) with one vertex per (corner, plane): positions (n, 3), unit normals (n, 3), faces (m, 3).
+
+    Faces in one plane (normal equal to 1e-6, offset to 1e-9) share vertices, so a flat region is one smooth
+    patch with one normal, as the fragments stage splits them.
+    """
+    if len(faces) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    a, b, c = V[faces[:, 0]], V[faces[:, 1]], V[faces[:, 2]]
+    normal = np.cross(b - a, c - a)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    key = np.column_stack([np.round(normal * 1e6), np.round(np.einsum("ij,ij->i", normal, a) * 1e9)])
+    _, plane = np.unique(key.astype(np.int64), axis=0, return_inverse=True)
+    plane = plane.reshape(-1)
+    plane_normal = np.zeros((plane.max() + 1, 3))
+    np.add.at(plane_normal, plane, normal)
+    plane_normal /= np.maximum(np.linalg.norm(plane_normal, axis=1, keepdims=True), 1e-300)
+    uniq, corner = np.unique(np.column_stack([faces.reshape(-1), np.repeat(plane, 3)]), axis=0, return_inverse=True)
+    return V[uniq[:, 0]], plane_normal[uniq[:, 1]], corner.reshape(-1, 3)

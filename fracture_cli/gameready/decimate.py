@@ -1,0 +1,273 @@
+"""Half-edge collapses on the shared surface complex of all fragments (see :mod:`.simplify`).
+
+The complex holds every face of every fragment once: a fault face shared by two
+fragments is one face of both, an outer face belongs to one. Each face carries
+the fragments whose surface it is part of and, for an outer face, the input
+polygon (connected coplanar input triangles) it lies in. A collapse merges a
+vertex ``u`` into a neighbour ``v`` (no new positions) when
+
+* ``u`` is free (not an input vertex) and, for every input polygon (coplanar
+  input triangles) ``u`` lies on, ``v`` is a corner of a face in that polygon
+  next to ``u``: outer faces stay in their polygon, and a point where a fault
+  curve crosses an input edge can only slide along that edge, so the curve
+  snaps to input vertices. Outer corners keep the input's UVs and normals;
+* in the surface of every fragment that has both ``u`` and ``v`` the edge has
+  exactly two faces and the link condition holds (the collapse pinches no
+  fragment); for a fragment without ``v``, ``u`` only moves;
+* no face turns by more than 30 degrees (60 around a vertex on the outer
+  surface) or becomes degenerate;
+* every fault vertex removed so far stays within the tolerance of the new fault
+  faces, and the new fault faces (centroids, edge midpoints) within the
+  tolerance of the cut fault.
+"""
+
+from __future__ import annotations
+
+import heapq
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from fracture_cli.trigeom import point_triangle_distance
+
+# A collapse may not turn a triangle by more than this (cosine of the angle between old and new normal): inside a
+# fault 30 degrees, so a smooth fault stays smooth under flat shading; 60 degrees for a vertex on the outer
+# surface, where a fault curve straightens or snaps to input vertices across a thin wall.
+MIN_NORMAL_COS = 0.85
+MIN_NORMAL_COS_OUTER = 0.5
+# Cut fault faces (nearest centroids) a point of a new fault face is measured against.
+_REFERENCE_CANDIDATES = 8
+# A face is degenerate when twice its area is below this fraction of its longest edge squared.
+MIN_SHAPE = 1e-6
+
+
+class SurfaceComplex:
+    """Mutable faces of all fragments with their input polygons, for collapses (global vertex ids, fixed positions).
+
+    Parameters
+    ----------
+    V : (g, 3) float
+        Welded vertex positions.
+    faces : (m, 3) int
+        Faces, each in the orientation of its first fragment.
+    groups : (m,) int
+        The input polygon every outer face lies in; -1 for a fault face.
+    owners : list of tuple of int
+        Fragments each face bounds (one for an outer face, two for a fault face).
+    fault : (m,) bool
+        Which faces are on a fault (their vertices are held to the tolerance).
+    locked : set of int
+        Vertices that never move.
+    damp : dict of int -> float, optional
+        Factor on the tolerance of some vertices (where an earlier try made a fragment intersect itself).
+    """
+
+    def __init__(self, V: np.ndarray, faces: np.ndarray, groups: np.ndarray, owners: list[tuple[int, ...]],
+                 fault: np.ndarray, locked: set[int], damp: dict[int, float] | None = None):
+        self.V = V
+        self.points = [tuple(p) for p in np.asarray(V, dtype=float).tolist()]
+        self.faces = {t: (int(a), int(b), int(c)) for t, (a, b, c) in enumerate(np.asarray(faces).tolist())}
+        self.groups = [int(x) for x in groups]
+        self.owners = owners
+        self.fault = [bool(x) for x in fault]
+        self.locked = locked
+        self.damp = damp or {}
+        self.vertex_faces: dict[int, set[int]] = {}
+        for t, f in self.faces.items():
+            for x in f:
+                self.vertex_faces.setdefault(x, set()).add(t)
+        self.stamp: dict[int, int] = {}
+        self.done: list[tuple[int, int]] = []  # the collapses made, in order
+        # Original fault vertices removed so far, kept with the face nearest to them (for the error bound).
+        self.assigned: dict[int, list[int]] = {t: [] for t in self.faces}
+        # Vertices whose collapse changed each face (to lock them when the face ends up in an invalid fragment).
+        self.history: dict[int, set[int]] = {t: set() for t in self.faces}
+        self.quadric = _quadrics(V, faces, fault, len(V))
+        # The cut fault faces, to measure how far new faces stray from them.
+        F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)[np.asarray(fault, dtype=bool)]
+        self.reference = V[F] if len(F) else np.zeros((1, 3, 3))
+        self.reference_tree = cKDTree(self.reference.mean(axis=1))
+
+    def replay(self, collapses: list[tuple[int, int]], tolerance: dict[int, float] | float) -> None:
+        """Redo the collapses ``(u, v)`` of an earlier try, in order, each only if still allowed.
+
+        A retry with a few vertices held back repeats most of the first try: replaying its collapses first
+        leaves :meth:`decimate` little to search for.
+        """
+        for u, v in collapses:
+            if u not in self.locked and u in self.vertex_faces and v in self.vertex_faces:
+                self._collapse(u, v, self._tolerance(u, tolerance))
+
+    def decimate(self, tolerance: dict[int, float] | float, vertices: list[int] | None = None) -> int:
+        """Collapse, cheapest first, until no allowed collapse is left; returns how many were done.
+
+        ``tolerance`` is one bound or a bound per fragment (a vertex takes the largest of its fragments').
+        Each vertex is queued once, at the cost of its cheapest collapse; when that one is refused the
+        next cheapest are tried. A new stamp (a neighbour changed) makes its older entry obsolete.
+        """
+        heap: list = []
+        for u in sorted(self.vertex_faces) if vertices is None else sorted(vertices):
+            self._push(heap, u)
+        done = 0
+        while heap:
+            _, u, stamp = heapq.heappop(heap)
+            if self.stamp.get(u) != stamp or u not in self.vertex_faces:
+                continue
+            bound = self._tolerance(u, tolerance)
+            v = next((v for v in self._targets(u) if self._collapse(u, v, bound)), None)
+            if v is not None:
+                done += 1
+                for w in sorted(self._neighbours(v) | {v}):
+                    self._push(heap, w)
+        return done
+
+    def _tolerance(self, u: int, tolerance: dict[int, float] | float) -> float:
+        damp = self.damp.get(u, 1.0)
+        if not isinstance(tolerance, dict):
+            return tolerance * damp
+        return damp * max(tolerance[k] for t in self.vertex_faces[u] for k in self.owners[t])
+
+    def _neighbours(self, u: int) -> set[int]:
+        return {x for t in self.vertex_faces.get(u, ()) for x in self.faces[t]} - {u}
+
+    def _costs(self, u: int) -> tuple[list[int], list[float]]:
+        """The neighbours of ``u`` and the quadric error of moving ``u`` onto each."""
+        targets = sorted(self._neighbours(u))
+        P = np.column_stack([self.V[targets], np.ones(len(targets))])
+        return targets, np.einsum("ij,jk,ik->i", P, self.quadric[u], P).tolist()
+
+    def _targets(self, u: int) -> list[int]:
+        targets, costs = self._costs(u)
+        return [v for _, v in sorted(zip(costs, targets))]
+
+    def _push(self, heap: list, u: int) -> None:
+        """Queue ``u`` at the cost of its cheapest collapse, if it may move."""
+        if u in self.locked or u not in self.vertex_faces:
+            return
+        stamp = self.stamp[u] = self.stamp.get(u, 0) + 1
+        _, costs = self._costs(u)
+        if costs:
+            heapq.heappush(heap, (min(costs), u, stamp))
+
+    def _allowed(self, u: int, v: int) -> list[int] | None:
+        """The faces a collapse of ``u`` into ``v`` removes, or None if polygons or topology forbid it."""
+        fan = self.vertex_faces[u]
+        removed = [t for t in fan if v in self.faces[t]]
+        polygons = {self.groups[t] for t in fan} - {-1}
+        if polygons - {self.groups[t] for t in removed}:
+            return None  # v is not on every input polygon u is on: outer faces would leave the input surface
+        v_fan = self.vertex_faces[v]
+        v_fragments = {k for t in v_fan for k in self.owners[t]}
+        for k in {k for t in fan for k in self.owners[t]} & v_fragments:
+            mine = [t for t in removed if k in self.owners[t]]
+            if len(mine) != 2:
+                return None
+            opposite = {x for t in mine for x in self.faces[t]} - {u, v}
+            around_u = {x for t in fan if k in self.owners[t] for x in self.faces[t]}
+            around_v = {x for t in v_fan if k in self.owners[t] for x in self.faces[t]}
+            if (around_u & around_v) - {u, v} != opposite:
+                return None  # link condition in fragment k: the collapse would pinch its surface
+        return removed
+
+    def _collapse(self, u: int, v: int, tolerance: float) -> bool:
+        """Merge ``u`` into ``v`` if polygons, topology, orientation and the error bound allow; True if done."""
+        removed = self._allowed(u, v)
+        if removed is None:
+            return False
+        kept = sorted(self.vertex_faces[u] - set(removed))
+        new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
+        limit = MIN_NORMAL_COS_OUTER if any(not self.fault[t] for t in self.vertex_faces[u]) else MIN_NORMAL_COS
+        if not all(_turns_little(self.points, self.faces[t], new_faces[t], limit) for t in kept):
+            return False
+        fault_kept = [t for t in kept if self.fault[t]]
+        points: list[int] = []
+        nearest: list[int] = []
+        if any(self.fault[t] for t in self.vertex_faces[u]):
+            points = [u] + [p for t in self.vertex_faces[u] for p in self.assigned[t]]
+            if not fault_kept:
+                return False
+            triangles = self.V[np.array([new_faces[t] for t in fault_kept])]
+            P = self.V[points]
+            # Every point against every new fault face in one call: (faces, points).
+            distance = point_triangle_distance(np.tile(P, (len(triangles), 1)),
+                                               np.repeat(triangles, len(P), axis=0)).reshape(len(triangles), -1)
+            if distance.min(axis=0).max() > tolerance:
+                return False
+            nearest = [fault_kept[i] for i in np.argmin(distance, axis=0).tolist()]
+            if self._strays(triangles, tolerance):
+                return False
+        self._apply(u, v, removed, kept, new_faces, points, nearest)
+        return True
+
+    def _strays(self, triangles: np.ndarray, tolerance: float) -> bool:
+        """Whether a new fault face (k, 3, 3) leaves the cut fault by more than ``tolerance`` at its centroid
+        or an edge midpoint (the other side of the bound: removed vertices near the new faces is not enough,
+        a fold between them would pass)."""
+        P = np.concatenate([triangles.mean(axis=1), (triangles + triangles[:, [1, 2, 0]]).reshape(-1, 3) / 2.0])
+        _, near = self.reference_tree.query(P, k=min(_REFERENCE_CANDIDATES, len(self.reference)))
+        near = near.reshape(len(P), -1)
+        distance = point_triangle_distance(np.repeat(P, near.shape[1], axis=0), self.reference[near.reshape(-1)])
+        return bool(distance.reshape(len(P), -1).min(axis=1).max() > tolerance)
+
+    def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
+               nearest: list[int]) -> None:
+        touched = {u}.union(*(self.history[t] for t in removed))
+        for t in removed:
+            for x in self.faces[t]:
+                self.vertex_faces[x].discard(t)
+            del self.faces[t], self.assigned[t], self.history[t]
+        for t in kept:
+            self.faces[t] = new_faces[t]
+            self.history[t] = self.history[t] | touched
+            if self.fault[t]:
+                self.assigned[t] = []
+        for point, t in zip(points, nearest):
+            self.assigned[t].append(point)
+        self.vertex_faces[v].update(kept)
+        del self.vertex_faces[u]
+        self.done.append((u, v))
+        self.quadric[v] = self.quadric[v] + self.quadric[u]
+
+    def face_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Ids (m',) of the faces left, ascending, and their corners (m', 3)."""
+        ids = np.array(sorted(self.faces), dtype=np.int64)
+        return ids, np.array([self.faces[t] for t in ids.tolist()], dtype=np.int64).reshape(-1, 3)
+
+
+def _quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np.ndarray:
+    """Area-weighted plane quadrics (n, 4, 4) of the fault faces around every vertex (zero on outer faces)."""
+    F = np.asarray(faces, dtype=np.int64)[np.asarray(fault, dtype=bool)]
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    normal = np.cross(b - a, c - a)
+    area = np.linalg.norm(normal, axis=1)
+    unit = normal / np.maximum(area, 1e-300)[:, None]
+    plane = np.sqrt(area)[:, None] * np.column_stack([unit, -np.einsum("ij,ij->i", unit, a)])
+    outer = np.einsum("fi,fj->fij", plane, plane)
+    Q = np.zeros((n, 4, 4))
+    for k in range(3):
+        np.add.at(Q, F[:, k], outer)
+    return Q
+
+
+def _turns_little(points: list, old: tuple, new: tuple, limit: float) -> bool:
+    """Whether face ``new`` is not degenerate and its normal's cosine with ``old``'s is ``limit`` or more.
+
+    Corners are ids into ``points``, a list of (x, y, z): plain floats, as numpy is slow on single triangles.
+    """
+    n_old = _normal(points, old)
+    n_new = _normal(points, new)
+    length2 = n_new[0] ** 2 + n_new[1] ** 2 + n_new[2] ** 2
+    a, b, c = (points[x] for x in new)
+    longest = max(sum((p - q) ** 2 for p, q in zip(a, b)), sum((p - q) ** 2 for p, q in zip(b, c)),
+                  sum((p - q) ** 2 for p, q in zip(c, a)))
+    if length2 == 0.0 or length2 <= (MIN_SHAPE * longest) ** 2:
+        return False
+    dot = n_old[0] * n_new[0] + n_old[1] * n_new[1] + n_old[2] * n_new[2]
+    old2 = n_old[0] ** 2 + n_old[1] ** 2 + n_old[2] ** 2
+    return dot > 0 and dot * dot >= limit**2 * old2 * length2
+
+
+def _normal(points: list, f: tuple) -> tuple[float, float, float]:
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[f[0]], points[f[1]], points[f[2]]
+    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+    return uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx

@@ -1,0 +1,75 @@
+"""Simplify: lean fragment meshes, the faults simplified to a tolerance (issue 20, "lean meshes").
+
+Runs on the fragments stage's output; the algorithm is
+:func:`fracture_cli.gameready.simplify.simplify_faults`. The outer surface
+stays the input's (its vertices, UVs and normals); the faults and the curves
+where they cut the outer surface lose the triangles they do not need, both
+sides of every fault alike, so every fragment stays closed and the volumes
+still sum to the input's. The pipeline checks the result again, as it will
+be written (:mod:`fracture_cli.checks`).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from fracture_cli.gameready.simplify import FaultReport, simplify_faults
+from fracture_cli.options import option
+from fracture_cli.types import Fragments, SurfaceMesh
+
+log = logging.getLogger(__name__)
+
+STAGE = "simplify"
+
+# The triangle budget the issue sets for a default bake: twice the input's triangles plus this many per fragment.
+BUDGET_PER_FRAGMENT = 64
+
+
+@dataclass(frozen=True)
+class SimplifyOptions:
+    """Options of the ``simplify`` stage (a recipe's ``[simplify]`` section)."""
+
+    tolerance: float = option(
+        0.002,
+        "largest distance of a simplified fault from the cut one, as a fraction of the asset's bounding-box "
+        "diagonal; 0 keeps the faults as cut",
+        min=0.0,
+        max=0.1,
+    )
+    max_triangles: int = option(
+        0,
+        "triangles per fragment to aim for: fragments above it are simplified further, up to 64 times the "
+        "tolerance; 0 = no budget",
+        min=0,
+    )
+
+
+def simplify(fragments: Fragments, surface: SurfaceMesh,
+             options: SimplifyOptions = SimplifyOptions()) -> tuple[Fragments, FaultReport]:
+    """Simplify the fragments' faults.
+
+    Parameters
+    ----------
+    fragments : Fragments
+        The fragments stage's output.
+    surface : SurfaceMesh
+        The (repaired) input they were cut from.
+    options : SimplifyOptions, optional
+
+    Returns
+    -------
+    fragments : Fragments
+        Same fragments, order, pieces and materials, fewer triangles.
+    report : FaultReport
+    """
+    result, report = simplify_faults(fragments, surface, options.tolerance, options.max_triangles)
+    if report.over_budget:
+        log.warning("%s: %d fragment(s) stay above max_triangles = %d (their faults cannot go further within "
+                    "64 times the tolerance)", STAGE, report.over_budget, options.max_triangles)
+    return result, report
+
+
+def triangle_budget(input_triangles: int, fragments: int) -> int:
+    """The issue's budget for a bake's output: twice the input's triangles plus 64 per fragment."""
+    return 2 * input_triangles + BUDGET_PER_FRAGMENT * fragments
