@@ -102,19 +102,79 @@ def ordered_map(function: Callable[[Any, T], R], items: Sequence[T], shared: Any
     count = min(jobs if jobs is not None else current_jobs(), len(items))
     if count <= 1 or _IN_WORKER or not hasattr(os, "fork"):
         return [function(shared, item) for item in items]
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
     global _WORK
     with _WORK_LOCK:
         _WORK = (function, shared, items)
         try:
-            with ProcessPoolExecutor(max_workers=count, mp_context=multiprocessing.get_context("fork"),
-                                     initializer=_start_worker) as pool:
-                # Interleaved small chunks balance items of very different cost (a big fragment next to slivers).
-                return list(pool.map(_run_item, range(len(items)), chunksize=max(1, len(items) // (8 * count))))
+            return _run_forked(function, shared, items, count)
         finally:
             _WORK = None
+
+
+def _run_forked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T], count: int) -> list[R]:
+    """The items on ``count`` forked workers, in chunks; finished in this process if the workers stall.
+
+    Forking a process that has used threaded native libraries (manifold3d's TBB
+    scheduler, BLAS) can, rarely, leave a lock held in the child: the worker
+    then sleeps forever. A worker never waits for anything while it has work, so
+    when no chunk finishes and no worker uses any CPU time for
+    :data:`STALL_SECONDS`, the pool is killed and the remaining items are
+    computed here, one after another (the same results: each depends only on
+    its item and ``shared``).
+    """
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    # Interleaved small chunks balance items of very different cost (a big fragment next to slivers).
+    size = max(1, len(items) // (8 * count))
+    chunks = [range(i, min(i + size, len(items))) for i in range(0, len(items), size)]
+    results: list[Any] = [None] * len(items)
+    pool = ProcessPoolExecutor(max_workers=count, mp_context=multiprocessing.get_context("fork"),
+                               initializer=_start_worker)
+    stalled = False
+    try:
+        pending = {pool.submit(_run_chunk, chunk): chunk for chunk in chunks}
+        last_cpu = -1
+        while pending:
+            done, _ = wait(pending, timeout=STALL_SECONDS, return_when=FIRST_COMPLETED)
+            for future in done:
+                chunk = pending.pop(future)
+                results[chunk.start:chunk.stop] = future.result()
+            if done:
+                last_cpu = -1
+                continue
+            cpu = _workers_cpu_ticks(pool)
+            if cpu is not None and cpu == last_cpu:
+                stalled = True
+                break
+            last_cpu = -1 if cpu is None else cpu
+        if stalled:
+            log.warning("parallel workers stopped making progress (no CPU time for %g s); finishing %d item(s) in "
+                        "this process", STALL_SECONDS, sum(len(c) for c in pending.values()))
+            for process in list(getattr(pool, "_processes", {}).values()):
+                process.kill()
+            for chunk in pending.values():
+                results[chunk.start:chunk.stop] = [function(shared, items[i]) for i in chunk]
+    finally:
+        pool.shutdown(wait=not stalled, cancel_futures=True)
+    return results
+
+
+#: Seconds without a finished chunk and without any worker CPU time after which forked workers count as stalled.
+STALL_SECONDS = 30.0
+
+
+def _workers_cpu_ticks(pool: Any) -> int | None:
+    """User + system CPU ticks of the pool's worker processes (Linux ``/proc``), None where unknown."""
+    total = 0
+    for pid in list(getattr(pool, "_processes", {}) or {}):
+        try:
+            with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
+                fields = fh.read().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            return None
+        total += int(fields[11]) + int(fields[12])  # utime, stime (fields 14 and 15 of stat(5))
+    return total
 
 
 def _start_worker() -> None:
@@ -128,7 +188,7 @@ def _start_worker() -> None:
     threadpool_limits(limits=1, user_api="blas")
 
 
-def _run_item(index: int) -> Any:
+def _run_chunk(indices: range) -> list[Any]:
     assert _WORK is not None, "worker started without work"  # internal invariant: set before the fork
     function, shared, items = _WORK
-    return function(shared, items[index])
+    return [function(shared, items[i]) for i in indices]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 
 import numpy as np
@@ -99,3 +100,19 @@ def test_large_input_crop_gives_the_same_fragments(monkeypatch):
         np.testing.assert_allclose(a.vertices.min(axis=0), b.vertices.min(axis=0), atol=1e-12)
     assert fr._piece_groups(regions.meshes, 3) == fr._piece_groups(regions.meshes, 3)
     assert sorted(p for g in fr._piece_groups(regions.meshes, 3) for p in g) == list(range(len(regions.meshes)))
+
+
+def _sleeps_in_workers(shared, item):
+    """Sleeps (no CPU time) when run in a forked worker: what a worker stuck on an inherited lock looks like."""
+    import time
+
+    if parallel._IN_WORKER:
+        time.sleep(3600)
+    return item * shared
+
+
+def test_stalled_workers_are_abandoned_and_the_items_finished_here(monkeypatch, caplog):
+    monkeypatch.setattr(parallel, "STALL_SECONDS", 0.5)
+    with caplog.at_level(logging.WARNING, logger="fracture_cli"):
+        assert parallel.ordered_map(_sleeps_in_workers, list(range(7)), 3, jobs=2) == [3 * i for i in range(7)]
+    assert any("stopped making progress" in r.message for r in caplog.records)
