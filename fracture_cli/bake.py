@@ -197,7 +197,10 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
 
     check_inputs_untouched(out_dir, [stem], input_files(state.need("source", "export")))  # also for a chain
     with runner.step("export"), output_set(out_dir, stem) as staging:
-        write_fragments_glb(staging.file(f"{stem}.glb"), state.need("fragments", "export"))
+        fragment_options, collision_options = runner.options.get("fragments"), runner.options.get("collision")
+        write_fragments_glb(staging.file(f"{stem}.glb"), state.need("fragments", "export"),
+                            pivot=getattr(fragment_options, "pivot", "center_of_mass"), parts=state.collision,
+                            collision=getattr(collision_options, "glb", "none") if state.collision else "none")
         write_runtime(state.need("runtime", "export"), staging.file(f"{stem}.fracture.json"))
         report["seconds"] = dict(runner.seconds)
         if runner.cache is not None:

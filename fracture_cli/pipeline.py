@@ -52,6 +52,7 @@ class PipelineState:
     pieces: Pieces | None = None
     regions: Regions | None = None
     fragments: Fragments | None = None
+    collision: tuple | None = None  # convex parts of every fragment, model space (gameready.stage.Parts)
     checks: dict[str, CheckValue] | None = None  # what the report says of the fragments
     runtime: RuntimeData | None = None
 
@@ -181,7 +182,7 @@ def _fragments(state: PipelineState, options: Any) -> PipelineState:
     surface = state.need("surface", "fragments")
     frags = fragments(surface, state.need("regions", "fragments"), options)
     # Checked as they will be written (float32 about each pivot); a broken fragment stops the bake here.
-    frags, written = written_fragments(frags)
+    frags, written = written_fragments(frags, options.pivot)
     require_sound(written)
     checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written))
     require_volume(checks)
@@ -193,15 +194,27 @@ def _fragments(state: PipelineState, options: Any) -> PipelineState:
     return dataclasses.replace(state, fragments=frags, checks=checks)
 
 
+def _collision(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.gameready.stage import collision
+
+    parts, checks = collision(state.need("fragments", "collision"), options)
+    return dataclasses.replace(state, collision=parts, checks={**(state.checks or {}), **checks})
+
+
 def _runtime(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.gameready.components import fragments_graph
+    from fracture_cli.gameready.stage import runtime_arrays_of
     from fracture_cli.io.write import fragment_name
     from fracture_cli.stages.precompute import runtime
 
     frags = state.need("fragments", "runtime")
     order = [int(f.piece) for f in frags.fragments]
     names = tuple(fragment_name(i) for i in range(len(order)))
+    # Bonds where fragments share fault faces: every group the game splits off is connected in space.
     data = runtime(state.need("tet_mesh", "runtime"), state.need("modes", "runtime"), state.need("pieces", "runtime"),
-                   options, fragment_pieces=order, fragment_names=names)
+                   options, fragment_pieces=order, fragment_names=names, fragment_graph=fragments_graph(frags))
+    # Mass properties and collision parts for engines that read the runtime file only (FORMAT.md section 8).
+    data = dataclasses.replace(data, gameready=runtime_arrays_of(frags, state.collision))
     return dataclasses.replace(state, runtime=data)
 
 
@@ -228,9 +241,12 @@ STAGES: tuple[Stage, ...] = (
     Stage("fragments", "Cut the input into one closed fragment per piece region, and check them.",
           "fracture_cli.stages.fragments:FragmentOptions", _fragments, consumes=("surface", "regions"),
           produces=("fragments", "checks")),
+    Stage("collision", "Convex collision parts per fragment that do not overlap (GLB and runtime file).",
+          "fracture_cli.gameready.collision:CollisionOptions", _collision, consumes=("fragments",),
+          produces=("collision",)),
     Stage("runtime", "Precompute the impact-projection data for the game (the runtime file).",
           "fracture_cli.stages.precompute:RuntimeOptions", _runtime,
-          consumes=("tet_mesh", "modes", "pieces", "fragments"), produces=("runtime",)),
+          consumes=("tet_mesh", "modes", "pieces", "fragments"), uses=("collision",), produces=("runtime",)),
 )
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
 # The steps a bake reports seconds for: every stage, then writing the outputs.

@@ -23,8 +23,6 @@ from fracture_cli.io.gltf import read_glb
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from invariants import check_glb  # noqa: E402
 
-from conftest import BODY_SPLIT_MISSING, SPLITS_BODIES  # noqa: E402
-
 HERE = os.path.dirname(os.path.abspath(__file__))
 CORPUS = os.path.join(HERE, "data", "bad")
 with open(os.path.join(CORPUS, "expected.toml"), "rb") as _fh:
@@ -76,9 +74,7 @@ def test_corpus_is_complete_and_small():
 
 
 @pytest.mark.parametrize("entry", CASES, ids=[c["file"] for c in CASES])
-def test_corpus_outcome(entry, tmp_path, request):
-    if entry.get("needs_body_split") and not SPLITS_BODIES:
-        request.applymarker(pytest.mark.xfail(strict=True, reason=f"{entry['needs_body_split']}: {BODY_SPLIT_MISSING}"))
+def test_corpus_outcome(entry, tmp_path):
     if not entry.get("known_issue"):
         check_outcome(entry, tmp_path)
         return
@@ -149,9 +145,8 @@ def check_outcome(entry, tmp_path):
     diagonal = float(np.linalg.norm(tris.reshape(-1, 3).max(axis=0) - tris.reshape(-1, 3).min(axis=0)))
     # Every fragment, welded by its exact written position: closed, manifold, oriented, one body, positive volume.
     written = check_glb(os.path.join(out, stem + ".glb"))
-    # Several bodies in one fragment: allowed only where the tree does not split fragments into bodies.
-    failing = [f"{f.name}: {f.problems}" for f in written.failing
-               if SPLITS_BODIES or f.problems != [f"{f.components} bodies"]]
+    # Every fragment is one body (a fragment that falls apart is split into fragments).
+    failing = [f"{f.name}: {f.problems}" for f in written.failing]
     assert not failing, failing
     assert checks["connected"] == all(f.components == 1 for f in written.fragments)
     total = written.total_volume

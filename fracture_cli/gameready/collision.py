@@ -41,6 +41,8 @@ log = logging.getLogger(__name__)
 
 STAGE = "collision"
 
+# How the GLB carries the parts (fracture_cli.gameready.export_shapes); "none" computes none.
+COLLISION_FORMATS = ("omi", "godot", "unreal", "none")
 # PhysX and Chaos cook at most 255 vertices per convex mesh.
 ENGINE_MAX_VERTICES = 255
 # A coordinate axis is not tried as a cut normal when a principal axis is this close (cosine, ~15 degrees).
@@ -66,6 +68,10 @@ class CollisionOptions:
                                    "volume", min=0.0, min_exclusive=True)
     intrusion: float = option(0.0, "also cut a part while its hull reaches into other fragments by more than this "
                                    "fraction of its volume (0: off; costs a boolean per part and neighbour)", min=0.0)
+    glb: str = option("omi", "how the GLB carries the parts: OMI_physics_shape/OMI_physics_body extensions (omi), "
+                             "'<fragment>_NN-convcolonly' child meshes (godot), 'UCX_<fragment>_NN' child meshes "
+                             "(unreal), or no parts at all (none; the runtime file then has none either)",
+                      choices=COLLISION_FORMATS)
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,19 @@ class FragmentOptions:
         min=0.0,
         max=1.0,
     )
+    pivot: str = option(
+        "center_of_mass",
+        "origin of every fragment node in the GLB: its centre of mass (where engines put a rigid body's origin) "
+        "or its bounding-box centre (bbox)",
+        choices=("center_of_mass", "bbox"),
+    )
+    min_body_fraction: float = option(
+        0.001,
+        "a fragment that falls apart is split into one fragment per closed body; bodies holding less than this "
+        "fraction of the asset's volume are glued to the neighbour they share the most fault area with",
+        min=0.0,
+        max=1.0,
+    )
 
 
 def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions = FragmentOptions()) -> Fragments:
@@ -62,7 +75,7 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     Returns
     -------
     Fragments
-        Non-empty fragments sorted by their centroid (x, then y, then z, rounded
+        Non-empty fragments, each one connected closed body, sorted by their centroid (x, then y, then z, rounded
         to 1e-6); ``Fragment.piece`` names the piece of each. ``materials`` are
         the input's plus the interior material as the last slot (or the
         input's own slot if one is already named ``interior``).
@@ -88,8 +101,15 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     (vertices split per plane), and UVs from a box projection of world-space
     positions divided by ``uv_scale``.
 
-    Pieces whose region misses the input are logged and left out; the lead's
+    Pieces whose region misses the input are logged and left out; the
     runtime uses ``Fragment.piece`` to map fragments to pieces.
+
+    A cut can fall apart (a region holding the tips of two legs); a game spawns
+    one rigid body per fragment, so every fragment is split into its closed
+    bodies (:func:`~fracture_cli.gameready.components.split_fragments`): bodies
+    below ``min_body_fraction`` of the input's volume are glued to their
+    largest-interface neighbour, the others become fragments of their own
+    (same piece). Several fragments may then share one piece.
     """
     solid, id_to_material = surface_solid(surface, stage=STAGE)
     input_volume = float(solid.volume())
@@ -123,12 +143,15 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     total = sum(trigeom.signed_volume(f.vertices, f.faces) for f in results)
     log.info("%s: %d fragments from %d regions, volume %.6g of input %.6g (error %.2g)", STAGE, len(results),
              len(regions.meshes), total, input_volume, abs(total - input_volume) / input_volume)
-    return Fragments(
+    cut_fragments = Fragments(
         fragments=tuple(results[i] for i in order),
         materials=materials,
         normalization=surface.normalization,
         input_volume=input_volume,
     )
+    from fracture_cli.gameready.components import split_fragments  # imports this module's _stable_order
+
+    return split_fragments(cut_fragments, options.min_body_fraction)[0]
 
 
 @dataclass(frozen=True)
