@@ -200,7 +200,8 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
         fragment_options, collision_options = runner.options.get("fragments"), runner.options.get("collision")
         write_fragments_glb(staging.file(f"{stem}.glb"), state.need("fragments", "export"),
                             pivot=getattr(fragment_options, "pivot", "center_of_mass"), parts=state.collision,
-                            collision=getattr(collision_options, "glb", "none") if state.collision else "none")
+                            collision=getattr(collision_options, "glb", "none") if state.collision else "none",
+                            stem=stem)
         write_runtime(state.need("runtime", "export"), staging.file(f"{stem}.fracture.json"))
         report["seconds"] = dict(runner.seconds)
         if runner.cache is not None:

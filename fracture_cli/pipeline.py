@@ -14,6 +14,7 @@ import contextlib
 import dataclasses
 import importlib
 import logging
+import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -209,7 +210,8 @@ def _runtime(state: PipelineState, options: Any) -> PipelineState:
 
     frags = state.need("fragments", "runtime")
     order = [int(f.piece) for f in frags.fragments]
-    names = tuple(fragment_name(i) for i in range(len(order)))
+    stem = os.path.splitext(os.path.basename(state.need("source", "runtime")))[0]
+    names = tuple(fragment_name(i, stem) for i in range(len(order)))  # as the GLB's nodes
     # Bonds where fragments share fault faces: every group the game splits off is connected in space.
     data = runtime(state.need("tet_mesh", "runtime"), state.need("modes", "runtime"), state.need("pieces", "runtime"),
                    options, fragment_pieces=order, fragment_names=names, fragment_graph=fragments_graph(frags))

@@ -140,7 +140,7 @@ def check_outcome(entry, tmp_path):
     # Independent checks on the written GLB (float32, input units).
     meshes, material_names = read_glb(os.path.join(out, stem + ".glb"))
     assert len(meshes) == report["counts"]["fragments"] >= 1
-    interior = material_names.index("interior")
+    interior = material_names.index(f"{stem}_interior")
     tris = raw_triangles(os.path.join(CORPUS, entry["reference"]) if entry.get("reference") else path)
     diagonal = float(np.linalg.norm(tris.reshape(-1, 3).max(axis=0) - tris.reshape(-1, 3).min(axis=0)))
     # Every fragment, welded by its exact written position: closed, manifold, oriented, one body, positive volume.

@@ -64,9 +64,10 @@ def test_glb_structure_is_valid_gltf(chair_bake):
     doc, binary = read_glb(out / "chair.glb")
     report = json.loads(result.stdout)
     assert doc["asset"]["version"] == "2.0"
-    names = [n["name"] for n in doc["nodes"]]
-    assert names == [f"fragment_{i:03d}" for i in range(report["counts"]["fragments"])]
-    assert [m["name"] for m in doc["materials"]][-1] == "interior"
+    names = [doc["nodes"][i]["name"] for i in doc["scenes"][0]["nodes"]]
+    assert names == [f"chair_fragment_{i:03d}" for i in range(report["counts"]["fragments"])]
+    assert [m["name"] for m in doc["materials"]][-1] == "chair_interior"
+    assert set(doc["extensionsUsed"]) >= {"OMI_physics_body", "OMI_physics_shape"}  # the default collision format
     for acc in doc["accessors"]:
         view = doc["bufferViews"][acc["bufferView"]]
         size = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[acc["type"]] * 4

@@ -98,9 +98,23 @@ def save_surface(path: str | os.PathLike, surface: SurfaceMesh) -> None:
         mesh.export(tmp, file_type=ext[1:])
 
 
-def fragment_name(index: int) -> str:
-    """Stable node name of fragment ``index`` (export order)."""
-    return f"fragment_{index:03d}"
+def fragment_name(index: int, stem: str | None = None) -> str:
+    """Stable node name of fragment ``index`` (export order): ``<stem>_fragment_###``, or ``fragment_###``.
+
+    The asset's stem keeps two baked assets in one scene from colliding (an
+    importer would rename the second ``fragment_000.001`` and the runtime
+    file's names would no longer match).
+    """
+    return f"{stem}_fragment_{index:03d}" if stem else f"fragment_{index:03d}"
+
+
+def prefixed_materials(materials, stem: str | None):
+    """``materials`` renamed ``<stem>_<name>`` (``chair_interior``): engines share materials by name across files."""
+    import dataclasses
+
+    if not stem:
+        return tuple(materials)
+    return tuple(dataclasses.replace(m, name=f"{stem}_{m.name}") for m in materials)
 
 
 def node_origin(world_points: np.ndarray) -> np.ndarray:
@@ -114,8 +128,8 @@ def node_origin(world_points: np.ndarray) -> np.ndarray:
 
 
 def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: str = "center_of_mass",
-                        parts=None, collision: str = "none") -> None:
-    """Write all fragments to one GLB: one node and mesh per fragment, named ``fragment_###``.
+                        parts=None, collision: str = "none", stem: str | None = None) -> None:
+    """Write all fragments to one GLB: one node and mesh per fragment, named ``<stem>_fragment_###``.
 
     Each mesh has one primitive per material it uses (the input's materials and
     the interior material). Each node is translated to its fragment's pivot and
@@ -134,6 +148,9 @@ def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: st
         the ``collision`` stage.
     collision : {"omi", "godot", "unreal", "none"}, optional (default "none")
         How the parts are written (:mod:`fracture_cli.gameready.export_shapes`).
+    stem : str, optional
+        The asset's stem: prefix of node, mesh and material names (``chair_fragment_000``,
+        ``chair_interior``); without it the names are unprefixed.
     """
     from fracture_cli.gameready.export_shapes import physics_extender
     from fracture_cli.gameready.stage import fragment_physics
@@ -143,5 +160,6 @@ def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: st
     for i, (frag, body) in enumerate(zip(fragments.fragments, physics)):
         prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids,
                                   fragments.normalization, body.origin)
-        meshes.append((fragment_name(i), prims, body.origin))
-    write_bytes_atomic(path, glb_bytes(meshes, fragments.materials, extend=physics_extender(physics, collision)))
+        meshes.append((fragment_name(i, stem), prims, body.origin))
+    materials = prefixed_materials(fragments.materials, stem)
+    write_bytes_atomic(path, glb_bytes(meshes, materials, extend=physics_extender(physics, collision)))
