@@ -178,16 +178,19 @@ def _fragments(state: PipelineState, options: Any) -> PipelineState:
         require_volume,
         written_fragments,
     )
-    from fracture_cli.stages.fragments import fragments
+    from fracture_cli.stages.fragments import fragments_with_split
 
     surface = state.need("surface", "fragments")
-    frags = fragments(surface, state.need("regions", "fragments"), options)
+    frags, split = fragments_with_split(surface, state.need("regions", "fragments"), options)
     # Checked as they will be written (float32 about each pivot); a broken fragment stops the bake here.
     frags, written = written_fragments(frags, options.pivot)
     require_sound(written)
     checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written))
     require_volume(checks)
     checks["input_volume"] = float(frags.input_volume * surface.normalization.scale**3)
+    # Cuts that fell apart: bodies that became fragments of their own, and tiny ones glued to a neighbour.
+    checks["split_bodies"] = sum(split.bodies) - len(split.bodies) - split.merged
+    checks["merged_bodies"] = split.merged
     # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
     shape = fragment_fault_shape(frags)
     checks["fault_mean_dihedral_degrees"] = round(shape["mean_dihedral_degrees"], 6)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import manifold3d
 import numpy as np
@@ -13,6 +14,9 @@ from fracture_cli.errors import StageError
 from fracture_cli.options import option
 from fracture_cli.stages._solids import SHELL_VOLUME, shell_mask, surface_solid
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Regions, SurfaceMesh
+
+if TYPE_CHECKING:  # components imports this module
+    from fracture_cli.gameready.components import SplitReport
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +62,13 @@ class FragmentOptions:
 
 
 def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions = FragmentOptions()) -> Fragments:
-    """Cut the input surface into one closed fragment per piece region.
+    """Cut the input surface into closed one-body fragments (:func:`fragments_with_split`, without its report)."""
+    return fragments_with_split(surface, regions, options)[0]
+
+
+def fragments_with_split(surface: SurfaceMesh, regions: Regions,
+                         options: FragmentOptions = FragmentOptions()) -> tuple[Fragments, SplitReport]:
+    """Cut the input surface into one closed fragment per piece region, then one per connected body.
 
     Parameters
     ----------
@@ -74,11 +84,13 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
 
     Returns
     -------
-    Fragments
+    fragments : Fragments
         Non-empty fragments, each one connected closed body, sorted by their centroid (x, then y, then z, rounded
         to 1e-6); ``Fragment.piece`` names the piece of each. ``materials`` are
         the input's plus the interior material as the last slot (or the
         input's own slot if one is already named ``interior``).
+    split : SplitReport
+        How many bodies each cut held and how many tiny ones were merged.
 
     Raises
     ------
@@ -151,7 +163,7 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     )
     from fracture_cli.gameready.components import split_fragments  # imports this module's _stable_order
 
-    return split_fragments(cut_fragments, options.min_body_fraction)[0]
+    return split_fragments(cut_fragments, options.min_body_fraction)
 
 
 @dataclass(frozen=True)
