@@ -101,6 +101,28 @@ def check_loaded(entry):
     np.testing.assert_allclose(hi, entry["bbox"][1], atol=1e-6)
 
 
+def check_bonds_are_shared_faces(out: str, stem: str, meshes, interior: int, diagonal: float) -> None:
+    """The runtime file bonds exactly the written fragments that share fault faces, so every group is connected."""
+    from fracture_cli.gameready.components import fragment_graph
+    from fracture_cli.runtime.format import load_runtime
+
+    data = load_runtime(os.path.join(out, stem + ".fracture.json"))
+    assert list(data.fragment_names) == [m.name for m in meshes]
+    solids, fault = [], []
+    for mesh in meshes:  # one mesh per fragment, its primitives stacked
+        offsets = np.cumsum([0] + [len(p.positions) for p in mesh.primitives])
+        solids.append((np.concatenate([p.positions for p in mesh.primitives]),
+                       np.concatenate([p.indices + o for p, o in zip(mesh.primitives, offsets)])))
+        fault.append(np.concatenate([np.full(len(p.indices), p.material == interior) for p in mesh.primitives]))
+    # float32 positions about each fragment's own pivot: the two sides of a fault agree to ~1e-7 of the diagonal.
+    edges, _ = fragment_graph(solids, fault, min_area=1e-6 * diagonal**2, tolerance=1e-6 * diagonal)
+    bonded = {tuple(e) for e in np.asarray(data.edges).tolist()}
+    assert {tuple(e) for e in edges.tolist()} <= bonded
+    # Every bond is through shared faces (an area of contact that the meshes show).
+    edges_any, _ = fragment_graph(solids, fault, min_area=0.0, tolerance=1e-6 * diagonal)
+    assert bonded <= {tuple(e) for e in edges_any.tolist()}
+
+
 def check_outcome(entry, tmp_path):
     path = os.path.join(CORPUS, entry["file"])
     if entry["outcome"] == "ok" and entry.get("check") == "load":
@@ -149,6 +171,7 @@ def check_outcome(entry, tmp_path):
     failing = [f"{f.name}: {f.problems}" for f in written.failing]
     assert not failing, failing
     assert checks["connected"] == all(f.components == 1 for f in written.fragments)
+    check_bonds_are_shared_faces(out, stem, meshes, interior, diagonal)
     total = written.total_volume
     outer_points = [p.positions for mesh in meshes for p in mesh.primitives if p.material != interior]
     expected_volume = entry.get("volume", report["checks"]["input_volume"])
