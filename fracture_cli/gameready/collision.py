@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
+from fracture_cli import parallel
 from fracture_cli.gameready.mass import mass_properties
 from fracture_cli.options import option
 
@@ -123,14 +124,14 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions()) -> 
     solids = [_solid(V, F) for V, F in meshes]
     boxes = np.array([s.bounding_box() for s in solids]).reshape(-1, 6)
     corners, materials, owners, volumes, hull_ratio = [], [], [], [], []
-    for index, solid in enumerate(solids):
-        volume = solid.volume()
+    # Fragments decompose independently: on parallel.current_jobs() processes (forked: the solids are inherited).
+    decomposed = parallel.ordered_map(_decompose, range(len(solids)), (solids, boxes, options))
+    for index, (volume, ratio, leaves) in enumerate(decomposed):
         volumes.append(volume)
-        hull_ratio.append(solid.hull().volume() / volume if volume > 0 else 1.0)
-        intrusion = _Intrusion(solids, boxes, index) if options.intrusion > 0 else None
-        for leaf in convex_decomposition(solid, options.max_parts, options.concavity, intrusion, options.intrusion):
-            corners.append(simplify_hull(hull_corners(leaf), options.max_vertices))
-            materials.append(_mesh(leaf))
+        hull_ratio.append(ratio)
+        for leaf_corners, leaf_mesh in leaves:
+            corners.append(leaf_corners)
+            materials.append(leaf_mesh)
             owners.append(index)
     flat = separate_parts(corners, materials)
     result: list[list[np.ndarray]] = [[] for _ in volumes]
@@ -149,6 +150,17 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions()) -> 
                            hull_ratio=np.array(hull_ratio),
                            parts_ratio=parts_volume / np.maximum(volumes_arr, 1e-300),
                            coverage=covered / np.maximum(volumes_arr, 1e-300))
+
+
+def _decompose(shared: tuple, index: int) -> tuple[float, float, list[tuple[np.ndarray, tuple]]]:
+    """Volume, hull ratio and convex leaves ``(corners, (V, F))`` of fragment ``index`` (numpy only: picklable)."""
+    solids, boxes, options = shared
+    solid = solids[index]
+    volume = solid.volume()
+    ratio = solid.hull().volume() / volume if volume > 0 else 1.0
+    intrusion = _Intrusion(solids, boxes, index) if options.intrusion > 0 else None
+    leaves = convex_decomposition(solid, options.max_parts, options.concavity, intrusion, options.intrusion)
+    return volume, ratio, [(simplify_hull(hull_corners(leaf), options.max_vertices), _mesh(leaf)) for leaf in leaves]
 
 
 def _mesh(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
