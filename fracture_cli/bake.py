@@ -28,7 +28,7 @@ from fracture_cli import __version__, trigeom
 from fracture_cli.cache import file_sha256
 from fracture_cli.errors import FractureError, UsageError
 from fracture_cli.io.inputs import estimate_output_bytes, input_files
-from fracture_cli.io.outputs import output_names, output_set
+from fracture_cli.io.outputs import output_set
 from fracture_cli.io.preflight import check_inputs_untouched, preflight, refuse_inputs_as_outputs
 from fracture_cli.pipeline import STAGE_NAMES, STEPS, PipelineState, Runner
 from fracture_cli.recipe import Recipe
@@ -84,7 +84,7 @@ def stem_of(path: str) -> str:
 
 
 def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = None,
-         jobs: int | None = None) -> BakeResult:
+         jobs: int | None = None, preview_size: tuple[int, int] | None = None) -> BakeResult:
     """Run the whole pipeline on one asset and write its outputs.
 
     Parameters
@@ -101,6 +101,10 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
     jobs : int, optional (default None: every core)
         Processes the stages may use for independent work (see :mod:`fracture_cli.parallel`); the
         outputs are the same bytes for any value.
+    preview_size : (int, int), optional (default None: no preview)
+        Also render ``<stem>.preview.png`` of this size (width, height) into the
+        output set. Without it an older preview is removed when the new set is
+        published (it would show other fragments than the files beside it).
 
     Returns
     -------
@@ -126,7 +130,7 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
         runner = Runner(f"bake {stem}", total=len(STEPS), cache=cache, jobs=jobs)
         state = run_pipeline(input_path, recipe, runner)
         report = build_report(state, recipe, runner)
-        outputs = write_outputs(out_dir, stem, state, report, runner)
+        outputs = write_outputs(out_dir, stem, state, report, runner, preview_size)
         return BakeResult(report=report, outputs=outputs)
     except FractureError as exc:
         if exc.path is None:
@@ -185,12 +189,14 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
 
 
 def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[str, Any],
-                  runner: Runner) -> tuple[str, ...]:
+                  runner: Runner, preview_size: tuple[int, int] | None = None) -> tuple[str, ...]:
     """Write the fragments, the runtime file and the report as the ``export`` step; returns the paths.
 
     The files are written into a staging folder and published as one set
     (:func:`fracture_cli.io.outputs.output_set`), the report last with the
     other files' hashes. ``report`` gets its ``seconds`` (and ``cache``) block.
+    With ``preview_size`` (width, height) the preview PNG is rendered from the
+    staged files and published with them.
     """
     from fracture_cli.io.write import write_fragments_glb
     from fracture_cli.runtime.format import write_runtime
@@ -203,12 +209,19 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
                             collision=getattr(collision_options, "glb", "none") if state.collision else "none",
                             stem=stem)
         write_runtime(state.need("runtime", "export"), staging.file(f"{stem}.fracture.json"))
+        if preview_size is not None:
+            from fracture_cli.preview import render_preview
+
+            render_preview(staging.file(f"{stem}.fracture.json"), staging.file(f"{stem}.preview.png"),
+                           width=preview_size[0], height=preview_size[1])
+            report["outputs"] = [*report["outputs"][:-1], f"{stem}.preview.png", report["outputs"][-1]]
         report["seconds"] = dict(runner.seconds)
         if runner.cache is not None:
             report["cache"] = dict(runner.cache.events)
         staging.write_report(report)
+        names = staging.names()
     report["seconds"] = dict(runner.seconds)
-    return tuple(os.path.join(out_dir, name) for name in output_names(stem))
+    return tuple(os.path.join(out_dir, name) for name in names)
 
 
 def check_batch(inputs: Sequence[str], out_dir: str) -> None:
@@ -239,9 +252,10 @@ def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir:
         yielded with its error line and the others are still baked; without
         it (or with one input) the first error is raised.
     preview : bool, optional (default False)
-        Also render ``<stem>.preview.png`` for each bake; without it a
-        ``<stem>.preview.png`` left by an earlier bake is removed (it would show
-        other fragments than the files beside it).
+        Also render ``<stem>.preview.png`` for each bake, as part of its output
+        set; without it a ``<stem>.preview.png`` left by an earlier bake is
+        removed with the publish (it would show other fragments than the files
+        beside it).
     preview_size : (int, int), optional (default (1600, 1000))
         Width and height of the preview in pixels.
 
@@ -253,16 +267,8 @@ def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir:
     check_batch(inputs, out_dir)
     for path in inputs:
         try:
-            result = bake(path, out_dir, recipe, cache_dir=cache_dir, jobs=jobs)
-            preview_png = os.path.join(out_dir, f"{stem_of(path)}.preview.png")
-            if preview:
-                from fracture_cli.preview import render_preview
-
-                render_preview(os.path.join(out_dir, f"{stem_of(path)}.fracture.json"), preview_png,
-                               width=preview_size[0], height=preview_size[1])
-            elif os.path.exists(preview_png):
-                os.remove(preview_png)
-                log.info("bake: removed %s (from an earlier bake; pass --preview for a new one)", preview_png)
+            result = bake(path, out_dir, recipe, cache_dir=cache_dir, jobs=jobs,
+                          preview_size=preview_size if preview else None)
         except Exception as exc:
             if not keep_going or len(inputs) == 1:
                 raise

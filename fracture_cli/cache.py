@@ -64,10 +64,12 @@ def input_digest(files: list[str]) -> str:
     folder = os.path.dirname(files[0])
     lines = []
     for path in files:
-        try:
-            digest = file_sha256(path)
-        except FileNotFoundError:
+        if not os.path.exists(path):
             digest = "missing"
+        elif not os.path.isfile(path):  # a FIFO or a device named as a texture: never read (it could block)
+            digest = "not-a-file"
+        else:
+            digest = file_sha256(path)
         lines.append(f"{digest}  {os.path.relpath(path, folder or '.')}\n")
     return hashlib.sha256("".join(lines).encode("utf-8", "surrogateescape")).hexdigest()
 

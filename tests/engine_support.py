@@ -32,6 +32,11 @@ CONFORMANCE = os.path.join(REPO, "tests", "data", "runtime_conformance")
 CORRUPT = os.path.join(CONFORMANCE, "corrupt")
 RELATIVE_TOLERANCE = 1e-9  # alpha and displacement, relative to the array's largest magnitude
 SAMPLE_ASSETS = ("chair", "pillar", "vase")  # the conformance runtime files baked from sample_assets/
+# The JavaScript reader's check driver, run under Node.js (tests of engines/web and of the viewer's copy).
+JS_DRIVER = os.path.join(REPO, "engines", "web", "fracture_check.mjs")
+NODE = shutil.which("node")
+requires_node = pytest.mark.skipif(NODE is None, reason="node (Node.js) is not installed; the JavaScript reader "
+                                   "runs under it (apt-get install nodejs)")
 
 
 def require_tool(name: str, package: str) -> str:

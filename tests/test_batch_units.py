@@ -129,9 +129,10 @@ def test_state_and_plan_skip_only_unchanged_assets(tmp_path):
     os.makedirs(job.out_dir, exist_ok=True)
     outputs = []
     for name in ("a.glb", "a.fracture.json", "a.fracture.bin", "a.report.json"):
-        (tmp_path / "out" / name).write_text(json.dumps({"counts": {"fragments": 3}}))
+        (tmp_path / "out" / name).write_text(json.dumps({"counts": {"fragments": 3}, "files": {"a.glb": "x"}}))
         outputs.append(str(tmp_path / "out" / name))
-    write_state(state_path(job.out_dir, job.stem), job.key, job.inputs, tuple(outputs), job.hashed_at_ns)
+    ours = {"counts": {"fragments": 3}, "files": {"a.glb": "x"}}
+    write_state(state_path(job.out_dir, job.stem), job.key, job.inputs, tuple(outputs), job.hashed_at_ns, ours)
     assert is_up_to_date(read_state(state_path(job.out_dir, "a")), job.key, job.out_dir)
     again = plan_batch(assets, impacts=0, cache_dir=None, timeout=10)
     assert [r.status for r in again.done] == [UP_TO_DATE] and again.done[0].report["counts"]["fragments"] == 3
@@ -141,6 +142,23 @@ def test_state_and_plan_skip_only_unchanged_assets(tmp_path):
     time.sleep(0.01)
     (tmp_path / "out" / "a.glb").write_text("replaced by someone")  # an output changed: re-bake
     assert [j.name for j in plan_batch(assets, impacts=0, cache_dir=None, timeout=10).jobs] == ["a.obj", "b.obj"]
+
+
+def test_state_is_not_written_for_a_set_another_bake_replaced(tmp_path):
+    """A concurrent bake of the same stem published after ours: the state must not vouch for its outputs."""
+    _tree(tmp_path, {"a.obj": BOX_OBJ})
+    assets = _assets(tmp_path, '[assets]\n"*.obj" = "stone"\n')
+    job = plan_batch(assets, impacts=0, cache_dir=None, timeout=10).jobs[0]
+    os.makedirs(job.out_dir, exist_ok=True)
+    outputs = []
+    for name in ("a.glb", "a.fracture.json", "a.fracture.bin", "a.report.json"):
+        (tmp_path / "out" / name).write_text(json.dumps({"files": {"a.glb": "other"}}))
+        outputs.append(str(tmp_path / "out" / name))
+    path = state_path(job.out_dir, job.stem)
+    (tmp_path / "out" / os.path.basename(path)).write_text("{}")  # an older state
+    write_state(path, job.key, job.inputs, tuple(outputs), job.hashed_at_ns, {"files": {"a.glb": "ours"}})
+    assert not os.path.exists(path)
+    assert [j.name for j in plan_batch(assets, impacts=0, cache_dir=None, timeout=10).jobs] == ["a.obj"]
 
 
 def test_outputs_that_would_overwrite_inputs_are_refused(tmp_path):

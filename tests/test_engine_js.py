@@ -8,27 +8,24 @@ and answers "error inconsistent" if they differ). Skipped when node is missing.
 
 from __future__ import annotations
 
-import os
-import shutil
 import subprocess
 
 import pytest
 from engine_support import (
-    REPO,
+    JS_DRIVER,
+    NODE,
     SAMPLE_ASSETS,
     check_answers,
     load_vectors,
     protocol_input,
     random_impacts,
+    requires_node,
     runtime_paths,
     vector_names,
 )
 
-DRIVER = os.path.join(REPO, "engines", "web", "fracture_check.mjs")
-NODE = shutil.which("node")
-
-pytestmark = pytest.mark.skipif(NODE is None, reason="node (Node.js) is not installed; the JavaScript reader "
-                                "runs under it (apt-get install nodejs)")
+DRIVER = JS_DRIVER
+pytestmark = requires_node
 
 
 def _answers(name: str, impacts: list[dict]) -> str:

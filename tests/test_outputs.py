@@ -387,6 +387,49 @@ def test_stale_staging_folders_are_removed_and_a_journalled_one_completed(tmp_pa
     assert sorted(os.listdir(tmp_path)) == sorted([*output_names("s"), ".other.staging-" + "2" * 32])
 
 
+def test_optional_preview_is_published_with_the_set_and_removed_with_the_next(tmp_path):
+    out = str(tmp_path)
+    with output_set(out, "p") as staging:
+        fake_set_with_preview(staging, "one")
+    report = json.loads((tmp_path / "p.report.json").read_text())
+    assert "p.preview.png" in report["files"] and verify_output_set(out, "p") is None
+    (tmp_path / "p.preview.png").write_text("from another bake")
+    assert "p.preview.png is not the file the report lists" in verify_output_set(out, "p")
+    with output_set(out, "p") as staging:  # a bake without --preview: the older preview goes with the publish
+        fake_set(staging, "two")
+    assert not (tmp_path / "p.preview.png").exists() and verify_output_set(out, "p") is None
+
+
+def test_failed_bake_keeps_the_previous_preview(tmp_path):
+    out = str(tmp_path)
+    with output_set(out, "p") as staging:
+        fake_set_with_preview(staging, "one")
+    with pytest.raises(RuntimeError), output_set(out, "p") as staging:
+        fake_set(staging, "two")
+        raise RuntimeError("a stage failed")
+    assert "one" in (tmp_path / "p.preview.png").read_text() and verify_output_set(out, "p") is None
+
+
+def test_killed_publish_that_removes_a_preview_is_completed(tmp_path):
+    out = str(tmp_path)
+    with output_set(out, "q") as staging:
+        fake_set_with_preview(staging, "old")
+    publishing = tmp_path / (".q.staging-" + "3" * 32)
+    publishing.mkdir()
+    staging = outputs.Staging(out, "q", str(publishing))
+    fake_set(staging, "new")
+    (publishing / "PUBLISHING").write_text("".join(n + "\n" for n in output_names("q")) + "-q.preview.png\n")
+    os.replace(publishing / "q.fracture.bin", tmp_path / "q.fracture.bin")  # killed after one rename
+    preflight(out, "q")
+    assert verify_output_set(out, "q") is None and not (tmp_path / "q.preview.png").exists()
+
+
+def fake_set_with_preview(staging, tag: str) -> None:
+    with open(staging.file(staging.stem + ".preview.png"), "w") as fh:
+        fh.write(f"{tag} preview\n")
+    fake_set(staging, tag)
+
+
 def test_stale_lock_of_a_dead_process_is_broken_and_a_live_one_waited_for(tmp_path, monkeypatch):
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     lock = StemLock(str(tmp_path), "s")

@@ -39,6 +39,18 @@ def test_bake_preview_png_is_valid_and_not_blank(baked):
     assert (pixels < 240).any(axis=2).mean() > 0.05  # not blank
 
 
+def test_bake_preview_belongs_to_the_output_set(baked):
+    """The preview is published with the set: the report lists its hash, like the other files'."""
+    import json
+
+    from fracture_cli.io.outputs import verify_output_set
+
+    out, stem = baked
+    report = json.loads((out / f"{stem}.report.json").read_text())
+    assert f"{stem}.preview.png" in report["files"] and f"{stem}.preview.png" in report["outputs"]
+    assert verify_output_set(str(out), stem) is None
+
+
 def test_preview_command_size_and_determinism(baked, tmp_path):
     out, stem = baked
     runtime = str(out / f"{stem}.fracture.json")

@@ -79,49 +79,39 @@ def test_impact_warns_about_a_far_point_and_its_help_says_what_it_writes(tmp_pat
 
 
 class _FakeBake:
-    """Stands in for the pipeline: the CLI logic around it is what is tested."""
+    """Stands in for the pipeline: the CLI logic around it is what is tested (the preview itself is
+    rendered into the output set by the bake: tests/test_outputs.py and tests/test_preview.py)."""
 
     def __init__(self):
-        self.renders = []
+        self.previews = []
 
-    def bake(self, path, out_dir, recipe, cache_dir=None):
+    def bake(self, path, out_dir, recipe, cache_dir=None, jobs=None, preview_size=None):
         from fracture_cli.bake import BakeResult
 
-        os.makedirs(out_dir, exist_ok=True)
+        self.previews.append(preview_size)
         report = {"counts": {"fragments": 1, "modes": 1, "tets": 1}, "checks": {"volume_error": 0.0},
                   "seconds": {"load": 0.0}}
         return BakeResult(report=report, outputs=())
-
-    def render(self, json_path, png_path, *, width=1600, height=1000, **_):
-        self.renders.append((os.path.basename(png_path), width, height))
-        with open(png_path, "wb") as fh:
-            fh.write(b"png")
 
 
 @pytest.fixture
 def fake_bake(monkeypatch):
     import fracture_cli.bake
-    import fracture_cli.preview
 
     fake = _FakeBake()
     monkeypatch.setattr(fracture_cli.bake, "bake", fake.bake)
-    monkeypatch.setattr(fracture_cli.preview, "render_preview", fake.render)
     return fake
 
 
-def test_bake_preview_size_and_stale_preview(tmp_path, fake_bake):
+def test_bake_preview_size_reaches_the_bake(tmp_path, fake_bake):
     asset = tmp_path / "thing.glb"
     asset.write_bytes(b"")
     out = tmp_path / "out"
-    sized = CliRunner().invoke(cli, ["bake", str(asset), "-o", str(out), "--preview-size", "2400", "1500", "-q"])
-    assert sized.exit_code == 0, sized.output
-    assert fake_bake.renders == [("thing.preview.png", 2400, 1500)]
-    assert (out / "thing.preview.png").exists()
-    plain = CliRunner().invoke(cli, ["bake", str(asset), "-o", str(out), "-q"])
-    assert plain.exit_code == 0, plain.output
-    assert not (out / "thing.preview.png").exists()  # it showed the previous bake
-    default = CliRunner().invoke(cli, ["bake", str(asset), "-o", str(out), "--preview", "-q"])
-    assert default.exit_code == 0 and fake_bake.renders[-1] == ("thing.preview.png", 1600, 1000)
+    for extra, size in ((["--preview-size", "2400", "1500"], (2400, 1500)), ([], None),
+                        (["--preview"], (1600, 1000))):
+        result = CliRunner().invoke(cli, ["bake", str(asset), "-o", str(out), *extra, "-q"])
+        assert result.exit_code == 0, result.output
+        assert fake_bake.previews[-1] == size
     bad = CliRunner().invoke(cli, ["bake", str(asset), "-o", str(out), "--preview-size", "10", "10"])
     assert bad.exit_code == 2 and "--preview-size 10 10 is out of range" in bad.output
 

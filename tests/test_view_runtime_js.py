@@ -8,14 +8,14 @@ The page of `fracture view` imports the same file.
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 
 import numpy as np
 import pytest
 from engine_support import (
     CORRUPT,
-    REPO,
+    JS_DRIVER,
+    NODE,
     check_answers,
     corrupt_cases,
     float_to_bits,
@@ -23,6 +23,7 @@ from engine_support import (
     load_vectors,
     parse_answer,
     protocol_input,
+    requires_node,
     runtime_paths,
     vector_names,
 )
@@ -30,11 +31,8 @@ from engine_support import (
 from fracture_cli.runtime.format import RuntimeData, write_runtime
 from fracture_cli.runtime.impact import project_impact
 
-DRIVER = os.path.join(REPO, "engines", "web", "fracture_check.mjs")
-NODE = shutil.which("node")
-
-pytestmark = pytest.mark.skipif(NODE is None, reason="node (Node.js) is not installed; the JavaScript reader "
-                                "runs under it (apt-get install nodejs)")
+DRIVER = JS_DRIVER
+pytestmark = requires_node
 
 
 def run_driver(header: str, binary: str, stdin: str = "", *flags: str) -> subprocess.CompletedProcess:

@@ -29,8 +29,10 @@ class BakeOutcome:
 
 
 def output_names(stem: str) -> tuple[str, ...]:
-    """File names a bake of ``stem`` publishes (checked against the inputs before any work)."""
-    return (f"{stem}.glb", f"{stem}.fracture.json", f"{stem}.fracture.bin", f"{stem}.report.json")
+    """File names a bake of ``stem`` may publish (checked against the inputs before any work)."""
+    from fracture_cli.io.outputs import all_names
+
+    return all_names(stem)
 
 
 def bake_asset(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None) -> BakeOutcome:

@@ -77,7 +77,8 @@ def run(job: BakeJob) -> TaskResult:
     """Bake (unless up to date), record the state, and compute the impacts asked for."""
     if job.bake:
         outcome = bake_asset(job.input_path, job.out_dir, job.recipe, job.cache_dir)
-        write_state(state_path(job.out_dir, job.stem), job.key, job.inputs, outcome.outputs, job.hashed_at_ns)
+        write_state(state_path(job.out_dir, job.stem), job.key, job.inputs, outcome.outputs, job.hashed_at_ns,
+                    outcome.report)
         report, status = outcome.report, BAKED
     else:
         report, status = _read_report(job), UP_TO_DATE

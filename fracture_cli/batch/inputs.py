@@ -1,8 +1,9 @@
 """Every file a bake reads, and their content hashes (for incremental batches).
 
 A ``.gltf`` reads its external buffers and images, an OBJ its ``mtllib``
-material files and the textures they name; all of them change the output, so
-all of them are part of an asset's key. Hashes are reused from the previous
+material files and the textures they name, a PLY its texture; all of them
+change the output, so all of them are part of an asset's key (the list is
+:func:`fracture_cli.io.inputs.input_files`, the one the bake's cache uses). Hashes are reused from the previous
 state when a file's size and modification time are unchanged (as git does), so
 a re-run reads only what changed (the state module offers only hashes taken
 well after the file's modification time, so an edit within one timestamp tick
@@ -11,20 +12,14 @@ is never missed).
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import stat
-import urllib.parse
 from dataclasses import dataclass
 
-from fracture_cli.bake import file_sha256
+from fracture_cli.io.inputs import file_sha256
 
 log = logging.getLogger(__name__)
-
-# OBJ material statements that name a texture file (the file name is the last token).
-_MTL_MAPS = ("map_", "bump", "disp", "decal", "refl", "norm")
-
 
 @dataclass(frozen=True)
 class InputFile:
@@ -48,68 +43,16 @@ class InputFile:
     sha256: str
 
 
-def _uri_files(doc: dict, folder: str) -> list[str]:
-    out = []
-    for kind in ("buffers", "images"):
-        for item in doc.get(kind) or []:
-            uri = item.get("uri") if isinstance(item, dict) else None
-            if isinstance(uri, str) and uri and not uri.startswith("data:") and "://" not in uri:
-                out.append(os.path.join(folder, urllib.parse.unquote(uri)))
-    return out
-
-
-def _gltf_files(path: str) -> list[str]:
-    from fracture_cli.io.gltf import read_glb_chunks
-
-    try:
-        if path.lower().endswith(".glb"):
-            doc, _ = read_glb_chunks(path)
-        else:
-            with open(path, encoding="utf-8") as fh:
-                doc = json.load(fh)
-    except Exception as exc:  # the bake reports an unreadable file; its key is then the file alone
-        log.debug("batch: %s: cannot list external files (%s)", path, exc)
-        return []
-    return _uri_files(doc, os.path.dirname(path)) if isinstance(doc, dict) else []
-
-
-def _statement_files(path: str, prefixes: tuple[str, ...], last_token: bool) -> list[str]:
-    """Files named by lines starting with one of ``prefixes`` (OBJ ``mtllib``, MTL ``map_Kd`` ...)."""
-    if not _is_regular(path):
-        return []
-    out = []
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for line in fh:
-            words = line.split()
-            if words and words[0].startswith(prefixes):
-                names = words[-1:] if last_token else words[1:]
-                out += [os.path.join(os.path.dirname(path), n) for n in names]
-    return out
-
-
-def _obj_files(path: str) -> list[str]:
-    materials = _statement_files(path, ("mtllib",), last_token=False)
-    textures = [t for m in materials for t in _statement_files(m, _MTL_MAPS, last_token=True)]
-    return materials + textures
-
-
-def _is_regular(path: str) -> bool:
-    try:
-        return stat.S_ISREG(os.stat(path).st_mode)
-    except OSError:
-        return False
-
-
 def dependency_files(path: str) -> list[str]:
-    """Absolute paths of the files an asset reads besides itself (sorted, no duplicates)."""
-    ext = os.path.splitext(path)[1].lower()
-    if ext in (".gltf", ".glb"):
-        found = _gltf_files(path)
-    elif ext == ".obj":
-        found = _obj_files(path)
-    else:
-        found = []
-    return sorted({os.path.abspath(p) for p in found} - {os.path.abspath(path)})
+    """Absolute paths of the files an asset reads besides itself (sorted, no duplicates).
+
+    The list is the bake's own (:func:`fracture_cli.io.inputs.input_files`, which
+    the cache key and the output preflight use too), so a batch never decides
+    "up to date" from a different set of files than the bake reads.
+    """
+    from fracture_cli.io.inputs import input_files
+
+    return sorted({os.path.abspath(p) for p in input_files(path)[1:]} - {os.path.abspath(path)})
 
 
 def hash_input(path: str, name: str, previous: dict[str, InputFile] | None = None) -> InputFile:

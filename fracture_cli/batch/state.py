@@ -12,6 +12,7 @@ outputs unnoticed.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -93,14 +94,43 @@ def is_up_to_date(state: dict | None, key: str, out_dir: str) -> bool:
 
 
 def write_state(path: str, key: str, inputs: tuple[InputFile, ...], outputs: tuple[str, ...],
-                hashed_at_ns: int) -> None:
-    """Record a successful publish (call only after the outputs are in place)."""
+                hashed_at_ns: int, report: dict) -> None:
+    """Record a successful publish (call only after the outputs are in place).
+
+    The state is written after the bake released its output lock, so another
+    bake of the same stem (a plain ``fracture bake``, a second batch) may have
+    published in between. The outputs are stat-ed first and the report on disk
+    compared with ``report`` (this bake's: the ``files`` block, the hashes of
+    the set it published) afterwards; when they differ, the
+    set on disk is not the one this key describes, and the state file is
+    removed instead of vouching for it (the next run bakes again).
+    """
+    outputs_now = _stat_outputs(outputs)
+    if not _report_is(os.path.join(os.path.dirname(path), _report_name(outputs)), report):
+        log.warning("%s: another bake replaced the outputs while this one finished; not recorded as up to date",
+                    os.path.dirname(path))
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(path)
+        return
     state = {
         "format": STATE_FORMAT,
         "key": key,
         "hashed_at_ns": hashed_at_ns,
         "written_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "inputs": {f.name: [f.size, f.mtime_ns, f.sha256] for f in inputs},
-        "outputs": _stat_outputs(outputs),
+        "outputs": outputs_now,
     }
     write_bytes_atomic(path, (json.dumps(state, indent=1, sort_keys=True) + "\n").encode())
+
+
+def _report_name(outputs: tuple[str, ...]) -> str:
+    return next(os.path.basename(p) for p in outputs if p.endswith(".report.json"))
+
+
+def _report_is(path: str, report: dict) -> bool:
+    """True when the report at ``path`` lists the same files as ``report`` (the hashes of the set it published)."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return bool(json.load(fh).get("files") == json.loads(json.dumps(report.get("files"))))
+    except (OSError, ValueError, AttributeError):
+        return False

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import stat
 import struct
 from urllib.parse import unquote
 
@@ -46,6 +47,8 @@ def input_files(path: str) -> list[str]:
         an unreadable asset has no companions (the loader reports it).
     """
     ext = os.path.splitext(path)[1].lower()
+    if not _is_regular(path):  # the loader refuses it; a FIFO must not be opened here (it would block)
+        return [path]
     try:
         if ext in (".gltf", ".glb"):
             names = _gltf_uris(path, ext)
@@ -111,6 +114,8 @@ def _obj_companions(path: str) -> list[str]:
                 names += raw.decode("utf-8", "replace").split()[1:]
     textures = []
     for name in names:
+        if not _is_regular(os.path.join(folder, name)):
+            continue
         try:
             with open(os.path.join(folder, name), "rb") as fh:
                 text = fh.read().decode("utf-8", "replace")
@@ -121,6 +126,14 @@ def _obj_companions(path: str) -> list[str]:
             if len(words) >= 2 and words[0].lower().startswith(_MTL_MAPS):
                 textures.append(os.path.join(os.path.dirname(name), words[-1]))
     return names + textures
+
+
+def _is_regular(path: str) -> bool:
+    """Whether ``path`` is a regular file (following symlinks): the only kind read for companions."""
+    try:
+        return stat.S_ISREG(os.stat(path).st_mode)
+    except OSError:
+        return False
 
 
 def _ply_companions(path: str) -> list[str]:

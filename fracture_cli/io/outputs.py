@@ -81,6 +81,10 @@ log = logging.getLogger(__name__)
 #: The suffixes of one output set, in publish order: the report (the manifest) last.
 SUFFIXES = (".fracture.bin", ".fracture.json", ".glb", ".report.json")
 REPORT_SUFFIX = ".report.json"
+#: Outputs a bake writes only when asked (``--preview``). They belong to the set all the same: published
+#: before the report and listed in it when written, removed in the same step when not (an older one
+#: would show other fragments than the files beside it).
+OPTIONAL_SUFFIXES = (".preview.png",)
 _JOURNAL = "PUBLISHING"
 _BACKUP = "previous"
 _TOKEN_RE = "[0-9a-f]{32}"
@@ -90,8 +94,24 @@ _published: list[str] = []
 
 
 def output_names(stem: str) -> tuple[str, ...]:
-    """The file names of ``stem``'s output set, in publish order (report last)."""
+    """The file names every output set of ``stem`` has, in publish order (report last)."""
     return tuple(stem + s for s in SUFFIXES)
+
+
+def optional_names(stem: str) -> tuple[str, ...]:
+    """The file names of ``stem``'s optional outputs (:data:`OPTIONAL_SUFFIXES`)."""
+    return tuple(stem + s for s in OPTIONAL_SUFFIXES)
+
+
+def all_names(stem: str) -> tuple[str, ...]:
+    """Every file name an output set of ``stem`` may have (what preflight and the input check guard)."""
+    return output_names(stem) + optional_names(stem)
+
+
+def _set_names(stem: str, written: tuple[str, ...]) -> tuple[str, ...]:
+    """Publish order of a set with the optional outputs ``written``: the required files, the optional, the report."""
+    required = output_names(stem)
+    return required[:-1] + tuple(n for n in optional_names(stem) if n in written) + required[-1:]
 
 
 def _umask() -> int:
@@ -125,12 +145,17 @@ def recover(out_dir: str, stem: str) -> None:
     complete); every other staging folder is removed.
     """
     for staging in _staging_dirs(out_dir, stem):
-        names = _read_journal(os.path.join(staging, _JOURNAL))
-        if names == output_names(stem):
+        lines = _read_journal(os.path.join(staging, _JOURNAL))
+        names = tuple(n for n in lines or () if not n.startswith("-"))
+        removed = [n[1:] for n in lines or () if n.startswith("-") and n[1:] in optional_names(stem)]
+        if lines and names == _set_names(stem, names):
             for name in names:
                 src = os.path.join(staging, name)
                 if os.path.exists(src):
                     os.replace(src, os.path.join(out_dir, name))
+            for name in removed:
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(os.path.join(out_dir, name))
             _sync_dir(out_dir)
             log.warning("%s: completed the output set of %s that a killed bake was publishing",
                         printable(out_dir), printable(stem))
@@ -162,10 +187,14 @@ class Staging:
     path: str
 
     def file(self, name: str) -> str:
-        """Path in the staging folder of output ``name`` (one of :func:`output_names`)."""
-        if name not in output_names(self.stem):
+        """Path in the staging folder of output ``name`` (one of :func:`all_names`)."""
+        if name not in all_names(self.stem):
             raise ValueError(f"{name} is not an output of {self.stem}")
         return os.path.join(self.path, name)
+
+    def names(self) -> tuple[str, ...]:
+        """The outputs of this set in publish order: the required ones and the optional ones written here."""
+        return _set_names(self.stem, tuple(n for n in optional_names(self.stem) if os.path.isfile(self.file(n))))
 
     def write_report(self, report: dict) -> str:
         """Write ``report`` as ``<stem>.report.json``, the manifest: ``report["files"]`` gets the other files' hashes.
@@ -176,7 +205,7 @@ class Staging:
             If the report holds NaN or infinity (JSON has no such numbers: a bug upstream).
         """
         files = {}
-        for name in output_names(self.stem)[:-1]:
+        for name in self.names()[:-1]:
             path = self.file(name)
             files[name] = {"sha256": file_sha256(path), "bytes": os.path.getsize(path)}
         report["files"] = files
@@ -270,7 +299,7 @@ def write_error(exc: OSError, out_dir: str) -> OutputError:
 def _finish_files(staging: Staging) -> None:
     """Every output present, mode ``0666 & ~umask`` (mkstemp makes 0600), and synced to disk."""
     mode = file_mode()
-    for name in output_names(staging.stem):
+    for name in staging.names():
         path = staging.file(name)
         if not os.path.isfile(path):
             raise StageError(f"{name} was not written", stage="export")
@@ -287,18 +316,20 @@ def publish(staging: Staging) -> None:
     OutputError
         A rename failed; says whether the previous set was restored.
     """
-    out_dir, names = staging.out_dir, output_names(staging.stem)
+    out_dir, names = staging.out_dir, staging.names()
+    # Optional outputs of an older set that this one does not have: removed in the same step.
+    stale = [n for n in optional_names(staging.stem) if n not in names and os.path.isfile(os.path.join(out_dir, n))]
     backup = os.path.join(staging.path, _BACKUP)
     os.mkdir(backup)
     previous = []
-    for name in names:
+    for name in names + tuple(stale):
         target = os.path.join(out_dir, name)
         if os.path.isfile(target):
             _link_or_copy(target, os.path.join(backup, name))
             previous.append(name)
     journal = os.path.join(staging.path, _JOURNAL)
     with open(journal, "w", encoding="utf-8") as fh:
-        fh.write("\n".join(names) + "\n")
+        fh.write("".join(n + "\n" for n in names) + "".join("-" + n + "\n" for n in stale))
         fh.flush()
         os.fsync(fh.fileno())
     _sync_dir(staging.path)
@@ -306,6 +337,9 @@ def publish(staging: Staging) -> None:
     try:
         for name in names:
             os.replace(staging.file(name), os.path.join(out_dir, name))
+            done.append(name)
+        for name in stale:
+            os.unlink(os.path.join(out_dir, name))
             done.append(name)
     except BaseException as exc:
         os.unlink(journal)  # from here on the staging folder is not a set to roll forward
@@ -330,7 +364,8 @@ def _restore(out_dir: str, backup: str, done: list[str], previous: list[str], ca
             if name in previous:
                 os.replace(os.path.join(backup, name), target)
             else:
-                os.unlink(target)
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(target)
     except OSError as exc:
         raise OutputError(f"publishing failed ({_reason(cause)}) and restoring the previous outputs failed too "
                           f"({exc.strerror}): the files of {printable(os.path.basename(backup))} are mixed; check "
@@ -418,8 +453,11 @@ def verify_output_set(out_dir: str, stem: str) -> str | None:
         return f"{stem}{REPORT_SUFFIX} is missing"
     except (ValueError, KeyError, TypeError) as exc:
         return f"{stem}{REPORT_SUFFIX} is not a manifest ({exc})"
-    for name in output_names(stem)[:-1]:
-        entry = files.get(name) if isinstance(files, dict) else None
+    if not isinstance(files, dict):
+        return f"{stem}{REPORT_SUFFIX} is not a manifest (no 'files' object)"
+    listed = [n for n in optional_names(stem) if n in files]
+    for name in output_names(stem)[:-1] + tuple(listed):
+        entry = files.get(name)
         path = os.path.join(out_dir, name)
         if not isinstance(entry, dict):
             return f"the report does not list {name}"

@@ -13,7 +13,7 @@ import shutil
 from collections.abc import Iterable
 
 from fracture_cli.errors import OutputError, printable
-from fracture_cli.io.outputs import output_names, recover, write_error
+from fracture_cli.io.outputs import all_names, recover, write_error
 from fracture_cli.io.stemlock import StemLock
 
 
@@ -52,7 +52,7 @@ def preflight(out_dir: str, stem: str, inputs: Iterable[str] = (), estimate_byte
         _check_writable(ancestor, for_new_folder=True)
         _check_free_space(ancestor, stem, estimate_bytes, out_dir)
         return
-    for name in output_names(stem):
+    for name in all_names(stem):
         target = os.path.join(out_dir, name)
         if os.path.lexists(target) and not os.path.isfile(target):
             raise OutputError("is in the way of an output (not a regular file); remove or rename it",
@@ -129,7 +129,7 @@ def check_inputs_untouched(out_dir: str, stems: Iterable[str], inputs: Iterable[
     OutputError
         See :func:`refuse_replacing_inputs`.
     """
-    refuse_replacing_inputs([os.path.join(out_dir, name) for stem in stems for name in output_names(stem)], inputs)
+    refuse_replacing_inputs([os.path.join(out_dir, name) for stem in stems for name in all_names(stem)], inputs)
 
 
 def refuse_replacing_inputs(targets: Iterable[str], inputs: Iterable[str]) -> None:
