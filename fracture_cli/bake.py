@@ -203,7 +203,11 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
 
     check_inputs_untouched(out_dir, [stem], input_files(state.need("source", "export")))  # also for a chain
     with runner.step("export"), output_set(out_dir, stem) as staging:
-        write_fragments_glb(staging.file(f"{stem}.glb"), state.need("fragments", "export"))
+        collision_options = runner.options.get("collision")
+        frags = state.need("fragments", "export")
+        write_fragments_glb(staging.file(f"{stem}.glb"), frags, pivot=frags.pivot, parts=state.collision,
+                            collision=getattr(collision_options, "glb", "none") if state.collision else "none",
+                            stem=stem)
         write_runtime(state.need("runtime", "export"), staging.file(f"{stem}.fracture.json"))
         if preview_size is not None:
             from fracture_cli.preview import render_preview

@@ -25,12 +25,14 @@ log = logging.getLogger(__name__)
 VOLUME_TOLERANCE = 1e-5
 
 
-def written_fragments(fragments: Fragments) -> tuple[Fragments, list[MeshCheck]]:
+def written_fragments(fragments: Fragments, pivot: str = "center_of_mass") -> tuple[Fragments, list[MeshCheck]]:
     """Check every fragment on its positions exactly as the GLB stores them, dropping faces rounding collapses.
 
     Parameters
     ----------
     fragments : Fragments
+    pivot : {"center_of_mass", "bbox"}, optional
+        The fragment nodes' origins, as the writer will use them.
 
     Returns
     -------
@@ -44,12 +46,12 @@ def written_fragments(fragments: Fragments) -> tuple[Fragments, list[MeshCheck]]
         One per fragment, welded by exact written position (see
         :func:`~fracture_cli.meshfix.weld_check.check_mesh`).
     """
-    from fracture_cli.io.write import node_origin
+    from fracture_cli.gameready.stage import fragment_physics
 
     out, checks = [], []
-    for frag in fragments.fragments:
+    for frag, body in zip(fragments.fragments, fragment_physics(fragments, pivot=pivot)):
         world = fragments.normalization.to_world(frag.vertices)
-        stored = as_written(world, node_origin(world))
+        stored = as_written(world, body.origin)
         _, index = weld_by_position(stored)
         degenerate = collapsed(index[frag.faces])
         if degenerate.any():

@@ -175,7 +175,7 @@ def impact_cmd(runtime_file: str, point: tuple[float, float, float], impulse: tu
             glb = runtime_file[: -len(".fracture.json")] + ".glb" if runtime_file.endswith(".fracture.json") else None
             if glb is None or not os.path.exists(glb):
                 raise UsageError(f"cannot find the fragments file next to {runtime_file} (expected <stem>.glb)")
-            write_groups_glb(glb, result.groups, out_glb)
+            write_groups_glb(glb, result.groups, out_glb, fragment_names=data.fragment_names)
         if out_png:
             from fracture_cli.preview import render_preview
 

@@ -14,6 +14,7 @@ import contextlib
 import dataclasses
 import importlib
 import logging
+import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -52,6 +53,7 @@ class PipelineState:
     pieces: Pieces | None = None
     regions: Regions | None = None
     fragments: Fragments | None = None
+    collision: tuple | None = None  # convex parts of every fragment, model space (gameready.stage.Parts)
     checks: dict[str, CheckValue] | None = None  # what the report says of the fragments
     runtime: RuntimeData | None = None
 
@@ -169,11 +171,14 @@ def _smooth(state: PipelineState, options: Any) -> PipelineState:
 
 
 def _fragments(state: PipelineState, options: Any) -> PipelineState:
-    from fracture_cli.stages.fragments import fragments
+    from fracture_cli.stages.fragments import fragments_with_split
 
     surface = state.need("surface", "fragments")
-    frags = fragments(surface, state.need("regions", "fragments"), options)
-    frags, checks = _checked(surface, frags)
+    frags, split = fragments_with_split(surface, state.need("regions", "fragments"), options)
+    frags, checks = _checked(surface, dataclasses.replace(frags, pivot=options.pivot))
+    # Cuts that fell apart: bodies that became fragments of their own, and tiny ones glued to a neighbour.
+    checks["split_bodies"] = sum(split.bodies) - len(split.bodies) - split.merged
+    checks["merged_bodies"] = split.merged
     return dataclasses.replace(state, fragments=frags, checks=checks)
 
 
@@ -188,7 +193,7 @@ def _checked(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments, dict[st
     )
 
     # Checked as they will be written (float32 about each pivot).
-    frags, written = written_fragments(frags)
+    frags, written = written_fragments(frags, frags.pivot)
     require_sound(written)
     checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written))
     require_volume(checks)
@@ -216,15 +221,28 @@ def _simplify(state: PipelineState, options: Any) -> PipelineState:
     return dataclasses.replace(state, fragments=frags, checks=checks)
 
 
+def _collision(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.gameready.stage import collision
+
+    parts, checks = collision(state.need("fragments", "collision"), options)
+    return dataclasses.replace(state, collision=parts, checks={**(state.checks or {}), **checks})
+
+
 def _runtime(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.gameready.components import fragments_graph
+    from fracture_cli.gameready.stage import runtime_arrays_of
     from fracture_cli.io.write import fragment_name
     from fracture_cli.stages.precompute import runtime
 
     frags = state.need("fragments", "runtime")
     order = [int(f.piece) for f in frags.fragments]
-    names = tuple(fragment_name(i) for i in range(len(order)))
+    stem = os.path.splitext(os.path.basename(state.need("source", "runtime")))[0]
+    names = tuple(fragment_name(i, stem) for i in range(len(order)))  # as the GLB's nodes
+    # Bonds where fragments share fault faces: every group the game splits off is connected in space.
     data = runtime(state.need("tet_mesh", "runtime"), state.need("modes", "runtime"), state.need("pieces", "runtime"),
-                   options, fragment_pieces=order, fragment_names=names)
+                   options, fragment_pieces=order, fragment_names=names, fragment_graph=fragments_graph(frags))
+    # Mass properties and collision parts for engines that read the runtime file only (FORMAT.md section 8).
+    data = dataclasses.replace(data, gameready=runtime_arrays_of(frags, state.collision))
     return dataclasses.replace(state, runtime=data)
 
 
@@ -254,9 +272,12 @@ STAGES: tuple[Stage, ...] = (
     Stage("simplify", "Simplify the fragments' faults to a tolerance (outer surface kept), and check them again.",
           "fracture_cli.stages.simplify:SimplifyOptions", _simplify, consumes=("surface", "fragments"),
           produces=("fragments", "checks")),
+    Stage("collision", "Convex collision parts per fragment that do not overlap (GLB and runtime file).",
+          "fracture_cli.gameready.collision:CollisionOptions", _collision, consumes=("fragments",),
+          produces=("collision",)),
     Stage("runtime", "Precompute the impact-projection data for the game (the runtime file).",
           "fracture_cli.stages.precompute:RuntimeOptions", _runtime,
-          consumes=("tet_mesh", "modes", "pieces", "fragments"), produces=("runtime",)),
+          consumes=("tet_mesh", "modes", "pieces", "fragments"), uses=("collision",), produces=("runtime",)),
 )
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
 # The steps a bake reports seconds for: every stage, then writing the outputs.

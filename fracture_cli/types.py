@@ -412,9 +412,13 @@ class Fragments:
         Map back to the input's units.
     input_volume : float
         Volume of the (repaired) input solid, normalized units.
+    pivot : {"center_of_mass", "bbox"}
+        Where each fragment's node origin goes when written (``fragments.pivot``);
+        the checks of the written meshes use the same.
     """
 
     fragments: tuple[Fragment, ...]
     materials: tuple[Material, ...]
     normalization: Normalization
     input_volume: float
+    pivot: str = "center_of_mass"

@@ -12,14 +12,6 @@ SAMPLE_ASSETS = os.path.join(REPO, "sample_assets")
 SAMPLE_FILES = ("pillar.glb", "chair.glb", "vase.obj")
 
 
-# Whether the tree splits every fragment into its connected bodies (fracture_cli/gameready/components.py, the
-# gameready work). Without it a fragment may be several bodies (reported `connected: false`), and one whose
-# bodies share an edge stops the bake; tests that need the split expect that and say so.
-SPLITS_BODIES = False  # True once the fragments stage splits bodies (fracture_cli.gameready.components wired in)
-BODY_SPLIT_MISSING = ("fragments are not split into their connected bodies in this tree "
-                      "(fracture_cli/gameready/components.py)")
-
-
 def pytest_addoption(parser):
     parser.addoption("--update-goldens", action="store_true", default=False,
                      help="rewrite tests/golden/*.json from the current output instead of comparing")

@@ -23,8 +23,6 @@ from fracture_cli.io.gltf import read_glb
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from invariants import check_glb  # noqa: E402
 
-from conftest import BODY_SPLIT_MISSING, SPLITS_BODIES  # noqa: E402
-
 HERE = os.path.dirname(os.path.abspath(__file__))
 CORPUS = os.path.join(HERE, "data", "bad")
 with open(os.path.join(CORPUS, "expected.toml"), "rb") as _fh:
@@ -76,9 +74,7 @@ def test_corpus_is_complete_and_small():
 
 
 @pytest.mark.parametrize("entry", CASES, ids=[c["file"] for c in CASES])
-def test_corpus_outcome(entry, tmp_path, request):
-    if entry.get("needs_body_split") and not SPLITS_BODIES:
-        request.applymarker(pytest.mark.xfail(strict=True, reason=f"{entry['needs_body_split']}: {BODY_SPLIT_MISSING}"))
+def test_corpus_outcome(entry, tmp_path):
     if not entry.get("known_issue"):
         check_outcome(entry, tmp_path)
         return
@@ -103,6 +99,28 @@ def check_loaded(entry):
     assert volume == pytest.approx(entry["volume"], rel=1e-6)
     np.testing.assert_allclose(lo, entry["bbox"][0], atol=1e-6)
     np.testing.assert_allclose(hi, entry["bbox"][1], atol=1e-6)
+
+
+def check_bonds_are_shared_faces(out: str, stem: str, meshes, interior: int, diagonal: float) -> None:
+    """The runtime file bonds exactly the written fragments that share fault faces, so every group is connected."""
+    from fracture_cli.gameready.components import fragment_graph
+    from fracture_cli.runtime.format import load_runtime
+
+    data = load_runtime(os.path.join(out, stem + ".fracture.json"))
+    assert list(data.fragment_names) == [m.name for m in meshes]
+    solids, fault = [], []
+    for mesh in meshes:  # one mesh per fragment, its primitives stacked
+        offsets = np.cumsum([0] + [len(p.positions) for p in mesh.primitives])
+        solids.append((np.concatenate([p.positions for p in mesh.primitives]),
+                       np.concatenate([p.indices + o for p, o in zip(mesh.primitives, offsets)])))
+        fault.append(np.concatenate([np.full(len(p.indices), p.material == interior) for p in mesh.primitives]))
+    # float32 positions about each fragment's own pivot: the two sides of a fault agree to ~1e-7 of the diagonal.
+    edges, _ = fragment_graph(solids, fault, min_area=1e-6 * diagonal**2, tolerance=1e-6 * diagonal)
+    bonded = {tuple(e) for e in np.asarray(data.edges).tolist()}
+    assert {tuple(e) for e in edges.tolist()} <= bonded
+    # Every bond is through shared faces (an area of contact that the meshes show).
+    edges_any, _ = fragment_graph(solids, fault, min_area=0.0, tolerance=1e-6 * diagonal)
+    assert bonded <= {tuple(e) for e in edges_any.tolist()}
 
 
 def check_outcome(entry, tmp_path):
@@ -144,16 +162,16 @@ def check_outcome(entry, tmp_path):
     # Independent checks on the written GLB (float32, input units).
     meshes, material_names = read_glb(os.path.join(out, stem + ".glb"))
     assert len(meshes) == report["counts"]["fragments"] >= 1
-    interior = material_names.index("interior")
+    interior = material_names.index(f"{stem}_interior")
     tris = raw_triangles(os.path.join(CORPUS, entry["reference"]) if entry.get("reference") else path)
     diagonal = float(np.linalg.norm(tris.reshape(-1, 3).max(axis=0) - tris.reshape(-1, 3).min(axis=0)))
     # Every fragment, welded by its exact written position: closed, manifold, oriented, one body, positive volume.
     written = check_glb(os.path.join(out, stem + ".glb"))
-    # Several bodies in one fragment: allowed only where the tree does not split fragments into bodies.
-    failing = [f"{f.name}: {f.problems}" for f in written.failing
-               if SPLITS_BODIES or f.problems != [f"{f.components} bodies"]]
+    # Every fragment is one body (a fragment that falls apart is split into fragments).
+    failing = [f"{f.name}: {f.problems}" for f in written.failing]
     assert not failing, failing
     assert checks["connected"] == all(f.components == 1 for f in written.fragments)
+    check_bonds_are_shared_faces(out, stem, meshes, interior, diagonal)
     total = written.total_volume
     outer_points = [p.positions for mesh in meshes for p in mesh.primitives if p.material != interior]
     expected_volume = entry.get("volume", report["checks"]["input_volume"])

@@ -64,15 +64,17 @@ def test_glb_structure_is_valid_gltf(chair_bake):
     doc, binary = read_glb(out / "chair.glb")
     report = json.loads(result.stdout)
     assert doc["asset"]["version"] == "2.0"
-    names = [n["name"] for n in doc["nodes"]]
-    assert names == [f"fragment_{i:03d}" for i in range(report["counts"]["fragments"])]
-    assert [m["name"] for m in doc["materials"]][-1] == "interior"
+    names = [doc["nodes"][i]["name"] for i in doc["scenes"][0]["nodes"]]
+    assert names == [f"chair_fragment_{i:03d}" for i in range(report["counts"]["fragments"])]
+    assert [m["name"] for m in doc["materials"]][-1] == "chair_interior"
+    assert set(doc["extensionsUsed"]) >= {"OMI_physics_body", "OMI_physics_shape"}  # the default collision format
     for acc in doc["accessors"]:
         view = doc["bufferViews"][acc["bufferView"]]
-        size = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[acc["type"]] * 4
+        size = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[acc["type"]] * {5126: 4, 5125: 4, 5123: 2}[acc["componentType"]]
         assert view["byteOffset"] % 4 == 0
         assert view["byteOffset"] + acc["count"] * size <= len(binary)
-    for mesh in doc["meshes"]:
+    fragment_meshes = [doc["nodes"][i]["mesh"] for i in doc["scenes"][0]["nodes"]]  # (the rest: collision parts)
+    for mesh in (doc["meshes"][m] for m in fragment_meshes):
         for prim in mesh["primitives"]:
             pos = doc["accessors"][prim["attributes"]["POSITION"]]
             assert "min" in pos and "max" in pos
@@ -139,8 +141,12 @@ def test_impact_cli_on_baked_chair(chair_bake, tmp_path):
                                       "--impulse", "0", "-50", "0", "--json", "-o", str(tmp_path / "broken.glb")])
     assert result.exit_code == 0, result.output
     groups = json.loads(result.stdout)["groups"]
-    assert sum(len(g) for g in groups) == len(read_glb(out / "chair.glb")[0]["nodes"])
-    assert (tmp_path / "broken.glb").is_file()
+    doc = read_glb(out / "chair.glb")[0]
+    assert sum(len(g) for g in groups) == len(doc["scenes"][0]["nodes"])  # every fragment node (not its parts)
+    broken, _ = read_glb(tmp_path / "broken.glb")
+    assert [n["name"] for n in broken["nodes"] if n["name"].startswith("group_")] == [f"group_{g:03d}" for g in
+                                                                                      range(len(groups))]
+    assert "OMI_physics_shape" not in broken.get("extensionsUsed", [])  # shapes point at meshes it renumbers
     zero = CliRunner().invoke(cli, ["impact", runtime, "--point", "0", "0", "0", "--impulse", "0", "0", "0", "--json"])
     assert zero.exit_code == 0
     assert len(json.loads(zero.stdout)["groups"]) == 1

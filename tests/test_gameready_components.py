@@ -142,3 +142,22 @@ def test_isolated_tiny_body_is_kept():
     a = _fragment(_concat(_box([0, 0, 0], [1, 1, 1]), _box([5, 5, 5], [5.01, 5.01, 5.01])), piece=0)
     result, report = split_fragments(_fragments([a]), min_volume_fraction=1e-3)
     assert report.isolated == 1 and len(result.fragments) == 2
+
+
+def test_runtime_repeats_a_split_piece_and_takes_bonds_from_the_meshes():
+    """Two fragments of one piece get its column of W; bonds come from the fragment graph, not the piece graph."""
+    from fracture_cli.errors import StageError
+    from fracture_cli.stages.precompute import _restrict_to_fragments
+    from fracture_cli.types import Pieces
+
+    W = np.arange(6, dtype=np.float64).reshape(2, 3, 1)
+    pieces = Pieces(tet_piece=np.zeros(1, np.int32), W=W, volumes=np.ones(3), centroids=np.zeros((3, 3)),
+                    edges=np.array([[0, 1], [1, 2]], np.int32), edge_areas=np.ones(2),
+                    edge_centroids=np.zeros((2, 3)), edge_normals=np.zeros((2, 3)))
+    graph = (np.array([[1, 2], [0, 2]]), np.array([0.5, 0.25]))
+    W2, edges, areas = _restrict_to_fragments(W, pieces, [1, 1, 2], graph)
+    np.testing.assert_array_equal(W2[:, 0], W[:, 1])
+    np.testing.assert_array_equal(W2[:, 1], W[:, 1])
+    assert edges.tolist() == [[0, 2], [1, 2]] and areas.tolist() == [0.25, 0.5]
+    with pytest.raises(StageError, match="share a piece"):
+        _restrict_to_fragments(W, pieces, [1, 1, 2])

@@ -64,6 +64,7 @@ func _iteration(_delta):
 		for body in bodies:
 			fastest = max(fastest, body.linear_velocity.length())
 		print("max_speed ", fastest)
+		print("bodies ", bodies.size())
 		print("done")
 		quit()
 	return false
@@ -107,3 +108,42 @@ def test_exported_parts_keep_fragments_at_rest_in_godot(tmp_path):
     print("godot max speed after 1 s", speed)
     assert speed["hull"] > 0.1, speed  # the overlapping hulls push the pieces apart
     assert speed["parts"] < 0.05, speed  # the parts only touch: nothing moves
+
+
+# Sample assets and their recipes (sample_assets/manifest.toml): about 3 CPU minutes for the three.
+_SAMPLES = {"chair.glb": "wood", "pillar.glb": "stone", "vase.obj": "ceramic"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("asset", sorted(_SAMPLES))
+def test_baked_sample_rests_in_godot(asset, tmp_path):
+    """The real bake with UCX_ parts, imported by Godot 3: one rigid body per fragment, still after 1 s."""
+    import json
+    import os
+
+    from click.testing import CliRunner
+    from godot_harness import GodotProject
+
+    from fracture_cli.cli import cli
+
+    from conftest import SAMPLE_ASSETS
+
+    project = GodotProject(tmp_path / "godot")  # skips when Godot 3 is missing
+    out = tmp_path / "bake"
+    result = CliRunner().invoke(cli, ["bake", os.path.join(SAMPLE_ASSETS, asset), "-o", str(out), "--recipe",
+                                      _SAMPLES[asset], "--set", "collision.glb=unreal", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    fragments = report["counts"]["fragments"]
+    assert report["checks"]["connected"] and report["checks"]["collision_max_overlap"] < 0.01, report["checks"]
+    stem = os.path.splitext(asset)[0]
+    scene = project.add_file(out / f"{stem}.glb")
+    project.import_resources()
+    speed = {}
+    for mode in ("hull", "parts"):
+        run = project.run_script(REST_SCRIPT, scene, mode)
+        assert int(run.lines("bodies ")[0].split()[1]) == fragments
+        speed[mode] = float(run.lines("max_speed ")[0].split()[1])
+    print(f"baked {asset}: godot max speed after 1 s {speed}, {fragments} fragments, "
+          f"max overlap {report['checks']['collision_max_overlap']}")
+    assert speed["parts"] < 0.05, speed

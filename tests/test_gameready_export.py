@@ -151,3 +151,31 @@ def test_fragments_glb_has_centre_of_mass_pivots_and_mass_extras(tmp_path):
         assert extras["inertia"] == pytest.approx(world.inertia6().tolist(), rel=1e-7, abs=1e-12)
         (mesh,), _ = read_glb(str(path))
         assert np.allclose(mesh.primitives[0].positions, norm.to_world(V), atol=1e-5)
+
+
+def test_runtime_file_carries_the_optional_arrays(tmp_path):
+    """Mass and collision arrays round-trip through the runtime file; counts name them; all or none."""
+    import dataclasses
+
+    from fracture_cli.runtime.format import RuntimeData, encode, load_runtime, write_runtime
+
+    _, physics = _fragments()
+    p = len(physics)
+    rng = np.random.default_rng(0)
+    data = RuntimeData(sites=rng.random((5, 3), dtype=np.float32), B=rng.random((5, 2, 1), dtype=np.float32),
+                       W=rng.random((2, p, 1), dtype=np.float32), edges=np.array([[0, 1]], np.int32),
+                       edge_areas=np.ones(1, np.float32), fragment_names=("a_fragment_000", "a_fragment_001"),
+                       gameready=runtime_arrays(physics))
+    write_runtime(data, tmp_path / "a.fracture.json")
+    back = load_runtime(tmp_path / "a.fracture.json")
+    for name, array in data.gameready.items():
+        np.testing.assert_array_equal(back.gameready[name], array)
+    header = json.loads((tmp_path / "a.fracture.json").read_text())
+    assert header["version"] == 1 and header["counts"]["collision_parts"] == sum(len(b.parts) for b in physics)
+    # A file without them still reads (old bakes), and a header missing one of them is refused.
+    plain = dataclasses.replace(data, gameready={})
+    write_runtime(plain, tmp_path / "b.fracture.json")
+    assert load_runtime(tmp_path / "b.fracture.json").gameready == {}
+    partial = dataclasses.replace(data, gameready={k: v for k, v in data.gameready.items() if k != "fragment_inertia"})
+    with pytest.raises(ValueError, match="all or none"):
+        encode(partial, "c.fracture.bin")

@@ -28,25 +28,11 @@ from fracture_cli.cli import cli
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from invariants import check_glb, input_box, read_glb_fragments
 
-from conftest import SPLITS_BODIES
-
 HERE = os.path.dirname(os.path.abspath(__file__))
 CORPUS = os.path.join(HERE, "data", "realworld")
 with open(os.path.join(CORPUS, "expected.toml"), "rb") as _fh:
     CASES = {c["file"]: c for c in tomllib.load(_fh)["case"]}
 SMALL = ("cage.target_faces=500", "modes.num_modes=4")
-
-# Fragments of several bodies (bodies touching along an edge or at a point) are split into one fragment per body
-# where the tree has that split (conftest.SPLITS_BODIES); without it, these files are expected to fail: a pinched
-# fragment stops the bake (exit 1).
-NEEDS_BODY_SPLIT = {
-    "gear_edge_contact.glb": "teeth touch the hub along an edge: the solid keeps the 4-face edge, and a fragment "
-    "holding a tooth and the hub is two bodies sharing it (pinched), which only splitting the fragment into its "
-    "bodies resolves",
-    "vertex_contact.glb": "boxes touching at a corner and along an edge: fragments holding both sides are several "
-    "bodies sharing an edge or a vertex",
-}
-
 
 def _shared_dir(tmp_path_factory) -> str:
     """A folder shared by all pytest-xdist workers of this run (bakes are cached there)."""
@@ -112,10 +98,8 @@ def check_bake(case: dict, path: str, exit_code: int, output: str, out: str) -> 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(CASES))
-def test_corpus_bake(name, tmp_path_factory, request):
+def test_corpus_bake(name, tmp_path_factory):
     """Bake one corpus file and check its expected outcome on the written GLB."""
-    if name in NEEDS_BODY_SPLIT and not SPLITS_BODIES:
-        request.applymarker(pytest.mark.xfail(strict=True, reason=NEEDS_BODY_SPLIT[name]))
     case = CASES[name]
     path = os.path.join(CORPUS, name)
     exit_code, output, out = bake_once(_shared_dir(tmp_path_factory), path)

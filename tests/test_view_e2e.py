@@ -51,10 +51,10 @@ pytestmark = pytest.mark.skipif(_missing_tool() is not None, reason=str(_missing
 
 
 def _add_collision_part(glb_path: str, out_path: str) -> None:
-    """Copy a fragments GLB with an Unreal-style UCX_ collision child under fragment_000."""
+    """Copy a fragments GLB with an Unreal-style UCX_ collision child under chair_fragment_000."""
     doc, binary = read_glb_chunks(glb_path)
-    first = next(i for i, node in enumerate(doc["nodes"]) if node.get("name") == "fragment_000")
-    doc["nodes"].append({"name": "UCX_fragment_000_00", "mesh": doc["nodes"][first]["mesh"]})
+    first = next(i for i, node in enumerate(doc["nodes"]) if node.get("name") == "chair_fragment_000")
+    doc["nodes"].append({"name": "UCX_chair_fragment_000_00", "mesh": doc["nodes"][first]["mesh"]})
     doc["nodes"][first].setdefault("children", []).append(len(doc["nodes"]) - 1)
     with open(out_path, "wb") as fh:
         fh.write(pack_glb(doc, binary))
@@ -62,10 +62,10 @@ def _add_collision_part(glb_path: str, out_path: str) -> None:
 
 @pytest.fixture(scope="module")
 def bake_folder(tmp_path_factory):
-    """A FAST chair bake plus two derived assets: a renamed copy and one with a collision part."""
+    """A FAST chair bake (no collision parts) plus two derived assets: a renamed copy and one with a UCX_ part."""
     out = tmp_path_factory.mktemp("view")
     result = CliRunner().invoke(cli, ["bake", os.path.join(SAMPLE_ASSETS, "chair.glb"), "-o", str(out), *FAST,
-                                      "--quiet"])
+                                      "--set", "collision.glb=none", "--quiet"])
     assert result.exit_code == 0, result.output
     data = load_runtime(out / "chair.fracture.json")
     write_runtime(data, out / "chair_ucx.fracture.json")

@@ -1,7 +1,11 @@
 """Game-ready output: one body per fragment, mass properties, collision shapes, lean faults.
 
-Standalone library modules (no pipeline wiring yet), one concern each:
+Library modules, one concern each, wired into the bake: the ``fragments`` stage splits
+every cut into its bodies (``components``), the ``collision`` stage (``stage``) computes the
+convex parts, the runtime stage bonds fragments through shared faces and writes mass and
+parts into the runtime file, and the GLB writer puts pivots, extras and parts in the GLB.
 
+* :mod:`~fracture_cli.gameready.stage`: the ``collision`` stage, pivots and the data both files share;
 * :mod:`~fracture_cli.gameready.mass`: volume, centre of mass and inertia tensor of closed meshes;
 * :mod:`~fracture_cli.gameready.components`: connected bodies of a fragment, tiny-body merging, the
   fragment graph recomputed from the meshes;

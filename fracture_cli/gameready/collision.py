@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
+from fracture_cli import parallel
 from fracture_cli.gameready.mass import mass_properties
 from fracture_cli.options import option
 
@@ -41,6 +42,8 @@ log = logging.getLogger(__name__)
 
 STAGE = "collision"
 
+# How the GLB carries the parts (fracture_cli.gameready.export_shapes); "none" computes none.
+COLLISION_FORMATS = ("omi", "godot", "unreal", "none")
 # PhysX and Chaos cook at most 255 vertices per convex mesh.
 ENGINE_MAX_VERTICES = 255
 # A coordinate axis is not tried as a cut normal when a principal axis is this close (cosine, ~15 degrees).
@@ -66,6 +69,10 @@ class CollisionOptions:
                                    "volume", min=0.0, min_exclusive=True)
     intrusion: float = option(0.0, "also cut a part while its hull reaches into other fragments by more than this "
                                    "fraction of its volume (0: off; costs a boolean per part and neighbour)", min=0.0)
+    glb: str = option("omi", "how the GLB carries the parts: OMI_physics_shape/OMI_physics_body extensions (omi), "
+                             "'<fragment>_NN-convcolonly' child meshes (godot), 'UCX_<fragment>_NN' child meshes "
+                             "(unreal), or no parts at all (none; the runtime file then has none either)",
+                      choices=COLLISION_FORMATS)
 
 
 @dataclass(frozen=True)
@@ -117,14 +124,14 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions()) -> 
     solids = [_solid(V, F) for V, F in meshes]
     boxes = np.array([s.bounding_box() for s in solids]).reshape(-1, 6)
     corners, materials, owners, volumes, hull_ratio = [], [], [], [], []
-    for index, solid in enumerate(solids):
-        volume = solid.volume()
+    # Fragments decompose independently: on parallel.current_jobs() processes (forked: the solids are inherited).
+    decomposed = parallel.ordered_map(_decompose, range(len(solids)), (solids, boxes, options))
+    for index, (volume, ratio, leaves) in enumerate(decomposed):
         volumes.append(volume)
-        hull_ratio.append(solid.hull().volume() / volume if volume > 0 else 1.0)
-        intrusion = _Intrusion(solids, boxes, index) if options.intrusion > 0 else None
-        for leaf in convex_decomposition(solid, options.max_parts, options.concavity, intrusion, options.intrusion):
-            corners.append(simplify_hull(hull_corners(leaf), options.max_vertices))
-            materials.append(_mesh(leaf))
+        hull_ratio.append(ratio)
+        for leaf_corners, leaf_mesh in leaves:
+            corners.append(leaf_corners)
+            materials.append(leaf_mesh)
             owners.append(index)
     flat = separate_parts(corners, materials)
     result: list[list[np.ndarray]] = [[] for _ in volumes]
@@ -143,6 +150,17 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions()) -> 
                            hull_ratio=np.array(hull_ratio),
                            parts_ratio=parts_volume / np.maximum(volumes_arr, 1e-300),
                            coverage=covered / np.maximum(volumes_arr, 1e-300))
+
+
+def _decompose(shared: tuple, index: int) -> tuple[float, float, list[tuple[np.ndarray, tuple]]]:
+    """Volume, hull ratio and convex leaves ``(corners, (V, F))`` of fragment ``index`` (numpy only: picklable)."""
+    solids, boxes, options = shared
+    solid = solids[index]
+    volume = solid.volume()
+    ratio = solid.hull().volume() / volume if volume > 0 else 1.0
+    intrusion = _Intrusion(solids, boxes, index) if options.intrusion > 0 else None
+    leaves = convex_decomposition(solid, options.max_parts, options.concavity, intrusion, options.intrusion)
+    return volume, ratio, [(simplify_hull(hull_corners(leaf), options.max_vertices), _mesh(leaf)) for leaf in leaves]
 
 
 def _mesh(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:

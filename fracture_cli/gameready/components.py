@@ -13,6 +13,7 @@ bodies, and each gets its own copy of the shared vertices.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -259,6 +260,31 @@ def fragment_graph(meshes, candidates=None, min_area: float = 0.0, tolerance: fl
     return pairs[keep], areas[keep]
 
 
+# Fragments sharing less fault area than this (fraction of the input's volume to the power 2/3) are not bonded:
+# a contact along a curve or at a point, or a sliver of rounding, holds nothing.
+_MIN_BOND_AREA = 1e-8
+
+
+def fragments_graph(fragments: Fragments) -> tuple[np.ndarray, np.ndarray]:
+    """The bonds of :func:`fragment_graph` between baked fragments, through their fault (interior) faces.
+
+    Parameters
+    ----------
+    fragments : Fragments
+
+    Returns
+    -------
+    edges : (e, 2) int64
+        Pairs ``P < Q`` of fragment indices, sorted.
+    areas : (e,) float64
+        Shared fault area, normalized units squared.
+    """
+    interior = _interior_slot(fragments)
+    meshes = [(f.vertices, f.faces) for f in fragments.fragments]
+    fault = [f.material_ids == interior for f in fragments.fragments]
+    return fragment_graph(meshes, fault, min_area=_MIN_BOND_AREA * fragments.input_volume ** (2.0 / 3.0))
+
+
 def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> tuple[Fragments, SplitReport]:
     """Make every fragment one connected body.
 
@@ -297,9 +323,13 @@ def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> 
         bodies.extend((i, faces) for faces in found)
     meshes = [(fragments.fragments[i].vertices, fragments.fragments[i].faces[faces]) for i, faces in bodies]
     volumes = np.array([mass_properties(V, F).volume for V, F in meshes])
+    min_volume = min_volume_fraction * fragments.input_volume
+    if len(bodies) == len(fragments.fragments) and not np.any(volumes < min_volume):
+        # Nothing to split or merge: the fragments as given (same order, same bytes).
+        return fragments, SplitReport(bodies=tuple(counts), source=tuple(range(len(counts))), merged=0, isolated=0)
     fault = [fragments.fragments[i].material_ids[faces] == interior for i, faces in bodies]
     pairs, areas = interface_areas(meshes, fault)
-    groups, merged, isolated = _merge_tiny(volumes, pairs, areas, min_volume_fraction * fragments.input_volume)
+    groups, merged, isolated = _merge_tiny(volumes, pairs, areas, min_volume)
     results, source = [], []
     for members in groups:
         host = max(members, key=lambda b: (volumes[b], -b))
@@ -314,8 +344,7 @@ def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> 
              len(fragments.fragments), len(bodies), len(results), merged)
     report = SplitReport(bodies=tuple(counts), source=tuple(source[k] for k in order), merged=merged,
                          isolated=isolated)
-    new = Fragments(fragments=tuple(results[k] for k in order), materials=fragments.materials,
-                    normalization=fragments.normalization, input_volume=fragments.input_volume)
+    new = dataclasses.replace(fragments, fragments=tuple(results[k] for k in order))
     return new, report
 
 

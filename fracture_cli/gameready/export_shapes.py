@@ -49,10 +49,10 @@ from typing import Any
 
 import numpy as np
 
-from fracture_cli.gameready.collision import hull_mesh
+from fracture_cli.gameready.collision import COLLISION_FORMATS, hull_mesh
 from fracture_cli.gameready.mass import MassProperties, quaternion_xyzw
 
-COLLISION_FORMATS = ("omi", "godot", "unreal", "none")
+__all__ = ["COLLISION_FORMATS", "FragmentPhysics", "node_extras", "physics_extender", "runtime_arrays"]
 OMI_SHAPE = "OMI_physics_shape"
 OMI_BODY = "OMI_physics_body"
 GODOT_SUFFIX = "-convcolonly"
@@ -202,7 +202,7 @@ def _round(x: float) -> float:
 
 
 def runtime_arrays(physics: Sequence[FragmentPhysics]) -> dict[str, np.ndarray]:
-    """The runtime-file arrays of the game-ready data (docs/FORMAT-gameready-draft.md).
+    """The runtime-file arrays of the game-ready data (docs/FORMAT.md section 9).
 
     Returns
     -------

@@ -9,6 +9,8 @@ the same triangles where the booleans triangulated one polygon two ways, and
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
@@ -198,8 +200,7 @@ def share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, 
                              piece=frag.piece)
         if valid(candidate):
             out[b] = candidate
-    return Fragments(fragments=tuple(out), materials=fragments.materials, normalization=fragments.normalization,
-                     input_volume=fragments.input_volume)
+    return dataclasses.replace(fragments, fragments=tuple(out))
 
 
 def _cluster_key(G: np.ndarray) -> tuple:

@@ -31,6 +31,7 @@ are most of a bake's triangles (chair, wood: 32,000 for a 2,500-triangle input).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -147,8 +148,7 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
                          classified.patches, retries, over)
     log.info("faults: %d -> %d triangles (interior %d -> %d) at tolerance %.3g", before, after,
              report.fault_before, report.fault_after, tolerance)
-    new = Fragments(fragments=tuple(results), materials=fragments.materials, normalization=fragments.normalization,
-                    input_volume=fragments.input_volume)
+    new = dataclasses.replace(fragments, fragments=tuple(results))
     return new, report
 
 

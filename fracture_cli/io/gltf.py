@@ -289,11 +289,12 @@ def read_glb(path: str) -> tuple[list[GlbMesh], list[str]]:
 
 
 def glb_meshes(doc: dict, binary: bytes | None) -> list[GlbMesh]:
-    """The meshes of a GLB document, one per node with a mesh, in node order.
+    """The meshes of a GLB document, one per top-level node with a mesh, in node order.
 
     A deliberately small reader (float32 positions/normals/UVs, uint32 or uint16
-    indices, node translations applied; no rotation, scale or hierarchy, which
-    our writer never emits) for previews and tests of our own output.
+    indices, node translations applied; no rotation or scale, which our writer
+    never emits; child nodes, which hold collision parts, skipped) for previews
+    and tests of our own output.
     """
     binary = binary or b""
 
@@ -307,8 +308,10 @@ def glb_meshes(doc: dict, binary: bytes | None) -> list[GlbMesh]:
         return arr.reshape(acc["count"], width) if width > 1 else arr
 
     meshes = []
-    for node in doc.get("nodes", []):
-        if "mesh" not in node:
+    # Child nodes are a fragment's collision parts (Godot -convcolonly / Unreal UCX_ meshes), not fragments.
+    children = {int(c) for node in doc.get("nodes", []) for c in node.get("children", [])}
+    for index, node in enumerate(doc.get("nodes", [])):
+        if "mesh" not in node or index in children:
             continue
         offset = np.asarray(node.get("translation", (0.0, 0.0, 0.0)), dtype=np.float64)
         prims = []

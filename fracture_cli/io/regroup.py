@@ -32,7 +32,7 @@ def write_groups_glb(fragments_glb_path: str | os.PathLike, groups, out_path: st
     Parameters
     ----------
     fragments_glb_path : path
-        The baked fragments GLB: one node per fragment, named ``fragment_###``.
+        The baked fragments GLB: one node per fragment, named as ``fragment_names`` says.
     groups : (p,) int
         Group of every fragment, e.g. ``ImpactResult.groups``.
     out_path : path
@@ -93,7 +93,9 @@ def write_groups_glb(fragments_glb_path: str | os.PathLike, groups, out_path: st
                 new_nodes.append(child)
                 children.append(len(new_nodes) - 1)
             new_nodes.append({"name": name, "extras": extras, "children": children})
-    out = dict(doc)
+    out = _without_physics(doc)
+    for node in new_nodes:
+        _drop_physics(node)
     out["nodes"] = new_nodes
     out["meshes"] = new_meshes
     group_nodes = [i for i, node in enumerate(new_nodes) if node.get("name") in set(names)]
@@ -101,3 +103,29 @@ def write_groups_glb(fragments_glb_path: str | os.PathLike, groups, out_path: st
     out["scene"] = 0
     write_bytes_atomic(out_path, pack_glb(out, binary))
     return names
+
+
+# Physics extensions of the fragments file: their shapes point at meshes this file renumbers, and a group is not
+# one rigid body of the bake, so the groups file carries none.
+_PHYSICS_EXTENSIONS = ("OMI_physics_body", "OMI_physics_shape")
+
+
+def _without_physics(doc: dict) -> dict:
+    out = dict(doc)
+    extensions = {k: v for k, v in doc.get("extensions", {}).items() if k not in _PHYSICS_EXTENSIONS}
+    out.pop("extensions", None)
+    if extensions:
+        out["extensions"] = extensions
+    for key in ("extensionsUsed", "extensionsRequired"):
+        kept = [e for e in doc.get(key, []) if e not in _PHYSICS_EXTENSIONS]
+        out.pop(key, None)
+        if kept:
+            out[key] = kept
+    return out
+
+
+def _drop_physics(node: dict) -> None:
+    extensions = {k: v for k, v in node.get("extensions", {}).items() if k not in _PHYSICS_EXTENSIONS}
+    node.pop("extensions", None)
+    if extensions:
+        node["extensions"] = extensions

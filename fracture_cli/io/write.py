@@ -98,9 +98,23 @@ def save_surface(path: str | os.PathLike, surface: SurfaceMesh) -> None:
         mesh.export(tmp, file_type=ext[1:])
 
 
-def fragment_name(index: int) -> str:
-    """Stable node name of fragment ``index`` (export order)."""
-    return f"fragment_{index:03d}"
+def fragment_name(index: int, stem: str | None = None) -> str:
+    """Stable node name of fragment ``index`` (export order): ``<stem>_fragment_###``, or ``fragment_###``.
+
+    The asset's stem keeps two baked assets in one scene from colliding (an
+    importer would rename the second ``fragment_000.001`` and the runtime
+    file's names would no longer match).
+    """
+    return f"{stem}_fragment_{index:03d}" if stem else f"fragment_{index:03d}"
+
+
+def prefixed_materials(materials, stem: str | None):
+    """``materials`` renamed ``<stem>_<name>`` (``chair_interior``): engines share materials by name across files."""
+    import dataclasses
+
+    if not stem:
+        return tuple(materials)
+    return tuple(dataclasses.replace(m, name=f"{stem}_{m.name}") for m in materials)
 
 
 def node_origin(world_points: np.ndarray) -> np.ndarray:
@@ -113,8 +127,9 @@ def node_origin(world_points: np.ndarray) -> np.ndarray:
     return (world_points.min(axis=0) + world_points.max(axis=0)) / 2.0
 
 
-def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: str = "center_of_mass") -> None:
-    """Write all fragments to one GLB: one node and mesh per fragment, named ``fragment_###``.
+def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: str = "center_of_mass",
+                        parts=None, collision: str = "none", stem: str | None = None) -> None:
+    """Write all fragments to one GLB: one node and mesh per fragment, named ``<stem>_fragment_###``.
 
     Each mesh has one primitive per material it uses (the input's materials and
     the interior material). Each node is translated to its fragment's pivot and
@@ -128,19 +143,23 @@ def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: st
     pivot : {"center_of_mass", "bbox"}, optional (default "center_of_mass")
         Node origins at the centre of mass (where engines put a rigid body's
         origin) or at the bounding-box centre.
+    parts : sequence of sequence of (k, 3) float, optional
+        Convex collision parts of every fragment (corners, model space), from
+        the ``collision`` stage.
+    collision : {"omi", "godot", "unreal", "none"}, optional (default "none")
+        How the parts are written (:mod:`fracture_cli.gameready.export_shapes`).
+    stem : str, optional
+        The asset's stem: prefix of node, mesh and material names (``chair_fragment_000``,
+        ``chair_interior``); without it the names are unprefixed.
     """
-    from fracture_cli.gameready.export_shapes import FragmentPhysics, physics_extender
-    from fracture_cli.gameready.mass import mass_properties
+    from fracture_cli.gameready.export_shapes import physics_extender
+    from fracture_cli.gameready.stage import fragment_physics
 
-    meshes, physics = [], []
-    for i, frag in enumerate(fragments.fragments):
-        mass = mass_properties(frag.vertices, frag.faces).to_world(fragments.normalization)
-        if pivot == "center_of_mass":
-            origin = mass.center
-        else:
-            origin = node_origin(fragments.normalization.to_world(frag.vertices))
+    physics = fragment_physics(fragments, parts, pivot)
+    meshes = []
+    for i, (frag, body) in enumerate(zip(fragments.fragments, physics)):
         prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids,
-                                  fragments.normalization, origin)
-        meshes.append((fragment_name(i), prims, origin))
-        physics.append(FragmentPhysics(mass=mass, origin=origin))
-    write_bytes_atomic(path, glb_bytes(meshes, fragments.materials, extend=physics_extender(physics, "none")))
+                                  fragments.normalization, body.origin)
+        meshes.append((fragment_name(i, stem), prims, body.origin))
+    materials = prefixed_materials(fragments.materials, stem)
+    write_bytes_atomic(path, glb_bytes(meshes, materials, extend=physics_extender(physics, collision)))

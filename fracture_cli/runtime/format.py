@@ -41,6 +41,15 @@ ARRAY_LAYOUT: dict[str, tuple[str, int]] = {
     "edges": ("int32", 2),
     "edge_areas": ("float32", 1),
 }
+# Optional game-ready arrays (docs/FORMAT.md section 8), after the required ones; a file has all or none.
+GAMEREADY_LAYOUT: dict[str, tuple[str, int]] = {
+    "fragment_volume": ("float32", 1),
+    "fragment_center_of_mass": ("float32", 2),
+    "fragment_inertia": ("float32", 2),
+    "collision_vertices": ("float32", 2),
+    "collision_part_offsets": ("int32", 1),
+    "collision_fragment_offsets": ("int32", 1),
+}
 _DTYPES = {"float32": np.dtype("<f4"), "int32": np.dtype("<i4")}
 
 
@@ -72,6 +81,9 @@ class RuntimeData:
         Impact radius baked into ``B``, as a fraction of the bounding-box diagonal.
     units : str
         Human-readable note on units.
+    gameready : dict of str -> array
+        The optional arrays of :data:`GAMEREADY_LAYOUT` (mass properties and
+        collision parts per fragment, model space), all or none.
     """
 
     sites: np.ndarray
@@ -84,6 +96,7 @@ class RuntimeData:
     default_threshold: float = 1.0
     radius: float = 0.05
     units: str = UNITS_NOTE
+    gameready: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def dim(self) -> int:
@@ -110,8 +123,20 @@ class RuntimeData:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The binary arrays in file order, converted to their file dtypes."""
-        return {name: np.ascontiguousarray(getattr(self, name), dtype=_DTYPES[dtype])
-                for name, (dtype, _) in ARRAY_LAYOUT.items()}
+        arrays = {name: np.ascontiguousarray(getattr(self, name), dtype=_DTYPES[dtype])
+                  for name, (dtype, _) in ARRAY_LAYOUT.items()}
+        for name, (dtype, _) in GAMEREADY_LAYOUT.items():
+            if name in self.gameready:
+                arrays[name] = np.ascontiguousarray(self.gameready[name], dtype=_DTYPES[dtype])
+        return arrays
+
+    def counts(self) -> dict[str, int]:
+        """The header's ``counts``."""
+        counts = {"sites": self.num_sites, "modes": self.k, "fragments": self.p, "edges": self.num_edges}
+        if self.gameready:
+            counts["collision_parts"] = int(len(self.gameready["collision_part_offsets"]) - 1)
+            counts["collision_vertices"] = int(len(self.gameready["collision_vertices"]))
+        return counts
 
 
 def check_runtime(data: RuntimeData) -> str | None:
@@ -148,8 +173,36 @@ def check_runtime(data: RuntimeData) -> str | None:
         return f"default threshold must be a finite number >= 0, got {data.default_threshold!r}"
     if np.asarray(data.transform).shape != (4, 4):
         return "transform must be a 4x4 matrix"
+    if data.gameready:
+        problem = _check_gameready(data.gameready, p)
+        if problem:
+            return problem
     if not (np.all(np.isfinite(data.transform)) and np.isfinite(data.radius)):
         return "transform and impact radius must be finite numbers"
+    return None
+
+
+def _check_gameready(arrays: dict[str, np.ndarray], p: int) -> str | None:
+    """Why the optional game-ready arrays are inconsistent (FORMAT.md section 8), or None."""
+    missing = [name for name in GAMEREADY_LAYOUT if name not in arrays]
+    if missing:
+        return f"game-ready arrays come all or none; missing {', '.join(missing)}"
+    n = len(arrays["collision_vertices"])
+    parts = np.asarray(arrays["collision_part_offsets"], dtype=np.int64)
+    owners = np.asarray(arrays["collision_fragment_offsets"], dtype=np.int64)
+    shapes = {"fragment_volume": (p,), "fragment_center_of_mass": (p, 3), "fragment_inertia": (p, 6),
+              "collision_vertices": (n, 3), "collision_fragment_offsets": (p + 1,)}
+    for name, shape in shapes.items():
+        if np.asarray(arrays[name]).shape != shape:
+            return f"array {name} has shape {list(np.asarray(arrays[name]).shape)}, expected {list(shape)}"
+    for name, offsets, end in (("collision_part_offsets", parts, n), ("collision_fragment_offsets", owners,
+                                                                       len(parts) - 1)):
+        if offsets.ndim != 1 or len(offsets) < 1 or offsets[0] != 0 or offsets[-1] != end or np.any(
+                np.diff(offsets) < 0):
+            return f"{name} must start at 0, never decrease and end at {end}"
+    for name in ("fragment_volume", "fragment_center_of_mass", "fragment_inertia", "collision_vertices"):
+        if not np.all(np.isfinite(arrays[name])):
+            return f"array {name} has non-finite values"
     return None
 
 
@@ -181,7 +234,7 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
     for name, array in data.arrays().items():
         raw = array.tobytes(order="C")
         table[name] = {
-            "dtype": ARRAY_LAYOUT[name][0],
+            "dtype": {**ARRAY_LAYOUT, **GAMEREADY_LAYOUT}[name][0],
             "shape": list(array.shape),
             "byte_offset": offset,
             "byte_length": len(raw),
@@ -194,7 +247,7 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
         "dim": data.dim,
-        "counts": {"sites": data.num_sites, "modes": data.k, "fragments": data.p, "edges": data.num_edges},
+        "counts": data.counts(),
         "fragment_names": list(data.fragment_names),
         "units": data.units,
         "transform": [float(x) for x in np.asarray(data.transform, dtype=np.float64).reshape(-1)],
@@ -336,13 +389,16 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     if crc is not None and zlib.crc32(binary) != crc:
         raise _fail("binary file does not match its header (crc32 differs; from another bake?)", path)
     arrays = {name: _array(table, name, binary, path) for name in ARRAY_LAYOUT}
+    # Optional arrays: read when any is listed (check_runtime then wants all of them).
+    gameready = {name: _array(table, name, binary, path, GAMEREADY_LAYOUT) for name in GAMEREADY_LAYOUT
+                 if name in table}
     data = RuntimeData(fragment_names=names, transform=transform, default_threshold=threshold,
-                       radius=radius, units=units, **arrays)
+                       radius=radius, units=units, gameready=gameready, **arrays)
     problem = check_runtime(data)
     if problem is None and data.dim != dim:
         problem = f"header says dim = {dim} but W has d = {data.dim}"
     if problem is None:
-        want = {"sites": data.num_sites, "modes": data.k, "fragments": data.p, "edges": data.num_edges}
+        want = data.counts()
         if {key: counts.get(key) for key in want} != want:
             problem = f"header counts {counts} do not match the arrays {want}"
     if problem:
@@ -350,13 +406,13 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     return data
 
 
-def _array(table: dict, name: str, binary: bytes, path) -> np.ndarray:
+def _array(table: dict, name: str, binary: bytes, path, layout: dict = ARRAY_LAYOUT) -> np.ndarray:
     """The array ``name`` of the header's table, as a read-only view of ``binary``; RuntimeFileError if malformed.
 
     Shapes, offsets and lengths are checked with Python integers (no int64
     overflow), so a tampered header cannot reach numpy with a size it rejects.
     """
-    dtype, ndim = ARRAY_LAYOUT[name]
+    dtype, ndim = layout[name]
     entry = table.get(name)
     if not isinstance(entry, dict):
         raise _fail(f"runtime header has no entry for array '{name}'", path)

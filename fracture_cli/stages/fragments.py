@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import manifold3d
 import numpy as np
@@ -13,6 +14,9 @@ from fracture_cli.errors import StageError
 from fracture_cli.options import option
 from fracture_cli.stages._solids import SHELL_VOLUME, shell_mask, surface_solid
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Regions, SurfaceMesh
+
+if TYPE_CHECKING:  # components imports this module
+    from fracture_cli.gameready.components import SplitReport
 
 log = logging.getLogger(__name__)
 
@@ -42,10 +46,29 @@ class FragmentOptions:
         min=0.0,
         max=1.0,
     )
+    pivot: str = option(
+        "center_of_mass",
+        "origin of every fragment node in the GLB: its centre of mass (where engines put a rigid body's origin) "
+        "or its bounding-box centre (bbox)",
+        choices=("center_of_mass", "bbox"),
+    )
+    min_body_fraction: float = option(
+        0.001,
+        "a fragment that falls apart is split into one fragment per closed body; bodies holding less than this "
+        "fraction of the asset's volume are glued to the neighbour they share the most fault area with",
+        min=0.0,
+        max=1.0,
+    )
 
 
 def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions = FragmentOptions()) -> Fragments:
-    """Cut the input surface into one closed fragment per piece region.
+    """Cut the input surface into closed one-body fragments (:func:`fragments_with_split`, without its report)."""
+    return fragments_with_split(surface, regions, options)[0]
+
+
+def fragments_with_split(surface: SurfaceMesh, regions: Regions,
+                         options: FragmentOptions = FragmentOptions()) -> tuple[Fragments, SplitReport]:
+    """Cut the input surface into one closed fragment per piece region, then one per connected body.
 
     Parameters
     ----------
@@ -61,11 +84,13 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
 
     Returns
     -------
-    Fragments
-        Non-empty fragments sorted by their centroid (x, then y, then z, rounded
+    fragments : Fragments
+        Non-empty fragments, each one connected closed body, sorted by their centroid (x, then y, then z, rounded
         to 1e-6); ``Fragment.piece`` names the piece of each. ``materials`` are
         the input's plus the interior material as the last slot (or the
         input's own slot if one is already named ``interior``).
+    split : SplitReport
+        How many bodies each cut held and how many tiny ones were merged.
 
     Raises
     ------
@@ -88,8 +113,15 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     (vertices split per plane), and UVs from a box projection of world-space
     positions divided by ``uv_scale``.
 
-    Pieces whose region misses the input are logged and left out; the lead's
+    Pieces whose region misses the input are logged and left out; the
     runtime uses ``Fragment.piece`` to map fragments to pieces.
+
+    A cut can fall apart (a region holding the tips of two legs); a game spawns
+    one rigid body per fragment, so every fragment is split into its closed
+    bodies (:func:`~fracture_cli.gameready.components.split_fragments`): bodies
+    below ``min_body_fraction`` of the input's volume are glued to their
+    largest-interface neighbour, the others become fragments of their own
+    (same piece). Several fragments may then share one piece.
     """
     solid, id_to_material = surface_solid(surface, stage=STAGE)
     input_volume = float(solid.volume())
@@ -123,12 +155,15 @@ def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions =
     total = sum(trigeom.signed_volume(f.vertices, f.faces) for f in results)
     log.info("%s: %d fragments from %d regions, volume %.6g of input %.6g (error %.2g)", STAGE, len(results),
              len(regions.meshes), total, input_volume, abs(total - input_volume) / input_volume)
-    return Fragments(
+    cut_fragments = Fragments(
         fragments=tuple(results[i] for i in order),
         materials=materials,
         normalization=surface.normalization,
         input_volume=input_volume,
     )
+    from fracture_cli.gameready.components import split_fragments  # imports this module's _stable_order
+
+    return split_fragments(cut_fragments, options.min_body_fraction)
 
 
 @dataclass(frozen=True)

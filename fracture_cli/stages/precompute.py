@@ -47,7 +47,8 @@ class RuntimeOptions:
 
 
 def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOptions = RuntimeOptions(),
-            fragment_pieces=None, fragment_names: tuple[str, ...] | None = None) -> RuntimeData:
+            fragment_pieces=None, fragment_names: tuple[str, ...] | None = None,
+            fragment_graph: tuple[np.ndarray, np.ndarray] | None = None) -> RuntimeData:
     """Compute the contact sites, site-to-mode coefficients ``B`` and piece modes ``W``.
 
     Parameters
@@ -64,9 +65,17 @@ def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOpt
         The piece of every exported fragment, in the fragments file's order
         (``[frag.piece for frag in fragments.fragments]``). Pieces without a
         fragment (regions that miss the input) are left out with their edges:
-        there is no material there to hold fragments together.
+        there is no material there to hold fragments together. A piece may
+        hold several fragments (a region cut into separate bodies): each gets
+        the piece's column of ``W``; ``fragment_graph`` is then required.
     fragment_names : tuple of str, optional (default ``fragment_000``, ...)
         Node name of every fragment, in the same order.
+    fragment_graph : ((e, 2) int, (e,) float), optional
+        Bonds between fragments measured on their meshes (pairs ``P < Q`` in
+        the fragments' order, sorted; shared fault area in normalized units
+        squared, see :func:`fracture_cli.gameready.components.fragment_graph`).
+        Default: the piece graph mapped to the fragments, which may bond
+        fragments that touch only outside the input.
 
     Returns
     -------
@@ -92,7 +101,7 @@ def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOpt
     if W.ndim != 3 or W.shape[0] != k or W.shape[2] != d:
         raise StageError(f"piece modes W have shape {W.shape}, expected ({k}, p, {d}) to match the modes",
                          stage=STAGE)
-    W, edges, edge_areas = _restrict_to_fragments(W, pieces, fragment_pieces)
+    W, edges, edge_areas = _restrict_to_fragments(W, pieces, fragment_pieces, fragment_graph)
     p = W.shape[1]
     if fragment_names is None:
         fragment_names = tuple(f"fragment_{j:03d}" for j in range(p))
@@ -151,16 +160,28 @@ def _site_coefficients(tet_mesh: TetMesh, U: np.ndarray, tau: float) -> np.ndarr
     return lu.solve(np.asfortranarray(rhs)).reshape(-1, k, d)  # (n, k, d)
 
 
-def _restrict_to_fragments(W: np.ndarray, pieces: Pieces, fragment_pieces):
-    """Reorder piece modes and the piece graph to the fragments' order; drop pieces without a fragment."""
+def _restrict_to_fragments(W: np.ndarray, pieces: Pieces, fragment_pieces, fragment_graph=None):
+    """Piece modes in the fragments' order (a piece's column repeated for each of its fragments) and their bonds."""
     p = W.shape[1]
     edges = np.asarray(pieces.edges, dtype=np.int64).reshape(-1, 2)
     areas = np.asarray(pieces.edge_areas, dtype=np.float64).reshape(-1)
-    if fragment_pieces is None:
+    if fragment_pieces is None and fragment_graph is None:
         return W, edges, areas
-    order = np.asarray(fragment_pieces, dtype=np.int64).reshape(-1)
-    if len(order) == 0 or order.min() < 0 or order.max() >= p or len(np.unique(order)) != len(order):
-        raise StageError(f"fragment_pieces must list distinct pieces in 0..{p - 1}, got {len(order)} entries",
+    order = np.arange(p) if fragment_pieces is None else np.asarray(fragment_pieces, dtype=np.int64).reshape(-1)
+    if len(order) == 0 or order.min() < 0 or order.max() >= p:
+        raise StageError(f"fragment_pieces must list pieces in 0..{p - 1}, got {len(order)} entries", stage=STAGE)
+    if len(np.unique(order)) < p:
+        log.info("%s: %d piece(s) without a fragment left out of the runtime file", STAGE, p - len(np.unique(order)))
+    if fragment_graph is not None:
+        edges = np.asarray(fragment_graph[0], dtype=np.int64).reshape(-1, 2)
+        areas = np.asarray(fragment_graph[1], dtype=np.float64).reshape(-1)
+        if len(edges) and (edges.min() < 0 or edges.max() >= len(order) or np.any(edges[:, 0] >= edges[:, 1])):
+            raise StageError(f"fragment graph edges must be pairs P < Q of fragments 0..{len(order) - 1}",
+                             stage=STAGE)
+        sort = np.lexsort((edges[:, 1], edges[:, 0]))
+        return W[:, order], edges[sort], areas[sort]
+    if len(np.unique(order)) != len(order):
+        raise StageError("several fragments share a piece: the runtime needs their graph (fragment_graph)",
                          stage=STAGE)
     fragment_of_piece = np.full(p, -1, dtype=np.int64)
     fragment_of_piece[order] = np.arange(len(order))
@@ -168,6 +189,4 @@ def _restrict_to_fragments(W: np.ndarray, pieces: Pieces, fragment_pieces):
     kept = np.all(mapped >= 0, axis=1)
     mapped, areas = np.sort(mapped[kept], axis=1), areas[kept]
     sort = np.lexsort((mapped[:, 1], mapped[:, 0]))
-    if len(order) < p:
-        log.info("%s: %d piece(s) without a fragment left out of the runtime file", STAGE, p - len(order))
     return W[:, order], mapped[sort], areas[sort]

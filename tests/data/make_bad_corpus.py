@@ -255,8 +255,7 @@ CASES: list[dict] = []
 
 def case(file: str, data, *, outcome: str, why: str, message: str | None = None, volume: float | None = None,
          overrides: tuple[str, ...] = (), known_issue: str | None = None, check: str = "bake",
-         bbox: tuple | None = None, reference: str | None = None, companions: dict | None = None,
-         needs_body_split: str | None = None):
+         bbox: tuple | None = None, reference: str | None = None, companions: dict | None = None):
     """Register one corpus file: its bytes (or text) and what a bake must do with it.
 
     ``known_issue`` marks an expected outcome the tool does not reach yet (the
@@ -265,14 +264,12 @@ def case(file: str, data, *, outcome: str, why: str, message: str | None = None,
     loaded triangles against the known geometry, in milliseconds) instead of
     baking it. ``reference`` names an OBJ of the intended triangles, for files
     that trimesh (the tests' independent reader) misreads. ``companions`` are
-    extra files written beside it (``{name: bytes}``). ``needs_body_split``
-    marks an outcome reached only where fragments are split into their
-    connected bodies (and says why).
+    extra files written beside it (``{name: bytes}``).
     """
     CASES.append(dict(file=file, data=data, outcome=outcome, why=why, message=message, volume=volume,
                       overrides=list(overrides), known_issue=known_issue, check=check,
                       bbox=[list(map(float, b)) for b in bbox] if bbox is not None else None,
-                      reference=reference, companions=companions or {}, needs_body_split=needs_body_split))
+                      reference=reference, companions=companions or {}))
 
 
 def build() -> None:
@@ -398,8 +395,7 @@ def build() -> None:
          why="two cells sharing an internal wall (its edges have three faces), as voxel/CAD exports do")
     C = box((1, 1, 1), (1, 1, 0))
     case("nonmanifold_edge4.obj", obj_text(*concat((V, F), C)), outcome="ok", volume=2.0,
-         why="two closed boxes touching along one edge: welded, that edge has four triangles",
-         needs_body_split="the union keeps the shared edge, so a fragment holding both boxes is two bodies sharing it")
+         why="two closed boxes touching along one edge: welded, that edge has four triangles")
     case("millimetres.stl", stl_binary(*icosphere(2, 250.0, (1200.0, -800.0, 40.0))), outcome="ok",
          volume=sphere_volume * 250.0**3, why="binary STL in millimetres (coordinates around 1e3)")
     case("micro.off", off_text(V * 2e-3 + 1e-3, F), outcome="ok", volume=8e-9,
@@ -537,8 +533,6 @@ def write_toml(cases: list[dict]) -> str:
             lines.append(f"reference = {json.dumps(c['reference'])}")
         if c["companions"]:
             lines.append(f"companions = {json.dumps(sorted(c['companions']))}")
-        if c["needs_body_split"]:
-            lines.append(f"needs_body_split = {json.dumps(c['needs_body_split'])}")
         lines.append("")
     return "\n".join(lines)
 

@@ -109,7 +109,9 @@ export class FragmentScene {
       // Two-sided: with the interior faces hidden, the inside of the shell shows instead of holes.
       if (mesh.material) mesh.material.side = THREE.DoubleSide;
       mesh.userData.original = mesh.material;
-      mesh.userData.interior = mesh.material && mesh.material.name === INTERIOR_MATERIAL;
+      // 'interior', or '<stem>_interior' since bakes prefix names with the asset's stem.
+      const material = mesh.material ? mesh.material.name || '' : '';
+      mesh.userData.interior = material === INTERIOR_MATERIAL || material.endsWith('_' + INTERIOR_MATERIAL);
       mesh.geometry.computeBoundingBox();
       box.union(mesh.geometry.boundingBox.clone().applyMatrix4(mesh.matrixWorld));
     }

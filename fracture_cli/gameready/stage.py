@@ -1,0 +1,85 @@
+"""The ``collision`` stage and the game-ready data of a bake: mass properties, pivots, convex parts.
+
+The stage (:func:`collision`) computes the convex collision parts of every
+fragment once; the runtime stage (:func:`runtime_arrays_of`) and the GLB writer
+(:func:`fragment_physics`) both read them, so the two files carry the same
+parts. Mass properties are cheap and computed where they are written.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from fracture_cli.gameready.collision import CollisionOptions, collision_shapes, max_overlap_fraction
+from fracture_cli.gameready.export_shapes import FragmentPhysics, runtime_arrays
+from fracture_cli.gameready.mass import mass_properties
+from fracture_cli.types import Fragments
+
+log = logging.getLogger(__name__)
+
+STAGE = "collision"
+PIVOTS = ("center_of_mass", "bbox")  # a fragment node's origin: its centre of mass or its bounding-box centre
+
+# Parts per fragment (model space, asset units): the corners of each convex part.
+Parts = tuple[tuple[np.ndarray, ...], ...]
+
+
+def collision(fragments: Fragments, options: CollisionOptions = CollisionOptions()) -> tuple[Parts, dict]:
+    """Non-overlapping convex parts of every fragment, in the asset's units, and what the report says of them.
+
+    Parameters
+    ----------
+    fragments : Fragments
+        One-body fragments (normalized coordinates).
+    options : CollisionOptions
+        ``glb = "none"`` computes no parts.
+
+    Returns
+    -------
+    parts : tuple of tuple of (k, 3) float64
+        Per fragment, the corners of each convex part, model space (asset units).
+    checks : dict
+        ``collision_parts`` (total), ``collision_max_parts`` (per fragment),
+        ``collision_max_overlap`` (largest overlap of two parts over the smaller
+        one's volume, measured by exact booleans), ``collision_min_coverage``
+        (smallest fraction of a fragment's volume inside its parts). Empty for
+        ``glb = "none"``.
+    """
+    if options.glb == "none":
+        return tuple(() for _ in fragments.fragments), {}
+    shapes = collision_shapes([(f.vertices, f.faces) for f in fragments.fragments], options)
+    every = [p for parts in shapes.parts for p in parts]
+    checks = {
+        "collision_parts": len(every),
+        "collision_max_parts": max((len(parts) for parts in shapes.parts), default=0),
+        "collision_max_overlap": round(float(max_overlap_fraction(every)), 9),
+        "collision_min_coverage": round(float(shapes.coverage.min()), 6) if len(shapes.coverage) else 1.0,
+    }
+    log.info("%s: %d convex parts for %d fragments (at most %d each), largest overlap %.2g, coverage >= %.3f",
+             STAGE, checks["collision_parts"], len(shapes.parts), checks["collision_max_parts"],
+             checks["collision_max_overlap"], checks["collision_min_coverage"])
+    world = fragments.normalization.to_world
+    return tuple(tuple(world(p) for p in parts) for parts in shapes.parts), checks
+
+
+def fragment_physics(fragments: Fragments, parts: Parts | None = None,
+                     pivot: str = "center_of_mass") -> list[FragmentPhysics]:
+    """Mass properties (unit density, asset units), pivot and parts of every fragment, in order."""
+    from fracture_cli.io.write import node_origin
+
+    out = []
+    for index, frag in enumerate(fragments.fragments):
+        mass = mass_properties(frag.vertices, frag.faces).to_world(fragments.normalization)
+        if pivot == "center_of_mass":
+            origin = mass.center
+        else:
+            origin = node_origin(fragments.normalization.to_world(frag.vertices))
+        out.append(FragmentPhysics(mass=mass, origin=origin, parts=parts[index] if parts else ()))
+    return out
+
+
+def runtime_arrays_of(fragments: Fragments, parts: Parts | None = None) -> dict[str, np.ndarray]:
+    """The runtime file's optional game-ready arrays (docs/FORMAT.md section 8) for these fragments."""
+    return runtime_arrays(fragment_physics(fragments, parts))
