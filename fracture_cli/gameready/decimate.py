@@ -66,6 +66,7 @@ class SurfaceComplex:
                  fault: np.ndarray, locked: set[int], damp: dict[int, float] | None = None):
         self.V = V
         self.points = [tuple(p) for p in np.asarray(V, dtype=float).tolist()]
+        self._homogeneous = np.column_stack([np.asarray(V, dtype=float), np.ones(len(V))])  # (g, 4)
         self.faces = {t: (int(a), int(b), int(c)) for t, (a, b, c) in enumerate(np.asarray(faces).tolist())}
         self.groups = [int(x) for x in groups]
         self.owners = owners
@@ -77,6 +78,9 @@ class SurfaceComplex:
             for x in f:
                 self.vertex_faces.setdefault(x, set()).add(t)
         self.stamp: dict[int, int] = {}
+        # The (targets, costs) computed when a vertex was last queued: still true when its entry is popped with
+        # the same stamp (any change to its neighbourhood or quadric queues it again with a new stamp).
+        self._queued: dict[int, tuple[list[int], list[float]]] = {}
         self.done: list[tuple[int, int]] = []  # the collapses made, in order
         # Original fault vertices removed so far, kept with the face nearest to them (for the error bound).
         self.assigned: dict[int, list[int]] = {t: [] for t in self.faces}
@@ -114,7 +118,7 @@ class SurfaceComplex:
             if self.stamp.get(u) != stamp or u not in self.vertex_faces:
                 continue
             bound = self._tolerance(u, tolerance)
-            v = next((v for v in self._targets(u) if self._collapse(u, v, bound)), None)
+            v = next((v for v in self._targets(u, self._queued.pop(u)) if self._collapse(u, v, bound)), None)
             if v is not None:
                 done += 1
                 for w in sorted(self._neighbours(v) | {v}):
@@ -133,19 +137,20 @@ class SurfaceComplex:
     def _costs(self, u: int) -> tuple[list[int], list[float]]:
         """The neighbours of ``u`` and the quadric error of moving ``u`` onto each."""
         targets = sorted(self._neighbours(u))
-        P = np.column_stack([self.V[targets], np.ones(len(targets))])
+        P = self._homogeneous[targets]
         return targets, np.einsum("ij,jk,ik->i", P, self.quadric[u], P).tolist()
 
-    def _targets(self, u: int) -> list[int]:
-        targets, costs = self._costs(u)
-        return [v for _, v in sorted(zip(costs, targets))]
+    def _targets(self, u: int, costs: tuple[list[int], list[float]] | None = None) -> list[int]:
+        """The neighbours of ``u``, cheapest collapse first (``costs``: :meth:`_costs` if already known)."""
+        targets, cost = costs if costs is not None else self._costs(u)
+        return [v for _, v in sorted(zip(cost, targets))]
 
     def _push(self, heap: list, u: int) -> None:
         """Queue ``u`` at the cost of its cheapest collapse, if it may move."""
         if u in self.locked or u not in self.vertex_faces:
             return
         stamp = self.stamp[u] = self.stamp.get(u, 0) + 1
-        _, costs = self._costs(u)
+        targets, costs = self._queued[u] = self._costs(u)
         if costs:
             heapq.heappush(heap, (min(costs), u, stamp))
 
