@@ -41,6 +41,16 @@ _REFERENCE_CANDIDATES = 8
 MIN_SHAPE = 1e-6
 
 
+class _Fan:
+    """The faces around a vertex and what its collapses check on them (see :meth:`SurfaceComplex._fan`)."""
+
+    __slots__ = ("fan", "polygons", "fragments", "limit", "on_fault", "around")
+
+    def __init__(self, fan: set[int], polygons: set[int], fragments: set[int], limit: float, on_fault: bool):
+        self.fan, self.polygons, self.fragments, self.limit, self.on_fault = fan, polygons, fragments, limit, on_fault
+        self.around: dict[int, set[int]] = {}
+
+
 class SurfaceComplex:
     """Mutable faces of all fragments with their input polygons, for collapses (global vertex ids, fixed positions).
 
@@ -118,7 +128,8 @@ class SurfaceComplex:
             if self.stamp.get(u) != stamp or u not in self.vertex_faces:
                 continue
             bound = self._tolerance(u, tolerance)
-            v = next((v for v in self._targets(u, self._queued.pop(u)) if self._collapse(u, v, bound)), None)
+            ctx = self._fan(u)
+            v = next((v for v in self._targets(u, self._queued.pop(u)) if self._collapse(u, v, bound, ctx)), None)
             if v is not None:
                 done += 1
                 for w in sorted(self._neighbours(v) | {v}):
@@ -154,40 +165,57 @@ class SurfaceComplex:
         if costs:
             heapq.heappush(heap, (min(costs), u, stamp))
 
-    def _allowed(self, u: int, v: int) -> list[int] | None:
-        """The faces a collapse of ``u`` into ``v`` removes, or None if polygons or topology forbid it."""
+    def _fan(self, u: int) -> _Fan:
+        """What every collapse of ``u`` looks at around ``u`` (valid until a collapse changes the complex)."""
         fan = self.vertex_faces[u]
-        removed = [t for t in fan if v in self.faces[t]]
         polygons = {self.groups[t] for t in fan} - {-1}
-        if polygons - {self.groups[t] for t in removed}:
+        fragments = {k for t in fan for k in self.owners[t]}
+        outer = any(not self.fault[t] for t in fan)
+        return _Fan(fan, polygons, fragments, MIN_NORMAL_COS_OUTER if outer else MIN_NORMAL_COS,
+                    any(self.fault[t] for t in fan))
+
+    def _around(self, around: dict[int, set[int]], fan: set[int], k: int) -> set[int]:
+        """Corners of the faces of ``fan`` in fragment ``k`` (memoized in ``around``)."""
+        if k not in around:
+            around[k] = {x for t in fan if k in self.owners[t] for x in self.faces[t]}
+        return around[k]
+
+    def _allowed(self, u: int, v: int, ctx: _Fan) -> list[int] | None:
+        """The faces a collapse of ``u`` into ``v`` removes, or None if polygons or topology forbid it."""
+        fan = ctx.fan
+        removed = [t for t in fan if v in self.faces[t]]
+        if ctx.polygons and ctx.polygons - {self.groups[t] for t in removed}:
             return None  # v is not on every input polygon u is on: outer faces would leave the input surface
         v_fan = self.vertex_faces[v]
         v_fragments = {k for t in v_fan for k in self.owners[t]}
-        for k in {k for t in fan for k in self.owners[t]} & v_fragments:
+        for k in ctx.fragments & v_fragments:
             mine = [t for t in removed if k in self.owners[t]]
             if len(mine) != 2:
                 return None
             opposite = {x for t in mine for x in self.faces[t]} - {u, v}
-            around_u = {x for t in fan if k in self.owners[t] for x in self.faces[t]}
+            around_u = self._around(ctx.around, fan, k)
             around_v = {x for t in v_fan if k in self.owners[t] for x in self.faces[t]}
             if (around_u & around_v) - {u, v} != opposite:
                 return None  # link condition in fragment k: the collapse would pinch its surface
         return removed
 
-    def _collapse(self, u: int, v: int, tolerance: float) -> bool:
-        """Merge ``u`` into ``v`` if polygons, topology, orientation and the error bound allow; True if done."""
-        removed = self._allowed(u, v)
+    def _collapse(self, u: int, v: int, tolerance: float, ctx: _Fan | None = None) -> bool:
+        """Merge ``u`` into ``v`` if polygons, topology, orientation and the error bound allow; True if done.
+
+        ``ctx``: :meth:`_fan` of ``u``, when several targets of one ``u`` are tried in a row.
+        """
+        ctx = ctx if ctx is not None else self._fan(u)
+        removed = self._allowed(u, v, ctx)
         if removed is None:
             return False
         kept = sorted(self.vertex_faces[u] - set(removed))
         new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
-        limit = MIN_NORMAL_COS_OUTER if any(not self.fault[t] for t in self.vertex_faces[u]) else MIN_NORMAL_COS
-        if not all(_turns_little(self.points, self.faces[t], new_faces[t], limit) for t in kept):
+        if not all(_turns_little(self.points, self.faces[t], new_faces[t], ctx.limit) for t in kept):
             return False
         fault_kept = [t for t in kept if self.fault[t]]
         points: list[int] = []
         nearest: list[int] = []
-        if any(self.fault[t] for t in self.vertex_faces[u]):
+        if ctx.on_fault:
             points = [u] + [p for t in self.vertex_faces[u] for p in self.assigned[t]]
             if not fault_kept:
                 return False
@@ -262,9 +290,10 @@ def _turns_little(points: list, old: tuple, new: tuple, limit: float) -> bool:
     n_old = _normal(points, old)
     n_new = _normal(points, new)
     length2 = n_new[0] ** 2 + n_new[1] ** 2 + n_new[2] ** 2
-    a, b, c = (points[x] for x in new)
-    longest = max(sum((p - q) ** 2 for p, q in zip(a, b)), sum((p - q) ** 2 for p, q in zip(b, c)),
-                  sum((p - q) ** 2 for p, q in zip(c, a)))
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = (points[x] for x in new)
+    # Written out, in the order sum() adds them (0 + x is x exactly).
+    longest = max((ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2, (bx - cx) ** 2 + (by - cy) ** 2 + (bz - cz) ** 2,
+                  (cx - ax) ** 2 + (cy - ay) ** 2 + (cz - az) ** 2)
     if length2 == 0.0 or length2 <= (MIN_SHAPE * longest) ** 2:
         return False
     dot = n_old[0] * n_new[0] + n_old[1] * n_new[1] + n_old[2] * n_new[2]

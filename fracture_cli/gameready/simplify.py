@@ -99,6 +99,7 @@ class _Classified:
     faces: np.ndarray  # (m, 3) global vertex ids, in the first owner's orientation
     groups: np.ndarray  # (m,) input polygon of an outer face; -1 on a fault; -2 - face for a loose face
     owners: list  # per face: (fragment,) or (fragment A, fragment B)
+    owner_pair: np.ndarray  # (m, 2) the same as an array: (A, B), or (A, -1) for a face of one fragment
     fault: np.ndarray  # (m,) bool: a matched fault face (rebuilt flat); else the original corners are kept
     material: np.ndarray  # (m,) material slot
     corner: dict  # (group, global id) -> (fragment, its original vertex): the UV and normal of that corner
@@ -303,7 +304,9 @@ def _classify(fragments: Fragments, surface: SurfaceMesh, gid: np.ndarray, offse
     # The input's own vertices stay: the outer surface keeps its triangulation's corners, only cuts move.
     near, _ = cKDTree(surface.vertices).query(welded, distance_upper_bound=WELD_TOLERANCE)
     on_input = np.flatnonzero(np.isfinite(near))
-    return _Classified(faces=G[rows], groups=groups[rows], owners=owners, fault=paired[rows], material=material[rows],
+    owner_pair = np.column_stack([owner[rows], np.where(paired[rows], owner[np.maximum(twin[rows], 0)], -1)])
+    return _Classified(faces=G[rows], groups=groups[rows], owners=owners, owner_pair=owner_pair, fault=paired[rows],
+                       material=material[rows],
                        corner=corner, locked=set(np.unique(G[loose]).tolist()) | set(on_input.tolist()),
                        unmatched=int(np.sum(loose & (material == interior))),
                        patches=len({o for o in owners if len(o) == 2}))
@@ -317,9 +320,9 @@ def _rebuild(fragments: Fragments, k: int, welded: np.ndarray, classified: _Clas
     fault faces get one vertex per (corner, plane): flat normals, box-projected UVs.
     """
     frag = fragments.fragments[k]
-    mine = np.array([k in classified.owners[t] for t in ids.tolist()], dtype=bool)
+    mine = np.any(classified.owner_pair[ids] == k, axis=1)
     ids, faces = ids[mine], faces[mine].copy()
-    flip = np.array([classified.owners[t][0] != k for t in ids.tolist()], dtype=bool)
+    flip = classified.owner_pair[ids, 0] != k
     faces[flip] = faces[flip][:, ::-1]
     fault = classified.fault[ids]
     kept_faces = faces[~fault]
