@@ -14,6 +14,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from fracture_cli import parallel
 from fracture_cli.meshtopo import manifold_patches, undirected_edges
 from fracture_cli.trigeom import edge_manifold_closed, point_triangle_distance, self_intersections, vertex_manifold
 from fracture_cli.types import Fragment, Fragments, SurfaceMesh
@@ -185,6 +186,7 @@ def share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, 
             (a, fa), (b, fb) = sorted(found, key=lambda x: x[0])
             swaps.setdefault(b, []).append((gid[fragments.fragments[a].faces[fa] + offsets[a]][:, ::-1], fb))
     out = list(fragments.fragments)
+    candidates: list[tuple[int, Fragment]] = []
     for b, items in sorted(swaps.items()):
         frag = fragments.fragments[b]
         local = {int(g): v for g, v in zip(gid[offsets[b]:offsets[b + 1]].tolist(), range(len(frag.vertices)))}
@@ -196,10 +198,17 @@ def share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, 
                              material_ids=np.concatenate([frag.material_ids[keep],
                                                           np.full(len(new), interior, dtype=np.int32)]),
                              piece=frag.piece)
-        if valid(candidate):
+        candidates.append((b, candidate))
+    # The candidates are checked on their own (whole fragments: self-intersections anywhere count), in parallel.
+    for (b, candidate), ok in zip(candidates, parallel.ordered_map(_valid_item, [c for _, c in candidates])):
+        if ok:
             out[b] = candidate
     return Fragments(fragments=tuple(out), materials=fragments.materials, normalization=fragments.normalization,
                      input_volume=fragments.input_volume)
+
+
+def _valid_item(_: None, fragment: Fragment) -> bool:
+    return valid(fragment)
 
 
 def _cluster_key(G: np.ndarray) -> tuple:

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fracture_cli import parallel
 from fracture_cli.gameready.decimate import SurfaceComplex
 from fracture_cli.gameready.faultmatch import (
     WELD_TOLERANCE,
@@ -181,16 +182,15 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
         results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
                                   for k in range(len(fragments.fragments))])
         bad = {}
-        for k, frag in enumerate(results):
-            if k in as_cut:
-                continue
-            # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
-            signature = np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
-            if signature in valid_faces:
-                continue
-            b = _new_bad_faces(frag, face_ids[k], complex_, known, k, fragments, gid, offsets)
+        # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
+        signatures = {k: np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
+                      for k in range(len(results)) if k not in as_cut}
+        todo = [k for k, signature in signatures.items() if signature not in valid_faces]
+        # The fragments are checked on their own, in parallel; what was bad before is judged here.
+        for k, found in zip(todo, parallel.ordered_map(_bad_faces_item, [results[k] for k in todo])):
+            b = _new_bad_faces(found, results[k], face_ids[k], complex_, known, k, fragments, gid, offsets)
             if b is None:
-                valid_faces.add(signature)
+                valid_faces.add(signatures[k])
             else:
                 bad[k] = b
         if not bad or tolerance <= 0:
@@ -239,14 +239,18 @@ def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: di
     return complex_, len(over)
 
 
-def _new_bad_faces(fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex, known: dict, k: int,
-                   fragments: Fragments, gid: np.ndarray, offsets: np.ndarray) -> np.ndarray | None:
-    """The faces making a rebuilt fragment invalid (see :func:`_bad_faces`), unless they were so before.
+def _bad_faces_item(_: None, fragment: Fragment) -> np.ndarray | None:
+    return bad_faces(fragment)
+
+
+def _new_bad_faces(bad: np.ndarray | None, fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex,
+                   known: dict, k: int, fragments: Fragments, gid: np.ndarray,
+                   offsets: np.ndarray) -> np.ndarray | None:
+    """Of the faces ``bad`` making a rebuilt fragment invalid (:func:`bad_faces`), those not so before.
 
     A fragment cut with faces that already intersect (rare: folds the booleans left) is not held against
     the simplification: faces of it that no collapse touched, and that were bad before, are let through.
     """
-    bad = bad_faces(fragment)
     if bad is None or len(bad) == len(fragment.faces):
         return bad
     if k not in known:
