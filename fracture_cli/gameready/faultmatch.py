@@ -97,17 +97,17 @@ def twins(G: np.ndarray, owner: np.ndarray, candidate: np.ndarray) -> np.ndarray
     group = group.reshape(-1)
     order = np.argsort(group, kind="stable")
     starts = np.searchsorted(group[order], np.arange(len(counts)))
-    for g in np.flatnonzero(counts == 2).tolist():
-        i, j = rows[order[starts[g]]], rows[order[starts[g] + 1]]
-        if owner[i] != owner[j] and _opposite(G[i], G[j]):
-            twin[i], twin[j] = j, i
+    pair = np.flatnonzero(counts == 2)
+    i, j = rows[order[starts[pair]]], rows[order[starts[pair] + 1]]
+    ok = (owner[i] != owner[j]) & _opposite(G[i], G[j])
+    twin[i[ok]], twin[j[ok]] = j[ok], i[ok]
     return twin
 
 
-def _opposite(f: np.ndarray, g: np.ndarray) -> bool:
-    """Whether triangles f and g have the same corners in opposite cyclic order."""
-    k = int(np.flatnonzero(g == f[0])[0])
-    return bool(g[(k + 1) % 3] == f[2])
+def _opposite(f: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Whether triangles f (p, 3) and g (p, 3), with the same corners, have them in opposite cyclic order."""
+    k = np.argmax(g == f[:, :1], axis=1)  # the first corner of g at f's first corner
+    return g[np.arange(len(g)), (k + 1) % 3] == f[:, 2]
 
 
 def coplanar_groups(surface: SurfaceMesh) -> np.ndarray:
