@@ -91,7 +91,8 @@ class SurfaceComplex:
         # The (targets, costs) computed when a vertex was last queued: still true when its entry is popped with
         # the same stamp (any change to its neighbourhood or quadric queues it again with a new stamp).
         self._queued: dict[int, tuple[list[int], list[float]]] = {}
-        self.done: list[tuple[int, int]] = []  # the collapses made, in order
+        # The collapses made, in order: (u, v, tolerance, points, nearest) as :meth:`_apply` took them.
+        self.done: list[tuple[int, int, float, list[int], list[int]]] = []
         # Original fault vertices removed so far, kept with the face nearest to them (for the error bound).
         self.assigned: dict[int, list[int]] = {t: [] for t in self.faces}
         # Vertices whose collapse changed each face (to lock them when the face ends up in an invalid fragment).
@@ -102,15 +103,41 @@ class SurfaceComplex:
         self.reference = V[F] if len(F) else np.zeros((1, 3, 3))
         self.reference_tree = cKDTree(self.reference.mean(axis=1))
 
-    def replay(self, collapses: list[tuple[int, int]], tolerance: dict[int, float] | float) -> None:
-        """Redo the collapses ``(u, v)`` of an earlier try, in order, each only if still allowed.
+    def replay(self, collapses: list[tuple[int, int, float, list[int], list[int]]],
+               tolerance: dict[int, float] | float) -> None:
+        """Redo the collapses of an earlier try (its :attr:`done`), in order, each only if still allowed.
 
         A retry with a few vertices held back repeats most of the first try: replaying its collapses first
-        leaves :meth:`decimate` little to search for.
+        leaves :meth:`decimate` little to search for. A collapse whose surroundings (the faces around ``u``
+        and ``v``, their corners and the removed vertices kept with them) are as they were in the earlier
+        try, at the same tolerance, is allowed again and applied without checking. Where the tries part (a
+        collapse not redone, or checked again), its surroundings are marked changed and later collapses
+        there are checked in full.
         """
-        for u, v in collapses:
-            if u not in self.locked and u in self.vertex_faces and v in self.vertex_faces:
-                self._collapse(u, v, self._tolerance(u, tolerance))
+        changed_faces: set[int] = set()
+        changed_vertices: set[int] = set()
+        for u, v, was, points, nearest in collapses:
+            if u in self.locked or u not in self.vertex_faces or v not in self.vertex_faces:
+                self._mark_changed(u, v, changed_faces, changed_vertices)
+                continue
+            bound = self._tolerance(u, tolerance)
+            fan, v_fan = self.vertex_faces[u], self.vertex_faces[v]
+            if (bound == was and u not in changed_vertices and v not in changed_vertices
+                    and changed_faces.isdisjoint(fan) and changed_faces.isdisjoint(v_fan)):
+                removed = [t for t in fan if v in self.faces[t]]
+                kept = sorted(fan - set(removed))
+                new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
+                self._apply(u, v, removed, kept, new_faces, points, nearest, bound)
+                continue
+            self._mark_changed(u, v, changed_faces, changed_vertices)
+            self._collapse(u, v, bound)
+
+    def _mark_changed(self, u: int, v: int, faces: set[int], vertices: set[int]) -> None:
+        """Add the faces around ``u`` and ``v`` and their corners to ``faces`` and ``vertices``."""
+        around = set(self.vertex_faces.get(u, ())) | set(self.vertex_faces.get(v, ()))
+        faces |= around
+        vertices.update(x for t in around for x in self.faces[t])
+        vertices.update((u, v))
 
     def decimate(self, tolerance: dict[int, float] | float, vertices: list[int] | None = None) -> int:
         """Collapse, cheapest first, until no allowed collapse is left; returns how many were done.
@@ -229,7 +256,7 @@ class SurfaceComplex:
             nearest = [fault_kept[i] for i in np.argmin(distance, axis=0).tolist()]
             if self._strays(triangles, tolerance):
                 return False
-        self._apply(u, v, removed, kept, new_faces, points, nearest)
+        self._apply(u, v, removed, kept, new_faces, points, nearest, tolerance)
         return True
 
     def _strays(self, triangles: np.ndarray, tolerance: float) -> bool:
@@ -243,7 +270,7 @@ class SurfaceComplex:
         return bool(distance.reshape(len(P), -1).min(axis=1).max() > tolerance)
 
     def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
-               nearest: list[int]) -> None:
+               nearest: list[int], tolerance: float) -> None:
         touched = {u}.union(*(self.history[t] for t in removed))
         for t in removed:
             for x in self.faces[t]:
@@ -258,7 +285,7 @@ class SurfaceComplex:
             self.assigned[t].append(point)
         self.vertex_faces[v].update(kept)
         del self.vertex_faces[u]
-        self.done.append((u, v))
+        self.done.append((u, v, tolerance, points, nearest))
         self.quadric[v] = self.quadric[v] + self.quadric[u]
 
     def face_arrays(self) -> tuple[np.ndarray, np.ndarray]:
