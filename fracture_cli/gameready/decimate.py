@@ -93,6 +93,15 @@ class SurfaceComplex:
         self._queued: dict[int, tuple[list[int], list[float]]] = {}
         # The collapses made, in order: (u, v, tolerance, points, nearest) as :meth:`_apply` took them.
         self.done: list[tuple[int, int, float, list[int], list[int]]] = []
+        # Collapses applied so far, and the count when each face last changed (or went).
+        self.clock = 0
+        self.modified: dict[int, int] = {}
+        # Per vertex, its last refusal: (clock, tolerance, the faces its collapses looked at).
+        self.refused: dict[int, tuple[int, float, frozenset[int]]] = {}
+        # Refusals of an earlier try that hold again while those faces are as they were (see :meth:`replay`).
+        self._refusals: dict[int, tuple[float, frozenset[int]]] = {}
+        self._changed: set[int] = set()
+        self._replayed = 0
         # Original fault vertices removed so far, kept with the face nearest to them (for the error bound).
         self.assigned: dict[int, list[int]] = {t: [] for t in self.faces}
         # Vertices whose collapse changed each face (to lock them when the face ends up in an invalid fragment).
@@ -104,7 +113,8 @@ class SurfaceComplex:
         self.reference_tree = cKDTree(self.reference.mean(axis=1))
 
     def replay(self, collapses: list[tuple[int, int, float, list[int], list[int]]],
-               tolerance: dict[int, float] | float) -> None:
+               tolerance: dict[int, float] | float,
+               refusals: dict[int, tuple[float, frozenset[int]]] | None = None) -> None:
         """Redo the collapses of an earlier try (its :attr:`done`), in order, each only if still allowed.
 
         A retry with a few vertices held back repeats most of the first try: replaying its collapses first
@@ -112,9 +122,12 @@ class SurfaceComplex:
         and ``v``, their corners and the removed vertices kept with them) are as they were in the earlier
         try, at the same tolerance, is allowed again and applied without checking. Where the tries part (a
         collapse not redone, or checked again), its surroundings are marked changed and later collapses
-        there are checked in full.
+        there are checked in full. Likewise a vertex whose collapses were all refused at the end of the
+        earlier try (``refusals``: its :meth:`final_refusals`) is not tried again by :meth:`decimate` while
+        the faces they looked at are as they were, at the same tolerance.
         """
-        changed_faces: set[int] = set()
+        changed_faces = self._changed
+        self._refusals = dict(refusals or {})
         changed_vertices: set[int] = set()
         for u, v, was, points, nearest in collapses:
             if u in self.locked or u not in self.vertex_faces or v not in self.vertex_faces:
@@ -131,6 +144,23 @@ class SurfaceComplex:
                 continue
             self._mark_changed(u, v, changed_faces, changed_vertices)
             self._collapse(u, v, bound)
+        self._replayed = self.clock
+
+    def final_refusals(self) -> dict[int, tuple[float, frozenset[int]]]:
+        """The vertices whose last refusal saw the faces as they are now: (tolerance, faces looked at)."""
+        return {u: (bound, region) for u, (clock, bound, region) in self.refused.items()
+                if u in self.vertex_faces and all(self.modified.get(t, 0) <= clock for t in region)}
+
+    def _region(self, u: int, targets: list[int]) -> frozenset[int]:
+        """The faces the collapses of ``u`` into ``targets`` look at: around ``u`` and around each target."""
+        return frozenset(self.vertex_faces[u]).union(*(self.vertex_faces[v] for v in targets))
+
+    def _refused_again(self, u: int, bound: float, region: frozenset[int]) -> bool:
+        """Whether an earlier try refused every collapse of ``u`` with these faces as they are now."""
+        earlier = self._refusals.get(u)
+        return (earlier is not None and earlier[0] == bound and earlier[1] == region
+                and self._changed.isdisjoint(region) and all(self.modified.get(t, 0) <= self._replayed
+                                                             for t in region))
 
     def _mark_changed(self, u: int, v: int, faces: set[int], vertices: set[int]) -> None:
         """Add the faces around ``u`` and ``v`` and their corners to ``faces`` and ``vertices``."""
@@ -156,8 +186,14 @@ class SurfaceComplex:
                 continue
             bound = self._tolerance(u, tolerance)
             ctx = self._fan(u)
-            v = next((v for v in self._targets(u, self._queued.pop(u)) if self._collapse(u, v, bound, ctx)), None)
-            if v is not None:
+            targets = self._targets(u, self._queued.pop(u))
+            region = self._region(u, targets)
+            if self._refused_again(u, bound, region):
+                continue  # as refused in the earlier try: same faces, same tolerance
+            v = next((v for v in targets if self._collapse(u, v, bound, ctx)), None)
+            if v is None:
+                self.refused[u] = (self.clock, bound, region)
+            else:
                 done += 1
                 for w in sorted(self._neighbours(v) | {v}):
                     self._push(heap, w)
@@ -272,6 +308,9 @@ class SurfaceComplex:
     def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
                nearest: list[int], tolerance: float) -> None:
         touched = {u}.union(*(self.history[t] for t in removed))
+        self.clock += 1
+        self.modified.update((t, self.clock) for t in removed)
+        self.modified.update((t, self.clock) for t in kept)
         for t in removed:
             for x in self.faces[t]:
                 self.vertex_faces[x].discard(t)

@@ -171,13 +171,13 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
         locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
     known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
     damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
-    replay: list = []
+    earlier: SurfaceComplex | None = None
     valid_faces: set[bytes] = set()
     attempt = 0
     while True:
         complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles,
-                                   len(fragments.fragments), replay)
-        replay = complex_.done
+                                   len(fragments.fragments), earlier)
+        earlier = complex_
         ids, faces = complex_.face_arrays()
         results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
                                   for k in range(len(fragments.fragments))])
@@ -209,17 +209,18 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
 
 
 def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: dict, tolerance: float,
-              max_triangles: int, count: int, replay: list | None = None) -> tuple[SurfaceComplex, int]:
+              max_triangles: int, count: int, earlier: SurfaceComplex | None = None) -> tuple[SurfaceComplex, int]:
     """The complex after collapses to ``tolerance``, then to the budget; and how many fragments stay above it.
 
-    ``replay``: the collapses of an earlier try, redone first where still allowed.
+    ``earlier``: the complex of an earlier try, whose collapses are redone first where still allowed.
     """
     complex_ = SurfaceComplex(welded, classified.faces, classified.groups, classified.owners, classified.fault,
                               locked, damp)
     if tolerance <= 0:
         return complex_, 0
     bound = {k: tolerance for k in range(count)}
-    complex_.replay(replay or [], bound)
+    if earlier is not None:
+        complex_.replay(earlier.done, bound, earlier.final_refusals())
     complex_.decimate(bound)
     over: list[int] = []
     for _ in range(_BUDGET_ROUNDS + 1):
