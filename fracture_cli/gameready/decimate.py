@@ -187,12 +187,13 @@ class SurfaceComplex:
             bound = self._tolerance(u, tolerance)
             ctx = self._fan(u)
             targets = self._targets(u, self._queued.pop(u))
-            region = self._region(u, targets)
-            if self._refused_again(u, bound, region):
+            # (A refused collapse changes nothing: the region is the same before and after trying.)
+            region = self._region(u, targets) if u in self._refusals else None
+            if region is not None and self._refused_again(u, bound, region):
                 continue  # as refused in the earlier try: same faces, same tolerance
             v = next((v for v in targets if self._collapse(u, v, bound, ctx)), None)
             if v is None:
-                self.refused[u] = (self.clock, bound, region)
+                self.refused[u] = (self.clock, bound, region if region is not None else self._region(u, targets))
             else:
                 done += 1
                 for w in sorted(self._neighbours(v) | {v}):
