@@ -41,6 +41,16 @@ _REFERENCE_CANDIDATES = 8
 MIN_SHAPE = 1e-6
 
 
+class _Fan:
+    """The faces around a vertex and what its collapses check on them (see :meth:`SurfaceComplex._fan`)."""
+
+    __slots__ = ("fan", "polygons", "fragments", "limit", "on_fault", "around")
+
+    def __init__(self, fan: set[int], polygons: set[int], fragments: set[int], limit: float, on_fault: bool):
+        self.fan, self.polygons, self.fragments, self.limit, self.on_fault = fan, polygons, fragments, limit, on_fault
+        self.around: dict[int, set[int]] = {}
+
+
 class SurfaceComplex:
     """Mutable faces of all fragments with their input polygons, for collapses (global vertex ids, fixed positions).
 
@@ -66,6 +76,7 @@ class SurfaceComplex:
                  fault: np.ndarray, locked: set[int], damp: dict[int, float] | None = None):
         self.V = V
         self.points = [tuple(p) for p in np.asarray(V, dtype=float).tolist()]
+        self._homogeneous = np.column_stack([np.asarray(V, dtype=float), np.ones(len(V))])  # (g, 4)
         self.faces = {t: (int(a), int(b), int(c)) for t, (a, b, c) in enumerate(np.asarray(faces).tolist())}
         self.groups = [int(x) for x in groups]
         self.owners = owners
@@ -77,7 +88,20 @@ class SurfaceComplex:
             for x in f:
                 self.vertex_faces.setdefault(x, set()).add(t)
         self.stamp: dict[int, int] = {}
-        self.done: list[tuple[int, int]] = []  # the collapses made, in order
+        # The (targets, costs) computed when a vertex was last queued: still true when its entry is popped with
+        # the same stamp (any change to its neighbourhood or quadric queues it again with a new stamp).
+        self._queued: dict[int, tuple[list[int], list[float]]] = {}
+        # The collapses made, in order: (u, v, tolerance, points, nearest) as :meth:`_apply` took them.
+        self.done: list[tuple[int, int, float, list[int], list[int]]] = []
+        # Collapses applied so far, and the count when each face last changed (or went).
+        self.clock = 0
+        self.modified: dict[int, int] = {}
+        # Per vertex, its last refusal: (clock, tolerance, the faces its collapses looked at).
+        self.refused: dict[int, tuple[int, float, frozenset[int]]] = {}
+        # Refusals of an earlier try that hold again while those faces are as they were (see :meth:`replay`).
+        self._refusals: dict[int, tuple[float, frozenset[int]]] = {}
+        self._changed: set[int] = set()
+        self._replayed = 0
         # Original fault vertices removed so far, kept with the face nearest to them (for the error bound).
         self.assigned: dict[int, list[int]] = {t: [] for t in self.faces}
         # Vertices whose collapse changed each face (to lock them when the face ends up in an invalid fragment).
@@ -88,15 +112,62 @@ class SurfaceComplex:
         self.reference = V[F] if len(F) else np.zeros((1, 3, 3))
         self.reference_tree = cKDTree(self.reference.mean(axis=1))
 
-    def replay(self, collapses: list[tuple[int, int]], tolerance: dict[int, float] | float) -> None:
-        """Redo the collapses ``(u, v)`` of an earlier try, in order, each only if still allowed.
+    def replay(self, collapses: list[tuple[int, int, float, list[int], list[int]]],
+               tolerance: dict[int, float] | float,
+               refusals: dict[int, tuple[float, frozenset[int]]] | None = None) -> None:
+        """Redo the collapses of an earlier try (its :attr:`done`), in order, each only if still allowed.
 
         A retry with a few vertices held back repeats most of the first try: replaying its collapses first
-        leaves :meth:`decimate` little to search for.
+        leaves :meth:`decimate` little to search for. A collapse whose surroundings (the faces around ``u``
+        and ``v``, their corners and the removed vertices kept with them) are as they were in the earlier
+        try, at the same tolerance, is allowed again and applied without checking. Where the tries part (a
+        collapse not redone, or checked again), its surroundings are marked changed and later collapses
+        there are checked in full. Likewise a vertex whose collapses were all refused at the end of the
+        earlier try (``refusals``: its :meth:`final_refusals`) is not tried again by :meth:`decimate` while
+        the faces they looked at are as they were, at the same tolerance.
         """
-        for u, v in collapses:
-            if u not in self.locked and u in self.vertex_faces and v in self.vertex_faces:
-                self._collapse(u, v, self._tolerance(u, tolerance))
+        changed_faces = self._changed
+        self._refusals = dict(refusals or {})
+        changed_vertices: set[int] = set()
+        for u, v, was, points, nearest in collapses:
+            if u in self.locked or u not in self.vertex_faces or v not in self.vertex_faces:
+                self._mark_changed(u, v, changed_faces, changed_vertices)
+                continue
+            bound = self._tolerance(u, tolerance)
+            fan, v_fan = self.vertex_faces[u], self.vertex_faces[v]
+            if (bound == was and u not in changed_vertices and v not in changed_vertices
+                    and changed_faces.isdisjoint(fan) and changed_faces.isdisjoint(v_fan)):
+                removed = [t for t in fan if v in self.faces[t]]
+                kept = sorted(fan - set(removed))
+                new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
+                self._apply(u, v, removed, kept, new_faces, points, nearest, bound)
+                continue
+            self._mark_changed(u, v, changed_faces, changed_vertices)
+            self._collapse(u, v, bound)
+        self._replayed = self.clock
+
+    def final_refusals(self) -> dict[int, tuple[float, frozenset[int]]]:
+        """The vertices whose last refusal saw the faces as they are now: (tolerance, faces looked at)."""
+        return {u: (bound, region) for u, (clock, bound, region) in self.refused.items()
+                if u in self.vertex_faces and all(self.modified.get(t, 0) <= clock for t in region)}
+
+    def _region(self, u: int, targets: list[int]) -> frozenset[int]:
+        """The faces the collapses of ``u`` into ``targets`` look at: around ``u`` and around each target."""
+        return frozenset(self.vertex_faces[u]).union(*(self.vertex_faces[v] for v in targets))
+
+    def _refused_again(self, u: int, bound: float, region: frozenset[int]) -> bool:
+        """Whether an earlier try refused every collapse of ``u`` with these faces as they are now."""
+        earlier = self._refusals.get(u)
+        return (earlier is not None and earlier[0] == bound and earlier[1] == region
+                and self._changed.isdisjoint(region) and all(self.modified.get(t, 0) <= self._replayed
+                                                             for t in region))
+
+    def _mark_changed(self, u: int, v: int, faces: set[int], vertices: set[int]) -> None:
+        """Add the faces around ``u`` and ``v`` and their corners to ``faces`` and ``vertices``."""
+        around = set(self.vertex_faces.get(u, ())) | set(self.vertex_faces.get(v, ()))
+        faces |= around
+        vertices.update(x for t in around for x in self.faces[t])
+        vertices.update((u, v))
 
     def decimate(self, tolerance: dict[int, float] | float, vertices: list[int] | None = None) -> int:
         """Collapse, cheapest first, until no allowed collapse is left; returns how many were done.
@@ -114,8 +185,16 @@ class SurfaceComplex:
             if self.stamp.get(u) != stamp or u not in self.vertex_faces:
                 continue
             bound = self._tolerance(u, tolerance)
-            v = next((v for v in self._targets(u) if self._collapse(u, v, bound)), None)
-            if v is not None:
+            ctx = self._fan(u)
+            targets = self._targets(u, self._queued.pop(u))
+            # (A refused collapse changes nothing: the region is the same before and after trying.)
+            region = self._region(u, targets) if u in self._refusals else None
+            if region is not None and self._refused_again(u, bound, region):
+                continue  # as refused in the earlier try: same faces, same tolerance
+            v = next((v for v in targets if self._collapse(u, v, bound, ctx)), None)
+            if v is None:
+                self.refused[u] = (self.clock, bound, region if region is not None else self._region(u, targets))
+            else:
                 done += 1
                 for w in sorted(self._neighbours(v) | {v}):
                     self._push(heap, w)
@@ -133,56 +212,74 @@ class SurfaceComplex:
     def _costs(self, u: int) -> tuple[list[int], list[float]]:
         """The neighbours of ``u`` and the quadric error of moving ``u`` onto each."""
         targets = sorted(self._neighbours(u))
-        P = np.column_stack([self.V[targets], np.ones(len(targets))])
+        P = self._homogeneous[targets]
         return targets, np.einsum("ij,jk,ik->i", P, self.quadric[u], P).tolist()
 
-    def _targets(self, u: int) -> list[int]:
-        targets, costs = self._costs(u)
-        return [v for _, v in sorted(zip(costs, targets))]
+    def _targets(self, u: int, costs: tuple[list[int], list[float]] | None = None) -> list[int]:
+        """The neighbours of ``u``, cheapest collapse first (``costs``: :meth:`_costs` if already known)."""
+        targets, cost = costs if costs is not None else self._costs(u)
+        return [v for _, v in sorted(zip(cost, targets))]
 
     def _push(self, heap: list, u: int) -> None:
         """Queue ``u`` at the cost of its cheapest collapse, if it may move."""
         if u in self.locked or u not in self.vertex_faces:
             return
         stamp = self.stamp[u] = self.stamp.get(u, 0) + 1
-        _, costs = self._costs(u)
+        targets, costs = self._queued[u] = self._costs(u)
         if costs:
             heapq.heappush(heap, (min(costs), u, stamp))
 
-    def _allowed(self, u: int, v: int) -> list[int] | None:
-        """The faces a collapse of ``u`` into ``v`` removes, or None if polygons or topology forbid it."""
+    def _fan(self, u: int) -> _Fan:
+        """What every collapse of ``u`` looks at around ``u`` (valid until a collapse changes the complex)."""
         fan = self.vertex_faces[u]
-        removed = [t for t in fan if v in self.faces[t]]
         polygons = {self.groups[t] for t in fan} - {-1}
-        if polygons - {self.groups[t] for t in removed}:
+        fragments = {k for t in fan for k in self.owners[t]}
+        outer = any(not self.fault[t] for t in fan)
+        return _Fan(fan, polygons, fragments, MIN_NORMAL_COS_OUTER if outer else MIN_NORMAL_COS,
+                    any(self.fault[t] for t in fan))
+
+    def _around(self, around: dict[int, set[int]], fan: set[int], k: int) -> set[int]:
+        """Corners of the faces of ``fan`` in fragment ``k`` (memoized in ``around``)."""
+        if k not in around:
+            around[k] = {x for t in fan if k in self.owners[t] for x in self.faces[t]}
+        return around[k]
+
+    def _allowed(self, u: int, v: int, ctx: _Fan) -> list[int] | None:
+        """The faces a collapse of ``u`` into ``v`` removes, or None if polygons or topology forbid it."""
+        fan = ctx.fan
+        removed = [t for t in fan if v in self.faces[t]]
+        if ctx.polygons and ctx.polygons - {self.groups[t] for t in removed}:
             return None  # v is not on every input polygon u is on: outer faces would leave the input surface
         v_fan = self.vertex_faces[v]
         v_fragments = {k for t in v_fan for k in self.owners[t]}
-        for k in {k for t in fan for k in self.owners[t]} & v_fragments:
+        for k in ctx.fragments & v_fragments:
             mine = [t for t in removed if k in self.owners[t]]
             if len(mine) != 2:
                 return None
             opposite = {x for t in mine for x in self.faces[t]} - {u, v}
-            around_u = {x for t in fan if k in self.owners[t] for x in self.faces[t]}
+            around_u = self._around(ctx.around, fan, k)
             around_v = {x for t in v_fan if k in self.owners[t] for x in self.faces[t]}
             if (around_u & around_v) - {u, v} != opposite:
                 return None  # link condition in fragment k: the collapse would pinch its surface
         return removed
 
-    def _collapse(self, u: int, v: int, tolerance: float) -> bool:
-        """Merge ``u`` into ``v`` if polygons, topology, orientation and the error bound allow; True if done."""
-        removed = self._allowed(u, v)
+    def _collapse(self, u: int, v: int, tolerance: float, ctx: _Fan | None = None) -> bool:
+        """Merge ``u`` into ``v`` if polygons, topology, orientation and the error bound allow; True if done.
+
+        ``ctx``: :meth:`_fan` of ``u``, when several targets of one ``u`` are tried in a row.
+        """
+        ctx = ctx if ctx is not None else self._fan(u)
+        removed = self._allowed(u, v, ctx)
         if removed is None:
             return False
         kept = sorted(self.vertex_faces[u] - set(removed))
         new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
-        limit = MIN_NORMAL_COS_OUTER if any(not self.fault[t] for t in self.vertex_faces[u]) else MIN_NORMAL_COS
-        if not all(_turns_little(self.points, self.faces[t], new_faces[t], limit) for t in kept):
+        if not all(_turns_little(self.points, self.faces[t], new_faces[t], ctx.limit) for t in kept):
             return False
         fault_kept = [t for t in kept if self.fault[t]]
         points: list[int] = []
         nearest: list[int] = []
-        if any(self.fault[t] for t in self.vertex_faces[u]):
+        if ctx.on_fault:
             points = [u] + [p for t in self.vertex_faces[u] for p in self.assigned[t]]
             if not fault_kept:
                 return False
@@ -196,7 +293,7 @@ class SurfaceComplex:
             nearest = [fault_kept[i] for i in np.argmin(distance, axis=0).tolist()]
             if self._strays(triangles, tolerance):
                 return False
-        self._apply(u, v, removed, kept, new_faces, points, nearest)
+        self._apply(u, v, removed, kept, new_faces, points, nearest, tolerance)
         return True
 
     def _strays(self, triangles: np.ndarray, tolerance: float) -> bool:
@@ -210,8 +307,11 @@ class SurfaceComplex:
         return bool(distance.reshape(len(P), -1).min(axis=1).max() > tolerance)
 
     def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
-               nearest: list[int]) -> None:
+               nearest: list[int], tolerance: float) -> None:
         touched = {u}.union(*(self.history[t] for t in removed))
+        self.clock += 1
+        self.modified.update((t, self.clock) for t in removed)
+        self.modified.update((t, self.clock) for t in kept)
         for t in removed:
             for x in self.faces[t]:
                 self.vertex_faces[x].discard(t)
@@ -225,7 +325,7 @@ class SurfaceComplex:
             self.assigned[t].append(point)
         self.vertex_faces[v].update(kept)
         del self.vertex_faces[u]
-        self.done.append((u, v))
+        self.done.append((u, v, tolerance, points, nearest))
         self.quadric[v] = self.quadric[v] + self.quadric[u]
 
     def face_arrays(self) -> tuple[np.ndarray, np.ndarray]:
@@ -257,9 +357,10 @@ def _turns_little(points: list, old: tuple, new: tuple, limit: float) -> bool:
     n_old = _normal(points, old)
     n_new = _normal(points, new)
     length2 = n_new[0] ** 2 + n_new[1] ** 2 + n_new[2] ** 2
-    a, b, c = (points[x] for x in new)
-    longest = max(sum((p - q) ** 2 for p, q in zip(a, b)), sum((p - q) ** 2 for p, q in zip(b, c)),
-                  sum((p - q) ** 2 for p, q in zip(c, a)))
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = (points[x] for x in new)
+    # Written out, in the order sum() adds them (0 + x is x exactly).
+    longest = max((ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2, (bx - cx) ** 2 + (by - cy) ** 2 + (bz - cz) ** 2,
+                  (cx - ax) ** 2 + (cy - ay) ** 2 + (cz - az) ** 2)
     if length2 == 0.0 or length2 <= (MIN_SHAPE * longest) ** 2:
         return False
     dot = n_old[0] * n_new[0] + n_old[1] * n_new[1] + n_old[2] * n_new[2]

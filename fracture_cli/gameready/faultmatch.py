@@ -16,6 +16,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from fracture_cli import parallel
 from fracture_cli.meshtopo import manifold_patches, undirected_edges
 from fracture_cli.trigeom import edge_manifold_closed, point_triangle_distance, self_intersections, vertex_manifold
 from fracture_cli.types import Fragment, Fragments, SurfaceMesh
@@ -98,17 +99,17 @@ def twins(G: np.ndarray, owner: np.ndarray, candidate: np.ndarray) -> np.ndarray
     group = group.reshape(-1)
     order = np.argsort(group, kind="stable")
     starts = np.searchsorted(group[order], np.arange(len(counts)))
-    for g in np.flatnonzero(counts == 2).tolist():
-        i, j = rows[order[starts[g]]], rows[order[starts[g] + 1]]
-        if owner[i] != owner[j] and _opposite(G[i], G[j]):
-            twin[i], twin[j] = j, i
+    pair = np.flatnonzero(counts == 2)
+    i, j = rows[order[starts[pair]]], rows[order[starts[pair] + 1]]
+    ok = (owner[i] != owner[j]) & _opposite(G[i], G[j])
+    twin[i[ok]], twin[j[ok]] = j[ok], i[ok]
     return twin
 
 
-def _opposite(f: np.ndarray, g: np.ndarray) -> bool:
-    """Whether triangles f and g have the same corners in opposite cyclic order."""
-    k = int(np.flatnonzero(g == f[0])[0])
-    return bool(g[(k + 1) % 3] == f[2])
+def _opposite(f: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Whether triangles f (p, 3) and g (p, 3), with the same corners, have them in opposite cyclic order."""
+    k = np.argmax(g == f[:, :1], axis=1)  # the first corner of g at f's first corner
+    return g[np.arange(len(g)), (k + 1) % 3] == f[:, 2]
 
 
 def coplanar_groups(surface: SurfaceMesh) -> np.ndarray:
@@ -187,6 +188,7 @@ def share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, 
             (a, fa), (b, fb) = sorted(found, key=lambda x: x[0])
             swaps.setdefault(b, []).append((gid[fragments.fragments[a].faces[fa] + offsets[a]][:, ::-1], fb))
     out = list(fragments.fragments)
+    candidates: list[tuple[int, Fragment]] = []
     for b, items in sorted(swaps.items()):
         frag = fragments.fragments[b]
         local = {int(g): v for g, v in zip(gid[offsets[b]:offsets[b + 1]].tolist(), range(len(frag.vertices)))}
@@ -198,9 +200,16 @@ def share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, 
                              material_ids=np.concatenate([frag.material_ids[keep],
                                                           np.full(len(new), interior, dtype=np.int32)]),
                              piece=frag.piece)
-        if valid(candidate):
+        candidates.append((b, candidate))
+    # The candidates are checked on their own (whole fragments: self-intersections anywhere count), in parallel.
+    for (b, candidate), ok in zip(candidates, parallel.ordered_map(_valid_item, [c for _, c in candidates])):
+        if ok:
             out[b] = candidate
     return dataclasses.replace(fragments, fragments=tuple(out))
+
+
+def _valid_item(_: None, fragment: Fragment) -> bool:
+    return valid(fragment)
 
 
 def _cluster_key(G: np.ndarray) -> tuple:

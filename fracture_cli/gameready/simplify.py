@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fracture_cli import parallel
 from fracture_cli.gameready.decimate import SurfaceComplex
 from fracture_cli.gameready.faultmatch import (
     WELD_TOLERANCE,
@@ -100,6 +101,7 @@ class _Classified:
     faces: np.ndarray  # (m, 3) global vertex ids, in the first owner's orientation
     groups: np.ndarray  # (m,) input polygon of an outer face; -1 on a fault; -2 - face for a loose face
     owners: list  # per face: (fragment,) or (fragment A, fragment B)
+    owner_pair: np.ndarray  # (m, 2) the same as an array: (A, B), or (A, -1) for a face of one fragment
     fault: np.ndarray  # (m,) bool: a matched fault face (rebuilt flat); else the original corners are kept
     material: np.ndarray  # (m,) material slot
     corner: dict  # (group, global id) -> (fragment, its original vertex): the UV and normal of that corner
@@ -169,27 +171,26 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
         locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
     known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
     damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
-    replay: list = []
+    earlier: SurfaceComplex | None = None
     valid_faces: set[bytes] = set()
     attempt = 0
     while True:
         complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles,
-                                   len(fragments.fragments), replay)
-        replay = complex_.done
+                                   len(fragments.fragments), earlier)
+        earlier = complex_
         ids, faces = complex_.face_arrays()
         results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
                                   for k in range(len(fragments.fragments))])
         bad = {}
-        for k, frag in enumerate(results):
-            if k in as_cut:
-                continue
-            # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
-            signature = np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
-            if signature in valid_faces:
-                continue
-            b = _new_bad_faces(frag, face_ids[k], complex_, known, k, fragments, gid, offsets)
+        # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
+        signatures = {k: np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
+                      for k in range(len(results)) if k not in as_cut}
+        todo = [k for k, signature in signatures.items() if signature not in valid_faces]
+        # The fragments are checked on their own, in parallel; what was bad before is judged here.
+        for k, found in zip(todo, parallel.ordered_map(_bad_faces_item, [results[k] for k in todo])):
+            b = _new_bad_faces(found, results[k], face_ids[k], complex_, known, k, fragments, gid, offsets)
             if b is None:
-                valid_faces.add(signature)
+                valid_faces.add(signatures[k])
             else:
                 bad[k] = b
         if not bad or tolerance <= 0:
@@ -208,17 +209,18 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
 
 
 def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: dict, tolerance: float,
-              max_triangles: int, count: int, replay: list | None = None) -> tuple[SurfaceComplex, int]:
+              max_triangles: int, count: int, earlier: SurfaceComplex | None = None) -> tuple[SurfaceComplex, int]:
     """The complex after collapses to ``tolerance``, then to the budget; and how many fragments stay above it.
 
-    ``replay``: the collapses of an earlier try, redone first where still allowed.
+    ``earlier``: the complex of an earlier try, whose collapses are redone first where still allowed.
     """
     complex_ = SurfaceComplex(welded, classified.faces, classified.groups, classified.owners, classified.fault,
                               locked, damp)
     if tolerance <= 0:
         return complex_, 0
     bound = {k: tolerance for k in range(count)}
-    complex_.replay(replay or [], bound)
+    if earlier is not None:
+        complex_.replay(earlier.done, bound, earlier.final_refusals())
     complex_.decimate(bound)
     over: list[int] = []
     for _ in range(_BUDGET_ROUNDS + 1):
@@ -238,14 +240,18 @@ def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: di
     return complex_, len(over)
 
 
-def _new_bad_faces(fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex, known: dict, k: int,
-                   fragments: Fragments, gid: np.ndarray, offsets: np.ndarray) -> np.ndarray | None:
-    """The faces making a rebuilt fragment invalid (see :func:`_bad_faces`), unless they were so before.
+def _bad_faces_item(_: None, fragment: Fragment) -> np.ndarray | None:
+    return bad_faces(fragment)
+
+
+def _new_bad_faces(bad: np.ndarray | None, fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex,
+                   known: dict, k: int, fragments: Fragments, gid: np.ndarray,
+                   offsets: np.ndarray) -> np.ndarray | None:
+    """Of the faces ``bad`` making a rebuilt fragment invalid (:func:`bad_faces`), those not so before.
 
     A fragment cut with faces that already intersect (rare: folds the booleans left) is not held against
     the simplification: faces of it that no collapse touched, and that were bad before, are let through.
     """
-    bad = bad_faces(fragment)
     if bad is None or len(bad) == len(fragment.faces):
         return bad
     if k not in known:
@@ -303,7 +309,9 @@ def _classify(fragments: Fragments, surface: SurfaceMesh, gid: np.ndarray, offse
     # The input's own vertices stay: the outer surface keeps its triangulation's corners, only cuts move.
     near, _ = cKDTree(surface.vertices).query(welded, distance_upper_bound=WELD_TOLERANCE)
     on_input = np.flatnonzero(np.isfinite(near))
-    return _Classified(faces=G[rows], groups=groups[rows], owners=owners, fault=paired[rows], material=material[rows],
+    owner_pair = np.column_stack([owner[rows], np.where(paired[rows], owner[np.maximum(twin[rows], 0)], -1)])
+    return _Classified(faces=G[rows], groups=groups[rows], owners=owners, owner_pair=owner_pair, fault=paired[rows],
+                       material=material[rows],
                        corner=corner, locked=set(np.unique(G[loose]).tolist()) | set(on_input.tolist()),
                        unmatched=int(np.sum(loose & (material == interior))),
                        patches=len({o for o in owners if len(o) == 2}))
@@ -317,9 +325,9 @@ def _rebuild(fragments: Fragments, k: int, welded: np.ndarray, classified: _Clas
     fault faces get one vertex per (corner, plane): flat normals, box-projected UVs.
     """
     frag = fragments.fragments[k]
-    mine = np.array([k in classified.owners[t] for t in ids.tolist()], dtype=bool)
+    mine = np.any(classified.owner_pair[ids] == k, axis=1)
     ids, faces = ids[mine], faces[mine].copy()
-    flip = np.array([classified.owners[t][0] != k for t in ids.tolist()], dtype=bool)
+    flip = classified.owner_pair[ids, 0] != k
     faces[flip] = faces[flip][:, ::-1]
     fault = classified.fault[ids]
     kept_faces = faces[~fault]
