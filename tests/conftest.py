@@ -28,10 +28,14 @@ def sample_asset(request) -> str:
 
 
 @pytest.fixture(autouse=True)
-def _restore_fracture_logger():
-    """CLI tests route the 'fracture_cli' logger to stderr and stop its propagation (configure_output); put
-    it back afterwards, so a later test in the same worker still sees its records through caplog."""
+def _pristine_fracture_logger():
+    """CLI tests route the 'fracture_cli' logger to stderr and stop its propagation (configure_output).
+
+    Every test starts with the logger as a library user gets it (no handlers, level unset, records
+    propagating to the root, where caplog listens), whatever ran before in this worker: a module-scoped
+    fixture that ran a CLI command changes it before any function-scoped fixture could save it.
+    """
     logger = logging.getLogger("fracture_cli")
-    saved = (list(logger.handlers), logger.level, logger.propagate)
+    logger.handlers[:], logger.level, logger.propagate = [], logging.NOTSET, True
     yield
-    logger.handlers[:], logger.level, logger.propagate = saved[0], saved[1], saved[2]
+    logger.handlers[:], logger.level, logger.propagate = [], logging.NOTSET, True
