@@ -206,11 +206,11 @@ def _checked(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments, dict[st
 
 
 def _simplify(state: PipelineState, options: Any) -> PipelineState:
-    from fracture_cli.stages.simplify import simplify, triangle_budget
+    from fracture_cli.stages.simplify import simplify, skipped, triangle_budget
 
     surface, frags = state.need("surface", "simplify"), state.need("fragments", "simplify")
     before = sum(len(f.faces) for f in frags.fragments)
-    if options.tolerance > 0:
+    if not skipped(surface, options):
         frags, checks = _checked(surface, simplify(frags, surface, options)[0])
     else:
         checks = dict(state.checks or {})

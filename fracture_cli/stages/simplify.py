@@ -43,11 +43,17 @@ class SimplifyOptions:
         "tolerance; 0 = no budget",
         min=0,
     )
+    max_input_triangles: int = option(
+        200_000,
+        "inputs with more triangles keep their faults as cut (the stage's matching of fault curves to input "
+        "polygons does not scale yet: a 1M-triangle input took over 12 minutes); 0 = no limit",
+        min=0,
+    )
 
 
 def simplify(fragments: Fragments, surface: SurfaceMesh,
              options: SimplifyOptions = SimplifyOptions()) -> tuple[Fragments, FaultReport]:
-    """Simplify the fragments' faults.
+    """Simplify the fragments' faults (callers check :func:`skipped` first).
 
     Parameters
     ----------
@@ -73,3 +79,15 @@ def simplify(fragments: Fragments, surface: SurfaceMesh,
 def triangle_budget(input_triangles: int, fragments: int) -> int:
     """The issue's budget for a bake's output: twice the input's triangles plus 64 per fragment."""
     return 2 * input_triangles + BUDGET_PER_FRAGMENT * fragments
+
+
+def skipped(surface: SurfaceMesh, options: SimplifyOptions) -> bool:
+    """Whether the stage leaves the faults as cut: tolerance 0, or an input above ``max_input_triangles`` (warned)."""
+    if options.tolerance <= 0:
+        return True
+    if options.max_input_triangles and len(surface.faces) > options.max_input_triangles:
+        log.warning("%s: the faults are kept as cut: the input has %d triangles, above simplify.max_input_triangles "
+                    "= %d (set it to 0 to simplify anyway, slowly)", STAGE, len(surface.faces),
+                    options.max_input_triangles)
+        return True
+    return False
