@@ -51,6 +51,7 @@ import numpy as np
 
 from fracture_cli.gameready.collision import COLLISION_FORMATS, hull_mesh
 from fracture_cli.gameready.mass import MassProperties, quaternion_xyzw
+from fracture_cli.io.gltf import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, UINT16
 
 __all__ = ["COLLISION_FORMATS", "FragmentPhysics", "node_extras", "physics_extender", "runtime_arrays"]
 OMI_SHAPE = "OMI_physics_shape"
@@ -58,10 +59,6 @@ OMI_BODY = "OMI_physics_body"
 GODOT_SUFFIX = "-convcolonly"
 UNREAL_PREFIX = "UCX_"
 
-_FLOAT = 5126
-_UINT16 = 5123
-_ARRAY_BUFFER = 34962
-_ELEMENT_ARRAY_BUFFER = 34963
 _DECIMALS = 9
 
 
@@ -177,8 +174,8 @@ def _hull_primitive(corners: np.ndarray, origin: np.ndarray, buffer) -> dict:
     positions = np.ascontiguousarray(V - np.asarray(origin, dtype=np.float64), dtype="<f4")
     indices = np.ascontiguousarray(F.reshape(-1), dtype="<u2")  # a convex part has < 256 corners
     return {
-        "attributes": {"POSITION": buffer.add_accessor(positions, "VEC3", _FLOAT, _ARRAY_BUFFER, bounds=True)},
-        "indices": buffer.add_accessor(indices, "SCALAR", _UINT16, _ELEMENT_ARRAY_BUFFER),
+        "attributes": {"POSITION": buffer.add_accessor(positions, "VEC3", FLOAT, ARRAY_BUFFER, bounds=True)},
+        "indices": buffer.add_accessor(indices, "SCALAR", UINT16, ELEMENT_ARRAY_BUFFER),
         "mode": 4,
     }
 

@@ -23,10 +23,11 @@ from fracture_cli.types import Material
 _GLB_MAGIC = b"glTF"
 _CHUNK_JSON = 0x4E4F534A
 _CHUNK_BIN = 0x004E4942
-_FLOAT = 5126
-_UINT32 = 5125
-_ARRAY_BUFFER = 34962
-_ELEMENT_ARRAY_BUFFER = 34963
+FLOAT = 5126
+UINT16 = 5123
+UINT32 = 5125
+ARRAY_BUFFER = 34962
+ELEMENT_ARRAY_BUFFER = 34963
 
 
 @dataclass(frozen=True)
@@ -181,16 +182,16 @@ def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Pri
             pos = np.ascontiguousarray(prim.positions, dtype="<f4")
             nrm = np.ascontiguousarray(prim.normals, dtype="<f4")
             attributes = {
-                "POSITION": add_accessor(pos, "VEC3", _FLOAT, _ARRAY_BUFFER, bounds=True),
-                "NORMAL": add_accessor(nrm, "VEC3", _FLOAT, _ARRAY_BUFFER),
+                "POSITION": add_accessor(pos, "VEC3", FLOAT, ARRAY_BUFFER, bounds=True),
+                "NORMAL": add_accessor(nrm, "VEC3", FLOAT, ARRAY_BUFFER),
             }
             if prim.uvs is not None:
                 uv = np.array(prim.uvs, dtype=np.float64)
                 uv[:, 1] = 1.0 - uv[:, 1]
-                attributes["TEXCOORD_0"] = add_accessor(np.ascontiguousarray(uv, dtype="<f4"), "VEC2", _FLOAT,
-                                                        _ARRAY_BUFFER)
+                attributes["TEXCOORD_0"] = add_accessor(np.ascontiguousarray(uv, dtype="<f4"), "VEC2", FLOAT,
+                                                        ARRAY_BUFFER)
             idx = np.ascontiguousarray(prim.indices, dtype="<u4").reshape(-1)
-            indices = add_accessor(idx, "SCALAR", _UINT32, _ELEMENT_ARRAY_BUFFER)
+            indices = add_accessor(idx, "SCALAR", UINT32, ELEMENT_ARRAY_BUFFER)
             prims.append({"attributes": attributes, "indices": indices, "material": int(prim.material), "mode": 4})
         gl_meshes.append({"name": name, "primitives": prims})
         node = {"name": name, "mesh": len(gl_meshes) - 1}
