@@ -18,7 +18,10 @@ extensions' own specifications):
 * buffers in the GLB binary chunk, in ``data:`` URIs or in files named by a
   percent-encoded relative ``uri``;
 * one material slot per glTF material (two materials that share a name stay
-  two), with base colour, metallic, roughness and the base-colour texture.
+  two), with base colour, metallic, roughness and the base-colour texture;
+* engines' collision-only nodes (Unreal ``UCX_``, Godot ``-convcolonly``, ...)
+  are skipped with a warning, and a GLB baked by fracture has its materials'
+  stem prefix removed (:mod:`fracture_cli.io.gltf_conventions`).
 
 ``extensionsRequired`` lists extensions a reader must understand: any not in
 :data:`SUPPORTED_EXTENSIONS` is refused by name (Draco and meshopt
@@ -42,6 +45,7 @@ import numpy as np
 
 from fracture_cli.errors import InputError
 from fracture_cli.io.gltf import MaterialSource
+from fracture_cli.io.gltf_conventions import baked_material_prefix, is_collision_only, unprefixed
 from fracture_cli.io.inputs import external_uri, gltf_document
 from fracture_cli.io.parts import MeshPart
 from fracture_cli.types import Material
@@ -148,6 +152,7 @@ class _Document:
         self._buffers: dict[int, bytes] = {}
         self._materials: dict[int, Material] = {}
         check_required_extensions(doc, path)
+        self.material_prefix = baked_material_prefix(doc)
         used = set(doc.get("extensionsUsed", []) or []) - SUPPORTED_EXTENSIONS
         if "EXT_mesh_gpu_instancing" in used:
             log.warning("load: %s: EXT_mesh_gpu_instancing is not applied; each instanced mesh is read once", path)
@@ -277,6 +282,7 @@ class _Document:
         else:
             return [(m, np.eye(4)) for m in range(len(self.doc.get("meshes", []) or []))]
         out: list[tuple[int, np.ndarray]] = []
+        self.skipped_collision: list[str] = []
         stack: list[tuple[int, np.ndarray, tuple[int, ...]]] = [(int(r), np.eye(4), ()) for r in reversed(roots)]
         while stack:
             index, parent, ancestors = stack.pop()
@@ -284,10 +290,16 @@ class _Document:
                 raise self.fail(f"node {index} is its own ancestor (the node hierarchy has a cycle)")
             node = nodes[index]
             world = parent @ _local_matrix(node)
-            if "mesh" in node:
+            if "mesh" in node and is_collision_only(node.get("name")):
+                self.skipped_collision.append(str(node["name"]))
+            elif "mesh" in node:
                 out.append((int(node["mesh"]), world))
             for child in reversed(node.get("children", [])):
                 stack.append((int(child), world, ancestors + (index,)))
+        if self.skipped_collision:
+            log.warning("load: %s: %d collision-only node(s) skipped (%s%s): engines import them as collision, "
+                        "not as the visible asset", self.path, len(self.skipped_collision),
+                        ", ".join(self.skipped_collision[:3]), ", ..." if len(self.skipped_collision) > 3 else "")
         return out
 
     def parts(self) -> list[MeshPart]:
@@ -382,7 +394,7 @@ class _Document:
             image = self._image(int(texture["index"]))
         source = MaterialSource(baseColorTexture=image, metallicFactor=float(pbr.get("metallicFactor", 1.0)),
                                     roughnessFactor=float(pbr.get("roughnessFactor", 1.0)))
-        return Material(name=str(spec.get("name") or f"material_{index}"),
+        return Material(name=unprefixed(str(spec.get("name") or f"material_{index}"), self.material_prefix),
                         base_color=tuple((factor + [1.0] * 4)[:4]), source=source)  # type: ignore[arg-type]
 
     def _image(self, texture_index: int):
