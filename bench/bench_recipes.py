@@ -61,7 +61,9 @@ pipeline.Runner.run = timed
 c0 = cpu()
 result = bake(sys.argv[1], sys.argv[2], load_recipe(sys.argv[3], sys.argv[4:]))
 cpu_seconds["export"] = cpu() - c0 - sum(cpu_seconds.values())
-print(json.dumps({"report": result.report, "wall": time.perf_counter() - t0, "cpu": cpu(), "cpu_stages": cpu_seconds,
+glb = os.path.join(sys.argv[2], os.path.splitext(os.path.basename(sys.argv[1]))[0] + ".glb")
+print(json.dumps({"report": result.report, "glb_bytes": os.path.getsize(glb),
+                  "wall": time.perf_counter() - t0, "cpu": cpu(), "cpu_stages": cpu_seconds,
                   "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
                   "worker_peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0}))
 """
@@ -212,6 +214,7 @@ def _tables(rows: list, stages: list[str]) -> str:
             + f" | {data['wall']:.1f} | {data['cpu']:.1f} | {100 * data['cpu'] / data['wall']:.0f} | "
             f"{data['peak_mb']:.0f} | {data['worker_peak_mb']:.0f} | {base['wall']:.2f} | "
             f"{data['wall'] / base['wall']:.1f} |")
+    lines += _game_ready_table(rows)
     lines += ["", "Baseline detail: wall of the whole process, of the shatter alone after imports, and its CPU.", "",
               "| asset | fragments | baseline wall s | shatter s | shatter CPU s |", "|---|---|---|---|---|"]
     seen = set()
@@ -221,6 +224,37 @@ def _tables(rows: list, stages: list[str]) -> str:
             seen.add(key)
             lines.append(f"| {asset} | {key[1]} | {base['wall']:.2f} | {base['compute']:.2f} | {base['cpu']:.2f} |")
     return "\n".join(lines) + "\n"
+
+
+def _game_ready_table(rows: list) -> list[str]:
+    """Issue 20's figures per recipe and asset, from each bake's report (checks run on the meshes as written)."""
+    lines = ["", "Game-ready output per recipe (issue 20), from each bake's report: triangles of the input as read "
+             "and of the solid it was repaired into (an open sheet is thickened), of the fragments as cut and as "
+             "written; the budget is twice the input's triangles plus 64 per fragment, counted from the solid "
+             "(what the report checks) and from the file as read (the stricter reading). Bodies: most closed "
+             "bodies in one fragment. Collision: convex parts, largest overlap between parts (fraction of the "
+             "smaller; target < 0.01), smallest share of a fragment's volume inside its parts.", "",
+             "| asset | recipe | fragments | tris read | tris solid | tris cut | tris written | budget (solid) | "
+             "budget (read) | GLB KiB | bodies | parts | overlap | coverage |",
+             "|" + "---|" * 14]
+    for asset, recipe, report, data, _ in rows:
+        checks, frags = report["checks"], int(report["counts"]["fragments"])
+        read = int(report["input"]["triangles"])
+        budget = int(checks.get("triangle_budget", 0))
+        solid = (budget - 64 * frags) // 2
+        written = int(checks.get("triangles", 0))
+        strict = 2 * read + 64 * frags
+        lines.append(f"| {asset} | {recipe} | {frags} | {read:,} | {solid:,} | {int(checks.get('triangles_cut', 0)):,} "
+                     f"| {written:,} | {_within(written, budget)} | {_within(written, strict)} | "
+                     f"{data.get('glb_bytes', 0) / 1024:.0f} | "
+                     f"{checks.get('fragment_bodies_max', '-')} | {checks.get('collision_parts', '-')} | "
+                     f"{checks.get('collision_max_overlap', 0.0):.2g} | "
+                     f"{checks.get('collision_min_coverage', 0.0):.3f} |")
+    return lines
+
+
+def _within(value: int, limit: int) -> str:
+    return f"{limit:,} {'ok' if value <= limit else 'OVER'}"
 
 
 if __name__ == "__main__":

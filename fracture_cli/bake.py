@@ -30,6 +30,7 @@ from fracture_cli.errors import FractureError, UsageError
 from fracture_cli.io.inputs import estimate_output_bytes, input_files
 from fracture_cli.io.outputs import output_set
 from fracture_cli.io.preflight import check_inputs_untouched, preflight, refuse_inputs_as_outputs
+from fracture_cli.io.write import fragment_name
 from fracture_cli.pipeline import STAGE_NAMES, STEPS, PipelineState, Runner
 from fracture_cli.recipe import Recipe
 from fracture_cli.types import Fragments
@@ -61,14 +62,14 @@ class BatchItem:
     exception: BaseException | None = None
 
 
-def fragment_summary(fragments: Fragments) -> list[dict[str, Any]]:
-    """Per-fragment summary for reports and golden files (input units, rounded)."""
+def fragment_summary(fragments: Fragments, stem: str | None = None) -> list[dict[str, Any]]:
+    """Per-fragment summary for reports and golden files (input units); names as the GLB's nodes."""
     out = []
     scale = fragments.normalization.scale
     for i, frag in enumerate(fragments.fragments):
         world = fragments.normalization.to_world(frag.vertices)
         out.append({
-            "name": f"fragment_{i:03d}",
+            "name": fragment_name(i, stem),
             "piece": int(frag.piece),
             "triangles": int(len(frag.faces)),
             "volume": float(trigeom.signed_volume(frag.vertices, frag.faces) * scale**3),
@@ -183,7 +184,7 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
         },
         "checks": dict(state.checks or {}),
         "repairs": records_for_report(state.repairs, surface.normalization),
-        "fragments": fragment_summary(frags),
+        "fragments": fragment_summary(frags, stem),
         "outputs": [f"{stem}.glb", f"{stem}.fracture.json", f"{stem}.fracture.bin", f"{stem}.report.json"],
     }
 
