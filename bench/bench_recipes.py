@@ -19,6 +19,7 @@ from __future__ import annotations
 import glob
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -128,9 +129,29 @@ def _child(code: str, *args: str) -> dict:
 
 
 def bake_one(asset: str, recipe: str) -> dict:
-    """Bake ``asset`` with ``recipe`` in a fresh process: report, wall, CPU per stage, peaks."""
+    """Bake ``asset`` with ``recipe`` in a fresh process: report, wall, CPU per stage, peaks, Godot rest speed.
+
+    The parts go into the GLB as ``UCX_`` meshes (``collision.glb=unreal``, the form the Godot 3 rest script
+    reads); the format changes only how the export step writes them.
+    """
     with tempfile.TemporaryDirectory(prefix="fracture-bench-recipes-") as out:
-        return bake_child(os.path.join(REPO, "sample_assets", asset), out, recipe)
+        data = bake_child(os.path.join(REPO, "sample_assets", asset), out, recipe, "collision.glb=unreal")
+        glb = os.path.join(out, os.path.splitext(asset)[0] + ".glb")
+        data["rest"] = _rest_in_godot(glb) if shutil.which("godot3-server") else None
+        return data
+
+
+def _rest_in_godot(glb: str) -> float:
+    """Largest body speed (m/s) after one second in Godot 3, one rigid body per fragment from its parts."""
+    sys.path.insert(0, os.path.join(REPO, "tests"))
+    from godot_harness import GodotProject
+    from test_gameready_engine import REST_SCRIPT
+
+    with tempfile.TemporaryDirectory(prefix="fracture-bench-godot-") as tmp:
+        project = GodotProject(os.path.join(tmp, "godot"))
+        scene = project.add_file(glb)
+        project.import_resources()
+        return float(project.run_script(REST_SCRIPT, scene, "parts").lines("max_speed ")[0].split()[1])
 
 
 def baseline(asset: str, fragments: int) -> dict:
@@ -233,10 +254,12 @@ def _game_ready_table(rows: list) -> list[str]:
              "written; the budget is twice the input's triangles plus 64 per fragment, counted from the solid "
              "(what the report checks) and from the file as read (the stricter reading). Bodies: most closed "
              "bodies in one fragment. Collision: convex parts, largest overlap between parts (fraction of the "
-             "smaller; target < 0.01), smallest share of a fragment's volume inside its parts.", "",
+             "smaller; target < 0.01), smallest share of a fragment's volume inside its parts. Rest: one rigid "
+             "body per fragment from its parts in Godot 3 headless, gravity off, largest speed after 1 s (m/s; "
+             "target < 0.05; '-' without godot3-server).", "",
              "| asset | recipe | fragments | tris read | tris solid | tris cut | tris written | budget (solid) | "
-             "budget (read) | GLB KiB | bodies | parts | overlap | coverage |",
-             "|" + "---|" * 14]
+             "budget (read) | GLB KiB | bodies | parts | overlap | coverage | rest m/s |",
+             "|" + "---|" * 15]
     for asset, recipe, report, data, _ in rows:
         checks, frags = report["checks"], int(report["counts"]["fragments"])
         read = int(report["input"]["triangles"])
@@ -249,7 +272,8 @@ def _game_ready_table(rows: list) -> list[str]:
                      f"{data.get('glb_bytes', 0) / 1024:.0f} | "
                      f"{checks.get('fragment_bodies_max', '-')} | {checks.get('collision_parts', '-')} | "
                      f"{checks.get('collision_max_overlap', 0.0):.2g} | "
-                     f"{checks.get('collision_min_coverage', 0.0):.3f} |")
+                     f"{checks.get('collision_min_coverage', 0.0):.3f} | "
+                     f"{'-' if data.get('rest') is None else format(data['rest'], '.4f')} |")
     return lines
 
 
