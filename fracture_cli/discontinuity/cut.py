@@ -198,11 +198,7 @@ class CutSubproblemSolver:
             key, inverse = np.unique(lo * n + hi, return_inverse=True)
             edge_omega = np.bincount(inverse.reshape(-1), weights=self.omega[between], minlength=len(key))
             edges = np.column_stack([key // n, key % n])
-            # Row P holds the volumes of the tets of cell P, in tet order (CSR built directly).
-            order = np.argsort(self.cells, kind="stable")
-            indptr = np.zeros(n + 1, dtype=np.int64)
-            np.cumsum(np.bincount(self.cells, minlength=n), out=indptr[1:])
-            indicator = sp.csr_matrix((self.vol[order], order, indptr), shape=(n, self.t))
+            indicator = sp.csr_matrix((self.vol, (self.cells, np.arange(self.t))), shape=(n, self.t))
             self._cell_cache = (n, edges, edge_omega, indicator)
         return self._cell_cache
 
