@@ -103,6 +103,10 @@ class CutSubproblemSolver:
         self.merge_cells = int(merge_cells)
         self._constraints = Constraints(self.vol)
         self._fa, self._fb = self.face_tets[:, 0], self.face_tets[:, 1]
+        # The face graph in CSR order (by first tet), so that a subgraph is a mask away (:meth:`_components`).
+        self._csr_order = np.argsort(self._fa, kind="stable")
+        self._csr_rows = self._fa[self._csr_order]
+        self._csr_cols = self._fb[self._csr_order].astype(np.int32)
         self._max_flow = MinCut(self.face_tets, self.omega, self.t, max_flow)
         self._master_lp = MasterLP(self.vol)
         self.cells = np.zeros(self.t, dtype=np.int64)
@@ -169,8 +173,12 @@ class CutSubproblemSolver:
 
     def _components(self, keep: np.ndarray) -> tuple[int, np.ndarray]:
         """Connected components (count, labels (t,)) of the tets joined by the faces in ``keep`` (f,) bool."""
-        graph = sp.csr_matrix((np.ones(int(keep.sum()), dtype=np.int8), (self._fa[keep], self._fb[keep])),
-                              shape=(self.t, self.t))
+        # Built as CSR directly (no COO round trip: this runs after every pricing round).
+        mask = keep[self._csr_order]
+        indptr = np.zeros(self.t + 1, dtype=np.int32)
+        np.cumsum(np.bincount(self._csr_rows[mask], minlength=self.t), out=indptr[1:])
+        cols = self._csr_cols[mask]
+        graph = sp.csr_matrix((np.ones(len(cols)), cols, indptr), shape=(self.t, self.t))
         count, labels = connected_components(graph, directed=False)
         return int(count), labels.astype(np.int64)
 

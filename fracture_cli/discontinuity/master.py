@@ -169,13 +169,23 @@ class MasterLP:
     def _dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost):
         """Matrix (n + 1, E + m + 1), costs, column bounds and row bounds of the dual master LP."""
         E, m = len(edges), G.shape[0]
-        eidx = np.arange(E)
         cell_vol = np.asarray(indicator.sum(axis=1)).reshape(-1)
-        Gs = sp.coo_matrix(G)
-        rows = np.concatenate([edges[:, 0], edges[:, 1], Gs.col, np.arange(n), [n]])
-        cols = np.concatenate([eidx, eidx, E + Gs.row, np.full(n, E + m), [E + m - 1]])
-        vals = np.concatenate([np.ones(E), -np.ones(E), -Gs.data, -cell_vol / cell_vol.sum(), [g_c]])
-        A = sp.csc_matrix((vals, (rows, cols)), shape=(n + 1, E + m + 1))
+        # CSC in canonical order, built directly (the master is rebuilt after every refinement): edge
+        # column e holds +1 at its lower cell and -1 at its higher one (edges are (lo, hi)); lambda
+        # column j holds -G[j] at its non-zeros (and g_c in the theta row for c's column); the mu
+        # column holds the cells' volume shares.
+        lam_rows, lam_cells = np.nonzero(G)
+        lam_counts = np.bincount(lam_rows, minlength=m)
+        lam_counts[m - 1] += 1
+        lam_index = np.empty(len(lam_rows) + 1, dtype=np.int32)
+        lam_value = np.empty(len(lam_rows) + 1)
+        lam_index[:-1], lam_value[:-1] = lam_cells, -G[lam_rows, lam_cells]
+        lam_index[-1], lam_value[-1] = n, g_c  # last: the theta row of c's column, below every cell row
+        indptr = np.concatenate([np.arange(0, 2 * E + 1, 2), 2 * E + np.cumsum(lam_counts),
+                                 [2 * E + len(lam_index) + n]]).astype(np.int32)
+        indices = np.concatenate([edges.reshape(-1), lam_index, np.arange(n)]).astype(np.int32)
+        values = np.concatenate([np.tile([1.0, -1.0], E), lam_value, -cell_vol / cell_vol.sum()])
+        A = sp.csc_matrix((values, indices, indptr), shape=(n + 1, E + m + 1))
         cost = np.concatenate([np.zeros(E), -b, [0.0]])
         col_lower = np.concatenate([-edge_omega, np.full(m + 1, -np.inf)])
         col_upper = np.concatenate([edge_omega, np.full(m + 1, np.inf)])
