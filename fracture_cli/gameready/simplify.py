@@ -160,10 +160,10 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
     """The simplified fragments, every one valid; how many retries that took and how many stay over budget.
 
     Fragments not closed and manifold once their vertices are welded by position even as cut (bodies touching
-    along an edge, which only the fragments' own vertex copies keep apart), or that the weld itself makes
-    intersect, are returned as they were cut (all their vertices locked). The others are checked after each
-    try on the faces a collapse changed only (the rest are as the first check saw them); after
-    :data:`_RETRIES` tries every fragment still invalid is locked whole, and one still invalid then is
+    along an edge, which only the fragments' own vertex copies keep apart), or that intersect where no
+    collapse changed a face (the weld moved a vertex), are returned as they were cut (all their vertices
+    locked). The first try is checked whole, later ones only where their faces differ from the first's;
+    after :data:`_RETRIES` tries every fragment still invalid is locked whole, and one still invalid then is
     returned as it was cut.
     """
     uv_scale = _uv_scale(fragments, interior)
@@ -171,12 +171,12 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
     count = len(fragments.fragments)
     as_cut = {k for k, f in enumerate(fragments.fragments) if not closed_when_welded(f)}
     known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
-    as_cut |= _welded_invalid(fragments, classified, welded, interior, uv_scale, as_cut, known, gid, offsets)
     whole: set[int] = set()  # fragments locked whole
     for k in sorted(as_cut):
         locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
     damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
     earlier: SurfaceComplex | None = None
+    first: dict[int, tuple] | None = None  # the faces of the first try, all checked
     valid_faces: set[bytes] = set()
     attempt = 0
     while True:
@@ -190,7 +190,11 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
         signatures = {k: np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
                       for k in range(len(results)) if k not in as_cut}
         todo = [k for k, signature in signatures.items() if signature not in valid_faces]
-        changed = [np.flatnonzero([bool(complex_.history[t]) for t in face_ids[k].tolist()]) for k in todo]
+        # The first try is checked whole; later ones only where a face differs from the first try's (pairs of
+        # faces as they were then were checked then).
+        changed = [None if first is None else
+                   np.flatnonzero([first.get(t) != complex_.faces[t] for t in face_ids[k].tolist()]) for k in todo]
+        first = dict(complex_.faces) if first is None else first
         # The fragments are checked on their own, in parallel; what was bad before is judged here.
         found_all = parallel.ordered_map(_bad_faces_item, [(results[k], c) for k, c in zip(todo, changed)])
         for k, found in zip(todo, found_all):
@@ -204,7 +208,10 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
         log.debug("faults: try %d, %d fragment(s) invalid; simplifying again with more held back", attempt, len(bad))
         for k, b in sorted(bad.items()):
             behind = set().union(*[complex_.history[t] for t in face_ids[k][b].tolist()])
-            if attempt + 1 >= _RETRIES or not behind:
+            if not behind:  # faces no collapse made (the weld moved them): locking cannot mend them
+                as_cut.add(k)
+                locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
+            elif attempt + 1 >= _RETRIES:
                 (as_cut if k in whole else whole).add(k)
                 locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
             elif attempt + 2 >= _RETRIES:
@@ -212,31 +219,6 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
             else:
                 damp.update({u: damp.get(u, 1.0) / 4.0 for u in behind})
         attempt += 1
-
-
-def _welded_invalid(fragments: Fragments, classified: _Classified, welded: np.ndarray, interior: int,
-                    uv_scale: float, skip: set[int], known: dict, gid: np.ndarray, offsets: np.ndarray) -> set[int]:
-    """The fragments (not in ``skip``) that, rebuilt from the welded complex before any collapse, intersect
-    themselves where they did not as cut (the weld moved a vertex by up to :data:`WELD_TOLERANCE`).
-
-    No collapse can mend those faces (locking does not move them back), so such fragments stay as cut; the
-    later tries then only check the faces a collapse changed.
-    """
-    ids = np.arange(len(classified.faces), dtype=np.int64)
-    todo = [k for k in range(len(fragments.fragments)) if k not in skip]
-    rebuilt = [_rebuild(fragments, k, welded, classified, ids, classified.faces, interior, uv_scale) for k in todo]
-    found_all = parallel.ordered_map(_bad_faces_item, [(fragment, None) for fragment, _ in rebuilt])
-    invalid = set()
-    for k, (fragment, face_ids), found in zip(todo, rebuilt, found_all):
-        if found is None:
-            continue
-        if len(found) == len(fragment.faces):
-            invalid.add(k)
-            continue
-        was = _known_bad(fragments, k, known, gid, offsets)
-        if any(tuple(sorted(f)) not in was for f in classified.faces[face_ids[found]].tolist()):
-            invalid.add(k)
-    return invalid
 
 
 def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: dict, tolerance: float,
