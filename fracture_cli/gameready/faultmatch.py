@@ -219,6 +219,7 @@ def share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, 
             swaps.setdefault(b, []).append((gid[fragments.fragments[a].faces[fa] + offsets[a]][:, ::-1], fb))
     out = list(fragments.fragments)
     candidates: list[tuple[int, Fragment]] = []
+    counts: list[int] = []  # new faces per candidate
     for b, items in sorted(swaps.items()):
         frag = fragments.fragments[b]
         local = {int(g): v for g, v in zip(gid[offsets[b]:offsets[b + 1]].tolist(), range(len(frag.vertices)))}
@@ -231,15 +232,18 @@ def share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, 
                                                           np.full(len(new), interior, dtype=np.int32)]),
                              piece=frag.piece)
         candidates.append((b, candidate))
-    # The candidates are checked on their own (whole fragments: self-intersections anywhere count), in parallel.
-    for (b, candidate), ok in zip(candidates, parallel.ordered_map(_valid_item, [c for _, c in candidates])):
-        if ok:
+        counts.append(len(new))
+    # The candidates are checked on their own, in parallel: closed and manifold, and their new faces (last)
+    # free of intersections (an intersection the fragment had as cut is not the swap's doing).
+    items = [(c, np.arange(len(c.faces) - n, len(c.faces))) for (_, c), n in zip(candidates, counts)]
+    for (b, candidate), bad in zip(candidates, parallel.ordered_map(_bad_faces_item, items)):
+        if bad is None:
             out[b] = candidate
     return dataclasses.replace(fragments, fragments=tuple(out))
 
 
-def _valid_item(_: None, fragment: Fragment) -> bool:
-    return valid(fragment)
+def _bad_faces_item(_: None, item: tuple[Fragment, np.ndarray]) -> np.ndarray | None:
+    return bad_faces(*item)
 
 
 def _cluster_key(G: np.ndarray) -> tuple:
