@@ -389,14 +389,10 @@ def self_intersections_among(V: np.ndarray, F: np.ndarray, faces: np.ndarray,
 
     Parameters
     ----------
-    V : (n, 3) float
-        Vertices.
-    F : (m, 3) int
-        Triangles of a consistently oriented mesh.
+    V, F, fold_cos
+        As in :func:`self_intersections`: vertices (n, 3), triangles (m, 3), the fold cosine.
     faces : (c,) int
         The faces to check (against all faces).
-    fold_cos : float, optional
-        As in :func:`self_intersections`.
 
     Returns
     -------
