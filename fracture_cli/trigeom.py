@@ -378,7 +378,42 @@ def self_intersections(V: np.ndarray, F: np.ndarray, fold_cos: float = -0.9998) 
     grid = BoxGrid(boxes, default_cell(boxes))
     i, j = grid.query(boxes)
     keep = i < j
-    i, j = i[keep], j[keep]
+    return _intersecting_pairs(V, F, i[keep], j[keep], fold_cos)
+
+
+def self_intersections_among(V: np.ndarray, F: np.ndarray, faces: np.ndarray,
+                             fold_cos: float = -0.9998) -> np.ndarray:
+    """The pairs of :func:`self_intersections` that involve at least one of ``faces``.
+
+    Only those faces' boxes are queried, so checking the few faces an edit changed costs little.
+
+    Parameters
+    ----------
+    V, F, fold_cos
+        As in :func:`self_intersections`: vertices (n, 3), triangles (m, 3), the fold cosine.
+    faces : (c,) int
+        The faces to check (against all faces).
+
+    Returns
+    -------
+    pairs : (k, 2) int64
+        Intersecting face pairs ``(f, g)``, ``f < g``, ascending, each once.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    faces = np.unique(np.asarray(faces, dtype=np.int64))
+    if len(faces) == 0 or len(F) < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    boxes = triangle_boxes(V, F)
+    qi, j = BoxGrid(boxes, default_cell(boxes)).query(boxes[faces])
+    i = faces[qi]
+    pairs = np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1)
+    pairs = np.unique(pairs[pairs[:, 0] < pairs[:, 1]], axis=0)
+    return _intersecting_pairs(V, F, pairs[:, 0], pairs[:, 1], fold_cos)
+
+
+def _intersecting_pairs(V: np.ndarray, F: np.ndarray, i: np.ndarray, j: np.ndarray, fold_cos: float) -> np.ndarray:
+    """Of the candidate face pairs ``(i, j)`` (p,), those that intersect other than along shared corners/edges."""
     Fi, Fj = F[i], F[j]
     shared = (Fi[:, :, None] == Fj[:, None, :])  # (p, 3, 3)
     n_shared = shared.any(axis=2).sum(axis=1)

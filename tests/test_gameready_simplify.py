@@ -160,3 +160,33 @@ def test_chair_bake_within_the_triangle_budget(tmp_path):
     assert checks["triangle_budget"] == triangle_budget(report["input"]["triangles"], len(report["fragments"]))
     assert triangles <= checks["triangle_budget"] < checks["triangles_cut"]
     assert checks["watertight"] and checks["volume_error"] <= 1e-9 and checks["max_outer_distance"] <= 1e-9
+
+
+def test_self_intersections_among_matches_the_full_check():
+    # Random triangles, many crossing: the pairs involving the chosen faces are the full check's.
+    from fracture_cli.trigeom import self_intersections, self_intersections_among
+
+    rng = np.random.default_rng(3)
+    V = rng.random((60, 3))
+    F = np.array([rng.choice(60, 3, replace=False) for _ in range(80)])
+    full = np.unique(self_intersections(V, F), axis=0)  # (the full check's order is the grid's)
+    assert len(full) > 0
+    assert np.array_equal(self_intersections_among(V, F, np.arange(len(F))), full)
+    some = np.arange(0, len(F), 3)
+    expected = full[np.isin(full, some).any(axis=1)]
+    assert np.array_equal(self_intersections_among(V, F, some), expected)
+
+
+def test_nearest_input_triangle_by_grid_is_the_brute_force_one():
+    from fracture_cli.gameready.faultmatch import _nearest_within
+
+    rng = np.random.default_rng(5)
+    S = rng.random((300, 3, 3)) * 0.2 + rng.random((300, 1, 3))
+    points = S[:40].mean(axis=1) + rng.normal(scale=1e-9, size=(40, 3))
+    best, distance = _nearest_within(S, points, 1e-7)
+    for i, p in enumerate(points):
+        d = point_triangle_distance(np.broadcast_to(p, (len(S), 3)), S)
+        if d.min() <= 1e-7:
+            assert best[i] == int(np.argmin(d)) and distance[i] == d.min()
+        else:
+            assert best[i] == -1 or distance[i] > 1e-7

@@ -18,7 +18,15 @@ from scipy.spatial import cKDTree
 
 from fracture_cli import parallel
 from fracture_cli.meshtopo import manifold_patches, undirected_edges
-from fracture_cli.trigeom import edge_manifold_closed, point_triangle_distance, self_intersections, vertex_manifold
+from fracture_cli.trigeom import (
+    BoxGrid,
+    default_cell,
+    edge_manifold_closed,
+    point_triangle_distance,
+    self_intersections,
+    self_intersections_among,
+    vertex_manifold,
+)
 from fracture_cli.types import Fragment, Fragments, SurfaceMesh
 
 # Vertices of different fragments closer than this (normalized units) are one point.
@@ -41,13 +49,17 @@ def valid(fragment: Fragment) -> bool:
     return bad_faces(fragment) is None
 
 
-def bad_faces(fragment: Fragment) -> np.ndarray | None:
-    """None if the fragment is valid (see :func:`_valid`); else the faces (k,) at fault, all if it is not closed."""
+def bad_faces(fragment: Fragment, changed: np.ndarray | None = None) -> np.ndarray | None:
+    """None if the fragment is valid (see :func:`valid`); else the faces (k,) at fault, all if it is not closed.
+
+    ``changed`` (c,): only intersections involving one of these faces count (the others are as they were
+    checked before); None checks every pair.
+    """
     V, weld = np.unique(fragment.vertices, axis=0, return_inverse=True)
     W = weld.reshape(-1)[fragment.faces]
     if not (edge_manifold_closed(W) and vertex_manifold(W)):
         return np.arange(len(W))
-    pairs = self_intersections(V, W)
+    pairs = self_intersections(V, W) if changed is None else self_intersections_among(V, W, changed)
     return np.unique(pairs) if len(pairs) else None
 
 
@@ -152,14 +164,32 @@ def source_groups(surface: SurfaceMesh, points: np.ndarray, thorough: np.ndarray
         distance = point_triangle_distance(centroid, S[near[:, j]])
         better = distance < best_distance
         best[better], best_distance[better] = near[better, j], distance[better]
-    for i in np.flatnonzero((best_distance > ON_SURFACE) & thorough).tolist():  # beside a big input triangle
-        distance = point_triangle_distance(np.broadcast_to(centroid[i], (len(S), 3)), S)
-        best[i], best_distance[i] = int(np.argmin(distance)), float(distance.min())
+    far = np.flatnonzero((best_distance > ON_SURFACE) & thorough)  # beside a big input triangle
+    if len(far):
+        best[far], best_distance[far] = _nearest_within(S, centroid[far], ON_SURFACE)
     T = S[np.maximum(best, 0)]
     normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     off_plane = np.abs(np.einsum("mcj,mj->mc", points - T[:, :1], normal)).max(axis=1)
     return np.where((best_distance <= ON_SURFACE) & (off_plane <= ON_SURFACE), group[np.maximum(best, 0)], -1)
+
+
+def _nearest_within(S: np.ndarray, points: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """For points (q, 3) the nearest of triangles S (t, 3, 3) (lowest index on ties) and its distance (q,).
+
+    Only triangles whose boxes come within ``reach`` of a point are measured (a box grid, not all t): a point
+    with none of them gets -1 and infinity, whatever lies farther.
+    """
+    boxes = np.stack([S.min(axis=1), S.max(axis=1)], axis=1)
+    qi, j = BoxGrid(boxes, default_cell(boxes)).query(np.stack([points, points], axis=1), pad=reach)
+    best = np.full(len(points), -1, dtype=np.int64)
+    distance = np.full(len(points), np.inf)
+    if len(qi):
+        d = point_triangle_distance(points[qi], S[j])
+        order = np.lexsort((j, d, qi))
+        first = order[np.r_[True, qi[order][1:] != qi[order][:-1]]]
+        best[qi[first]], distance[qi[first]] = j[first], d[first]
+    return best, distance
 
 
 def share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, interior: int) -> Fragments:
@@ -189,6 +219,7 @@ def share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, 
             swaps.setdefault(b, []).append((gid[fragments.fragments[a].faces[fa] + offsets[a]][:, ::-1], fb))
     out = list(fragments.fragments)
     candidates: list[tuple[int, Fragment]] = []
+    counts: list[int] = []  # new faces per candidate
     for b, items in sorted(swaps.items()):
         frag = fragments.fragments[b]
         local = {int(g): v for g, v in zip(gid[offsets[b]:offsets[b + 1]].tolist(), range(len(frag.vertices)))}
@@ -201,15 +232,18 @@ def share_unmatched(fragments: Fragments, gid: np.ndarray, offsets: np.ndarray, 
                                                           np.full(len(new), interior, dtype=np.int32)]),
                              piece=frag.piece)
         candidates.append((b, candidate))
-    # The candidates are checked on their own (whole fragments: self-intersections anywhere count), in parallel.
-    for (b, candidate), ok in zip(candidates, parallel.ordered_map(_valid_item, [c for _, c in candidates])):
-        if ok:
+        counts.append(len(new))
+    # The candidates are checked on their own, in parallel: closed and manifold, and their new faces (last)
+    # free of intersections (an intersection the fragment had as cut is not the swap's doing).
+    items = [(c, np.arange(len(c.faces) - n, len(c.faces))) for (_, c), n in zip(candidates, counts)]
+    for (b, candidate), bad in zip(candidates, parallel.ordered_map(_bad_faces_item, items)):
+        if bad is None:
             out[b] = candidate
     return dataclasses.replace(fragments, fragments=tuple(out))
 
 
-def _valid_item(_: None, fragment: Fragment) -> bool:
-    return valid(fragment)
+def _bad_faces_item(_: None, item: tuple[Fragment, np.ndarray]) -> np.ndarray | None:
+    return bad_faces(*item)
 
 
 def _cluster_key(G: np.ndarray) -> tuple:

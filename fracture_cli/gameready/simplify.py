@@ -159,35 +159,45 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
                           max_triangles: int) -> tuple[list[Fragment], int, int]:
     """The simplified fragments, every one valid; how many retries that took and how many stay over budget.
 
-    After :data:`_RETRIES` tries every fragment still invalid is locked whole; one still invalid then, or not
-    closed and manifold once its vertices are welded by position even as cut (bodies touching along an edge,
-    which only the fragments' own vertex copies keep apart), is returned as it was cut.
+    Fragments not closed and manifold once their vertices are welded by position even as cut (bodies touching
+    along an edge, which only the fragments' own vertex copies keep apart), or that intersect where no
+    collapse changed a face (the weld moved a vertex), are returned as they were cut (all their vertices
+    locked). The first try is checked whole, later ones only where their faces differ from the first's;
+    after :data:`_RETRIES` tries every fragment still invalid is locked whole, and one still invalid then is
+    returned as it was cut.
     """
     uv_scale = _uv_scale(fragments, interior)
     locked = set(classified.locked)
+    count = len(fragments.fragments)
     as_cut = {k for k, f in enumerate(fragments.fragments) if not closed_when_welded(f)}
+    known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
     whole: set[int] = set()  # fragments locked whole
     for k in sorted(as_cut):
         locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
-    known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
     damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
     earlier: SurfaceComplex | None = None
+    first: dict[int, tuple] | None = None  # the faces of the first try, all checked
     valid_faces: set[bytes] = set()
     attempt = 0
     while True:
-        complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles,
-                                   len(fragments.fragments), earlier)
+        complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles, count, earlier)
         earlier = complex_
         ids, faces = complex_.face_arrays()
         results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
-                                  for k in range(len(fragments.fragments))])
+                                  for k in range(count)])
         bad = {}
         # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
         signatures = {k: np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
                       for k in range(len(results)) if k not in as_cut}
         todo = [k for k, signature in signatures.items() if signature not in valid_faces]
+        # The first try is checked whole; later ones only where a face differs from the first try's (pairs of
+        # faces as they were then were checked then).
+        changed = [None if first is None else
+                   np.flatnonzero([first.get(t) != complex_.faces[t] for t in face_ids[k].tolist()]) for k in todo]
+        first = dict(complex_.faces) if first is None else first
         # The fragments are checked on their own, in parallel; what was bad before is judged here.
-        for k, found in zip(todo, parallel.ordered_map(_bad_faces_item, [results[k] for k in todo])):
+        found_all = parallel.ordered_map(_bad_faces_item, [(results[k], c) for k, c in zip(todo, changed)])
+        for k, found in zip(todo, found_all):
             b = _new_bad_faces(found, results[k], face_ids[k], complex_, known, k, fragments, gid, offsets)
             if b is None:
                 valid_faces.add(signatures[k])
@@ -198,7 +208,10 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
         log.debug("faults: try %d, %d fragment(s) invalid; simplifying again with more held back", attempt, len(bad))
         for k, b in sorted(bad.items()):
             behind = set().union(*[complex_.history[t] for t in face_ids[k][b].tolist()])
-            if attempt + 1 >= _RETRIES:
+            if not behind:  # faces no collapse made (the weld moved them): locking cannot mend them
+                as_cut.add(k)
+                locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
+            elif attempt + 1 >= _RETRIES:
                 (as_cut if k in whole else whole).add(k)
                 locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
             elif attempt + 2 >= _RETRIES:
@@ -240,8 +253,9 @@ def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: di
     return complex_, len(over)
 
 
-def _bad_faces_item(_: None, fragment: Fragment) -> np.ndarray | None:
-    return bad_faces(fragment)
+def _bad_faces_item(_: None, item: tuple[Fragment, np.ndarray | None]) -> np.ndarray | None:
+    fragment, changed = item
+    return bad_faces(fragment, changed)
 
 
 def _new_bad_faces(bad: np.ndarray | None, fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex,
@@ -254,12 +268,18 @@ def _new_bad_faces(bad: np.ndarray | None, fragment: Fragment, ids: np.ndarray, 
     """
     if bad is None or len(bad) == len(fragment.faces):
         return bad
+    was = _known_bad(fragments, k, known, gid, offsets)
+    new = [i for i, t in zip(bad.tolist(), ids[bad].tolist()) if tuple(sorted(complex_.faces[t])) not in was]
+    return np.array(new, dtype=np.int64) if new else None
+
+
+def _known_bad(fragments: Fragments, k: int, known: dict, gid: np.ndarray, offsets: np.ndarray) -> set:
+    """The faces (sorted global corner ids) of fragment ``k`` that intersect as cut (memoized in ``known``)."""
     if k not in known:
         before = fragments.fragments[k]
         was = bad_faces(before)
         known[k] = set() if was is None else {tuple(sorted(f)) for f in gid[before.faces[was] + offsets[k]].tolist()}
-    new = [i for i, t in zip(bad.tolist(), ids[bad].tolist()) if tuple(sorted(complex_.faces[t])) not in known[k]]
-    return np.array(new, dtype=np.int64) if new else None
+    return known[k]
 
 
 def _interior_slot(fragments: Fragments) -> int:
