@@ -147,7 +147,7 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions()) -> 
             owners.append(index)
             cells.append((index, cell))
     # Parts in different cells of one fragment's partition cannot overlap: their pairs need no look.
-    flat = separate_parts(corners, materials, _groups(cells))
+    flat = separate_parts(corners, materials, _groups(cells), (meshes, owners))
     owned: list[list[np.ndarray]] = [[] for _ in volumes]
     for owner, points in zip(owners, flat):
         owned[owner].append(points)
@@ -243,21 +243,22 @@ def max_overlap_fraction(parts_a, parts_b=None) -> float:
         pairs = pairs[(pairs[:, 0] < len(a)) & (pairs[:, 1] >= len(a))]
     if len(pairs) == 0:
         return 0.0
-    fractions = parallel.ordered_map(_overlap_fraction, [(int(i), int(j)) for i, j in pairs], (every, hulls))
-    return max(fractions)
+    meshes = [mesh_of(h) for h in hulls]
+    shared = (every, hulls, [face_planes(V, F) for V, F in meshes], [surface_area(V, F) for V, F in meshes],
+              [h.volume() for h in hulls])
+    return max(parallel.ordered_map(_overlap_fraction, [(int(i), int(j)) for i, j in pairs], shared))
 
 
 def _overlap_fraction(shared: tuple, pair: tuple[int, int]) -> float:
     """``vol(a ^ b) / min(vol(a), vol(b))`` of one pair (see :func:`max_overlap_fraction`)."""
-    corners, hulls = shared
-    a, b = hulls[pair[0]], hulls[pair[1]]
-    smaller = min(a.volume(), b.volume())
+    corners, hulls, planes, areas, volumes = shared
+    i, j = pair
+    smaller = min(volumes[i], volumes[j])
     if smaller <= 0:
         return 0.0
-    meshes = [mesh_of(a), mesh_of(b)]
     # A cross-section of a convex part is at most half its surface.
-    slack = _NEGLIGIBLE * smaller / max(max(surface_area(V, F) for V, F in meshes), 1e-300)
-    if (overlap_bound_separated(face_planes(*meshes[0]), corners[pair[1]], slack)
-            or overlap_bound_separated(face_planes(*meshes[1]), corners[pair[0]], slack)):
+    slack = 0.5 * _NEGLIGIBLE * smaller / max(areas[i], areas[j], 1e-300)
+    if (overlap_bound_separated(corners[i], planes[i], corners[j], slack)
+            or overlap_bound_separated(corners[j], planes[j], corners[i], slack)):
         return 0.0
-    return (a ^ b).volume() / smaller
+    return (hulls[i] ^ hulls[j]).volume() / smaller

@@ -12,15 +12,13 @@ from __future__ import annotations
 import manifold3d
 import numpy as np
 
-from fracture_cli.gameready.hulls import hull_of, mesh_of
+from fracture_cli.gameready.hulls import MIN_PART_VOLUME, hull_of, mesh_of
 from fracture_cli.gameready.mass import mass_properties
 
 # A coordinate axis is not tried as a cut normal when a principal axis is this close (cosine, ~15 degrees).
 _SAME_AXIS = 0.966
 # Offsets tried along each candidate normal, as fractions of the part's extent.
 _CUT_FRACTIONS = np.arange(1, 8) / 8.0
-# Pieces with less volume are dropped.
-MIN_PART_VOLUME = 1e-12
 
 
 def convex_decomposition(solid: manifold3d.Manifold, max_parts: int, concavity: float,

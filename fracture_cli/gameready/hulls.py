@@ -13,6 +13,9 @@ import numpy as np
 
 from fracture_cli.trigeom import cross3
 
+# Pieces and parts with less volume are dropped.
+MIN_PART_VOLUME = 1e-12
+
 
 def mesh_of(solid: manifold3d.Manifold) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (n, 3) and faces (m, 3) of a manifold3d solid."""
@@ -50,8 +53,11 @@ def hull_corners(solid: manifold3d.Manifold) -> np.ndarray:
 
 
 def face_planes(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit outward normals (m, 3) and offsets (m,) of a convex mesh's faces (``normal . x <= offset`` inside)."""
-    return _planes(V, F)[:2]
+    """Unit outward normals (m', 3) and offsets (m',) of a convex mesh's faces (``normal . x <= offset`` inside);
+    faces without area (no normal) are left out."""
+    normal, offset, area = _planes(V, F)
+    keep = area > 0
+    return normal[keep], offset[keep]
 
 
 def surface_area(V: np.ndarray, F: np.ndarray) -> float:
@@ -121,13 +127,18 @@ def _initial_tetrahedron(points: np.ndarray) -> list[int]:
     return list(dict.fromkeys([a, b, c, d]))
 
 
-def overlap_bound_separated(planes_a: tuple[np.ndarray, np.ndarray], corners_b: np.ndarray, slack: float) -> bool:
-    """Whether some face plane of convex part a has every corner of b beyond it, up to ``slack``.
+def overlap_bound_separated(corners_a: np.ndarray, planes_a: tuple[np.ndarray, np.ndarray], corners_b: np.ndarray,
+                            slack: float) -> bool:
+    """Whether a face plane of convex part a has a's corners on its inside and b's beyond it, up to ``slack``.
 
-    Then the two parts overlap at most in a slab ``slack`` thick along that
-    plane: a volume below ``slack`` times a's largest cross-section.
+    Then the two parts overlap at most in a slab ``2 slack`` thick along that
+    plane: a volume below ``2 slack`` times a's largest cross-section. A
+    plane is used only if it supports a (a degenerate face's normal may point
+    anywhere).
     """
     normal, offset = planes_a
     if len(corners_b) == 0 or len(normal) == 0:
         return True
-    return bool(((corners_b @ normal.T).min(axis=0) - offset >= -slack).any())
+    supports = (corners_a @ normal.T).max(axis=0) - offset <= slack
+    beyond = (corners_b @ normal.T).min(axis=0) - offset >= -slack
+    return bool((supports & beyond).any())

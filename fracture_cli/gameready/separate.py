@@ -17,8 +17,15 @@ import manifold3d
 import numpy as np
 
 from fracture_cli import parallel
-from fracture_cli.gameready.decompose import MIN_PART_VOLUME
-from fracture_cli.gameready.hulls import face_planes, hull_corners, hull_of, mesh_of
+from fracture_cli.gameready.hulls import (
+    MIN_PART_VOLUME,
+    face_planes,
+    hull_corners,
+    hull_of,
+    mesh_of,
+    overlap_bound_separated,
+    surface_area,
+)
 from fracture_cli.gameready.mass import MassProperties, mass_properties
 from fracture_cli.trigeom import cross3
 
@@ -49,6 +56,10 @@ class _Shared:
     materials: list
     masses: list
     tolerance: float
+    planes: list  # face planes (normals (m, 3), offsets (m,)) of each part's hull
+    areas: list  # surface area of each part's hull
+    body: np.ndarray  # (parts,) the body each part is a piece of
+    contacts: dict  # (body P, body Q), P < Q -> (signed area-weighted normals (f, 3) from P to Q, centroids (f, 3))
 
 
 def volume_beyond(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, offsets) -> np.ndarray:
@@ -105,7 +116,7 @@ def _volume_beyond(material: _Material, normal: np.ndarray, offsets) -> np.ndarr
     return result + positive @ weight[reach]
 
 
-def separate_parts(parts: list[np.ndarray], materials=None, groups=None) -> list[np.ndarray]:
+def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=None) -> list[np.ndarray]:
     """Clip every overlapping pair of convex parts by one plane so that they only touch.
 
     Parameters
@@ -120,6 +131,10 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None) -> list
         Parts of one group are known not to overlap (the cells of one
         fragment's partition): their pairs are not looked at. Default: every
         part its own group.
+    bodies : (meshes, body of each part), optional
+        The closed bodies (fragments) the materials are pieces of, and the
+        index of each part's body: shared faces are matched once between
+        bodies instead of between pieces. Default: each material its own body.
 
     Returns
     -------
@@ -134,7 +149,8 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None) -> list
     candidate that cuts off the least *material* (the pieces the parts stand
     for, as a fraction of each; a part only bulging over its neighbour loses
     its bulge, not its substance): normals are the interface's area-weighted
-    normal where the two materials share faces, the thinnest direction of the
+    normal where the two materials share faces (the faces their bodies share
+    that lie in both parts' hulls), the thinnest direction of the
     overlap ``O = a ^ b`` (its second moment's smallest eigenvector) and the
     direction between the two materials' centroids; offsets span ``O`` along
     each normal. Material volume on the wrong side is exact
@@ -157,7 +173,11 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None) -> list
         index: dict = {}
         group = np.array([index.setdefault(g, len(index)) for g in groups], dtype=np.int64)
         pairs = pairs[group[pairs[:, 0]] != group[pairs[:, 1]]]
-    shared = _Shared(hulls, corners, solids, masses, tolerance)
+    meshes, body = bodies if bodies is not None else (materials, np.arange(len(materials)))
+    hull_meshes = [mesh_of(h) for h in hulls]
+    shared = _Shared(hulls, corners, solids, masses, tolerance, [face_planes(V, F) for V, F in hull_meshes],
+                     [surface_area(V, F) for V, F in hull_meshes], np.asarray(body, dtype=np.int64),
+                     _contacts(meshes, tolerance))
     planes = parallel.ordered_map(_pair_plane, [(int(i), int(j)) for i, j in pairs], shared)
     clipped = [False] * len(hulls)
     for (i, j), plane in zip(pairs, planes):
@@ -201,12 +221,17 @@ def _pair_plane(shared: _Shared, pair: tuple[int, int]) -> tuple[np.ndarray, flo
     if a.is_empty() or b.is_empty() or _separated(shared.corners[i], shared.corners[j], mass_a.center,
                                                   mass_b.center):
         return None
-    overlap = a ^ b
-    if overlap.is_empty() or overlap.volume() <= _TOUCH * min(a.volume(), b.volume()):
+    smaller = min(a.volume(), b.volume())
+    # A face plane of one hull with the other's corners beyond it (up to a slab too thin to matter) separates them.
+    slack = 0.5 * _TOUCH * smaller / max(shared.areas[i], shared.areas[j], 1e-300)
+    if (overlap_bound_separated(shared.corners[i], shared.planes[i], shared.corners[j], slack)
+            or overlap_bound_separated(shared.corners[j], shared.planes[j], shared.corners[i], slack)):
         return None
-    material_a, material_b = shared.materials[i], shared.materials[j]
-    interface = _interface_normal(material_a, material_b, a, b, shared.tolerance)
-    return _best_plane(overlap, material_a, material_b, mass_a, mass_b, interface)
+    overlap = a ^ b
+    if overlap.is_empty() or overlap.volume() <= _TOUCH * smaller:
+        return None
+    interface = _interface_normal(shared, i, j)
+    return _best_plane(overlap, shared.materials[i], shared.materials[j], mass_a, mass_b, interface)
 
 
 def _separated(a: np.ndarray, b: np.ndarray, centre_a: np.ndarray, centre_b: np.ndarray) -> bool:
@@ -215,33 +240,33 @@ def _separated(a: np.ndarray, b: np.ndarray, centre_a: np.ndarray, centre_b: np.
     return bool(len(a) == 0 or len(b) == 0 or (a @ axis).max() < (b @ axis).min())
 
 
-def _interface_normal(a: _Material, b: _Material, hull_a: manifold3d.Manifold, hull_b: manifold3d.Manifold,
-                      tolerance: float) -> np.ndarray | None:
-    """Unit area-weighted normal (from a to b) of the faces a and b share, None if they share none.
-
-    A face of a on b's surface lies in b's hull (and the other way round):
-    only such faces are matched.
-    """
+def _contacts(meshes, tolerance: float) -> dict:
+    """The faces every pair of bodies share: ``(P, Q) -> (area-weighted normals from P to Q (f, 3), centroids)``."""
     from fracture_cli.gameready.components import coincident_faces
 
-    near = [_inside_hull(a.centroid, hull_b, tolerance), _inside_hull(b.centroid, hull_a, tolerance)]
-    if not near[0].any() or not near[1].any():
+    match = coincident_faces(meshes, tolerance=tolerance)
+    lo, hi = np.minimum(match.owner, match.other), np.maximum(match.owner, match.other)
+    weighted = (match.area * np.where(match.owner < match.other, 1.0, -1.0))[:, None] * match.normal
+    order = np.lexsort((hi, lo))
+    keys, start = np.unique(np.stack([lo[order], hi[order]], axis=1), axis=0, return_index=True)
+    stops = np.append(start[1:], len(order))
+    return {(int(p), int(q)): (weighted[order[a:b]], match.centroid[order[a:b]])
+            for (p, q), a, b in zip(keys, start, stops)}
+
+
+def _interface_normal(shared: _Shared, i: int, j: int) -> np.ndarray | None:
+    """Unit area-weighted normal (from part i to part j) of the faces their bodies share inside both hulls, None
+    if there are none (a face on the interface of two pieces lies in both pieces, hence in both hulls)."""
+    p, q = int(shared.body[i]), int(shared.body[j])
+    if p == q or (min(p, q), max(p, q)) not in shared.contacts:
         return None
-    match = coincident_faces([(a.vertices, a.faces), (b.vertices, b.faces)], near, tolerance)
-    flip = np.where(match.owner == 0, 1.0, -1.0)
-    weighted = (match.area * flip) @ match.normal
-    length = float(np.linalg.norm(weighted))
-    return weighted / length if length > 0 else None
-
-
-def _inside_hull(points: np.ndarray, hull: manifold3d.Manifold, tolerance: float) -> np.ndarray:
-    """Whether points (p, 3) lie in a convex solid, up to ``tolerance`` (p,) bool."""
-    box = np.asarray(hull.bounding_box())
-    inside = np.all((points >= box[:3] - tolerance) & (points <= box[3:] + tolerance), axis=1)
-    if inside.any():
-        normal, offset = face_planes(*mesh_of(hull))
-        inside[inside] = (points[inside] @ normal.T - offset[None, :]).max(axis=1) <= tolerance
-    return inside
+    weighted, centroid = shared.contacts[(min(p, q), max(p, q))]
+    inside = np.ones(len(centroid), dtype=bool)
+    for normal, offset in (shared.planes[i], shared.planes[j]):
+        inside &= (centroid @ normal.T - offset[None, :]).max(axis=1) <= shared.tolerance
+    total = weighted[inside].sum(axis=0) * (1.0 if p < q else -1.0)
+    length = float(np.linalg.norm(total))
+    return total / length if length > 0 else None
 
 
 def _best_plane(overlap: manifold3d.Manifold, material_a: _Material, material_b: _Material, mass_a: MassProperties,
