@@ -132,3 +132,16 @@ def test_max_overlap_fraction_matches_booleans_on_many_pairs():
                    for i in range(len(parts)) for j in range(i + 1, len(parts)))
     assert expected > 0.01
     assert max_overlap_fraction(parts) == pytest.approx(expected, rel=1e-9)
+
+
+def test_collision_shapes_are_the_same_with_one_job_and_two():
+    from fracture_cli import parallel
+
+    meshes = [_l_shape(), *_ridge_pair()]
+    with parallel.using(1):
+        serial = collision_shapes(meshes)
+    with parallel.using(2):
+        forked = collision_shapes(meshes)
+    assert [len(p) for p in serial.parts] == [len(p) for p in forked.parts]
+    assert all(p.tobytes() == q.tobytes() for a, b in zip(serial.parts, forked.parts) for p, q in zip(a, b))
+    assert serial.coverage.tobytes() == forked.coverage.tobytes()
