@@ -187,10 +187,12 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=
         # Once a part was clipped by an earlier pair, this pair may be apart already: then it keeps its material.
         if (clipped[i] or clipped[j]) and not _overlapping(hulls[i], hulls[j], corners[i], corners[j], normal, offset):
             continue
-        hulls[i] = hulls[i].trim_by_plane(-normal, -offset)
-        hulls[j] = hulls[j].trim_by_plane(normal, offset)
-        corners[i], corners[j] = mesh_of(hulls[i])[0], mesh_of(hulls[j])[0]
-        clipped[i] = clipped[j] = True
+        # A part wholly on its side of the plane stays as it is (and needs no trim).
+        for part, side, level in ((i, -normal, -offset), (j, normal, offset)):
+            if len(corners[part]) and (corners[part] @ side).min() < level:
+                hulls[part] = hulls[part].trim_by_plane(side, level)
+                corners[part] = mesh_of(hulls[part])[0]
+                clipped[part] = True
     return [hull_corners(h) if not h.is_empty() and h.volume() > MIN_PART_VOLUME else np.zeros((0, 3))
             for h in hulls]
 
