@@ -488,3 +488,10 @@ def mesh_intersections(V_a: np.ndarray, F_a: np.ndarray, V_b: np.ndarray, F_b: n
     i = ids_a[qi]
     hit = triangles_intersect(V_a[F_a[i]], V_b[F_b[j]])
     return np.stack([i[hit], j[hit]], axis=1)
+
+
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross products of (..., 3) arrays (``np.cross`` without its axis handling, for hot loops)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)

@@ -120,3 +120,28 @@ def test_volume_beyond_matches_a_boolean():
     offsets = np.array([-1.5, -0.3, 0.0, 0.6, 1.5])
     expected = [solid.trim_by_plane(normal, o).volume() for o in offsets]
     assert np.allclose(volume_beyond(sphere.vertices, sphere.faces, normal, offsets), expected, atol=1e-12)
+
+
+def test_max_overlap_fraction_matches_booleans_on_many_pairs():
+    """The face-plane shortcut never hides an overlap (parts with coplanar corners, whose hulls have flat faces)."""
+    rng = np.random.default_rng(7)
+    grid = np.array(np.meshgrid(*[np.linspace(0, 1, 4)] * 3)).reshape(3, -1).T
+    parts = [grid * rng.uniform(0.3, 1.0, 3) + rng.uniform(-0.5, 0.5, 3) for _ in range(8)]
+    hulls = [manifold3d.Manifold.hull_points(p) for p in parts]
+    expected = max((hulls[i] ^ hulls[j]).volume() / min(hulls[i].volume(), hulls[j].volume())
+                   for i in range(len(parts)) for j in range(i + 1, len(parts)))
+    assert expected > 0.01
+    assert max_overlap_fraction(parts) == pytest.approx(expected, rel=1e-9)
+
+
+def test_collision_shapes_are_the_same_with_one_job_and_two():
+    from fracture_cli import parallel
+
+    meshes = [_l_shape(), *_ridge_pair()]
+    with parallel.using(1):
+        serial = collision_shapes(meshes)
+    with parallel.using(2):
+        forked = collision_shapes(meshes)
+    assert [len(p) for p in serial.parts] == [len(p) for p in forked.parts]
+    assert all(p.tobytes() == q.tobytes() for a, b in zip(serial.parts, forked.parts) for p, q in zip(a, b))
+    assert serial.coverage.tobytes() == forked.coverage.tobytes()

@@ -43,7 +43,9 @@ def collision(fragments: Fragments, options: CollisionOptions = CollisionOptions
     checks : dict
         ``collision_parts`` (total), ``collision_max_parts`` (per fragment),
         ``collision_max_overlap`` (largest overlap of two parts over the smaller
-        one's volume, measured by exact booleans), ``collision_min_coverage``
+        one's volume, measured by exact booleans; pairs that a face plane of
+        one part separates up to less than 1e-12 of it count as 0),
+        ``collision_min_coverage``
         (smallest fraction of a fragment's volume inside its parts). Empty for
         ``glb = "none"``.
     """

@@ -1,0 +1,302 @@
+"""Separation of overlapping convex parts by one plane per pair (the collision parts' last step).
+
+Every pair of parts whose hulls overlap gets one plane through the overlap
+(the candidate that cuts off the least material); each part keeps its own side
+of every plane of its pairs. A part only shrinks and stays convex, and the two
+parts of a pair lie on opposite sides of their plane, so no pair overlaps
+afterwards whatever else was clipped. The planes of all pairs are found on the
+parts as decomposed, independently of each other: on ``--jobs`` worker
+processes, with results that do not depend on scheduling.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import manifold3d
+import numpy as np
+
+from fracture_cli import parallel
+from fracture_cli.gameready.hulls import (
+    MIN_PART_VOLUME,
+    face_planes,
+    hull_corners,
+    hull_of,
+    mesh_of,
+    overlap_bound_separated,
+    surface_area,
+)
+from fracture_cli.gameready.mass import MassProperties, mass_properties
+from fracture_cli.trigeom import cross3
+
+# Overlaps below this volume (fraction of the smaller part) are contact, not overlap.
+_TOUCH = 1e-9
+# Offsets tried for a separating plane, as fractions of the overlap's extent along its normal.
+_PLANE_FRACTIONS = np.linspace(0.0, 1.0, 9)
+
+
+class _Material:
+    """A closed mesh as triangles (t, 3, 3) with their area vectors (t, 3) (for :func:`volume_beyond`)."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self.vertices = np.asarray(vertices, dtype=np.float64)
+        self.faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+        self.triangles = self.vertices[self.faces]
+        a, b, c = self.triangles[:, 0], self.triangles[:, 1], self.triangles[:, 2]
+        self.area = 0.5 * cross3(b - a, c - a)
+        self.centroid = self.triangles.mean(axis=1)
+
+
+@dataclass(frozen=True)
+class _Shared:
+    """What every pair's plane search reads (inherited by the forked workers)."""
+
+    hulls: list
+    corners: list
+    materials: list
+    masses: list
+    tolerance: float
+    planes: list  # face planes (normals (m, 3), offsets (m,)) of each part's hull
+    areas: list  # surface area of each part's hull
+    body: np.ndarray  # (parts,) the body each part is a piece of
+    contacts: dict  # (body P, body Q), P < Q -> (signed area-weighted normals (f, 3) from P to Q, centroids (f, 3))
+
+
+def volume_beyond(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, offsets) -> np.ndarray:
+    """Exact volume of a closed mesh on the side ``normal . x > offset`` of parallel planes.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (m, 3) int
+        A closed, outward-oriented mesh.
+    normal : (3,) float
+        Unit plane normal.
+    offsets : (k,) float
+        Plane offsets.
+
+    Returns
+    -------
+    (k,) float64
+        The volume beyond each plane (>= 0 up to rounding).
+
+    Notes
+    -----
+    Divergence theorem with the field ``h(x) n``, ``h = normal . x - offset``
+    (divergence 1): the volume is the sum over triangles of
+    ``(n . area vector) * mean of max(h, 0)`` over the triangle; the cap that
+    closes the cut has ``h = 0`` and adds nothing. ``h`` is linear on a
+    triangle, so the mean of its positive part is closed-form in the corner
+    values ``h0 <= h1 <= h2``: their mean when all are positive,
+    ``h2^3 / (3 (h2 - h0)(h2 - h1))`` when only ``h2`` is, and the mean plus
+    ``(-h0)^3 / (3 (h1 - h0)(h2 - h0))`` when only ``h0`` is not (no
+    denominator can vanish there). Every plane and triangle is evaluated at
+    once, without clipping a triangle.
+    """
+    return _volume_beyond(_Material(vertices, faces), normal, offsets)
+
+
+def _volume_beyond(material: _Material, normal: np.ndarray, offsets) -> np.ndarray:
+    normal = np.asarray(normal, dtype=np.float64)
+    offsets = np.atleast_1d(np.asarray(offsets, dtype=np.float64))
+    h = np.sort(material.triangles @ normal, axis=1)
+    weight = material.area @ normal
+    # Triangles wholly beyond every plane: a mean that is linear in the offset, summed once.
+    full = h[:, 0] > offsets.max()
+    result = weight[full] @ h[full].mean(axis=1) - offsets * weight[full].sum()
+    reach = ~full & (h[:, 2] > offsets.min())
+    x = h[None, reach, :] - offsets[:, None, None]  # (k, t, 3)
+    x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
+    mean = (x0 + x1 + x2) / 3.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        two = mean + np.maximum(-x0, 0.0) ** 3 / (3.0 * (x1 - x0) * (x2 - x0))
+        one = x2 ** 3 / (3.0 * (x2 - x0) * (x2 - x1))
+    positive = np.where(x1 > 0, two, np.where(x2 > 0, one, 0.0))
+    positive = np.where(x0 > 0, mean, positive)
+    return result + positive @ weight[reach]
+
+
+def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=None) -> list[np.ndarray]:
+    """Clip every overlapping pair of convex parts by one plane so that they only touch.
+
+    Parameters
+    ----------
+    parts : list of (k_i, 3) float
+        Corners of convex parts.
+    materials : list of (vertices (n_i, 3), faces (m_i, 3)), optional
+        The closed piece of material each part stands for (a fragment, or a
+        piece of one from :func:`~fracture_cli.gameready.decompose.convex_decomposition`);
+        default the parts themselves.
+    groups : sequence of hashable, optional
+        Parts of one group are known not to overlap (the cells of one
+        fragment's partition): their pairs are not looked at. Default: every
+        part its own group.
+    bodies : (meshes, body of each part), optional
+        The closed bodies (fragments) the materials are pieces of, and the
+        index of each part's body: shared faces are matched once between
+        bodies instead of between pieces. Default: each material its own body.
+
+    Returns
+    -------
+    list of (k_i', 3) float64
+        Hull corners of each clipped part (an empty (0, 3) array if a part was
+        clipped away entirely).
+
+    Notes
+    -----
+    For each pair ``(i, j)``, ``i < j``, whose hulls overlap, ``i`` keeps the
+    side of the plane below it, ``j`` the side above. The plane is the
+    candidate that cuts off the least *material* (the pieces the parts stand
+    for, as a fraction of each; a part only bulging over its neighbour loses
+    its bulge, not its substance): normals are the interface's area-weighted
+    normal where the two materials share faces (the faces their bodies share
+    that lie in both parts' hulls), the thinnest direction of the
+    overlap ``O = a ^ b`` (its second moment's smallest eigenvector) and the
+    direction between the two materials' centroids; offsets span ``O`` along
+    each normal. Material volume on the wrong side is exact
+    (:func:`volume_beyond`). All planes are found on the unclipped parts, so
+    pairs are independent (worker processes); they are then applied in the
+    order ``(i, j)``, skipping a pair that earlier clips already separated.
+    """
+    hulls = [hull_of(p) for p in parts]
+    corners = [np.asarray(p, dtype=np.float64) for p in parts]
+    if materials is None:
+        materials = [mesh_of(h) for h in hulls]
+    solids = [_Material(V, F) for V, F in materials]
+    masses = [mass_properties(V, F) for V, F in materials]
+    points = np.vstack([m.vertices for m in solids]) if solids else np.zeros((1, 3))
+    from fracture_cli.gameready.components import INTERFACE_TOLERANCE
+
+    tolerance = INTERFACE_TOLERANCE * float(np.linalg.norm(np.ptp(points, axis=0)))
+    pairs = overlapping_boxes([h.bounding_box() for h in hulls])
+    if groups is not None:
+        index: dict = {}
+        group = np.array([index.setdefault(g, len(index)) for g in groups], dtype=np.int64)
+        pairs = pairs[group[pairs[:, 0]] != group[pairs[:, 1]]]
+    meshes, body = bodies if bodies is not None else (materials, np.arange(len(materials)))
+    hull_meshes = [mesh_of(h) for h in hulls]
+    shared = _Shared(hulls, corners, solids, masses, tolerance, [face_planes(V, F) for V, F in hull_meshes],
+                     [surface_area(V, F) for V, F in hull_meshes], np.asarray(body, dtype=np.int64),
+                     _contacts(meshes, tolerance))
+    planes = parallel.ordered_map(_pair_plane, [(int(i), int(j)) for i, j in pairs], shared)
+    clipped = [False] * len(hulls)
+    for (i, j), plane in zip(pairs, planes):
+        if plane is None:
+            continue
+        normal, offset = plane
+        # Once a part was clipped by an earlier pair, this pair may be apart already: then it keeps its material.
+        if (clipped[i] or clipped[j]) and not _overlapping(hulls[i], hulls[j], corners[i], corners[j], normal, offset):
+            continue
+        # A part wholly on its side of the plane stays as it is (and needs no trim).
+        for part, side, level in ((i, -normal, -offset), (j, normal, offset)):
+            if len(corners[part]) and (corners[part] @ side).min() < level:
+                hulls[part] = hulls[part].trim_by_plane(side, level)
+                corners[part] = mesh_of(hulls[part])[0]
+                clipped[part] = True
+    return [hull_corners(h) if not h.is_empty() and h.volume() > MIN_PART_VOLUME else np.zeros((0, 3))
+            for h in hulls]
+
+
+def _overlapping(a: manifold3d.Manifold, b: manifold3d.Manifold, corners_a: np.ndarray, corners_b: np.ndarray,
+                 normal: np.ndarray, offset: float) -> bool:
+    """Whether two convex parts overlap by more than contact (their plane ``normal . x = offset`` first)."""
+    if a.is_empty() or b.is_empty() or len(corners_a) == 0 or len(corners_b) == 0:
+        return False
+    if (corners_a @ normal).max() <= offset <= (corners_b @ normal).min():
+        return False
+    return (a ^ b).volume() > _TOUCH * min(a.volume(), b.volume())
+
+
+def overlapping_boxes(boxes) -> np.ndarray:
+    """Pairs ``(i, j)``, ``i < j`` (e, 2), of axis-aligned boxes (n, 6) (min, max) that touch or overlap."""
+    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 6)
+    lo, hi = boxes[:, :3], boxes[:, 3:]
+    touching = np.all((lo[:, None, :] <= hi[None, :, :]) & (lo[None, :, :] <= hi[:, None, :]), axis=2)
+    return np.argwhere(np.triu(touching, 1))
+
+
+def _pair_plane(shared: _Shared, pair: tuple[int, int]) -> tuple[np.ndarray, float] | None:
+    """The separating plane of pair ``(i, j)``, None if their hulls do not overlap (numpy only: picklable)."""
+    i, j = pair
+    a, b = shared.hulls[i], shared.hulls[j]
+    mass_a, mass_b = shared.masses[i], shared.masses[j]
+    if a.is_empty() or b.is_empty() or _separated(shared.corners[i], shared.corners[j], mass_a.center,
+                                                  mass_b.center):
+        return None
+    smaller = min(a.volume(), b.volume())
+    # A face plane of one hull with the other's corners beyond it (up to a slab too thin to matter) separates them.
+    slack = 0.5 * _TOUCH * smaller / max(shared.areas[i], shared.areas[j], 1e-300)
+    if (overlap_bound_separated(shared.corners[i], shared.planes[i], shared.corners[j], slack)
+            or overlap_bound_separated(shared.corners[j], shared.planes[j], shared.corners[i], slack)):
+        return None
+    overlap = a ^ b
+    if overlap.is_empty() or overlap.volume() <= _TOUCH * smaller:
+        return None
+    interface = _interface_normal(shared, i, j)
+    return _best_plane(overlap, shared.materials[i], shared.materials[j], mass_a, mass_b, interface)
+
+
+def _separated(a: np.ndarray, b: np.ndarray, centre_a: np.ndarray, centre_b: np.ndarray) -> bool:
+    """Whether the hulls of corner sets a and b are separated along the line between two centres (cheap test)."""
+    axis = centre_b - centre_a
+    return bool(len(a) == 0 or len(b) == 0 or (a @ axis).max() < (b @ axis).min())
+
+
+def _contacts(meshes, tolerance: float) -> dict:
+    """The faces every pair of bodies share: ``(P, Q) -> (area-weighted normals from P to Q (f, 3), centroids)``."""
+    from fracture_cli.gameready.components import coincident_faces
+
+    match = coincident_faces(meshes, tolerance=tolerance)
+    lo, hi = np.minimum(match.owner, match.other), np.maximum(match.owner, match.other)
+    weighted = (match.area * np.where(match.owner < match.other, 1.0, -1.0))[:, None] * match.normal
+    order = np.lexsort((hi, lo))
+    keys, start = np.unique(np.stack([lo[order], hi[order]], axis=1), axis=0, return_index=True)
+    stops = np.append(start[1:], len(order))
+    return {(int(p), int(q)): (weighted[order[a:b]], match.centroid[order[a:b]])
+            for (p, q), a, b in zip(keys, start, stops)}
+
+
+def _interface_normal(shared: _Shared, i: int, j: int) -> np.ndarray | None:
+    """Unit area-weighted normal (from part i to part j) of the faces their bodies share inside both hulls, None
+    if there are none (a face on the interface of two pieces lies in both pieces, hence in both hulls)."""
+    p, q = int(shared.body[i]), int(shared.body[j])
+    if p == q or (min(p, q), max(p, q)) not in shared.contacts:
+        return None
+    weighted, centroid = shared.contacts[(min(p, q), max(p, q))]
+    inside = np.ones(len(centroid), dtype=bool)
+    for normal, offset in (shared.planes[i], shared.planes[j]):
+        inside &= (centroid @ normal.T - offset[None, :]).max(axis=1) <= shared.tolerance
+    total = weighted[inside].sum(axis=0) * (1.0 if p < q else -1.0)
+    length = float(np.linalg.norm(total))
+    return total / length if length > 0 else None
+
+
+def _best_plane(overlap: manifold3d.Manifold, material_a: _Material, material_b: _Material, mass_a: MassProperties,
+                mass_b: MassProperties, interface_normal: np.ndarray | None) -> tuple[np.ndarray, float] | None:
+    """The candidate plane ``(unit normal from a to b, offset)`` that leaves the least material on the wrong side."""
+    corners, triangles = mesh_of(overlap)
+    towards_b = mass_b.center - mass_a.center
+    # Largest principal moment of inertia = smallest second moment: the overlap's thinnest direction.
+    moments, axes = mass_properties(corners, triangles).principal()
+    candidates = [axes[:, int(np.argmax(moments))], towards_b]
+    if interface_normal is not None:
+        candidates.insert(0, interface_normal)
+    volume_a, volume_b = max(mass_a.volume, 1e-300), max(mass_b.volume, 1e-300)
+    best, best_cost = None, np.inf
+    for normal in candidates:
+        length = np.linalg.norm(normal)
+        if length == 0:
+            continue
+        normal = normal / length
+        if normal @ towards_b < 0:
+            normal = -normal
+        s = corners @ normal
+        offsets = s.min() + (s.max() - s.min()) * _PLANE_FRACTIONS
+        # Fractions of a's material beyond the plane and of b's before it: relative, so a small part
+        # is not sacrificed to save a sliver of a big one.
+        cost = (_volume_beyond(material_a, normal, offsets) / volume_a
+                + _volume_beyond(material_b, -normal, -offsets) / volume_b)
+        k = int(np.argmin(cost))
+        if cost[k] < best_cost - 1e-15:
+            best, best_cost = (normal, float(offsets[k])), float(cost[k])
+    return best
