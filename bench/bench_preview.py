@@ -33,13 +33,16 @@ def run(quick: bool = False) -> str:
         mesh = _bumpy_sphere(5 if quick else 6)  # 20k or 82k triangles
         mesh.export(big)
         inputs = [(os.path.join(REPO, "sample_assets", "chair.glb"), "chair"), (big, "bumpy")]
+        out = os.path.join(tmp, "out")  # never the inputs' folder: the bake refuses to replace an input
         for path, stem in inputs:
-            bake(path, tmp, load_recipe("default"))
+            bake(path, out, load_recipe("default"))
             t0 = time.perf_counter()
-            info = render_preview(os.path.join(tmp, f"{stem}.fracture.json"), os.path.join(tmp, f"{stem}.png"))
-            rows.append((stem, len(mesh.faces) if stem == "bumpy" else None, info["fragments"], time.perf_counter() - t0))
+            info = render_preview(os.path.join(out, f"{stem}.fracture.json"), os.path.join(out, f"{stem}.png"))
+            tris = len(mesh.faces) if stem == "bumpy" else None
+            rows.append((stem, tris, info["fragments"], time.perf_counter() - t0))
     lines = ["## Preview rendering", "", "`fracture preview` (matplotlib Agg, 1600x1000, 9 panels). Target: a few "
-             "seconds for a 50k-triangle asset.", "", "| asset | input tris | fragments | seconds |", "|---|---|---|---|"]
+             "seconds for a 50k-triangle asset.", "", "| asset | input tris | fragments | seconds |",
+             "|---|---|---|---|"]
     for stem, tris, frags, secs in rows:
         lines.append(f"| {stem} | {tris if tris else '-'} | {frags} | {secs:.2f} |")
     return "\n".join(lines) + "\n"
