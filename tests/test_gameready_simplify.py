@@ -191,12 +191,3 @@ def test_nearest_input_triangle_by_grid_is_the_brute_force_one():
         else:
             assert best[i] == -1 or distance[i] > 1e-7
 
-
-def test_needles_are_told_from_thin_but_real_triangles():
-    """A triangle 1e-10 high on a 1e-3 edge is a needle (its intersection test follows rounding); 1e-8 is not."""
-    from fracture_cli.gameready.faultmatch import _needle
-
-    T = np.array([[[0, 0, 0], [1e-3, 0, 0], [5e-4, 1e-10, 0]],
-                  [[0, 0, 0], [1e-3, 0, 0], [5e-4, 1e-8, 0]],
-                  [[0, 0, 0], [1, 0, 0], [0.5, 1e-5, 0]]], dtype=float)
-    assert _needle(T).tolist() == [True, False, False]

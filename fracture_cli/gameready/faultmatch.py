@@ -33,8 +33,6 @@ from fracture_cli.types import Fragment, Fragments, SurfaceMesh
 WELD_TOLERANCE = 1e-6
 # An outer face lies in an input triangle when its corners are this close to it (normalized units).
 ON_SURFACE = 1e-7
-# A triangle whose height is below this fraction of its longest edge is a needle (see _needle).
-NEEDLE = 1e-6
 # Input triangles tried per outer face (nearest centroids first) before all of them are.
 _CANDIDATES = 16
 
@@ -62,23 +60,7 @@ def bad_faces(fragment: Fragment, changed: np.ndarray | None = None) -> np.ndarr
     if not (edge_manifold_closed(W) and vertex_manifold(W)):
         return np.arange(len(W))
     pairs = self_intersections(V, W) if changed is None else self_intersections_among(V, W, changed)
-    if len(pairs):
-        pairs = pairs[~np.any(_needle(V[W])[pairs], axis=1)]
     return np.unique(pairs) if len(pairs) else None
-
-
-def _needle(T: np.ndarray) -> np.ndarray:
-    """(m,) bool: triangles (m, 3, 3) whose height is below :data:`NEEDLE` of their longest edge.
-
-    The booleans leave such needles where a fault grazes a tet corner. Whether one "intersects" the face it
-    shares a corner with depends on rounding, not on geometry (the same pair tests both ways in two vertex
-    orders), and a triangle with no area cannot pierce anything: pairs with a needle are not counted.
-    """
-    edges = np.roll(T, -1, axis=1) - T
-    longest = np.max(np.einsum("mij,mij->mi", edges, edges), axis=1)
-    doubled_area = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
-    # height = doubled area / longest edge: height < NEEDLE * edge <=> doubled area < NEEDLE * edge^2
-    return doubled_area < NEEDLE * longest
 
 
 def weld(positions: np.ndarray, owner: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:

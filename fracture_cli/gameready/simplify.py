@@ -178,27 +178,6 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
     earlier: SurfaceComplex | None = None
     first: dict[int, tuple] | None = None  # the faces of the first try, all checked
     valid_faces: set[bytes] = set()
-    plain: list = []  # the complex before any collapse, built once when needed
-
-    def known_bad(k: int) -> set:
-        """Faces (sorted corner ids) of fragment ``k`` that intersect as cut, or once welded before any collapse."""
-        if k not in known:
-            before = fragments.fragments[k]
-            was = bad_faces(before)
-            known[k] = set() if was is None else {tuple(sorted(f))
-                                                  for f in gid[before.faces[was] + offsets[k]].tolist()}
-            # The weld (WELD_TOLERANCE) moves vertices by up to 1e-6: next to a sliver left by the booleans that
-            # can fold two faces into each other. No collapse made them, so they are judged as the cut ones are.
-            if not plain:
-                plain.append(SurfaceComplex(welded, classified.faces, classified.groups, classified.owners,
-                                            classified.fault, set(classified.locked), {}))
-            ids0, faces0 = plain[0].face_arrays()
-            welded_only, ids_k = _rebuild(fragments, k, welded, classified, ids0, faces0, interior, uv_scale)
-            folded = bad_faces(welded_only)
-            if folded is not None and len(folded) < len(welded_only.faces):
-                known[k] |= {tuple(sorted(plain[0].faces[t])) for t in ids_k[folded].tolist()}
-        return known[k]
-
     attempt = 0
     while True:
         complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles, count, earlier)
@@ -219,7 +198,7 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
         # The fragments are checked on their own, in parallel; what was bad before is judged here.
         found_all = parallel.ordered_map(_bad_faces_item, [(results[k], c) for k, c in zip(todo, changed)])
         for k, found in zip(todo, found_all):
-            b = _new_bad_faces(found, results[k], face_ids[k], complex_, lambda k=k: known_bad(k))
+            b = _new_bad_faces(found, results[k], face_ids[k], complex_, known, k, fragments, gid, offsets)
             if b is None:
                 valid_faces.add(signatures[k])
             else:
@@ -280,18 +259,27 @@ def _bad_faces_item(_: None, item: tuple[Fragment, np.ndarray | None]) -> np.nda
 
 
 def _new_bad_faces(bad: np.ndarray | None, fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex,
-                   known_bad) -> np.ndarray | None:
+                   known: dict, k: int, fragments: Fragments, gid: np.ndarray,
+                   offsets: np.ndarray) -> np.ndarray | None:
     """Of the faces ``bad`` making a rebuilt fragment invalid (:func:`bad_faces`), those not so before.
 
-    A fragment cut with faces that already intersect (rare: folds the booleans left), or that intersect once
-    its vertices are welded, is not held against the simplification: faces of it that no collapse touched,
-    and that were bad before (``known_bad()``: a set of sorted corner ids), are let through.
+    A fragment cut with faces that already intersect (rare: folds the booleans left) is not held against
+    the simplification: faces of it that no collapse touched, and that were bad before, are let through.
     """
     if bad is None or len(bad) == len(fragment.faces):
         return bad
-    was = known_bad()
+    was = _known_bad(fragments, k, known, gid, offsets)
     new = [i for i, t in zip(bad.tolist(), ids[bad].tolist()) if tuple(sorted(complex_.faces[t])) not in was]
     return np.array(new, dtype=np.int64) if new else None
+
+
+def _known_bad(fragments: Fragments, k: int, known: dict, gid: np.ndarray, offsets: np.ndarray) -> set:
+    """The faces (sorted global corner ids) of fragment ``k`` that intersect as cut (memoized in ``known``)."""
+    if k not in known:
+        before = fragments.fragments[k]
+        was = bad_faces(before)
+        known[k] = set() if was is None else {tuple(sorted(f)) for f in gid[before.faces[was] + offsets[k]].tolist()}
+    return known[k]
 
 
 def _interior_slot(fragments: Fragments) -> int:
