@@ -23,6 +23,7 @@ import contextlib
 import logging
 import os
 import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from contextvars import ContextVar
 from typing import Any, TypeVar
@@ -134,20 +135,20 @@ def _run_forked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T]
     stalled = False
     try:
         pending = {pool.submit(_run_chunk, chunk): chunk for chunk in chunks}
-        last_cpu = -1
+        last_cpu, quiet_since = -1, time.monotonic()
         while pending:
-            done, _ = wait(pending, timeout=STALL_SECONDS, return_when=FIRST_COMPLETED)
+            # Polled often, so a stall costs STALL_SECONDS, not up to twice that.
+            done, _ = wait(pending, timeout=min(_STALL_POLL, STALL_SECONDS), return_when=FIRST_COMPLETED)
             for future in done:
                 chunk = pending.pop(future)
                 results[chunk.start:chunk.stop] = future.result()
-            if done:
-                last_cpu = -1
+            cpu = None if done else _workers_cpu_ticks(pool)
+            if done or cpu is None or cpu != last_cpu:
+                last_cpu, quiet_since = (-1 if cpu is None else cpu), time.monotonic()
                 continue
-            cpu = _workers_cpu_ticks(pool)
-            if cpu is not None and cpu == last_cpu:
+            if time.monotonic() - quiet_since >= STALL_SECONDS:
                 stalled = True
                 break
-            last_cpu = -1 if cpu is None else cpu
         if stalled:
             log.warning("parallel workers stopped making progress (no CPU time for %g s); finishing %d item(s) in "
                         "this process", STALL_SECONDS, sum(len(c) for c in pending.values()))
@@ -160,8 +161,12 @@ def _run_forked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T]
     return results
 
 
-#: Seconds without a finished chunk and without any worker CPU time after which forked workers count as stalled.
-STALL_SECONDS = 30.0
+#: Seconds without a finished chunk and without any worker CPU time after which forked workers count as stalled
+#: (a worker with work never waits: it always uses CPU time; the bench saw workers asleep after forking from a
+#: process that had run manifold3d booleans).
+STALL_SECONDS = 10.0
+# How often the workers' progress is looked at.
+_STALL_POLL = 1.0
 
 
 def _workers_cpu_ticks(pool: Any) -> int | None:
