@@ -422,3 +422,9 @@ class Fragments:
     normalization: Normalization
     input_volume: float
     pivot: str = "center_of_mass"
+
+    @property
+    def interior_slot(self) -> int:
+        """Index of the ``interior`` material (the fault faces'); the last slot when none is named so."""
+        names = [m.name for m in self.materials]
+        return names.index(INTERIOR_MATERIAL_NAME) if INTERIOR_MATERIAL_NAME in names else len(names) - 1

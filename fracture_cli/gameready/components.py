@@ -25,7 +25,7 @@ from fracture_cli.meshtopo import manifold_patches
 from fracture_cli.stages._solids import SplitMesh, from_manifold, shell_mask, to_manifold
 from fracture_cli.stages.fragments import _stable_order
 from fracture_cli.trigeom import BoxGrid, default_cell, face_signed_volumes
-from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments
+from fracture_cli.types import Fragment, Fragments
 
 log = logging.getLogger(__name__)
 
@@ -291,7 +291,7 @@ def fragments_graph(fragments: Fragments) -> tuple[np.ndarray, np.ndarray]:
     areas : (e,) float64
         Shared fault area, normalized units squared.
     """
-    interior = _interior_slot(fragments)
+    interior = fragments.interior_slot
     meshes = [(f.vertices, f.faces) for f in fragments.fragments]
     fault = [f.material_ids == interior for f in fragments.fragments]
     return fragment_graph(meshes, fault, min_area=_MIN_BOND_AREA * fragments.input_volume ** (2.0 / 3.0))
@@ -326,7 +326,7 @@ def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> 
     of ``W`` and takes its edges from :func:`fragment_graph`, not from the
     piece graph.
     """
-    interior = _interior_slot(fragments)
+    interior = fragments.interior_slot
     bodies: list[tuple[int, np.ndarray]] = []  # (fragment index, face indices)
     counts = []
     for i, frag in enumerate(fragments.fragments):
@@ -359,10 +359,6 @@ def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> 
     new = dataclasses.replace(fragments, fragments=tuple(results[k] for k in order))
     return new, report
 
-
-def _interior_slot(fragments: Fragments) -> int:
-    names = [m.name for m in fragments.materials]
-    return names.index(INTERIOR_MATERIAL_NAME) if INTERIOR_MATERIAL_NAME in names else len(names) - 1
 
 
 def _merge_tiny(volumes: np.ndarray, pairs: np.ndarray, areas: np.ndarray, min_volume: float):

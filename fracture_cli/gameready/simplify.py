@@ -51,7 +51,7 @@ from fracture_cli.gameready.faultmatch import (
     weld,
 )
 from fracture_cli.stages.fragments import _box_uvs
-from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, SurfaceMesh
+from fracture_cli.types import Fragment, Fragments, SurfaceMesh
 
 __all__ = ["FaultReport", "simplify_faults", "valid"]
 
@@ -133,7 +133,7 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
         Same fragments, order and pieces.
     report : FaultReport
     """
-    interior = _interior_slot(fragments)
+    interior = fragments.interior_slot
     offsets = np.cumsum([0] + [len(f.vertices) for f in fragments.fragments])
     positions = np.vstack([f.vertices for f in fragments.fragments])
     owner = np.repeat(np.arange(len(fragments.fragments)), np.diff(offsets))
@@ -281,10 +281,6 @@ def _known_bad(fragments: Fragments, k: int, known: dict, gid: np.ndarray, offse
         known[k] = set() if was is None else {tuple(sorted(f)) for f in gid[before.faces[was] + offsets[k]].tolist()}
     return known[k]
 
-
-def _interior_slot(fragments: Fragments) -> int:
-    names = [m.name for m in fragments.materials]
-    return names.index(INTERIOR_MATERIAL_NAME) if INTERIOR_MATERIAL_NAME in names else len(names) - 1
 
 
 def _uv_scale(fragments: Fragments, interior: int) -> float:

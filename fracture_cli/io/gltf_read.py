@@ -282,7 +282,7 @@ class _Document:
         else:
             return [(m, np.eye(4)) for m in range(len(self.doc.get("meshes", []) or []))]
         out: list[tuple[int, np.ndarray]] = []
-        self.skipped_collision: list[str] = []
+        skipped: list[str] = []
         stack: list[tuple[int, np.ndarray, tuple[int, ...]]] = [(int(r), np.eye(4), ()) for r in reversed(roots)]
         while stack:
             index, parent, ancestors = stack.pop()
@@ -291,15 +291,15 @@ class _Document:
             node = nodes[index]
             world = parent @ _local_matrix(node)
             if "mesh" in node and is_collision_only(node.get("name")):
-                self.skipped_collision.append(str(node["name"]))
+                skipped.append(str(node["name"]))
             elif "mesh" in node:
                 out.append((int(node["mesh"]), world))
             for child in reversed(node.get("children", [])):
                 stack.append((int(child), world, ancestors + (index,)))
-        if self.skipped_collision:
+        if skipped:
             log.warning("load: %s: %d collision-only node(s) skipped (%s%s): engines import them as collision, "
-                        "not as the visible asset", self.path, len(self.skipped_collision),
-                        ", ".join(self.skipped_collision[:3]), ", ..." if len(self.skipped_collision) > 3 else "")
+                        "not as the visible asset", self.path, len(skipped),
+                        ", ".join(skipped[:3]), ", ..." if len(skipped) > 3 else "")
         return out
 
     def parts(self) -> list[MeshPart]:
