@@ -136,9 +136,8 @@ def _lean(asset: str, recipe_name: str, tmp: str) -> tuple[Fragments, tuple]:
 
 def _rest_in_godot(fragments: Fragments, shapes) -> tuple[float, float]:
     """Largest body speed after one second in Godot 3: (convex hulls, exported parts)."""
-    sys.path.insert(0, os.path.join(REPO, "tests"))
-    from godot_harness import GodotProject
-    from test_gameready_engine import REST_SCRIPT
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from bench_recipes import rest_in_godot
 
     from fracture_cli.gameready.export_shapes import FragmentPhysics, physics_extender
     from fracture_cli.io.gltf import glb_bytes
@@ -156,12 +155,8 @@ def _rest_in_godot(fragments: Fragments, shapes) -> tuple[float, float]:
         glb = os.path.join(tmp, "asset.glb")
         with open(glb, "wb") as fh:
             fh.write(glb_bytes(nodes, fragments.materials, extend=physics_extender(physics, "unreal")))
-        project = GodotProject(os.path.join(tmp, "godot"))
-        scene = project.add_file(glb)
-        project.import_resources()
-        speeds = [float(project.run_script(REST_SCRIPT, scene, mode).lines("max_speed ")[0].split()[1])
-                  for mode in ("hull", "parts")]
-    return speeds[0], speeds[1]
+        hull, parts = rest_in_godot(glb, ("hull", "parts"))
+    return hull, parts
 
 
 def run(quick: bool = False, source: str | None = None, lean_only: bool = False) -> str:

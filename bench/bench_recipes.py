@@ -137,12 +137,13 @@ def bake_one(asset: str, recipe: str) -> dict:
     with tempfile.TemporaryDirectory(prefix="fracture-bench-recipes-") as out:
         data = bake_child(os.path.join(REPO, "sample_assets", asset), out, recipe, "collision.glb=unreal")
         glb = os.path.join(out, os.path.splitext(asset)[0] + ".glb")
-        data["rest"] = _rest_in_godot(glb) if shutil.which("godot3-server") else None
+        data["rest"] = rest_in_godot(glb)[0] if shutil.which("godot3-server") else None
         return data
 
 
-def _rest_in_godot(glb: str) -> float:
-    """Largest body speed (m/s) after one second in Godot 3, one rigid body per fragment from its parts."""
+def rest_in_godot(glb: str, modes: tuple[str, ...] = ("parts",)) -> list[float]:
+    """Largest body speed (m/s) after one second in Godot 3, one rigid body per fragment, per mode of the
+    rest script (``parts``: from its ``UCX_`` meshes; ``hull``: its mesh's convex hull)."""
     sys.path.insert(0, os.path.join(REPO, "tests"))
     from godot_harness import GodotProject
     from test_gameready_engine import REST_SCRIPT
@@ -151,7 +152,8 @@ def _rest_in_godot(glb: str) -> float:
         project = GodotProject(os.path.join(tmp, "godot"))
         scene = project.add_file(glb)
         project.import_resources()
-        return float(project.run_script(REST_SCRIPT, scene, "parts").lines("max_speed ")[0].split()[1])
+        return [float(project.run_script(REST_SCRIPT, scene, mode).lines("max_speed ")[0].split()[1])
+                for mode in modes]
 
 
 def baseline(asset: str, fragments: int) -> dict:
