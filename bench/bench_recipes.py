@@ -251,14 +251,17 @@ def _tables(rows: list, stages: list[str]) -> str:
 
 def _game_ready_table(rows: list) -> list[str]:
     """Issue 20's figures per recipe and asset, from each bake's report (checks run on the meshes as written)."""
-    lines = ["", "Game-ready output per recipe (issue 20), from each bake's report: triangles of the input as read "
-             "and of the solid it was repaired into (an open sheet is thickened), of the fragments as cut and as "
-             "written; the budget is twice the input's triangles plus 64 per fragment, counted from the solid "
-             "(what the report checks) and from the file as read (the stricter reading). Bodies: most closed "
-             "bodies in one fragment. Collision: convex parts, largest overlap between parts (fraction of the "
-             "smaller; target < 0.01), smallest share of a fragment's volume inside its parts. Rest: one rigid "
-             "body per fragment from its parts in Godot 3 headless, gravity off, largest speed after 1 s (m/s; "
-             "target < 0.05; '-' without godot3-server).", "",
+    from fracture_cli.stages.simplify import BUDGET_PER_FRAGMENT, triangle_budget
+
+    lines = ["", (f"Game-ready output per recipe (issue 20), from each bake's report: triangles of the input as "
+                  f"read and of the solid it was repaired into (an open sheet is thickened), of the fragments as"
+                  f" cut and as written; the budget is twice the input's triangles plus {BUDGET_PER_FRAGMENT} "
+                  f"per fragment, counted from the solid (what the report checks) and from the file as read (the"
+                  f" stricter reading). Bodies: most closed bodies in one fragment. Collision: convex parts, "
+                  f"largest overlap between parts (fraction of the smaller; target < 0.01), smallest share of a "
+                  f"fragment's volume inside its parts. Rest: one rigid body per fragment from its parts in "
+                  f"Godot 3 headless, gravity off, largest speed after 1 s (m/s; target < 0.05; '-' without "
+                  f"godot3-server)."), "",
              "| asset | recipe | fragments | tris read | tris solid | tris cut | tris written | budget (solid) | "
              "budget (read) | GLB KiB | bodies | parts | overlap | coverage | rest m/s |",
              "|" + "---|" * 15]
@@ -266,9 +269,9 @@ def _game_ready_table(rows: list) -> list[str]:
         checks, frags = report["checks"], int(report["counts"]["fragments"])
         read = int(report["input"]["triangles"])
         budget = int(checks.get("triangle_budget", 0))
-        solid = (budget - 64 * frags) // 2
+        solid = (budget - BUDGET_PER_FRAGMENT * frags) // 2  # the report's budget counts the solid
         written = int(checks.get("triangles", 0))
-        strict = 2 * read + 64 * frags
+        strict = triangle_budget(read, frags)
         lines.append(f"| {asset} | {recipe} | {frags} | {read:,} | {solid:,} | {int(checks.get('triangles_cut', 0)):,} "
                      f"| {written:,} | {_within(written, budget)} | {_within(written, strict)} | "
                      f"{data.get('glb_bytes', 0) / 1024:.0f} | "
