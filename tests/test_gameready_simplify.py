@@ -9,6 +9,7 @@ import manifold3d
 import numpy as np
 import pytest
 
+from fracture_cli.gameready.budget import Limits, shares
 from fracture_cli.gameready.mass import mass_properties
 from fracture_cli.gameready.simplify import simplify_faults, valid
 from fracture_cli.pipeline import STAGE_NAMES
@@ -132,6 +133,34 @@ def test_budget_simplifies_further():
     assert report.over_budget == sum(len(f.faces) > 60 for f in capped.fragments)
 
 
+def test_fit_budget_brings_the_asset_within_its_budget():
+    """Issue 20: at default settings (fit_budget) the asset keeps to twice the input's triangles + 64 per fragment."""
+    fragments, surface = _pair(bend=0.2)
+    budget = triangle_budget(len(surface.faces), len(fragments.fragments))
+    free, _ = simplify_faults(fragments, surface, tolerance=2e-3)
+    fitted, report = simplify_faults(fragments, surface, tolerance=2e-3, fit_budget=True)
+    assert sum(len(f.faces) for f in free.fragments) > budget >= report.triangles_after
+    assert report.triangles_after == sum(len(f.faces) for f in fitted.fragments)
+    assert all(valid(f) for f in fitted.fragments)
+    assert _fault(fitted.fragments[0]) == _fault(fitted.fragments[1])
+    total = sum(mass_properties(f.vertices, f.faces).volume for f in fitted.fragments)
+    assert total == pytest.approx(fragments.input_volume, rel=1e-12)
+    _check_outer(fragments, fitted)
+
+
+def test_budget_shares_what_stuck_fragments_leave():
+    share = shares(100, np.array([1.0, 1.0, 2.0]))
+    assert share.sum() == pytest.approx(triangle_budget(100, 3))
+    limits = Limits(budget=triangle_budget(100, 3), share=share)
+    # Within the budget: nothing to do, however uneven.
+    assert limits.over(np.array([300, 10, 10]), np.zeros(3, dtype=bool)).tolist() == []
+    # Above it: the fragments above their shares (114, 114, 164 of 392).
+    assert limits.over(np.array([200, 100, 200]), np.zeros(3, dtype=bool)).tolist() == [0, 2]
+    # Fragment 0 cannot go further: the others share what it leaves (192 for 1 and 2: 64 and 128, about).
+    assert limits.over(np.array([200, 100, 100]), np.array([True, False, False])).tolist() == [1]
+    assert Limits(max_triangles=150).over(np.array([200, 100, 160]), np.array([False, False, True])).tolist() == [0]
+
+
 def test_zero_tolerance_changes_nothing():
     fragments, surface = _pair(bend=0.2)
     result, report = simplify_faults(fragments, surface, tolerance=0.0)
@@ -145,6 +174,7 @@ def test_stage_runs_after_fragments_with_recipe_keys():
     recipe = load_recipe("default")
     assert isinstance(recipe["simplify"], SimplifyOptions)
     assert recipe["simplify"].tolerance > 0 and recipe["simplify"].max_triangles == 0
+    assert recipe["simplify"].fit_budget
 
 
 def test_chair_bake_within_the_triangle_budget(tmp_path):

@@ -19,8 +19,11 @@ are most of a bake's triangles (chair, wood: 32,000 for a 2,500-triangle input).
    the same faces, so the fragments still partition the input exactly: their
    volumes sum to the input's, and the outer surface is the input's, with its
    UVs and normals.
-3. **Budget.** With ``max_triangles``, fragments still above it get their
-   tolerance doubled, a few times, and are simplified further.
+3. **Budget** (:mod:`.budget`). With ``max_triangles``, fragments still above
+   it get their tolerance doubled, a few times, and are simplified further;
+   with ``fit_budget``, likewise the fragments above their share of the
+   asset's budget (twice the input's triangles plus 64 per fragment) while
+   the asset is above it.
 4. **Rebuild and check.** Each fragment is rebuilt (fault vertices split per
    plane, flat normals, box-projected UVs as the fragments stage makes them)
    and checked closed, manifold and free of self-intersections; when one is
@@ -39,6 +42,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fracture_cli import parallel
+from fracture_cli.gameready.budget import Limits, shares, triangle_budget
 from fracture_cli.gameready.decimate import SurfaceComplex
 from fracture_cli.gameready.faultmatch import (
     WELD_TOLERANCE,
@@ -50,7 +54,7 @@ from fracture_cli.gameready.faultmatch import (
     valid,
     weld,
 )
-from fracture_cli.stages.fragments import _box_uvs
+from fracture_cli.gameready.rebuild import Classified, rebuild, uv_scale
 from fracture_cli.types import Fragment, Fragments, SurfaceMesh
 
 __all__ = ["FaultReport", "simplify_faults", "valid"]
@@ -94,24 +98,8 @@ class FaultReport:
     over_budget: int = 0
 
 
-@dataclass(frozen=True)
-class _Classified:
-    """The fragments' faces as one complex (see :class:`~fracture_cli.gameready.decimate.SurfaceComplex`)."""
-
-    faces: np.ndarray  # (m, 3) global vertex ids, in the first owner's orientation
-    groups: np.ndarray  # (m,) input polygon of an outer face; -1 on a fault; -2 - face for a loose face
-    owners: list  # per face: (fragment,) or (fragment A, fragment B)
-    owner_pair: np.ndarray  # (m, 2) the same as an array: (A, B), or (A, -1) for a face of one fragment
-    fault: np.ndarray  # (m,) bool: a matched fault face (rebuilt flat); else the original corners are kept
-    material: np.ndarray  # (m,) material slot
-    corner: dict  # (group, global id) -> (fragment, its original vertex): the UV and normal of that corner
-    locked: set  # vertices of faces that match nothing
-    unmatched: int
-    patches: int
-
-
 def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float = 1e-3,
-                    max_triangles: int = 0) -> tuple[Fragments, FaultReport]:
+                    max_triangles: int = 0, fit_budget: bool = False) -> tuple[Fragments, FaultReport]:
     """Simplify the fault surfaces of all fragments to ``tolerance``.
 
     Parameters
@@ -126,6 +114,9 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     max_triangles : int, optional (default 0: no budget)
         Triangles per fragment to aim for: fragments above it are simplified
         with up to 64 times the tolerance.
+    fit_budget : bool, optional (default False)
+        Also simplify, up to 64 times the tolerance, the fragments above their share of
+        :func:`~fracture_cli.gameready.budget.triangle_budget` while the asset is above it.
 
     Returns
     -------
@@ -141,8 +132,12 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     original = fragments
     fragments = share_unmatched(fragments, gid, offsets, interior)
     classified = _classify(fragments, surface, gid, offsets, welded, interior)
+    limits = Limits(max_triangles, triangle_budget(len(surface.faces), len(fragments.fragments)),
+                    shares(len(surface.faces), _outer_area(classified, welded, len(fragments.fragments))))
+    if not fit_budget:
+        limits = Limits(max_triangles)
     results, retries, over = _valid_simplification(fragments, surface, classified, gid, offsets, welded, interior,
-                                                   tolerance, max_triangles)
+                                                   tolerance, limits)
     before = sum(len(f.faces) for f in original.fragments)
     after = sum(len(f.faces) for f in results)
     report = FaultReport(before, after, sum(int(np.sum(f.material_ids == interior)) for f in original.fragments),
@@ -154,10 +149,76 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     return new, report
 
 
-def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified: _Classified, gid: np.ndarray,
+def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified: Classified, gid: np.ndarray,
                           offsets: np.ndarray, welded: np.ndarray, interior: int, tolerance: float,
-                          max_triangles: int) -> tuple[list[Fragment], int, int]:
+                          limits: Limits) -> tuple[list[Fragment], int, int]:
     """The simplified fragments, every one valid; how many retries that took and how many stay over budget.
+
+    First to ``tolerance`` and ``limits.max_triangles`` (:func:`_within_tolerance`), then, while the asset is
+    above ``limits.budget``, further (:func:`_within_budget`).
+    """
+    checker = _Checker(fragments, classified, welded, interior, gid, offsets)
+    tried, results, attempt, over = _within_tolerance(checker, tolerance, Limits(limits.max_triangles))
+    if tolerance > 0 and limits.budget > 0 and sum(len(f.faces) for f in results) > limits.budget:
+        results = _within_budget(checker, tried, tolerance, limits, results)
+    return results, attempt, over
+
+
+@dataclass(frozen=True)
+class _Tried:
+    """What the last try of :func:`_within_tolerance` held back, and its complex (all its fragments valid)."""
+
+    complex_: SurfaceComplex
+    locked: set
+    damp: dict
+    as_cut: frozenset
+
+
+class _Checker:
+    """Rebuilds the fragments of a complex and finds the invalid ones, remembering what was checked before."""
+
+    def __init__(self, fragments: Fragments, classified: Classified, welded: np.ndarray, interior: int,
+                 gid: np.ndarray, offsets: np.ndarray):
+        self.fragments, self.classified, self.welded, self.interior = fragments, classified, welded, interior
+        self.gid, self.offsets = gid, offsets
+        self.uv_scale = uv_scale(fragments, interior)
+        self.known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves as cut
+        self.first: dict[int, tuple] | None = None  # the faces of the first try, all checked
+        self.valid_faces: set[bytes] = set()
+
+    def check(self, complex_: SurfaceComplex, as_cut: set | frozenset) -> tuple[list[Fragment], list, dict]:
+        """The rebuilt fragments (those ``as_cut`` as they were cut), their faces' complex ids, and the bad
+        faces (local indices) of each invalid fragment."""
+        fragments, count = self.fragments, len(self.fragments.fragments)
+        ids, faces = complex_.face_arrays()
+        results, face_ids = zip(*[rebuild(fragments, k, self.welded, self.classified, ids, faces, self.interior,
+                                          self.uv_scale) for k in range(count)])
+        bad = {}
+        # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
+        signatures = {k: np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
+                      for k in range(count) if k not in as_cut}
+        todo = [k for k, signature in signatures.items() if signature not in self.valid_faces]
+        # The first try is checked whole; later ones only where a face differs from the first try's (pairs of
+        # faces as they were then were checked then).
+        first = self.first
+        changed = [None if first is None else
+                   np.flatnonzero([first.get(t) != complex_.faces[t] for t in face_ids[k].tolist()]) for k in todo]
+        self.first = dict(complex_.faces) if first is None else first
+        # The fragments are checked on their own, in parallel; what was bad before is judged here.
+        found_all = parallel.ordered_map(_bad_faces_item, [(results[k], c) for k, c in zip(todo, changed)])
+        for k, found in zip(todo, found_all):
+            b = _new_bad_faces(found, results[k], face_ids[k], complex_, self.known, k, fragments, self.gid,
+                               self.offsets)
+            if b is None:
+                self.valid_faces.add(signatures[k])
+            else:
+                bad[k] = b
+        return [fragments.fragments[k] if k in as_cut else f for k, f in enumerate(results)], list(face_ids), bad
+
+
+def _within_tolerance(checker: _Checker, tolerance: float,
+                      limits: Limits) -> tuple[_Tried, list[Fragment], int, int]:
+    """Simplify to ``tolerance`` (and ``limits``) until every fragment is valid.
 
     Fragments not closed and manifold once their vertices are welded by position even as cut (bodies touching
     along an edge, which only the fragments' own vertex copies keep apart), or that intersect where no
@@ -165,46 +226,31 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
     locked). The first try is checked whole, later ones only where their faces differ from the first's;
     after :data:`_RETRIES` tries every fragment still invalid is locked whole, and one still invalid then is
     returned as it was cut.
+
+    Returns
+    -------
+    tried : _Tried
+    fragments : list of Fragment
+    retries, over : int
+        Tries after the first; fragments above ``limits.max_triangles``.
     """
-    uv_scale = _uv_scale(fragments, interior)
-    locked = set(classified.locked)
+    fragments, gid, offsets = checker.fragments, checker.gid, checker.offsets
+    locked = set(checker.classified.locked)
     count = len(fragments.fragments)
     as_cut = {k for k, f in enumerate(fragments.fragments) if not closed_when_welded(f)}
-    known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves before
     whole: set[int] = set()  # fragments locked whole
     for k in sorted(as_cut):
         locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
     damp: dict[int, float] = {}  # tolerance factors of the vertices behind faces that intersected
     earlier: SurfaceComplex | None = None
-    first: dict[int, tuple] | None = None  # the faces of the first try, all checked
-    valid_faces: set[bytes] = set()
     attempt = 0
     while True:
-        complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles, count, earlier)
+        complex_, over = _decimate(checker.welded, checker.classified, locked, damp, tolerance, limits, count,
+                                   earlier)
         earlier = complex_
-        ids, faces = complex_.face_arrays()
-        results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
-                                  for k in range(count)])
-        bad = {}
-        # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
-        signatures = {k: np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
-                      for k in range(len(results)) if k not in as_cut}
-        todo = [k for k, signature in signatures.items() if signature not in valid_faces]
-        # The first try is checked whole; later ones only where a face differs from the first try's (pairs of
-        # faces as they were then were checked then).
-        changed = [None if first is None else
-                   np.flatnonzero([first.get(t) != complex_.faces[t] for t in face_ids[k].tolist()]) for k in todo]
-        first = dict(complex_.faces) if first is None else first
-        # The fragments are checked on their own, in parallel; what was bad before is judged here.
-        found_all = parallel.ordered_map(_bad_faces_item, [(results[k], c) for k, c in zip(todo, changed)])
-        for k, found in zip(todo, found_all):
-            b = _new_bad_faces(found, results[k], face_ids[k], complex_, known, k, fragments, gid, offsets)
-            if b is None:
-                valid_faces.add(signatures[k])
-            else:
-                bad[k] = b
+        results, face_ids, bad = checker.check(complex_, as_cut)
         if not bad or tolerance <= 0:
-            return [fragments.fragments[k] if k in as_cut else f for k, f in enumerate(results)], attempt, over
+            return _Tried(complex_, locked, damp, frozenset(as_cut)), results, attempt, over
         log.debug("faults: try %d, %d fragment(s) invalid; simplifying again with more held back", attempt, len(bad))
         for k, b in sorted(bad.items()):
             behind = set().union(*[complex_.history[t] for t in face_ids[k][b].tolist()])
@@ -221,11 +267,41 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
         attempt += 1
 
 
-def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: dict, tolerance: float,
-              max_triangles: int, count: int, earlier: SurfaceComplex | None = None) -> tuple[SurfaceComplex, int]:
-    """The complex after collapses to ``tolerance``, then to the budget; and how many fragments stay above it.
+def _within_budget(checker: _Checker, tried: _Tried, tolerance: float, limits: Limits,
+                   results: list[Fragment]) -> list[Fragment]:
+    """Simplify the fragments above their share of ``limits.budget`` further, every fragment still valid.
 
-    ``earlier``: the complex of an earlier try, whose collapses are redone first where still allowed.
+    Starts from the valid simplification ``tried`` (``results``): its collapses are redone, then the
+    budget's. A fragment that turns invalid is held as it was in ``tried`` (every vertex of its faces
+    kept), its shared faults included, and the rest is simplified again; when every fragment is held,
+    that is ``results``.
+    """
+    count = len(results)
+    held = set(tried.as_cut)
+    base = tried.complex_
+    owners = checker.classified.owners
+    while len(held) < count:
+        hold = {x for t, f in base.faces.items() if held.intersection(owners[t]) for x in f}
+        complex_, _ = _decimate(checker.welded, checker.classified, tried.locked, tried.damp, tolerance, limits,
+                                count, base, hold, frozenset(held))
+        fitted, _, bad = checker.check(complex_, tried.as_cut)
+        if not bad:
+            return fitted
+        log.debug("faults: %d fragment(s) invalid within the budget; holding them as they were", len(bad))
+        held.update(bad)
+    return results
+
+
+def _decimate(welded: np.ndarray, classified: Classified, locked: set, damp: dict, tolerance: float,
+              limits: Limits, count: int, earlier: SurfaceComplex | None = None, hold: set | None = None,
+              held: frozenset[int] = frozenset()) -> tuple[SurfaceComplex, int]:
+    """The complex after collapses to ``tolerance``, then to the limits; and how many fragments stay above
+    ``limits.max_triangles``.
+
+    ``earlier``: the complex of an earlier try, whose collapses are redone first where still allowed; then
+    the vertices ``hold`` are locked too, and the fragments ``held`` (whose vertices those are) are not
+    simplified for the limits. A fragment goes no further once its tolerance is :data:`_BUDGET_ROUNDS`
+    doublings up, or when all its vertices are locked.
     """
     complex_ = SurfaceComplex(welded, classified.faces, classified.groups, classified.owners, classified.fault,
                               locked, damp)
@@ -234,23 +310,46 @@ def _decimate(welded: np.ndarray, classified: _Classified, locked: set, damp: di
     bound = {k: tolerance for k in range(count)}
     if earlier is not None:
         complex_.replay(earlier.done, bound, earlier.final_refusals())
+    if hold:
+        complex_.locked = set(locked) | hold
     complex_.decimate(bound)
-    over: list[int] = []
-    for _ in range(_BUDGET_ROUNDS + 1):
-        if max_triangles <= 0:
+    sizes = _sizes(complex_, classified, count)
+    # Fragments with every vertex locked (kept as cut) cannot give anything: the others share what they leave.
+    stuck = np.ones(count, dtype=bool)
+    for t, f in complex_.faces.items():
+        if not complex_.locked.issuperset(f):
+            stuck[list(classified.owners[t])] = False
+    stuck[sorted(held)] = True
+    for _ in range(_BUDGET_ROUNDS):
+        todo = limits.over(sizes, stuck) if limits.active else np.zeros(0, dtype=np.int64)
+        if not len(todo):
             break
-        sizes = np.zeros(count, dtype=np.int64)
-        for t in complex_.faces:
-            for k in classified.owners[t]:
-                sizes[k] += 1
-        over = np.flatnonzero(sizes > max_triangles).tolist()
-        if not over or bound[over[0]] >= tolerance * 2**_BUDGET_ROUNDS:
-            break
-        for k in over:
+        for k in todo.tolist():
             bound[k] *= 2.0
-        todo = {x for t, f in complex_.faces.items() if set(classified.owners[t]) & set(over) for x in f}
-        complex_.decimate(bound, sorted(todo))
-    return complex_, len(over)
+        chosen = set(todo.tolist())
+        vertices = {x for t, f in complex_.faces.items() if chosen.intersection(classified.owners[t]) for x in f}
+        complex_.decimate(bound, sorted(vertices))
+        sizes = _sizes(complex_, classified, count)
+        stuck |= np.array([bound[k] >= tolerance * 2**_BUDGET_ROUNDS for k in range(count)])
+    over = int(np.sum(sizes > limits.max_triangles)) if limits.max_triangles > 0 else 0
+    return complex_, over
+
+
+def _outer_area(classified: Classified, welded: np.ndarray, count: int) -> np.ndarray:
+    """Area (count,) of each fragment's outer surface (its faces on the input)."""
+    outer = classified.groups >= 0
+    T = welded[classified.faces[outer]]
+    area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+    return np.bincount(classified.owner_pair[outer, 0], weights=area, minlength=count)
+
+
+def _sizes(complex_: SurfaceComplex, classified: Classified, count: int) -> np.ndarray:
+    """Triangles (count,) of each fragment in the complex as it is (a fault face counts for both sides)."""
+    sizes = np.zeros(count, dtype=np.int64)
+    for t in complex_.faces:
+        for k in classified.owners[t]:
+            sizes[k] += 1
+    return sizes
 
 
 def _bad_faces_item(_: None, item: tuple[Fragment, np.ndarray | None]) -> np.ndarray | None:
@@ -283,27 +382,8 @@ def _known_bad(fragments: Fragments, k: int, known: dict, gid: np.ndarray, offse
 
 
 
-def _uv_scale(fragments: Fragments, interior: int) -> float:
-    """World units per UV unit of the fragments stage's box projection, read back from its fault vertices.
-
-    The projection is linear in the world position (``uv = world / uv_scale``), so one least-squares ratio
-    recovers the recipe's ``fragments.uv_scale`` exactly; 1 without fault faces or UVs.
-    """
-    num = den = 0.0
-    for frag in fragments.fragments:
-        if frag.uvs is None:
-            continue
-        used = np.unique(frag.faces[frag.material_ids == interior])
-        if len(used) == 0:
-            continue
-        unit = _box_uvs(fragments.normalization.to_world(frag.vertices[used]), frag.normals[used], 1.0)
-        num += float(np.sum(unit * frag.uvs[used]))
-        den += float(np.sum(frag.uvs[used] ** 2))
-    return num / den if den > 0 and num > 0 else 1.0
-
-
 def _classify(fragments: Fragments, surface: SurfaceMesh, gid: np.ndarray, offsets: np.ndarray, welded: np.ndarray,
-              interior: int) -> _Classified:
+              interior: int) -> Classified:
     """Every face of every fragment as a face of the complex: a shared fault face, an outer face, or a locked one."""
     G = np.vstack([gid[f.faces + offsets[k]] for k, f in enumerate(fragments.fragments)])
     owner = np.concatenate([np.full(len(f.faces), k) for k, f in enumerate(fragments.fragments)])
@@ -326,70 +406,8 @@ def _classify(fragments: Fragments, surface: SurfaceMesh, gid: np.ndarray, offse
     near, _ = cKDTree(surface.vertices).query(welded, distance_upper_bound=WELD_TOLERANCE)
     on_input = np.flatnonzero(np.isfinite(near))
     owner_pair = np.column_stack([owner[rows], np.where(paired[rows], owner[np.maximum(twin[rows], 0)], -1)])
-    return _Classified(faces=G[rows], groups=groups[rows], owners=owners, owner_pair=owner_pair, fault=paired[rows],
+    return Classified(faces=G[rows], groups=groups[rows], owners=owners, owner_pair=owner_pair, fault=paired[rows],
                        material=material[rows],
                        corner=corner, locked=set(np.unique(G[loose]).tolist()) | set(on_input.tolist()),
                        unmatched=int(np.sum(loose & (material == interior))),
                        patches=len({o for o in owners if len(o) == 2}))
-
-
-def _rebuild(fragments: Fragments, k: int, welded: np.ndarray, classified: _Classified, ids: np.ndarray,
-             faces: np.ndarray, interior: int, uv_scale: float) -> tuple[Fragment, np.ndarray]:
-    """Fragment ``k`` from the complex's faces ``ids`` (m',), ``faces`` (m', 3); and its faces' complex ids.
-
-    Faces not on a fault keep the fragment's own corners (positions welded, UVs and normals as they were);
-    fault faces get one vertex per (corner, plane): flat normals, box-projected UVs.
-    """
-    frag = fragments.fragments[k]
-    mine = np.any(classified.owner_pair[ids] == k, axis=1)
-    ids, faces = ids[mine], faces[mine].copy()
-    flip = classified.owner_pair[ids, 0] != k
-    faces[flip] = faces[flip][:, ::-1]
-    fault = classified.fault[ids]
-    kept_faces = faces[~fault]
-    groups = classified.groups[ids[~fault]]
-    # Every outer corner takes the UV and normal its input polygon has there (from whichever fragment had
-    # that corner); corners with one position and the same attributes are one vertex.
-    source = [classified.corner[(grp, g)] for grp, row in zip(groups.tolist(), kept_faces.tolist()) for g in row]
-    normals = np.array([fragments.fragments[f].normals[v] for f, v in source]).reshape(-1, 3)
-    uvs = np.array([fragments.fragments[f].uvs[v] if fragments.fragments[f].uvs is not None else (0.0, 0.0)
-                    for f, v in source]).reshape(-1, 2)
-    corner = np.column_stack([kept_faces.reshape(-1), normals, uvs])
-    _, first, local = np.unique(corner, axis=0, return_index=True, return_inverse=True)
-    rank = np.empty(len(first), dtype=np.int64)
-    rank[np.argsort(first)] = np.arange(len(first))  # vertices in the order of first use
-    first, local = np.sort(first), rank[local.reshape(-1)]
-    flat_vertices, flat_normals, flat_faces = _flat(welded, faces[fault])
-    all_uvs = None
-    if frag.uvs is not None:
-        world = fragments.normalization.to_world(flat_vertices)
-        all_uvs = np.vstack([uvs[first], _box_uvs(world, flat_normals, uv_scale)])
-    order = np.concatenate([np.flatnonzero(~fault), np.flatnonzero(fault)])
-    rebuilt = Fragment(vertices=np.vstack([welded[kept_faces.reshape(-1)[first]], flat_vertices]),
-                       faces=np.vstack([local.reshape(-1, 3), len(first) + flat_faces]),
-                       uvs=all_uvs, normals=np.vstack([normals[first], flat_normals]),
-                       material_ids=np.concatenate([classified.material[ids[~fault]],
-                                                    np.full(int(fault.sum()), interior, dtype=np.int32)]),
-                       piece=frag.piece)
-    return rebuilt, ids[order]
-
-
-def _flat(V: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Fault faces (m, 3) with one vertex per (corner, plane): positions (n, 3), unit normals (n, 3), faces (m, 3).
-
-    Faces in one plane (normal equal to 1e-6, offset to 1e-9) share vertices, so a flat region is one smooth
-    patch with one normal, as the fragments stage splits them.
-    """
-    if len(faces) == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
-    a, b, c = V[faces[:, 0]], V[faces[:, 1]], V[faces[:, 2]]
-    normal = np.cross(b - a, c - a)
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    key = np.column_stack([np.round(normal * 1e6), np.round(np.einsum("ij,ij->i", normal, a) * 1e9)])
-    _, plane = np.unique(key.astype(np.int64), axis=0, return_inverse=True)
-    plane = plane.reshape(-1)
-    plane_normal = np.zeros((plane.max() + 1, 3))
-    np.add.at(plane_normal, plane, normal)
-    plane_normal /= np.maximum(np.linalg.norm(plane_normal, axis=1, keepdims=True), 1e-300)
-    uniq, corner = np.unique(np.column_stack([faces.reshape(-1), np.repeat(plane, 3)]), axis=0, return_inverse=True)
-    return V[uniq[:, 0]], plane_normal[uniq[:, 1]], corner.reshape(-1, 3)

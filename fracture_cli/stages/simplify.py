@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
+from fracture_cli.gameready.budget import BUDGET_PER_FRAGMENT, triangle_budget
 from fracture_cli.gameready.simplify import FaultReport, simplify_faults
 from fracture_cli.options import option
 from fracture_cli.types import Fragments, SurfaceMesh
@@ -22,8 +23,7 @@ log = logging.getLogger(__name__)
 
 STAGE = "simplify"
 
-# The triangle budget the issue sets for a default bake: twice the input's triangles plus this many per fragment.
-BUDGET_PER_FRAGMENT = 64
+__all__ = ["BUDGET_PER_FRAGMENT", "SimplifyOptions", "simplify", "skipped", "triangle_budget"]
 
 
 @dataclass(frozen=True)
@@ -42,6 +42,11 @@ class SimplifyOptions:
         "triangles per fragment to aim for: fragments above it are simplified further, up to 64 times the "
         "tolerance; 0 = no budget",
         min=0,
+    )
+    fit_budget: bool = option(
+        True,
+        "keep the asset within twice the input's triangles plus 64 per fragment (the report's triangle_budget): "
+        "fragments above their share of it are simplified further, up to 64 times the tolerance",
     )
     max_input_triangles: int = option(
         200_000,
@@ -70,16 +75,16 @@ def simplify(fragments: Fragments, surface: SurfaceMesh,
         Same fragments, order, pieces and materials, fewer triangles.
     report : FaultReport
     """
-    result, report = simplify_faults(fragments, surface, options.tolerance, options.max_triangles)
+    result, report = simplify_faults(fragments, surface, options.tolerance, options.max_triangles, options.fit_budget)
     if report.over_budget:
         log.warning("%s: %d fragment(s) stay above max_triangles = %d (their faults cannot go further within "
                     "64 times the tolerance)", STAGE, report.over_budget, options.max_triangles)
+    budget = triangle_budget(len(surface.faces), len(result.fragments))
+    if options.fit_budget and report.triangles_after > budget:
+        log.warning("%s: %d triangles, above the budget of %d (twice the input's plus %d per fragment): some "
+                    "faults cannot go further within 64 times the tolerance", STAGE, report.triangles_after, budget,
+                    BUDGET_PER_FRAGMENT)
     return result, report
-
-
-def triangle_budget(input_triangles: int, fragments: int) -> int:
-    """The issue's budget for a bake's output: twice the input's triangles plus 64 per fragment."""
-    return 2 * input_triangles + BUDGET_PER_FRAGMENT * fragments
 
 
 def skipped(surface: SurfaceMesh, options: SimplifyOptions) -> bool:
