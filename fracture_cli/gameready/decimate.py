@@ -23,6 +23,7 @@ vertex ``u`` into a neighbour ``v`` (no new positions) when
 
 from __future__ import annotations
 
+import copy
 import heapq
 
 import numpy as np
@@ -111,6 +112,26 @@ class SurfaceComplex:
         F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)[np.asarray(fault, dtype=bool)]
         self.reference = V[F] if len(F) else np.zeros((1, 3, 3))
         self.reference_tree = cKDTree(self.reference.mean(axis=1))
+
+    def copy(self) -> SurfaceComplex:
+        """An independent copy, to go on from (positions, input polygons and the cut fault are shared: they
+        never change)."""
+        new = copy.copy(self)
+        new.faces = dict(self.faces)
+        new.locked = set(self.locked)
+        new.damp = dict(self.damp)
+        new.vertex_faces = {x: set(f) for x, f in self.vertex_faces.items()}
+        new.stamp = dict(self.stamp)
+        new._queued = dict(self._queued)
+        new.done = list(self.done)
+        new.modified = dict(self.modified)
+        new.refused = dict(self.refused)
+        new._refusals = dict(self._refusals)
+        new._changed = set(self._changed)
+        new.assigned = {t: list(p) for t, p in self.assigned.items()}
+        new.history = dict(self.history)  # its sets are replaced, never changed
+        new.quadric = self.quadric.copy()
+        return new
 
     def replay(self, collapses: list[tuple[int, int, float, list[int], list[int]]],
                tolerance: dict[int, float] | float,

@@ -273,18 +273,17 @@ def _within_budget(checker: _Checker, tried: _Tried, tolerance: float, limits: L
 
     Starts from the valid simplification ``tried`` (``results``): its collapses are redone, then the
     budget's. A fragment that turns invalid is held as it was in ``tried`` (every vertex of its faces
-    kept), its shared faults included, and the rest is simplified again; when every fragment is held,
-    that is ``results``.
+    kept), its shared faults included, and the rest is simplified again (the last try's budget collapses
+    redone first where still allowed); when every fragment is held, that is ``results``.
     """
     count = len(results)
     held = set(tried.as_cut)
-    base = tried.complex_
     owners = checker.classified.owners
+    later: _Fitted | None = None
     while len(held) < count:
-        hold = {x for t, f in base.faces.items() if held.intersection(owners[t]) for x in f}
-        complex_, _ = _decimate(checker.welded, checker.classified, tried.locked, tried.damp, tolerance, limits,
-                                count, base, hold, frozenset(held))
-        fitted, _, bad = checker.check(complex_, tried.as_cut)
+        hold = {x for t, f in tried.complex_.faces.items() if held.intersection(owners[t]) for x in f}
+        later = _fit(checker, tried, tolerance, limits, hold, frozenset(held), later)
+        fitted, _, bad = checker.check(later.complex_, tried.as_cut)
         if not bad:
             return fitted
         log.debug("faults: %d fragment(s) invalid within the budget; holding them as they were", len(bad))
@@ -292,16 +291,38 @@ def _within_budget(checker: _Checker, tried: _Tried, tolerance: float, limits: L
     return results
 
 
+@dataclass(frozen=True)
+class _Fitted:
+    """A complex simplified for the budget (:func:`_fit`)."""
+
+    complex_: SurfaceComplex
+    bound: dict  # the tolerance each fragment ended with
+    start: int  # collapses of ``complex_.done`` that made the valid try (the budget's follow)
+
+
+def _fit(checker: _Checker, tried: _Tried, tolerance: float, limits: Limits, hold: set, held: frozenset[int],
+         later: _Fitted | None) -> _Fitted:
+    """The valid try's complex (a copy), the vertices ``hold`` (of fragments ``held``) locked, simplified to
+    the budget; ``later``: an earlier fit whose budget collapses are redone first, at its tolerances."""
+    count = len(checker.fragments.fragments)
+    complex_ = tried.complex_.copy()
+    complex_.locked |= hold
+    bound = {k: tolerance for k in range(count)}
+    start = len(complex_.done)
+    if later is not None:
+        bound = {k: tolerance if k in held else b for k, b in later.bound.items()}
+        complex_.replay(later.complex_.done[later.start:], bound, later.complex_.final_refusals())
+        complex_.decimate(bound)
+    _rounds(complex_, checker.classified, limits, bound, tolerance, held)
+    return _Fitted(complex_, bound, start)
+
+
 def _decimate(welded: np.ndarray, classified: Classified, locked: set, damp: dict, tolerance: float,
-              limits: Limits, count: int, earlier: SurfaceComplex | None = None, hold: set | None = None,
-              held: frozenset[int] = frozenset()) -> tuple[SurfaceComplex, int]:
+              limits: Limits, count: int, earlier: SurfaceComplex | None = None) -> tuple[SurfaceComplex, int]:
     """The complex after collapses to ``tolerance``, then to the limits; and how many fragments stay above
     ``limits.max_triangles``.
 
-    ``earlier``: the complex of an earlier try, whose collapses are redone first where still allowed; then
-    the vertices ``hold`` are locked too, and the fragments ``held`` (whose vertices those are) are not
-    simplified for the limits. A fragment goes no further once its tolerance is :data:`_BUDGET_ROUNDS`
-    doublings up, or when all its vertices are locked.
+    ``earlier``: the complex of an earlier try, whose collapses are redone first where still allowed.
     """
     complex_ = SurfaceComplex(welded, classified.faces, classified.groups, classified.owners, classified.fault,
                               locked, damp)
@@ -310,10 +331,25 @@ def _decimate(welded: np.ndarray, classified: Classified, locked: set, damp: dic
     bound = {k: tolerance for k in range(count)}
     if earlier is not None:
         complex_.replay(earlier.done, bound, earlier.final_refusals())
-    if hold:
-        complex_.locked = set(locked) | hold
     complex_.decimate(bound)
+    sizes = _rounds(complex_, classified, limits, bound, tolerance)
+    over = int(np.sum(sizes > limits.max_triangles)) if limits.max_triangles > 0 else 0
+    return complex_, over
+
+
+def _rounds(complex_: SurfaceComplex, classified: Classified, limits: Limits, bound: dict, tolerance: float,
+            held: frozenset[int] = frozenset()) -> np.ndarray:
+    """Double the tolerance (``bound``, per fragment, updated) of the fragments over ``limits`` and simplify
+    them further, until none is; the fragments' triangles (count,) at the end.
+
+    A fragment goes no further once its tolerance is :data:`_BUDGET_ROUNDS` doublings up, when all its
+    vertices are locked, or when it is ``held``.
+    """
+    count = len(bound)
     sizes = _sizes(complex_, classified, count)
+    if not limits.active:
+        return sizes
+    limit = tolerance * 2**_BUDGET_ROUNDS
     # Fragments with every vertex locked (kept as cut) cannot give anything: the others share what they leave.
     stuck = np.ones(count, dtype=bool)
     for t, f in complex_.faces.items():
@@ -321,7 +357,8 @@ def _decimate(welded: np.ndarray, classified: Classified, locked: set, damp: dic
             stuck[list(classified.owners[t])] = False
     stuck[sorted(held)] = True
     for _ in range(_BUDGET_ROUNDS):
-        todo = limits.over(sizes, stuck) if limits.active else np.zeros(0, dtype=np.int64)
+        stuck |= np.array([bound[k] >= limit for k in range(count)])
+        todo = limits.over(sizes, stuck)
         if not len(todo):
             break
         for k in todo.tolist():
@@ -330,9 +367,7 @@ def _decimate(welded: np.ndarray, classified: Classified, locked: set, damp: dic
         vertices = {x for t, f in complex_.faces.items() if chosen.intersection(classified.owners[t]) for x in f}
         complex_.decimate(bound, sorted(vertices))
         sizes = _sizes(complex_, classified, count)
-        stuck |= np.array([bound[k] >= tolerance * 2**_BUDGET_ROUNDS for k in range(count)])
-    over = int(np.sum(sizes > limits.max_triangles)) if limits.max_triangles > 0 else 0
-    return complex_, over
+    return sizes
 
 
 def _outer_area(classified: Classified, welded: np.ndarray, count: int) -> np.ndarray:
