@@ -182,6 +182,8 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
     while True:
         complex_, over = _decimate(welded, classified, locked, damp, tolerance, max_triangles, count, earlier)
         earlier = complex_
+        if tolerance > 0:
+            complex_.flip_needles(as_cut)
         ids, faces = complex_.face_arrays()
         results, face_ids = zip(*[_rebuild(fragments, k, welded, classified, ids, faces, interior, uv_scale)
                                   for k in range(count)])
