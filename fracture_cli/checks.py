@@ -41,7 +41,9 @@ def written_fragments(fragments: Fragments, pivot: str = "center_of_mass") -> tu
         once written (float32, relative to the fragment's pivot, as
         :func:`~fracture_cli.io.write.write_fragments_glb` does) are left out:
         they have no area, and removing them collapses their short edge as the
-        writer's rounding already did.
+        writer's rounding already did (the vertices one written position joins
+        then share the float64 position of the first of them, so the fragment
+        stays closed in its own coordinates too).
     checks : list of MeshCheck
         One per fragment, welded by exact written position (see
         :func:`~fracture_cli.meshfix.weld_check.check_mesh`).
@@ -55,7 +57,12 @@ def written_fragments(fragments: Fragments, pivot: str = "center_of_mass") -> tu
         _, index = weld_by_position(stored)
         degenerate = collapsed(index[frag.faces])
         if degenerate.any():
-            frag = dataclasses.replace(frag, faces=frag.faces[~degenerate], material_ids=frag.material_ids[~degenerate])
+            # Corners one written position joins take one float64 position too (the first's): without the
+            # faces, the later stages (collision: welded by exact float64 position) would find a hole there.
+            first = np.full(int(index.max()) + 1, len(index))
+            np.minimum.at(first, index, np.arange(len(index)))
+            frag = dataclasses.replace(frag, vertices=frag.vertices[first[index]], faces=frag.faces[~degenerate],
+                                       material_ids=frag.material_ids[~degenerate])
         out.append(frag)
         checks.append(check_mesh(stored, frag.faces))
     return dataclasses.replace(fragments, fragments=tuple(out)), checks

@@ -21,6 +21,7 @@ from fracture_cli.checks import (
     written_fragments,
 )
 from fracture_cli.errors import StageError
+from fracture_cli.trigeom import edge_manifold_closed
 from fracture_cli.types import Fragment, Fragments, Material, Normalization, SurfaceMesh
 
 
@@ -61,6 +62,10 @@ def test_faces_collapsed_by_float32_rounding_are_dropped():
     frags, checks = written_fragments(fragments(fragment(V, faces)))
     assert len(frags.fragments[0].faces) == 12  # the two slivers at a are dropped
     assert checks[0].watertight and checks[0].degenerate_faces == 0
+    # ... and the split point takes a's position, so later stages (welding by float64 position) find it closed.
+    kept = frags.fragments[0]
+    _, weld = np.unique(kept.vertices, axis=0, return_inverse=True)
+    assert edge_manifold_closed(weld.reshape(-1)[kept.faces])
 
 
 def _edge_and_faces(F):

@@ -221,3 +221,26 @@ def test_nearest_input_triangle_by_grid_is_the_brute_force_one():
         else:
             assert best[i] == -1 or distance[i] > 1e-7
 
+
+
+def test_cap_needles_are_flipped_away_without_moving_the_surface():
+    """A needle (apex 1e-12 off its long edge) and the face across that edge become two well-shaped faces."""
+    from fracture_cli.gameready.decimate import MIN_SHAPE, SurfaceComplex
+
+    b, c, d, a, e = range(5)
+    V = np.array([[0, 0, 0], [1, 0, 0], [0.5, -1, 0], [0.5, 1e-12, 0], [0.5, 1, 0]], dtype=float)
+    faces = np.array([[b, d, c], [b, c, a], [b, a, e], [a, c, e]])
+
+    def complex_() -> SurfaceComplex:
+        return SurfaceComplex(V, faces, np.full(4, -1), [(0, 1)] * 4, np.ones(4, dtype=bool), set())
+
+    flipped = complex_()
+    assert flipped.flip_needles(set()) == 1
+    ids, F = flipped.face_arrays()
+    T = V[F]
+    normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    longest = np.max(np.sum((T - np.roll(T, 1, axis=1)) ** 2, axis=2), axis=1)
+    assert np.all(normal[:, 2] > MIN_SHAPE * longest)  # none is a needle; all still face +z
+    assert normal[:, 2].sum() == pytest.approx(2.0)  # the same area (twice it: 1 below the edge, 1 above)
+    assert {frozenset(f) for f in F.tolist()} >= {frozenset((a, b, d)), frozenset((a, d, c))}
+    assert complex_().flip_needles({0}) == 0  # faces of a fragment kept as cut stay as they are

@@ -19,6 +19,10 @@ vertex ``u`` into a neighbour ``v`` (no new positions) when
 * every fault vertex removed so far stays within the tolerance of the new fault
   faces, and the new fault faces (centroids, edge midpoints) within the
   tolerance of the cut fault.
+
+After the collapses, :meth:`SurfaceComplex.flip_needles` flips away the needles
+the booleans left (a corner ~1e-10 from the opposite edge), which float32 would
+turn over differently on the two sides of a fault.
 """
 
 from __future__ import annotations
@@ -349,6 +353,61 @@ class SurfaceComplex:
         del self.vertex_faces[u]
         self.done.append((u, v, tolerance, points, nearest))
         self.quadric[v] = self.quadric[v] + self.quadric[u]
+
+    def flip_needles(self, frozen: set[int]) -> int:
+        """Flip the long edge of every cap needle with the face across it; returns how many flips were made.
+
+        The booleans leave needles: faces whose corner lies within ~1e-10 of their opposite (long) edge, their
+        height below :data:`MIN_SHAPE` of that edge. Written as float32 about each fragment's own pivot,
+        such a corner moves by more than the height, so the needle turns over differently in the two
+        fragments sharing it, and the written fault folds where the fragments should meet exactly. The
+        long edge (b, c) of needle (a, b, c) is replaced by (a, d), d the far corner of the face across it,
+        when that face bounds the same fragments (and lies in the same input polygon) and both new faces
+        are well shaped and face the way it does: (a, b, d) and (a, d, c) cover the same quad, so the
+        surface moves by the needle's height only. Faces of the ``frozen`` fragments (kept as cut) stay.
+        Faces in ascending ids, again until none flips: deterministic.
+        """
+        flips = 0
+        again = True
+        while again:
+            again = False
+            for t in sorted(self.faces):
+                if t in self.faces and frozen.isdisjoint(self.owners[t]) and self._flip(t):
+                    flips += 1
+                    again = True
+        return flips
+
+    def _flip(self, t: int) -> bool:
+        """Flip the long edge of face ``t`` if it is a cap needle and the flip is allowed (see :meth:`flip_needles`)."""
+        f = self.faces[t]
+        P = [self.points[x] for x in f]
+        lengths = [sum((P[(i + 1) % 3][j] - P[i][j]) ** 2 for j in range(3)) for i in range(3)]
+        i = max(range(3), key=lambda k: lengths[k])  # the long edge: corner i -> corner i + 1
+        n = _normal(self.points, f)
+        if n[0] ** 2 + n[1] ** 2 + n[2] ** 2 > (MIN_SHAPE * lengths[i]) ** 2:
+            return False
+        a, b, c = f[(i + 2) % 3], f[i], f[(i + 1) % 3]
+        across = [s for s in self.vertex_faces[b] & self.vertex_faces[c] if s != t]
+        if len(across) != 1:
+            return False
+        s = across[0]
+        g = self.faces[s]
+        d = next(x for x in g if x != b and x != c)
+        if (self.owners[s] != self.owners[t] or self.fault[s] != self.fault[t] or self.groups[s] != self.groups[t]
+                or g[(g.index(c) + 1) % 3] != b or self.vertex_faces[a] & self.vertex_faces[d]):
+            return False  # another surface, misoriented, or an edge a-d already there (the flip would pinch)
+        new_t, new_s = (a, b, d), (a, d, c)
+        if not (_turns_little(self.points, g, new_t, 0.0) and _turns_little(self.points, g, new_s, 0.0)):
+            return False
+        self.clock += 1
+        self.vertex_faces[b].discard(s)
+        self.vertex_faces[c].discard(t)
+        self.vertex_faces[a].add(s)
+        self.vertex_faces[d].add(t)
+        self.faces[t], self.faces[s] = new_t, new_s
+        self.history[t] = self.history[s] = self.history[t] | self.history[s]
+        self.modified[t] = self.modified[s] = self.clock
+        return True
 
     def face_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """Ids (m',) of the faces left, ascending, and their corners (m', 3)."""

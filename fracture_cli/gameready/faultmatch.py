@@ -17,6 +17,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fracture_cli import parallel
+from fracture_cli.exactgeom import real_pairs
 from fracture_cli.meshtopo import manifold_patches, undirected_edges
 from fracture_cli.trigeom import (
     BoxGrid,
@@ -53,13 +54,16 @@ def bad_faces(fragment: Fragment, changed: np.ndarray | None = None) -> np.ndarr
     """None if the fragment is valid (see :func:`valid`); else the faces (k,) at fault, all if it is not closed.
 
     ``changed`` (c,): only intersections involving one of these faces count (the others are as they were
-    checked before); None checks every pair.
+    checked before); None checks every pair. Pairs the floating-point test reports are tested again exactly
+    (:func:`~fracture_cli.exactgeom.real_pairs`): needles the booleans leave (height ~1e-10 of their edges)
+    "intersect" the faces they share a corner with by rounding alone, and would keep fragments as cut.
     """
     V, weld = np.unique(fragment.vertices, axis=0, return_inverse=True)
     W = weld.reshape(-1)[fragment.faces]
     if not (edge_manifold_closed(W) and vertex_manifold(W)):
         return np.arange(len(W))
     pairs = self_intersections(V, W) if changed is None else self_intersections_among(V, W, changed)
+    pairs = real_pairs(V, W, pairs)
     return np.unique(pairs) if len(pairs) else None
 
 

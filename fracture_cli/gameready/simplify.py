@@ -248,6 +248,8 @@ def _within_tolerance(checker: _Checker, tolerance: float,
         complex_, over = _decimate(checker.welded, checker.classified, locked, damp, tolerance, limits, count,
                                    earlier)
         earlier = complex_
+        if tolerance > 0:
+            complex_.flip_needles(as_cut)
         results, face_ids, bad = checker.check(complex_, as_cut)
         if not bad or tolerance <= 0:
             return _Tried(complex_, locked, damp, frozenset(as_cut)), results, attempt, over
@@ -314,6 +316,7 @@ def _fit(checker: _Checker, tried: _Tried, tolerance: float, limits: Limits, hol
         complex_.replay(later.complex_.done[later.start:], bound, later.complex_.final_refusals())
         complex_.decimate(bound)
     _rounds(complex_, checker.classified, limits, bound, tolerance, held)
+    complex_.flip_needles(set(tried.as_cut) | held)
     return _Fitted(complex_, bound, start)
 
 
