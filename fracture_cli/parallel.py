@@ -15,6 +15,16 @@ use the cores, a BLAS worker thread on top would only oversubscribe them
 (``make -j2 assets``, several bakes at once), and a reduction split over a
 varying number of threads would round differently on machines with a
 different core count.
+
+Forking a process whose native thread pools are busy is unsafe: a TBB worker
+of manifold3d that holds a task-pool lock at the moment of ``fork()`` leaves
+that lock held forever in the child, whose next boolean then sleeps in
+``tbb::detail::r1::wait_on_address`` (seen: 2 of 300 forks right after a
+boolean, and the bench's ~59 s collision-stage stalls). :func:`using` and
+:func:`ordered_map` therefore size manifold3d's TBB scheduler to one thread
+before its first use (:func:`single_threaded_tbb`): the parent then has no
+TBB worker thread that a fork could cut off mid-operation. The parent loses
+nothing it needs: ``--jobs`` gives the cores to the forked workers.
 """
 
 from __future__ import annotations
@@ -60,12 +70,44 @@ def current_jobs() -> int:
 @contextlib.contextmanager
 def using(jobs: int | None) -> Iterator[None]:
     """Run the body with ``jobs`` jobs (None: every core) and BLAS limited to one thread."""
+    single_threaded_tbb()
     token = _JOBS.set(jobs)
     try:
         with blas_threads(1):
             yield
     finally:
         _JOBS.reset(token)
+
+
+_TBB_SIZED = False
+
+
+def single_threaded_tbb() -> None:
+    """Make manifold3d's TBB scheduler run without worker threads (once per process, before its first use).
+
+    TBB sizes its pool once, from the CPU affinity of the thread that first
+    uses it, and manifold3d offers no setting for it: the first manifold3d
+    operation therefore runs with this thread limited to one core, which is
+    restored at once. Afterwards every manifold3d operation runs on the
+    calling thread only, so a forked worker never inherits a TBB lock held by
+    a thread that does not exist in it (see the module notes). Does nothing
+    where the affinity cannot be set (not Linux) or after the pool exists.
+    """
+    global _TBB_SIZED
+    if _TBB_SIZED or _IN_WORKER or not hasattr(os, "sched_setaffinity"):
+        return
+    _TBB_SIZED = True
+    import manifold3d
+
+    cores = os.sched_getaffinity(0)
+    if len(cores) <= 1:
+        return  # TBB starts no worker thread on one core anyway
+    os.sched_setaffinity(0, {min(cores)})
+    try:
+        # Any manifold3d construction makes TBB read the affinity (0.4 ms); later changes are not looked at.
+        manifold3d.Manifold.cube((1.0, 1.0, 1.0)).volume()
+    finally:
+        os.sched_setaffinity(0, cores)
 
 
 @contextlib.contextmanager
@@ -103,6 +145,7 @@ def ordered_map(function: Callable[[Any, T], R], items: Sequence[T], shared: Any
     count = min(jobs if jobs is not None else current_jobs(), len(items))
     if count <= 1 or _IN_WORKER or not hasattr(os, "fork"):
         return [function(shared, item) for item in items]
+    single_threaded_tbb()  # no-op in a bake (using() did it); library callers may come here first
     global _WORK
     with _WORK_LOCK:
         _WORK = (function, shared, items)
@@ -116,8 +159,9 @@ def _run_forked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T]
     """The items on ``count`` forked workers, in chunks; finished in this process if the workers stall.
 
     Forking a process that has used threaded native libraries (manifold3d's TBB
-    scheduler, BLAS) can, rarely, leave a lock held in the child: the worker
-    then sleeps forever. A worker never waits for anything while it has work, so
+    scheduler before :func:`single_threaded_tbb`, a library's pool this module
+    does not size) can, rarely, leave a lock held in the child: the worker then
+    sleeps forever. This watchdog stays as the safety net. A worker never waits for anything while it has work, so
     when no chunk finishes and no worker uses any CPU time for
     :data:`STALL_SECONDS`, the pool is killed and the remaining items are
     computed here, one after another (the same results: each depends only on

@@ -12,6 +12,14 @@ SAMPLE_ASSETS = os.path.join(REPO, "sample_assets")
 SAMPLE_FILES = ("pillar.glb", "chair.glb", "vase.obj")
 
 
+def pytest_configure(config):
+    # Before any test touches manifold3d: its TBB pool without worker threads, so the tests' forked workers
+    # (fracture_cli.parallel) never inherit a TBB lock (what a bake's parallel.using() does first).
+    from fracture_cli import parallel
+
+    parallel.single_threaded_tbb()
+
+
 def pytest_addoption(parser):
     parser.addoption("--update-goldens", action="store_true", default=False,
                      help="rewrite tests/golden/*.json from the current output instead of comparing")

@@ -55,6 +55,26 @@ def test_using_sets_jobs_and_limits_blas():
     assert parallel.current_jobs() == parallel.available_cores()
 
 
+def test_tbb_has_no_worker_threads_to_fork_from():
+    # A fresh process: the first manifold3d use after single_threaded_tbb() leaves only the main thread (a TBB
+    # worker would be a thread whose locks a forked worker could inherit held; tbb wait_on_address forever).
+    import subprocess
+    import sys
+
+    code = ("import os, manifold3d\n"
+            "from fracture_cli import parallel\n"
+            "parallel.single_threaded_tbb()\n"
+            "big = manifold3d.Manifold.sphere(1.0, 400)\n"
+            "(big ^ manifold3d.Manifold.cube((1, 1, 1))).volume()\n"
+            "print(len(os.listdir('/proc/self/task')), len(os.sched_getaffinity(0)))\n")
+    if not hasattr(os, "sched_setaffinity"):
+        pytest.skip("CPU affinity cannot be set here")
+    threads, cores = map(int, subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                             check=True).stdout.split())
+    assert threads == 1
+    assert cores == parallel.available_cores()  # the affinity is restored
+
+
 def test_jobs_flag_is_global():
     assert hoist_global_flags(["bake", "a.glb", "-o", "out", "-j", "1", "-q"])[:3] == ["-j", "1", "-q"]
     assert hoist_global_flags(["bake", "a.glb", "--jobs=2"])[0] == "--jobs=2"

@@ -1,0 +1,93 @@
+"""A broad phase for boxes of very different sizes: one uniform grid per size class.
+
+One :class:`~fracture_cli.trigeom.BoxGrid` over boxes of mixed size needs a
+cell about the size of the small ones, and every large box is then entered in
+every cell it covers: the fragments of the 1M-triangle bench input (tiny
+surface triangles, fault triangles across the whole fragment) put 45M entries
+in the grid of :func:`~fracture_cli.gameready.components.coincident_faces`
+(3 GB of keys and temporaries, half a minute to build and query).
+:class:`LevelGrid` sorts the boxes into classes by extent, each class on a grid
+whose cells are about its size, so no box covers more than a few cells per
+axis; it returns the same pairs in the same order as the single grid would.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fracture_cli.trigeom import BoxGrid, default_cell
+
+# A box of level k spans at most this many cells of its level's grid per axis (plus one for alignment);
+# the cells of level k are _RATIO ** k times the base cell.
+_SPAN = 4.0
+_RATIO = 4.0
+# Candidates (query, box sharing a cell) one BoxGrid.query may hold at once: its temporaries take ~100 bytes each.
+# A fan of slivers (a UV sphere's pole) puts ~1,500 boxes in one cell, and every one of their centres meets all.
+_CANDIDATES = 2_000_000
+
+
+class LevelGrid:
+    """Boxes indexed by size class; :meth:`query` equals ``BoxGrid(boxes, default_cell(boxes)).query``.
+
+    Parameters
+    ----------
+    boxes : (m, 2, 3) float
+        Boxes to index (lower and upper corners).
+    """
+
+    def __init__(self, boxes: np.ndarray):
+        self.boxes = np.asarray(boxes, dtype=np.float64)
+        self.cell = default_cell(self.boxes)
+        self.origin = self.boxes[:, 0].min(axis=0) - self.cell  # as BoxGrid's: its cells give the pair order
+        extent = (self.boxes[:, 1] - self.boxes[:, 0]).max(axis=1)
+        level = np.zeros(len(self.boxes), dtype=np.int64)
+        big = extent > _SPAN * self.cell
+        level[big] = np.ceil(np.log(extent[big] / (_SPAN * self.cell)) / np.log(_RATIO)).astype(np.int64)
+        self.levels = [(members, BoxGrid(self.boxes[members], self.cell * _RATIO ** int(k)))
+                       for k in np.unique(level) for members in [np.flatnonzero(level == k)]]
+
+    def query(self, boxes: np.ndarray, pad: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs ``(i, j)`` of query box ``i`` and indexed box ``j`` that overlap (see ``BoxGrid.query``).
+
+        Parameters
+        ----------
+        boxes : (q, 2, 3) float
+            Query boxes.
+        pad : float, optional (default 0)
+            Grow every query box by this much on each side.
+
+        Returns
+        -------
+        i, j : (p,) int64
+            Every overlapping pair once, ordered as the single grid orders them: by query, then by the
+            grid cell holding the corner ``max(lo_i, lo_j)`` (x fastest over the query's cells), then by ``j``.
+        """
+        grown = np.asarray(boxes, dtype=np.float64).copy()  # the same arithmetic as BoxGrid.query's cells
+        grown[:, 0] -= pad
+        grown[:, 1] += pad
+        found = [(q + chunk.start, members[j]) for members, grid in self.levels
+                 for chunk in _chunks(grid, grown) for q, j in [grid.query(grown[chunk.start:chunk.stop])]]
+        q = np.concatenate([f[0] for f in found]) if found else np.zeros(0, dtype=np.int64)
+        j = np.concatenate([f[1] for f in found]) if found else np.zeros(0, dtype=np.int64)
+        lo = np.floor((grown[:, 0] - self.origin) / self.cell).astype(np.int64)
+        span = np.floor((grown[:, 1] - self.origin) / self.cell).astype(np.int64) - lo + 1
+        cell_j = np.floor((self.boxes[j, 0] - self.origin) / self.cell).astype(np.int64)
+        local = np.maximum(lo[q], cell_j) - lo[q]
+        rank = local[:, 0] + span[q, 0] * (local[:, 1] + span[q, 1] * local[:, 2])
+        order = np.lexsort((j, rank, q))
+        return q[order], j[order]
+
+
+def _chunks(grid: BoxGrid, boxes: np.ndarray) -> list[range]:
+    """Consecutive ranges of the query ``boxes`` with at most :data:`_CANDIDATES` candidates each in ``grid``
+    (a query with more is a range of its own)."""
+    ids, keys = grid._expand(boxes)
+    count = np.searchsorted(grid.keys, keys, side="right") - np.searchsorted(grid.keys, keys, side="left")
+    total = np.cumsum(np.bincount(ids, weights=count, minlength=len(boxes)))
+    ranges, start = [], 0
+    while start < len(boxes):
+        before = total[start - 1] if start else 0.0
+        stop = max(int(np.searchsorted(total, before + _CANDIDATES, side="right")), start + 1)
+        ranges.append(range(start, stop))
+        start = stop
+    return ranges

@@ -1,0 +1,52 @@
+"""LevelGrid: the pairs of one BoxGrid over boxes of very different sizes, in its order, with few entries."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fracture_cli.gameready.boxlevels import LevelGrid
+from fracture_cli.trigeom import BoxGrid, default_cell
+
+
+def _mixed_boxes(rng, m):
+    # Mostly tiny boxes (surface triangles) and a tenth of large ones (fault triangles across a fragment).
+    lo = rng.uniform(-1, 1, (m, 3))
+    size = np.where(rng.random(m) < 0.1, rng.uniform(0.2, 1.5, m), rng.uniform(0, 0.01, m))[:, None]
+    return np.stack([lo, lo + size * rng.random((m, 3))], axis=1)
+
+
+def test_same_pairs_in_the_same_order_as_one_grid():
+    rng = np.random.default_rng(1)
+    for _ in range(6):
+        boxes = _mixed_boxes(rng, int(rng.integers(50, 1500)))
+        centres = rng.uniform(-1.2, 1.5, (int(rng.integers(10, 1000)), 3))
+        queries = np.stack([centres, centres + rng.uniform(0, 0.02, (len(centres), 1)) * rng.random((len(centres), 3))],
+                           axis=1)
+        pad = float(rng.choice([0.0, 1e-3, 0.05]))
+        expected = BoxGrid(boxes, default_cell(boxes)).query(queries, pad)
+        found = LevelGrid(boxes).query(queries, pad)
+        assert np.array_equal(found[0], expected[0]) and np.array_equal(found[1], expected[1])
+
+
+def test_large_boxes_take_few_entries():
+    boxes = _mixed_boxes(np.random.default_rng(2), 1000)
+    single = BoxGrid(boxes, default_cell(boxes))
+    levels = LevelGrid(boxes)
+    entries = sum(len(grid.ids) for _, grid in levels.levels)
+    assert entries * 20 < len(single.ids)
+    assert entries <= 5**3 * len(boxes)  # at most 5 cells per axis each
+
+
+def test_queries_in_chunks_give_the_same_pairs(monkeypatch):
+    # A dense cell (a fan of slivers) splits the queries into many small BoxGrid queries: same result.
+    import fracture_cli.gameready.boxlevels as boxlevels
+
+    rng = np.random.default_rng(3)
+    boxes = _mixed_boxes(rng, 800)
+    centres = rng.uniform(-1, 1, (600, 3))
+    queries = np.stack([centres, centres], axis=1)
+    whole = LevelGrid(boxes).query(queries, 0.01)
+    monkeypatch.setattr(boxlevels, "_CANDIDATES", 25)
+    chunked = LevelGrid(boxes).query(queries, 0.01)
+    assert len(whole[0]) > 100
+    assert np.array_equal(whole[0], chunked[0]) and np.array_equal(whole[1], chunked[1])
