@@ -77,8 +77,9 @@ class CutSubproblemSolver:
       mode are kept across its ICCM rounds;
     * when the partition grows past ``merge_cells`` and the master's objective
       has strictly decreased since the last merge, neighbouring cells on which
-      the master's solution is equal are merged. The master's solution and
-      duals stay optimal for the coarser partition (its feasible set is
+      the master's solution is equal are merged, except across a boundary whose
+      flow in the master is at capacity (see :meth:`_coarsen`). The master's
+      solution and duals stay optimal for the coarser partition (its feasible set is
       smaller but still contains that solution; its dual constraints are a
       subset), so no LP is re-solved; requiring a strict decrease between
       merges rules out cycling (a partition cannot recur with a lower objective).
@@ -140,7 +141,14 @@ class CutSubproblemSolver:
         return True
 
     def _coarsen(self, x: np.ndarray) -> np.ndarray:
-        """Merge neighbouring cells whose master values ``x`` (n,) are equal; returns ``x`` on the new cells.
+        """Merge neighbouring cells whose master values ``x`` (n,) are equal and whose common boundary is
+        not at capacity in the master's flow; returns ``x`` on the new cells.
+
+        A boundary whose cell-edge flow is nonbasic (at ``+-omega_e``) is a bottleneck of the routing
+        that certifies the master's duals, the kind of face set that pricing cuts along: merged away,
+        it was found again a few max-flows later (late modes on 12k tets refined back up to 150 cells
+        several times in one exact round). Only boundaries with a basic flow are merged. Without a
+        HiGHS basis of the current partition (scipy's linprog), every equal-valued boundary is merged.
 
         With fewer cells than constraint rows the earlier modes' rows can be dependent and HiGHS can
         end without a status: :class:`MasterLP` then solves on a basis of their row space, and if that
@@ -149,7 +157,15 @@ class CutSubproblemSolver:
         """
         ca, cb = self.cells[self._fa], self.cells[self._fb]
         scale = float(np.abs(x).max()) or 1.0
-        count, cells = self._components(np.abs(x[ca] - x[cb]) <= 1e-9 * scale)
+        join = np.abs(x[ca] - x[cb]) <= 1e-9 * scale
+        slack = self._master_lp.slack_edges
+        if slack is not None and slack[0] == self._partition_version:
+            n, edges = self._cell_graph()[:2]
+            between = np.flatnonzero(ca != cb)
+            lo, hi = np.minimum(ca[between], cb[between]), np.maximum(ca[between], cb[between])
+            edge = np.searchsorted(edges[:, 0] * n + edges[:, 1], lo * n + hi)  # edges are sorted (lo, hi)
+            join[between[~slack[1][edge]]] = False
+        count, cells = self._components(join)
         if count == len(x):
             return x
         self._before_merge = self.cells
