@@ -228,7 +228,8 @@ class CutSubproblemSolver:
         return self._fixed_cache[k][1]
 
     # ----------------------------------------------------------------- solve
-    def solve(self, c: np.ndarray, fixed=(), *, max_flows: int | None = None) -> SubproblemResult:
+    def solve(self, c: np.ndarray, fixed=(), *, max_flows: int | None = None,
+              stall_flows: int | None = None) -> SubproblemResult:
         """Minimise the energy subject to the constraints.
 
         Parameters
@@ -241,6 +242,12 @@ class CutSubproblemSolver:
             Pricing rounds allowed. When they run out before a certificate, the result is the master's
             solution on the refined partition: feasible, energy at most that of ``c`` scaled to
             ``c^T M_T u = 1``, but not certified (``stats["certified"]`` False, ``lower_bound`` nan).
+        stall_flows : int, optional (default None: never)
+            Stop the same way (uncertified) once the master's objective, after its first decrease, has
+            not decreased by more than 1e-7 (relative) over this many max-flows: the degenerate tail
+            of column generation, where the master's solution is already optimal (or nearly) and the
+            max-flows only make its duals feasible, which a round that is not the mode's last does
+            not need (about 10 max-flows of a late mode's first round).
 
         Returns
         -------
@@ -257,7 +264,7 @@ class CutSubproblemSolver:
         Y, v, v_cost = self._constraint_vectors(c, fixed)
         b = np.zeros(Y.shape[1])
         b[-1] = 1.0
-        x, theta, objective, worst_rc, certified = self._cut_loop(Y, b, v, v_cost, max_flows)
+        x, theta, objective, worst_rc, certified = self._cut_loop(Y, b, v, v_cost, max_flows, stall_flows)
         u = x[self.cells]
         if theta > 0.0:
             u = u + theta * v
@@ -289,15 +296,22 @@ class CutSubproblemSolver:
         v = v / norm
         return Y, v, float(self.omega @ np.abs(v[self._fa] - v[self._fb]))
 
-    def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v: np.ndarray, v_cost: float, max_flows: int | None = None):
+    def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v: np.ndarray, v_cost: float, max_flows: int | None = None,
+                  stall_flows: int | None = None):
         """Master LP and pricing until no tet set is violated; returns ``x`` (cells,), ``theta``, the
-        objective, the last reduced cost and whether it is certified (False: ``max_flows`` ran out)."""
+        objective, the last reduced cost and whether it is certified (False: ``max_flows`` ran out or
+        the objective stalled for ``stall_flows``)."""
         MY = self.vol[:, None] * Y
         worst_rc = 0.0
         merged_at = np.inf
+        objectives: list[float] = []
         for flows in range(self.max_iter):
             self.counters["master_lps"] += 1
             x, theta, lam, objective = self._solve_master(Y, b, v_cost)
+            objectives.append(objective)
+            if (stall_flows is not None and len(objectives) > stall_flows and objective < objectives[0]
+                    and objective >= objectives[-1 - stall_flows] * (1.0 - 1e-7)):
+                return x, theta, objective, worst_rc, False
             if len(x) > self.merge_cells and max_flows is None and objective < merged_at - 1e-9 * abs(objective):
                 x = self._coarsen(x)
                 merged_at = objective
