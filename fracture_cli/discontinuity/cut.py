@@ -77,8 +77,9 @@ class CutSubproblemSolver:
       mode are kept across its ICCM rounds;
     * when the partition grows past ``merge_cells`` and the master's objective
       has strictly decreased since the last merge, neighbouring cells on which
-      the master's solution is equal are merged. The master's solution and
-      duals stay optimal for the coarser partition (its feasible set is
+      the master's solution is equal are merged, except across a boundary whose
+      flow in the master is at capacity (see :meth:`_coarsen`). The master's
+      solution and duals stay optimal for the coarser partition (its feasible set is
       smaller but still contains that solution; its dual constraints are a
       subset), so no LP is re-solved; requiring a strict decrease between
       merges rules out cycling (a partition cannot recur with a lower objective).
@@ -140,7 +141,14 @@ class CutSubproblemSolver:
         return True
 
     def _coarsen(self, x: np.ndarray) -> np.ndarray:
-        """Merge neighbouring cells whose master values ``x`` (n,) are equal; returns ``x`` on the new cells.
+        """Merge neighbouring cells whose master values ``x`` (n,) are equal and whose common boundary is
+        not at capacity in the master's flow; returns ``x`` on the new cells.
+
+        A boundary whose cell-edge flow is nonbasic (at ``+-omega_e``) is a bottleneck of the routing
+        that certifies the master's duals, the kind of face set that pricing cuts along: merged away,
+        it was found again a few max-flows later (late modes on 12k tets refined back up to 150 cells
+        several times in one exact round). Only boundaries with a basic flow are merged. Without a
+        HiGHS basis of the current partition (scipy's linprog), every equal-valued boundary is merged.
 
         With fewer cells than constraint rows the earlier modes' rows can be dependent and HiGHS can
         end without a status: :class:`MasterLP` then solves on a basis of their row space, and if that
@@ -149,7 +157,15 @@ class CutSubproblemSolver:
         """
         ca, cb = self.cells[self._fa], self.cells[self._fb]
         scale = float(np.abs(x).max()) or 1.0
-        count, cells = self._components(np.abs(x[ca] - x[cb]) <= 1e-9 * scale)
+        join = np.abs(x[ca] - x[cb]) <= 1e-9 * scale
+        slack = self._master_lp.slack_edges
+        if slack is not None and slack[0] == self._partition_version:
+            n, edges = self._cell_graph()[:2]
+            between = np.flatnonzero(ca != cb)
+            lo, hi = np.minimum(ca[between], cb[between]), np.maximum(ca[between], cb[between])
+            edge = np.searchsorted(edges[:, 0] * n + edges[:, 1], lo * n + hi)  # edges are sorted (lo, hi)
+            join[between[~slack[1][edge]]] = False
+        count, cells = self._components(join)
         if count == len(x):
             return x
         self._before_merge = self.cells
@@ -212,7 +228,8 @@ class CutSubproblemSolver:
         return self._fixed_cache[k][1]
 
     # ----------------------------------------------------------------- solve
-    def solve(self, c: np.ndarray, fixed=(), *, max_flows: int | None = None) -> SubproblemResult:
+    def solve(self, c: np.ndarray, fixed=(), *, max_flows: int | None = None,
+              stall_flows: int | None = None) -> SubproblemResult:
         """Minimise the energy subject to the constraints.
 
         Parameters
@@ -225,6 +242,12 @@ class CutSubproblemSolver:
             Pricing rounds allowed. When they run out before a certificate, the result is the master's
             solution on the refined partition: feasible, energy at most that of ``c`` scaled to
             ``c^T M_T u = 1``, but not certified (``stats["certified"]`` False, ``lower_bound`` nan).
+        stall_flows : int, optional (default None: never)
+            Stop the same way (uncertified) once the master's objective, after its first decrease, has
+            not decreased by more than 1e-7 (relative) over this many max-flows: the degenerate tail
+            of column generation, where the master's solution is already optimal (or nearly) and the
+            max-flows only make its duals feasible, which a round that is not the mode's last does
+            not need (about 10 max-flows of a late mode's first round).
 
         Returns
         -------
@@ -241,7 +264,7 @@ class CutSubproblemSolver:
         Y, v, v_cost = self._constraint_vectors(c, fixed)
         b = np.zeros(Y.shape[1])
         b[-1] = 1.0
-        x, theta, objective, worst_rc, certified = self._cut_loop(Y, b, v, v_cost, max_flows)
+        x, theta, objective, worst_rc, certified = self._cut_loop(Y, b, v, v_cost, max_flows, stall_flows)
         u = x[self.cells]
         if theta > 0.0:
             u = u + theta * v
@@ -273,15 +296,22 @@ class CutSubproblemSolver:
         v = v / norm
         return Y, v, float(self.omega @ np.abs(v[self._fa] - v[self._fb]))
 
-    def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v: np.ndarray, v_cost: float, max_flows: int | None = None):
+    def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v: np.ndarray, v_cost: float, max_flows: int | None = None,
+                  stall_flows: int | None = None):
         """Master LP and pricing until no tet set is violated; returns ``x`` (cells,), ``theta``, the
-        objective, the last reduced cost and whether it is certified (False: ``max_flows`` ran out)."""
+        objective, the last reduced cost and whether it is certified (False: ``max_flows`` ran out or
+        the objective stalled for ``stall_flows``)."""
         MY = self.vol[:, None] * Y
         worst_rc = 0.0
         merged_at = np.inf
+        objectives: list[float] = []
         for flows in range(self.max_iter):
             self.counters["master_lps"] += 1
             x, theta, lam, objective = self._solve_master(Y, b, v_cost)
+            objectives.append(objective)
+            if (stall_flows is not None and len(objectives) > stall_flows and objective < objectives[0]
+                    and objective >= objectives[-1 - stall_flows] * (1.0 - 1e-7)):
+                return x, theta, objective, worst_rc, False
             if len(x) > self.merge_cells and max_flows is None and objective < merged_at - 1e-9 * abs(objective):
                 x = self._coarsen(x)
                 merged_at = objective

@@ -117,6 +117,9 @@ class MasterLP:
         self._lp_G = None
         self._lp_basis = None
         self.retries = 0
+        # (partition version, (E,) bool): cell edges whose flow was basic (strictly inside its bounds)
+        # in the last optimal HiGHS basis; None after a solve without a basis (scipy's linprog).
+        self.slack_edges: tuple[int, np.ndarray] | None = None
 
     def solve(self, cells: np.ndarray, version: int, cell_graph, Y: np.ndarray, b: np.ndarray, v_cost: float):
         """Solve the master on the partition ``cells`` (t,) (``version`` changes with it).
@@ -220,6 +223,7 @@ class MasterLP:
         basis = h.getBasis()
         self._lp_basis = (cells, edges, m, np.array([int(v) for v in basis.col_status]),
                           np.array([int(v) for v in basis.row_status]))
+        self.slack_edges = (version, self._lp_basis[3][:E] == int(_highspy.HighsBasisStatus.kBasic))
         solution = h.getSolution()
         lam = np.asarray(solution.col_value)[E:E + m]
         row_dual = np.asarray(solution.row_dual)
@@ -295,6 +299,7 @@ class MasterLP:
         return result
 
     def _solve_linprog(self, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+        self.slack_edges = None
         E, m = len(edges), G.shape[0]
         A, cost, col_lower, col_upper, _, row_upper = self._dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost)
         A = A.tocsr()

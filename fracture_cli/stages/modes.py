@@ -48,6 +48,11 @@ _DENSE_EIGEN_MAX = 4000
 # the 24 energies 35.9, 36.9, 37.1, 37.4 (37.1 with exact rounds only, 17-18 s, worst/median 9).
 _BUDGET_ROUNDS = 60
 _ROUND_FLOWS = 3
+# The first round of a mode stops (uncertified) when the master's objective has not decreased for this
+# many max-flows (CutSubproblemSolver.solve's stall_flows). k = 24 and 32 on the 3k/6k/12k bench meshes:
+# max-flows 476/520/695 -> 470/495/597 (k = 24), 878/1021/1295 -> 873/1051/1175 (k = 32), sums of
+# energies within +-2% either way (other local minima, as with any change of the ICCM path).
+_FIRST_ROUND_STALL = 3
 
 @dataclass(frozen=True)
 class ModesOptions:
@@ -314,7 +319,8 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
           restricted: bool = False):
     """Adapted ICCM (paper Algorithm 1): ``count`` modes (t, d) from start vectors ``starts``.
 
-    ``solve(c, earlier_modes, max_flows) -> SubproblemResult`` (``max_flows`` None: exact);
+    ``solve(c, earlier_modes, max_flows, first_round) -> SubproblemResult`` (``max_flows`` None: exact,
+    except that a first round may stop on a stalled objective);
     ``restricted``: the solver takes a max-flow budget (see :func:`_iccm_mode`).
     """
     found: list[np.ndarray] = []
@@ -342,8 +348,10 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
 def _iccm_mode(solve, c, found, inner: _MInner, opts: ModesOptions, name: str, restricted: bool):
     """ICCM rounds of one mode from the start vector ``c`` (t, d); returns the mode and its stats.
 
-    The first round is exact: from the smooth start vector it picks the basin (budgeting it too
-    lands later modes in other local minima, about 5% more energy in total). With ``restricted``,
+    The first round has no max-flow budget: from the smooth start vector it picks the basin
+    (budgeting it too lands later modes in other local minima, about 5% more energy in total);
+    with ``restricted`` it stops once the master's objective stalls (:data:`_FIRST_ROUND_STALL`
+    max-flows without a decrease: only the duals were still moving). With ``restricted``,
     the rounds after it get a budget of :data:`_ROUND_FLOWS` max-flows each: a round that runs out
     returns the master's solution on the refined partition, uncertified. It is feasible and its
     energy is at most ``E(c)`` (``c`` itself, rescaled, is in the master), so the Rayleigh quotient
@@ -360,7 +368,7 @@ def _iccm_mode(solve, c, found, inner: _MInner, opts: ModesOptions, name: str, r
     while rounds < opts.max_iter:
         budget = _ROUND_FLOWS if restricted and rounds > 0 and budgeted < _BUDGET_ROUNDS else None
         try:
-            result = solve(c, found, budget)
+            result = solve(c, found, budget, rounds + budgeted == 0)
         except (RuntimeError, ValueError) as error:
             raise StageError(f"{name}: subproblem failed in ICCM round {rounds + budgeted + 1}: {error}",
                              stage=STAGE) from error
@@ -441,7 +449,8 @@ def _axis_chain(_shared, task):
                                  weight_scale=weight_scale)
     label = "" if d == 1 else f" (axis {'xyz'[axis]})"
     with threadpool_limits(limits=1, user_api="blas"):
-        found, stats = _iccm(lambda c, fixed, budget: solver.solve(c, fixed, max_flows=budget), scalar_init[:, :, None],
+        found, stats = _iccm(lambda c, fixed, budget, first: solver.solve(
+            c, fixed, max_flows=budget, stall_flows=_FIRST_ROUND_STALL if first else None), scalar_init[:, :, None],
                              count, inner, opts, label, lambda n: rng.standard_normal((t, 1)), restricted=True)
     return found, stats, solver.max_flow_backend
 
@@ -457,7 +466,7 @@ def _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
         s[:, i % d] = scalar_init[i // d]
         starts.append(s)
     rng = np.random.default_rng(opts.seed + 1)
-    found, per_mode = _iccm(lambda c, fixed, budget: solver.solve(c, fixed), starts, k, inner, opts, "",
+    found, per_mode = _iccm(lambda c, fixed, budget, first: solver.solve(c, fixed), starts, k, inner, opts, "",
                             lambda n: rng.standard_normal((t, d)))
     return np.stack(found), _summary(per_mode)
 
