@@ -47,20 +47,9 @@ class LevelGrid:
                        for k in np.unique(level) for members in [np.flatnonzero(level == k)]]
 
     def query(self, boxes: np.ndarray, pad: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-        """Pairs ``(i, j)`` of query box ``i`` and indexed box ``j`` that overlap (see ``BoxGrid.query``).
-
-        Parameters
-        ----------
-        boxes : (q, 2, 3) float
-            Query boxes.
-        pad : float, optional (default 0)
-            Grow every query box by this much on each side.
-
-        Returns
-        -------
-        i, j : (p,) int64
-            Every overlapping pair once, ordered as the single grid orders them: by query, then by the
-            grid cell holding the corner ``max(lo_i, lo_j)`` (x fastest over the query's cells), then by ``j``.
+        """The pairs :meth:`~fracture_cli.trigeom.BoxGrid.query` gives for the same ``boxes`` (q, 2, 3) and
+        ``pad``, and in the single grid's order: by query, then by the grid cell holding the corner
+        ``max(lo_i, lo_j)`` (x fastest over the query's cells), then by ``j``; ``i, j`` (p,) int64.
         """
         grown = np.asarray(boxes, dtype=np.float64).copy()  # the same arithmetic as BoxGrid.query's cells
         grown[:, 0] -= pad
