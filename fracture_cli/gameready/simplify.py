@@ -132,10 +132,10 @@ def simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: float
     original = fragments
     fragments = share_unmatched(fragments, gid, offsets, interior)
     classified = _classify(fragments, surface, gid, offsets, welded, interior)
-    limits = Limits(max_triangles, triangle_budget(len(surface.faces), len(fragments.fragments)),
-                    shares(len(surface.faces), _outer_area(classified, welded, len(fragments.fragments))))
-    if not fit_budget:
-        limits = Limits(max_triangles)
+    count = len(fragments.fragments)
+    limits = (Limits(max_triangles, triangle_budget(len(surface.faces), count),
+                     shares(len(surface.faces), _outer_area(classified, welded, count)))
+              if fit_budget else Limits(max_triangles))
     results, retries, over = _valid_simplification(fragments, surface, classified, gid, offsets, welded, interior,
                                                    tolerance, limits)
     before = sum(len(f.faces) for f in original.fragments)
@@ -273,10 +273,10 @@ def _within_budget(checker: _Checker, tried: _Tried, tolerance: float, limits: L
                    results: list[Fragment]) -> list[Fragment]:
     """Simplify the fragments above their share of ``limits.budget`` further, every fragment still valid.
 
-    Starts from the valid simplification ``tried`` (``results``): its collapses are redone, then the
-    budget's. A fragment that turns invalid is held as it was in ``tried`` (every vertex of its faces
-    kept), its shared faults included, and the rest is simplified again (the last try's budget collapses
-    redone first where still allowed); when every fragment is held, that is ``results``.
+    Goes on from (a copy of) the valid simplification ``tried`` (``results``). A fragment that turns
+    invalid is held as it was in ``tried`` (every vertex of its faces kept), its shared faults included,
+    and the rest is simplified again (the last fit's budget collapses redone first where still allowed);
+    when every fragment is held, that is ``results``.
     """
     count = len(results)
     held = set(tried.as_cut)
