@@ -8,7 +8,7 @@ modes), so the timings isolate these three stages from the cage and modes
 stages. (2) Sample assets through their manifest recipes (repair, cage, tetra,
 modes, pieces), smoothed with lambda = 0 and with the recipe's lambda by both
 methods.
-Fault shape is :func:`fracture_cli.checks.fragment_fault_shape`: the
+Fault shape is :func:`fracture_cli.faultshape.fragment_fault_shape`: the
 mean dihedral angle of bent edges inside each fault (degrees) and the crease
 density (edges bending more than 30 degrees per unit fault area, 1/diagonal);
 lower is smoother.
@@ -25,7 +25,8 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from fracture_cli.checks import fragment_fault_shape, fragment_invariants  # noqa: E402
+from fracture_cli.checks import fragment_invariants  # noqa: E402
+from fracture_cli.faultshape import fragment_fault_shape  # noqa: E402
 from fracture_cli.stages.fragments import fragments  # noqa: E402
 from fracture_cli.stages.pieces import pieces  # noqa: E402
 from fracture_cli.stages.smooth import SmoothOptions, smooth  # noqa: E402

@@ -184,13 +184,8 @@ def _fragments(state: PipelineState, options: Any) -> PipelineState:
 
 def _checked(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments, dict[str, CheckValue]]:
     """The fragments as they will be written and the report's checks; a broken fragment stops the bake here."""
-    from fracture_cli.checks import (
-        fragment_fault_shape,
-        fragment_invariants,
-        require_sound,
-        require_volume,
-        written_fragments,
-    )
+    from fracture_cli.checks import fragment_invariants, require_sound, require_volume, written_fragments
+    from fracture_cli.faultshape import fragment_fault_shape
 
     # Checked as they will be written (float32 about each pivot).
     frags, written = written_fragments(frags, frags.pivot)

@@ -5,7 +5,7 @@ then it is smoothed with lambda = 0 (tet-aligned faults) and with the recipe's
 lambda, cut into fragments, and checked with the independent invariant checks
 of ``test_fragments.check_invariants`` (trimesh, manifold3d, open3d). With
 smoothing on, the faults must look smoother: their mean dihedral angle and
-their crease density (:func:`fracture_cli.checks.fault_shape`) drop.
+their crease density (:func:`fracture_cli.faultshape.fault_shape`) drop.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import tomllib
 import pytest
 from test_fragments import check_invariants
 
-from fracture_cli.checks import fragment_fault_shape
+from fracture_cli.faultshape import fragment_fault_shape
 from fracture_cli.io.read import load_surface
 from fracture_cli.recipe import load_recipe
 from fracture_cli.stages.cage import cage

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fracture_cli import tetgeom
-from fracture_cli.checks import fault_roughness, region_fault_roughness
+from fracture_cli.faultshape import fault_roughness, region_fault_roughness
 from fracture_cli.stages.pieces import pieces
 from fracture_cli.stages.smooth import SmoothOptions, smooth
 from fracture_cli.stages.smooth.cells import union_regions as _union_regions
@@ -515,7 +515,7 @@ def test_red_refinement_is_a_conforming_positive_split():
 
 
 def test_refined_field_partitions_the_cage_and_flattens_creases():
-    from fracture_cli.checks import fault_shape, region_faults
+    from fracture_cli.faultshape import fault_shape, region_faults
 
     tm = jittered_grid(5, seed=2)
     P = plane_pieces(tm)
@@ -542,7 +542,7 @@ def test_refinement_respects_the_tet_budget(caplog):
 
 
 def test_fault_shape_counts_creases_not_fans():
-    from fracture_cli.checks import fault_shape
+    from fracture_cli.faultshape import fault_shape
 
     # A flat square fanned into 4 triangles: no dihedral, no crease.
     V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0]], float)
