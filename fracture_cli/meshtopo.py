@@ -23,6 +23,14 @@ def undirected_edges(W: np.ndarray):
     return directed, edge_id.reshape(-1), face
 
 
+def unique_edges(W: np.ndarray) -> np.ndarray:
+    """The undirected edges (e, 2) of ``W``, ``a < b``, sorted (the rows :func:`undirected_edges` numbers)."""
+    pairs = np.concatenate([W[:, [0, 1]], W[:, [1, 2]], W[:, [2, 0]]]).astype(np.int64)
+    n = int(pairs.max()) + 1 if len(pairs) else 1
+    keys = np.unique(pairs.min(axis=1) * n + pairs.max(axis=1))  # one int64 key per edge, as there
+    return np.stack([keys // n, keys % n], axis=1)
+
+
 def nonmanifold_edges(W: np.ndarray) -> int:
     """Number of edges of ``W`` shared by more than two faces."""
     _, edge_id, _ = undirected_edges(W)
