@@ -73,11 +73,19 @@ def _new_highs():
     return highs
 
 
-def _highs_model(A: sp.csc_matrix, cost, col_lower, col_upper, row_lower, row_upper, **extra):
-    """A ``highspy.Highs`` holding the LP, with the project's settings (and ``extra`` ones)."""
-    h = _new_highs()
-    for name, value in dict(_HIGHS_SETTINGS, **extra).items():
-        h.setOptionValue(name, value)
+def _highs_model(A: sp.csc_matrix, cost, col_lower, col_upper, row_lower, row_upper, *, reuse=None, **extra):
+    """A ``highspy.Highs`` holding the LP, with the project's settings (and ``extra`` ones).
+
+    ``reuse``: a ``Highs`` made here before with the project's settings only; passing a new model
+    to it drops its old model, basis and solution, and saves building a solver object (a third of
+    the Python cost of a master LP).
+    """
+    if reuse is not None and not extra:
+        h = reuse
+    else:
+        h = _new_highs()
+        for name, value in dict(_HIGHS_SETTINGS, **extra).items():
+            h.setOptionValue(name, value)
     lp = _highspy.HighsLp()
     lp.num_col_, lp.num_row_ = A.shape[1], A.shape[0]
     lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, col_lower, col_upper
@@ -86,6 +94,15 @@ def _highs_model(A: sp.csc_matrix, cost, col_lower, col_upper, row_lower, row_up
     lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = A.indptr, A.indices, A.data
     h.passModel(lp)
     return h
+
+
+def _basis_statuses() -> np.ndarray:
+    """``highspy.HighsBasisStatus`` members (object array) indexed by their integer codes."""
+    members = list(_highspy.HighsBasisStatus.__members__.values())
+    lookup = np.empty(max(int(v) for v in members) + 1, dtype=object)
+    for v in members:
+        lookup[int(v)] = v
+    return lookup
 
 
 def _independent_fixed_rows(G: np.ndarray):
@@ -116,6 +133,7 @@ class MasterLP:
         self._lp_key = None
         self._lp_G = None
         self._lp_basis = None
+        self._highs = None  # the Highs object of the master with default settings (see _highs_model)
         self.retries = 0
         # (partition version, (E,) bool): cell edges whose flow was basic (strictly inside its bounds)
         # in the last optimal HiGHS basis; None after a solve without a basis (scipy's linprog).
@@ -209,7 +227,8 @@ class MasterLP:
             h.changeColCost(col, float(-b[-1]))
             h.changeRowBounds(n, -_highspy.kHighsInf, float(v_cost))
         else:
-            h = _highs_model(*self._dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost))
+            h = _highs_model(*self._dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost), reuse=self._highs)
+            self._highs = h
             basis = self._inherited_basis(cells, n, edges, m)
             if basis is not None:
                 h.setBasis(basis)
@@ -221,8 +240,8 @@ class MasterLP:
             self._lp = self._lp_basis = None
             return self._solve_linprog(n, edges, edge_omega, indicator, G, b, g_c, v_cost)
         basis = h.getBasis()
-        self._lp_basis = (cells, edges, m, np.array([int(v) for v in basis.col_status]),
-                          np.array([int(v) for v in basis.row_status]))
+        self._lp_basis = (cells, edges, m, np.array(basis.col_status, dtype=np.int64),
+                          np.array(basis.row_status, dtype=np.int64))
         self.slack_edges = (version, self._lp_basis[3][:E] == int(_highspy.HighsBasisStatus.kBasic))
         solution = h.getSolution()
         lam = np.asarray(solution.col_value)[E:E + m]
@@ -259,8 +278,8 @@ class MasterLP:
         old_cells, old_edges, old_m, col_status, row_status = self._lp_basis
         if old_m != m:
             return None
-        first = np.unique(cells, return_index=True)[1]
-        parent = old_cells[first]  # new cell -> old cell
+        parent = np.empty(n, dtype=old_cells.dtype)
+        parent[cells] = old_cells  # new cell -> old cell (if the partition refines the old one)
         if not np.array_equal(parent[cells], old_cells):
             return None
         n_old = int(old_cells.max()) + 1
@@ -290,11 +309,10 @@ class MasterLP:
         cols = np.concatenate([edge_status, col_status[E_old:]])
         if np.count_nonzero(cols == basic) + np.count_nonzero(rows == basic) != n + 1:
             return None
-        status = list(_highspy.HighsBasisStatus.__members__.values())
-        by_code = {int(v): v for v in status}
+        by_code = _basis_statuses()
         result = _highspy.HighsBasis()
-        result.col_status = [by_code[int(v)] for v in cols]
-        result.row_status = [by_code[int(v)] for v in rows]
+        result.col_status = by_code[cols].tolist()
+        result.row_status = by_code[rows].tolist()
         result.valid = True
         return result
 
