@@ -29,11 +29,9 @@ from __future__ import annotations
 
 import copy
 import heapq
+from types import ModuleType
 
 import numpy as np
-from scipy.spatial import cKDTree
-
-from fracture_cli.trigeom import point_triangle_distance
 
 # A collapse may not turn a triangle by more than this (cosine of the angle between old and new normal): inside a
 # fault 30 degrees, so a smooth fault stays smooth under flat shading; 60 degrees for a vertex on the outer
@@ -114,8 +112,14 @@ class SurfaceComplex:
         self.quadric = _quadrics(V, faces, fault, len(V))
         # The cut fault faces, to measure how far new faces stray from them.
         F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)[np.asarray(fault, dtype=bool)]
-        self.reference = V[F] if len(F) else np.zeros((1, 3, 3))
-        self.reference_tree = cKDTree(self.reference.mean(axis=1))
+        self.reference = np.ascontiguousarray(V[F], dtype=np.float64) if len(F) else np.zeros((1, 3, 3))
+        self._candidates = min(_REFERENCE_CANDIDATES, len(self.reference))
+        self._positions = np.ascontiguousarray(V, dtype=np.float64)
+        self._kernels = _kernels()
+        # Their centroids in a grid, for the nearest ones to a new face (:func:`.collapse_kernels.nearest`).
+        self._centroids = np.ascontiguousarray(self.reference.mean(axis=1))
+        self._cell = _grid_cell(self.reference)
+        self._grid = self._kernels.grid_index(self._centroids, self._cell)
 
     def copy(self) -> SurfaceComplex:
         """An independent copy, to go on from (positions, input polygons and the cut fault are shared: they
@@ -237,8 +241,8 @@ class SurfaceComplex:
     def _costs(self, u: int) -> tuple[list[int], list[float]]:
         """The neighbours of ``u`` and the quadric error of moving ``u`` onto each."""
         targets = sorted(self._neighbours(u))
-        P = self._homogeneous[targets]
-        return targets, np.einsum("ij,jk,ik->i", P, self.quadric[u], P).tolist()
+        costs = self._kernels.quadric_costs(self._homogeneous, self.quadric, u, np.array(targets, dtype=np.int64))
+        return targets, costs.tolist()
 
     def _targets(self, u: int, costs: tuple[list[int], list[float]] | None = None) -> list[int]:
         """The neighbours of ``u``, cheapest collapse first (``costs``: :meth:`_costs` if already known)."""
@@ -308,29 +312,26 @@ class SurfaceComplex:
             points = [u] + [p for t in self.vertex_faces[u] for p in self.assigned[t]]
             if not fault_kept:
                 return False
-            triangles = self.V[np.array([new_faces[t] for t in fault_kept])]
-            distance, strays = self._distances(self.V[points], triangles)
-            if distance.min(axis=0).max() > tolerance or strays > tolerance:
+            found = self._within(points, np.array([new_faces[t] for t in fault_kept], dtype=np.int64), tolerance)
+            if found is None:
                 return False
-            nearest = [fault_kept[i] for i in np.argmin(distance, axis=0).tolist()]
+            nearest = [fault_kept[i] for i in found]
         self._apply(u, v, removed, kept, new_faces, points, nearest, tolerance)
         return True
 
-    def _distances(self, P: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, float]:
-        """Distances (k, p) of the removed fault points P (p, 3) from the new fault faces (k, 3, 3); and how
-        far the new faces stray from the cut fault (the largest distance of a centroid or edge midpoint from
-        its nearest cut fault faces: the other side of the bound, as points near the new faces would let a
-        fold between them pass). One distance call for both, as numpy's overhead dominates on so few points.
+    def _within(self, points: list[int], triangles: np.ndarray, tolerance: float) -> list[int] | None:
+        """The new fault face (index into ``triangles`` (k, 3)) nearest each removed fault point, if every one
+        lies within ``tolerance`` of the new fault faces and the new faces (centroids, edge midpoints) within
+        ``tolerance`` of their nearest cut fault faces (the other side of the bound, as points near the new
+        faces would let a fold between them pass); else None. The arithmetic is compiled
+        (:mod:`.collapse_kernels`): numpy's overhead dominated on so few points.
         """
-        Q = np.concatenate([triangles.mean(axis=1), (triangles + triangles[:, [1, 2, 0]]).reshape(-1, 3) / 2.0])
-        _, near = self.reference_tree.query(Q, k=min(_REFERENCE_CANDIDATES, len(self.reference)))
-        near = near.reshape(len(Q), -1)
-        k, p = len(triangles), len(P)
-        distance = point_triangle_distance(
-            np.concatenate([np.tile(P, (k, 1)), np.repeat(Q, near.shape[1], axis=0)]),
-            np.concatenate([np.repeat(triangles, p, axis=0), self.reference[near.reshape(-1)]]))
-        strays = distance[k * p:].reshape(len(Q), -1).min(axis=1).max()
-        return distance[:k * p].reshape(k, p), float(strays)
+        kernels = self._kernels
+        Q = kernels.probes(self._positions, triangles)
+        near = kernels.nearest(self._centroids, self._grid, self._cell, Q, self._candidates)
+        found = kernels.within_tolerance(self._positions, np.array(points, dtype=np.int64), triangles, Q,
+                                         self.reference, near, tolerance)
+        return found.tolist() if len(found) else None
 
     def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
                nearest: list[int], tolerance: float) -> None:
@@ -413,6 +414,21 @@ class SurfaceComplex:
         """Ids (m',) of the faces left, ascending, and their corners (m', 3)."""
         ids = np.array(sorted(self.faces), dtype=np.int64)
         return ids, np.array([self.faces[t] for t in ids.tolist()], dtype=np.int64).reshape(-1, 3)
+
+
+def _kernels() -> ModuleType:
+    """:mod:`.collapse_kernels`, imported on first use: numba loads only when the simplify stage runs."""
+    from fracture_cli.gameready import collapse_kernels
+
+    return collapse_kernels
+
+
+def _grid_cell(triangles: np.ndarray) -> float:
+    """A cell size for the grid of the centroids of ``triangles`` (r, 3, 3): twice their mean edge length, a
+    few centroids per cell on a surface, at most 2**21 cells."""
+    edges = np.linalg.norm(triangles - triangles[:, [1, 2, 0]], axis=2)
+    extent = float((triangles.reshape(-1, 3).max(axis=0) - triangles.reshape(-1, 3).min(axis=0)).max())
+    return max(2.0 * float(edges.mean()), extent / 128.0, 1e-9)
 
 
 def _quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np.ndarray:
