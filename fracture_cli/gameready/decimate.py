@@ -47,11 +47,15 @@ MIN_SHAPE = 1e-6
 class _Fan:
     """The faces around a vertex and what its collapses check on them (see :meth:`SurfaceComplex._fan`)."""
 
-    __slots__ = ("fan", "polygons", "fragments", "limit", "on_fault", "around")
+    __slots__ = ("fan", "polygons", "fragments", "limit", "on_fault", "around", "single", "corners")
 
-    def __init__(self, fan: set[int], polygons: set[int], fragments: set[int], limit: float, on_fault: bool):
+    def __init__(self, fan: set[int], polygons: set[int], fragments: set[int], limit: float, on_fault: bool,
+                 single: tuple[int, ...] | None):
         self.fan, self.polygons, self.fragments, self.limit, self.on_fault = fan, polygons, fragments, limit, on_fault
         self.around: dict[int, set[int]] = {}
+        # The fragments every face of the fan bounds, when they all bound the same ones; and then their corners.
+        self.single = single
+        self.corners: set[int] | None = None
 
 
 class SurfaceComplex:
@@ -107,8 +111,10 @@ class SurfaceComplex:
         self._replayed = 0
         # Original fault vertices removed so far, kept with the face nearest to them (for the error bound).
         self.assigned: dict[int, list[int]] = {t: [] for t in self.faces}
-        # Vertices whose collapse changed each face (to lock them when the face ends up in an invalid fragment).
-        self.history: dict[int, set[int]] = {t: set() for t in self.faces}
+        # Vertices whose collapse changed each face (to lock them when the face ends up in an invalid fragment),
+        # as a graph of collapses shared between faces (see :meth:`behind`): copying sets cost more than the rest
+        # of a collapse.
+        self.history: dict[int, tuple] = {t: () for t in self.faces}
         self.quadric = _quadrics(V, faces, fault, len(V))
         # The cut fault faces, to measure how far new faces stray from them.
         F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)[np.asarray(fault, dtype=bool)]
@@ -137,7 +143,7 @@ class SurfaceComplex:
         new._refusals = dict(self._refusals)
         new._changed = set(self._changed)
         new.assigned = {t: list(p) for t, p in self.assigned.items()}
-        new.history = dict(self.history)  # its sets are replaced, never changed
+        new.history = dict(self.history)  # its nodes are replaced, never changed
         new.quadric = self.quadric.copy()
         return new
 
@@ -264,8 +270,9 @@ class SurfaceComplex:
         polygons = {self.groups[t] for t in fan} - {-1}
         fragments = {k for t in fan for k in self.owners[t]}
         outer = any(not self.fault[t] for t in fan)
+        owned = {self.owners[t] for t in fan}
         return _Fan(fan, polygons, fragments, MIN_NORMAL_COS_OUTER if outer else MIN_NORMAL_COS,
-                    any(self.fault[t] for t in fan))
+                    any(self.fault[t] for t in fan), owned.pop() if len(owned) == 1 else None)
 
     def _around(self, around: dict[int, set[int]], fan: set[int], k: int) -> set[int]:
         """Corners of the faces of ``fan`` in fragment ``k`` (memoized in ``around``)."""
@@ -275,11 +282,19 @@ class SurfaceComplex:
 
     def _allowed(self, u: int, v: int, ctx: _Fan) -> list[int] | None:
         """The faces a collapse of ``u`` into ``v`` removes, or None if polygons or topology forbid it."""
-        fan = ctx.fan
-        removed = [t for t in fan if v in self.faces[t]]
-        if ctx.polygons and ctx.polygons - {self.groups[t] for t in removed}:
+        fan, v_fan, faces, owners = ctx.fan, self.vertex_faces[v], self.faces, self.owners
+        removed = [t for t in fan if t in v_fan]
+        if ctx.polygons and not ctx.polygons.issubset([self.groups[t] for t in removed]):
             return None  # v is not on every input polygon u is on: outer faces would leave the input surface
-        v_fan = self.vertex_faces[v]
+        single = ctx.single
+        if single is not None and all(owners[t] == single for t in v_fan):
+            # Every face around u and v bounds the same fragments: one link condition holds for all of them.
+            if len(removed) != 2:
+                return None
+            opposite = {*faces[removed[0]], *faces[removed[1]]} - {u, v}
+            if ctx.corners is None:
+                ctx.corners = {x for t in fan for x in faces[t]}
+            return removed if (ctx.corners & {x for t in v_fan for x in faces[t]}) - {u, v} == opposite else None
         v_fragments = {k for t in v_fan for k in self.owners[t]}
         for k in ctx.fragments & v_fragments:
             mine = [t for t in removed if k in self.owners[t]]
@@ -335,7 +350,7 @@ class SurfaceComplex:
 
     def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
                nearest: list[int], tolerance: float) -> None:
-        touched = {u}.union(*(self.history[t] for t in removed))
+        touched = (u, tuple(h for t in removed if (h := self.history[t])))
         self.clock += 1
         self.modified.update((t, self.clock) for t in removed)
         self.modified.update((t, self.clock) for t in kept)
@@ -345,7 +360,7 @@ class SurfaceComplex:
             del self.faces[t], self.assigned[t], self.history[t]
         for t in kept:
             self.faces[t] = new_faces[t]
-            self.history[t] = self.history[t] | touched
+            self.history[t] = _merged(self.history[t], touched)
             if self.fault[t]:
                 self.assigned[t] = []
         for point, t in zip(points, nearest):
@@ -406,9 +421,28 @@ class SurfaceComplex:
         self.vertex_faces[a].add(s)
         self.vertex_faces[d].add(t)
         self.faces[t], self.faces[s] = new_t, new_s
-        self.history[t] = self.history[s] = self.history[t] | self.history[s]
+        self.history[t] = self.history[s] = _merged(self.history[t], self.history[s])
         self.modified[t] = self.modified[s] = self.clock
         return True
+
+    def behind(self, faces: list[int]) -> set[int]:
+        """The vertices whose collapses changed any of ``faces`` (or the faces they were made from).
+
+        A face's :attr:`history` is () when no collapse changed it, else a node ``(u, parents)``: the collapse of
+        ``u`` (-1 for a mere union) after those of the ``parents`` nodes.
+        """
+        found: set[int] = set()
+        seen: set[int] = set()
+        stack = [self.history[t] for t in faces]
+        while stack:
+            node = stack.pop()
+            if not node or id(node) in seen:
+                continue
+            seen.add(id(node))
+            if node[0] >= 0:
+                found.add(node[0])
+            stack.extend(node[1])
+        return found
 
     def face_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """Ids (m',) of the faces left, ascending, and their corners (m', 3)."""
@@ -421,6 +455,11 @@ def _kernels() -> ModuleType:
     from fracture_cli.gameready import collapse_kernels
 
     return collapse_kernels
+
+
+def _merged(a: tuple, b: tuple) -> tuple:
+    """The history of a face changed by the collapses of both ``a`` and ``b`` (:meth:`SurfaceComplex.behind`)."""
+    return b if not a else a if not b or a is b else (-1, (a, b))
 
 
 def _grid_cell(triangles: np.ndarray) -> float:
