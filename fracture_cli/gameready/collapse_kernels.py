@@ -248,3 +248,14 @@ def nearest(X: np.ndarray, grid: tuple, cell: float, Q: np.ndarray, k: int) -> n
                 break
         out[q] = ids
     return out
+
+
+@njit(cache=True)
+def fault_bound(V: np.ndarray, points: np.ndarray, tris: np.ndarray, reference: np.ndarray, centroids: np.ndarray,
+                origin: np.ndarray, dims: np.ndarray, starts: np.ndarray, order: np.ndarray, cell: float, k: int,
+                tolerance: float) -> np.ndarray:  # pragma: no cover (compiled)
+    """:func:`within_tolerance` of a collapse, its probes' ``k`` nearest cut faces found in the grid of their
+    ``centroids`` (:func:`grid_index`: origin, dims, starts, order): one call per collapse."""
+    Q = probes(V, tris)
+    near = nearest(centroids, (origin, dims, starts, order), cell, Q, k)
+    return within_tolerance(V, points, tris, Q, reference, near, tolerance)

@@ -172,9 +172,9 @@ class SurfaceComplex:
             fan, v_fan = self.vertex_faces[u], self.vertex_faces[v]
             if (bound == was and u not in changed_vertices and v not in changed_vertices
                     and changed_faces.isdisjoint(fan) and changed_faces.isdisjoint(v_fan)):
-                removed = [t for t in fan if v in self.faces[t]]
-                kept = sorted(fan - set(removed))
-                new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
+                removed = [t for t in fan if t in v_fan]
+                kept = sorted(fan.difference(removed))
+                new_faces = {t: _moved(self.faces[t], u, v) for t in kept}
                 self._apply(u, v, removed, kept, new_faces, points, nearest, bound)
                 continue
             self._mark_changed(u, v, changed_faces, changed_vertices)
@@ -316,10 +316,14 @@ class SurfaceComplex:
         removed = self._allowed(u, v, ctx)
         if removed is None:
             return False
-        kept = sorted(self.vertex_faces[u] - set(removed))
-        new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
-        if not all(_turns_little(self.points, self.faces[t], new_faces[t], ctx.limit) for t in kept):
-            return False
+        faces, positions, limit = self.faces, self.points, ctx.limit
+        kept = sorted(self.vertex_faces[u].difference(removed))
+        new_faces = {}
+        for t in kept:
+            f = faces[t]
+            g = new_faces[t] = _moved(f, u, v)
+            if not _turns_little(positions, f, g, limit):
+                return False
         fault_kept = [t for t in kept if self.fault[t]]
         points: list[int] = []
         nearest: list[int] = []
@@ -341,11 +345,8 @@ class SurfaceComplex:
         faces would let a fold between them pass); else None. The arithmetic is compiled
         (:mod:`.collapse_kernels`): numpy's overhead dominated on so few points.
         """
-        kernels = self._kernels
-        Q = kernels.probes(self._positions, triangles)
-        near = kernels.nearest(self._centroids, self._grid, self._cell, Q, self._candidates)
-        found = kernels.within_tolerance(self._positions, np.array(points, dtype=np.int64), triangles, Q,
-                                         self.reference, near, tolerance)
+        found = self._kernels.fault_bound(self._positions, np.array(points, dtype=np.int64), triangles, self.reference,
+                                          self._centroids, *self._grid, self._cell, self._candidates, tolerance)
         return found.tolist() if len(found) else None
 
     def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
@@ -396,11 +397,14 @@ class SurfaceComplex:
     def _flip(self, t: int) -> bool:
         """Flip the long edge of face ``t`` if it is a cap needle and the flip is allowed (see :meth:`flip_needles`)."""
         f = self.faces[t]
-        P = [self.points[x] for x in f]
-        lengths = [sum((P[(i + 1) % 3][j] - P[i][j]) ** 2 for j in range(3)) for i in range(3)]
-        i = max(range(3), key=lambda k: lengths[k])  # the long edge: corner i -> corner i + 1
-        n = _normal(self.points, f)
-        if n[0] ** 2 + n[1] ** 2 + n[2] ** 2 > (MIN_SHAPE * lengths[i]) ** 2:
+        (ax, ay, az), (bx, by, bz), (cx, cy, cz) = self.points[f[0]], self.points[f[1]], self.points[f[2]]
+        # Written out (most faces are no needles): squared edge lengths as sum() adds them, and the normal.
+        lengths = ((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2, (cx - bx) ** 2 + (cy - by) ** 2 + (cz - bz) ** 2,
+                   (ax - cx) ** 2 + (ay - cy) ** 2 + (az - cz) ** 2)
+        i = 0 if lengths[0] >= lengths[1] and lengths[0] >= lengths[2] else 1 if lengths[1] >= lengths[2] else 2
+        ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        if nx**2 + ny**2 + nz**2 > (MIN_SHAPE * lengths[i]) ** 2:
             return False
         a, b, c = f[(i + 2) % 3], f[i], f[(i + 1) % 3]
         across = [s for s in self.vertex_faces[b] & self.vertex_faces[c] if s != t]
@@ -488,23 +492,27 @@ def _quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np
 def _turns_little(points: list, old: tuple, new: tuple, limit: float) -> bool:
     """Whether face ``new`` is not degenerate and its normal's cosine with ``old``'s is ``limit`` or more.
 
-    Corners are ids into ``points``, a list of (x, y, z): plain floats, as numpy is slow on single triangles.
+    Corners are ids into ``points``, a list of (x, y, z): plain floats, as numpy is slow on single triangles
+    (normals written out: a call for each cost a fifth of the test).
     """
-    n_old = _normal(points, old)
-    n_new = _normal(points, new)
-    length2 = n_new[0] ** 2 + n_new[1] ** 2 + n_new[2] ** 2
-    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = (points[x] for x in new)
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[old[0]], points[old[1]], points[old[2]]
+    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+    ox, oy, oz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[new[0]], points[new[1]], points[new[2]]
+    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    length2 = nx**2 + ny**2 + nz**2
     # Written out, in the order sum() adds them (0 + x is x exactly).
     longest = max((ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2, (bx - cx) ** 2 + (by - cy) ** 2 + (bz - cz) ** 2,
                   (cx - ax) ** 2 + (cy - ay) ** 2 + (cz - az) ** 2)
     if length2 == 0.0 or length2 <= (MIN_SHAPE * longest) ** 2:
         return False
-    dot = n_old[0] * n_new[0] + n_old[1] * n_new[1] + n_old[2] * n_new[2]
-    old2 = n_old[0] ** 2 + n_old[1] ** 2 + n_old[2] ** 2
+    dot = ox * nx + oy * ny + oz * nz
+    old2 = ox**2 + oy**2 + oz**2
     return dot > 0 and dot * dot >= limit**2 * old2 * length2
 
 
-def _normal(points: list, f: tuple) -> tuple[float, float, float]:
-    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[f[0]], points[f[1]], points[f[2]]
-    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
-    return uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+def _moved(f: tuple, u: int, v: int) -> tuple[int, int, int]:
+    """Face ``f`` with corner ``u`` replaced by ``v``."""
+    a, b, c = f
+    return (v if a == u else a, v if b == u else b, v if c == u else c)
