@@ -14,7 +14,8 @@ in tests/test_simplify_kernels.py):
 * the quadric error adds ``(p_j Q_jk) p_k`` over j, then k, as
   ``np.einsum("ij,jk,ik->i")``.
 
-This module imports numba: :mod:`.decimate` imports it only when a complex is
+It also holds the numpy set-up of a complex (its quadrics, the cell of its
+grid of cut faces). This module imports numba: :mod:`.decimate` imports it only when a complex is
 built, so other stages do not pay for it. Compiled code is cached (``cache=True``:
 beside this file, or in the user's cache directory when that is read-only);
 ``error_model="numpy"`` makes a division by zero give inf or nan as numpy does.
@@ -48,6 +49,29 @@ def njit(cache: bool = True, **options: Any) -> Callable[[Callable], Any]:
             return numba.njit(**options)(function)
 
     return wrap
+
+
+def grid_cell(triangles: np.ndarray) -> float:
+    """A cell size for the grid of the centroids of ``triangles`` (r, 3, 3): twice their mean edge length, a
+    few centroids per cell on a surface, at most 2**21 cells."""
+    edges = np.linalg.norm(triangles - triangles[:, [1, 2, 0]], axis=2)
+    extent = float((triangles.reshape(-1, 3).max(axis=0) - triangles.reshape(-1, 3).min(axis=0)).max())
+    return max(2.0 * float(edges.mean()), extent / 128.0, 1e-9)
+
+
+def quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np.ndarray:
+    """Area-weighted plane quadrics (n, 4, 4) of the fault faces around every vertex (zero on outer faces)."""
+    F = np.asarray(faces, dtype=np.int64)[np.asarray(fault, dtype=bool)]
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    normal = np.cross(b - a, c - a)
+    area = np.linalg.norm(normal, axis=1)
+    unit = normal / np.maximum(area, 1e-300)[:, None]
+    plane = np.sqrt(area)[:, None] * np.column_stack([unit, -np.einsum("ij,ij->i", unit, a)])
+    outer = np.einsum("fi,fj->fij", plane, plane)
+    Q = np.zeros((n, 4, 4))
+    for k in range(3):
+        np.add.at(Q, F[:, k], outer)
+    return Q
 
 
 @njit(cache=True, error_model="numpy")

@@ -115,16 +115,16 @@ class SurfaceComplex:
         # as a graph of collapses shared between faces (see :meth:`behind`): copying sets cost more than the rest
         # of a collapse.
         self.history: dict[int, tuple] = {t: () for t in self.faces}
-        self.quadric = _quadrics(V, faces, fault, len(V))
+        self._kernels = _kernels()
+        self.quadric = self._kernels.quadrics(V, faces, fault, len(V))
         # The cut fault faces, to measure how far new faces stray from them.
         F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)[np.asarray(fault, dtype=bool)]
         self.reference = np.ascontiguousarray(V[F], dtype=np.float64) if len(F) else np.zeros((1, 3, 3))
         self._candidates = min(_REFERENCE_CANDIDATES, len(self.reference))
         self._positions = np.ascontiguousarray(V, dtype=np.float64)
-        self._kernels = _kernels()
         # Their centroids in a grid, for the nearest ones to a new face (:func:`.collapse_kernels.nearest`).
         self._centroids = np.ascontiguousarray(self.reference.mean(axis=1))
-        self._cell = _grid_cell(self.reference)
+        self._cell = self._kernels.grid_cell(self.reference)
         self._grid = self._kernels.grid_index(self._centroids, self._cell)
 
     def copy(self) -> SurfaceComplex:
@@ -219,8 +219,8 @@ class SurfaceComplex:
             _, u, stamp = heapq.heappop(heap)
             if self.stamp.get(u) != stamp or u not in self.vertex_faces:
                 continue
-            bound = self._tolerance(u, tolerance)
             ctx = self._fan(u)
+            bound = self._tolerance(u, tolerance, ctx.fragments)
             targets = self._targets(u, self._queued.pop(u))
             # (A refused collapse changes nothing: the region is the same before and after trying.)
             region = self._region(u, targets) if u in self._refusals else None
@@ -235,14 +235,20 @@ class SurfaceComplex:
                     self._push(heap, w)
         return done
 
-    def _tolerance(self, u: int, tolerance: dict[int, float] | float) -> float:
+    def _tolerance(self, u: int, tolerance: dict[int, float] | float, fragments: set[int] | None = None) -> float:
+        """The bound of ``u``: the largest of its fragments' (``fragments``, when known), times its damp."""
         damp = self.damp.get(u, 1.0)
         if not isinstance(tolerance, dict):
             return tolerance * damp
-        return damp * max(tolerance[k] for t in self.vertex_faces[u] for k in self.owners[t])
+        if fragments is None:
+            fragments = {k for t in self.vertex_faces[u] for k in self.owners[t]}
+        return damp * max([tolerance[k] for k in fragments])
 
     def _neighbours(self, u: int) -> set[int]:
-        return {x for t in self.vertex_faces.get(u, ()) for x in self.faces[t]} - {u}
+        faces = self.faces
+        found = set().union(*[faces[t] for t in self.vertex_faces.get(u, ())])
+        found.discard(u)
+        return found
 
     def _costs(self, u: int) -> tuple[list[int], list[float]]:
         """The neighbours of ``u`` and the quadric error of moving ``u`` onto each."""
@@ -277,7 +283,7 @@ class SurfaceComplex:
     def _around(self, around: dict[int, set[int]], fan: set[int], k: int) -> set[int]:
         """Corners of the faces of ``fan`` in fragment ``k`` (memoized in ``around``)."""
         if k not in around:
-            around[k] = {x for t in fan if k in self.owners[t] for x in self.faces[t]}
+            around[k] = set().union(*[self.faces[t] for t in fan if k in self.owners[t]])
         return around[k]
 
     def _allowed(self, u: int, v: int, ctx: _Fan) -> list[int] | None:
@@ -293,8 +299,8 @@ class SurfaceComplex:
                 return None
             opposite = {*faces[removed[0]], *faces[removed[1]]} - {u, v}
             if ctx.corners is None:
-                ctx.corners = {x for t in fan for x in faces[t]}
-            return removed if (ctx.corners & {x for t in v_fan for x in faces[t]}) - {u, v} == opposite else None
+                ctx.corners = set().union(*[faces[t] for t in fan])
+            return removed if (ctx.corners & set().union(*[faces[t] for t in v_fan])) - {u, v} == opposite else None
         v_fragments = {k for t in v_fan for k in self.owners[t]}
         for k in ctx.fragments & v_fragments:
             mine = [t for t in removed if k in self.owners[t]]
@@ -302,7 +308,7 @@ class SurfaceComplex:
                 return None
             opposite = {x for t in mine for x in self.faces[t]} - {u, v}
             around_u = self._around(ctx.around, fan, k)
-            around_v = {x for t in v_fan if k in self.owners[t] for x in self.faces[t]}
+            around_v = set().union(*[self.faces[t] for t in v_fan if k in self.owners[t]])
             if (around_u & around_v) - {u, v} != opposite:
                 return None  # link condition in fragment k: the collapse would pinch its surface
         return removed
@@ -464,29 +470,6 @@ def _kernels() -> ModuleType:
 def _merged(a: tuple, b: tuple) -> tuple:
     """The history of a face changed by the collapses of both ``a`` and ``b`` (:meth:`SurfaceComplex.behind`)."""
     return b if not a else a if not b or a is b else (-1, (a, b))
-
-
-def _grid_cell(triangles: np.ndarray) -> float:
-    """A cell size for the grid of the centroids of ``triangles`` (r, 3, 3): twice their mean edge length, a
-    few centroids per cell on a surface, at most 2**21 cells."""
-    edges = np.linalg.norm(triangles - triangles[:, [1, 2, 0]], axis=2)
-    extent = float((triangles.reshape(-1, 3).max(axis=0) - triangles.reshape(-1, 3).min(axis=0)).max())
-    return max(2.0 * float(edges.mean()), extent / 128.0, 1e-9)
-
-
-def _quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np.ndarray:
-    """Area-weighted plane quadrics (n, 4, 4) of the fault faces around every vertex (zero on outer faces)."""
-    F = np.asarray(faces, dtype=np.int64)[np.asarray(fault, dtype=bool)]
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    normal = np.cross(b - a, c - a)
-    area = np.linalg.norm(normal, axis=1)
-    unit = normal / np.maximum(area, 1e-300)[:, None]
-    plane = np.sqrt(area)[:, None] * np.column_stack([unit, -np.einsum("ij,ij->i", unit, a)])
-    outer = np.einsum("fi,fj->fij", plane, plane)
-    Q = np.zeros((n, 4, 4))
-    for k in range(3):
-        np.add.at(Q, F[:, k], outer)
-    return Q
 
 
 def _turns_little(points: list, old: tuple, new: tuple, limit: float) -> bool:

@@ -336,7 +336,7 @@ def _decimate(checker: _Checker, locked: set, damp: dict, tolerance: float, limi
     ``earlier``: the complex of an earlier try, whose collapses are redone first where still allowed.
     """
     complex_ = checker.pristine().copy()
-    complex_.locked, complex_.damp = locked, damp
+    complex_.locked, complex_.damp = locked, damp or {}
     if tolerance <= 0:
         return complex_, 0
     bound = {k: tolerance for k in range(count)}
