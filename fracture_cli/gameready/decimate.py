@@ -29,11 +29,9 @@ from __future__ import annotations
 
 import copy
 import heapq
+from types import ModuleType
 
 import numpy as np
-from scipy.spatial import cKDTree
-
-from fracture_cli.trigeom import point_triangle_distance
 
 # A collapse may not turn a triangle by more than this (cosine of the angle between old and new normal): inside a
 # fault 30 degrees, so a smooth fault stays smooth under flat shading; 60 degrees for a vertex on the outer
@@ -49,11 +47,15 @@ MIN_SHAPE = 1e-6
 class _Fan:
     """The faces around a vertex and what its collapses check on them (see :meth:`SurfaceComplex._fan`)."""
 
-    __slots__ = ("fan", "polygons", "fragments", "limit", "on_fault", "around")
+    __slots__ = ("fan", "polygons", "fragments", "limit", "on_fault", "around", "single", "corners")
 
-    def __init__(self, fan: set[int], polygons: set[int], fragments: set[int], limit: float, on_fault: bool):
+    def __init__(self, fan: set[int], polygons: set[int], fragments: set[int], limit: float, on_fault: bool,
+                 single: tuple[int, ...] | None):
         self.fan, self.polygons, self.fragments, self.limit, self.on_fault = fan, polygons, fragments, limit, on_fault
         self.around: dict[int, set[int]] = {}
+        # The fragments every face of the fan bounds, when they all bound the same ones; and then their corners.
+        self.single = single
+        self.corners: set[int] | None = None
 
 
 class SurfaceComplex:
@@ -109,13 +111,21 @@ class SurfaceComplex:
         self._replayed = 0
         # Original fault vertices removed so far, kept with the face nearest to them (for the error bound).
         self.assigned: dict[int, list[int]] = {t: [] for t in self.faces}
-        # Vertices whose collapse changed each face (to lock them when the face ends up in an invalid fragment).
-        self.history: dict[int, set[int]] = {t: set() for t in self.faces}
-        self.quadric = _quadrics(V, faces, fault, len(V))
+        # Vertices whose collapse changed each face (to lock them when the face ends up in an invalid fragment),
+        # as a graph of collapses shared between faces (see :meth:`behind`): copying sets cost more than the rest
+        # of a collapse.
+        self.history: dict[int, tuple] = {t: () for t in self.faces}
+        self._kernels = _kernels()
+        self.quadric = self._kernels.quadrics(V, faces, fault, len(V))
         # The cut fault faces, to measure how far new faces stray from them.
         F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)[np.asarray(fault, dtype=bool)]
-        self.reference = V[F] if len(F) else np.zeros((1, 3, 3))
-        self.reference_tree = cKDTree(self.reference.mean(axis=1))
+        self.reference = np.ascontiguousarray(V[F], dtype=np.float64) if len(F) else np.zeros((1, 3, 3))
+        self._candidates = min(_REFERENCE_CANDIDATES, len(self.reference))
+        self._positions = np.ascontiguousarray(V, dtype=np.float64)
+        # Their centroids in a grid, for the nearest ones to a new face (:func:`.collapse_kernels.nearest`).
+        self._centroids = np.ascontiguousarray(self.reference.mean(axis=1))
+        self._cell = self._kernels.grid_cell(self.reference)
+        self._grid = self._kernels.grid_index(self._centroids, self._cell)
 
     def copy(self) -> SurfaceComplex:
         """An independent copy, to go on from (positions, input polygons and the cut fault are shared: they
@@ -133,7 +143,7 @@ class SurfaceComplex:
         new._refusals = dict(self._refusals)
         new._changed = set(self._changed)
         new.assigned = {t: list(p) for t, p in self.assigned.items()}
-        new.history = dict(self.history)  # its sets are replaced, never changed
+        new.history = dict(self.history)  # its nodes are replaced, never changed
         new.quadric = self.quadric.copy()
         return new
 
@@ -162,9 +172,9 @@ class SurfaceComplex:
             fan, v_fan = self.vertex_faces[u], self.vertex_faces[v]
             if (bound == was and u not in changed_vertices and v not in changed_vertices
                     and changed_faces.isdisjoint(fan) and changed_faces.isdisjoint(v_fan)):
-                removed = [t for t in fan if v in self.faces[t]]
-                kept = sorted(fan - set(removed))
-                new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
+                removed = [t for t in fan if t in v_fan]
+                kept = sorted(fan.difference(removed))
+                new_faces = {t: _moved(self.faces[t], u, v) for t in kept}
                 self._apply(u, v, removed, kept, new_faces, points, nearest, bound)
                 continue
             self._mark_changed(u, v, changed_faces, changed_vertices)
@@ -209,8 +219,8 @@ class SurfaceComplex:
             _, u, stamp = heapq.heappop(heap)
             if self.stamp.get(u) != stamp or u not in self.vertex_faces:
                 continue
-            bound = self._tolerance(u, tolerance)
             ctx = self._fan(u)
+            bound = self._tolerance(u, tolerance, ctx.fragments)
             targets = self._targets(u, self._queued.pop(u))
             # (A refused collapse changes nothing: the region is the same before and after trying.)
             region = self._region(u, targets) if u in self._refusals else None
@@ -225,20 +235,26 @@ class SurfaceComplex:
                     self._push(heap, w)
         return done
 
-    def _tolerance(self, u: int, tolerance: dict[int, float] | float) -> float:
+    def _tolerance(self, u: int, tolerance: dict[int, float] | float, fragments: set[int] | None = None) -> float:
+        """The bound of ``u``: the largest of its fragments' (``fragments``, when known), times its damp."""
         damp = self.damp.get(u, 1.0)
         if not isinstance(tolerance, dict):
             return tolerance * damp
-        return damp * max(tolerance[k] for t in self.vertex_faces[u] for k in self.owners[t])
+        if fragments is None:
+            fragments = {k for t in self.vertex_faces[u] for k in self.owners[t]}
+        return damp * max([tolerance[k] for k in fragments])
 
     def _neighbours(self, u: int) -> set[int]:
-        return {x for t in self.vertex_faces.get(u, ()) for x in self.faces[t]} - {u}
+        faces = self.faces
+        found = set().union(*[faces[t] for t in self.vertex_faces.get(u, ())])
+        found.discard(u)
+        return found
 
     def _costs(self, u: int) -> tuple[list[int], list[float]]:
         """The neighbours of ``u`` and the quadric error of moving ``u`` onto each."""
         targets = sorted(self._neighbours(u))
-        P = self._homogeneous[targets]
-        return targets, np.einsum("ij,jk,ik->i", P, self.quadric[u], P).tolist()
+        costs = self._kernels.quadric_costs(self._homogeneous, self.quadric, u, np.array(targets, dtype=np.int64))
+        return targets, costs.tolist()
 
     def _targets(self, u: int, costs: tuple[list[int], list[float]] | None = None) -> list[int]:
         """The neighbours of ``u``, cheapest collapse first (``costs``: :meth:`_costs` if already known)."""
@@ -260,22 +276,31 @@ class SurfaceComplex:
         polygons = {self.groups[t] for t in fan} - {-1}
         fragments = {k for t in fan for k in self.owners[t]}
         outer = any(not self.fault[t] for t in fan)
+        owned = {self.owners[t] for t in fan}
         return _Fan(fan, polygons, fragments, MIN_NORMAL_COS_OUTER if outer else MIN_NORMAL_COS,
-                    any(self.fault[t] for t in fan))
+                    any(self.fault[t] for t in fan), owned.pop() if len(owned) == 1 else None)
 
     def _around(self, around: dict[int, set[int]], fan: set[int], k: int) -> set[int]:
         """Corners of the faces of ``fan`` in fragment ``k`` (memoized in ``around``)."""
         if k not in around:
-            around[k] = {x for t in fan if k in self.owners[t] for x in self.faces[t]}
+            around[k] = set().union(*[self.faces[t] for t in fan if k in self.owners[t]])
         return around[k]
 
     def _allowed(self, u: int, v: int, ctx: _Fan) -> list[int] | None:
         """The faces a collapse of ``u`` into ``v`` removes, or None if polygons or topology forbid it."""
-        fan = ctx.fan
-        removed = [t for t in fan if v in self.faces[t]]
-        if ctx.polygons and ctx.polygons - {self.groups[t] for t in removed}:
+        fan, v_fan, faces, owners = ctx.fan, self.vertex_faces[v], self.faces, self.owners
+        removed = [t for t in fan if t in v_fan]
+        if ctx.polygons and not ctx.polygons.issubset([self.groups[t] for t in removed]):
             return None  # v is not on every input polygon u is on: outer faces would leave the input surface
-        v_fan = self.vertex_faces[v]
+        single = ctx.single
+        if single is not None and all(owners[t] == single for t in v_fan):
+            # Every face around u and v bounds the same fragments: one link condition holds for all of them.
+            if len(removed) != 2:
+                return None
+            opposite = {*faces[removed[0]], *faces[removed[1]]} - {u, v}
+            if ctx.corners is None:
+                ctx.corners = set().union(*[faces[t] for t in fan])
+            return removed if (ctx.corners & set().union(*[faces[t] for t in v_fan])) - {u, v} == opposite else None
         v_fragments = {k for t in v_fan for k in self.owners[t]}
         for k in ctx.fragments & v_fragments:
             mine = [t for t in removed if k in self.owners[t]]
@@ -283,7 +308,7 @@ class SurfaceComplex:
                 return None
             opposite = {x for t in mine for x in self.faces[t]} - {u, v}
             around_u = self._around(ctx.around, fan, k)
-            around_v = {x for t in v_fan if k in self.owners[t] for x in self.faces[t]}
+            around_v = set().union(*[self.faces[t] for t in v_fan if k in self.owners[t]])
             if (around_u & around_v) - {u, v} != opposite:
                 return None  # link condition in fragment k: the collapse would pinch its surface
         return removed
@@ -297,10 +322,14 @@ class SurfaceComplex:
         removed = self._allowed(u, v, ctx)
         if removed is None:
             return False
-        kept = sorted(self.vertex_faces[u] - set(removed))
-        new_faces = {t: tuple(v if x == u else x for x in self.faces[t]) for t in kept}
-        if not all(_turns_little(self.points, self.faces[t], new_faces[t], ctx.limit) for t in kept):
-            return False
+        faces, positions, limit = self.faces, self.points, ctx.limit
+        kept = sorted(self.vertex_faces[u].difference(removed))
+        new_faces = {}
+        for t in kept:
+            f = faces[t]
+            g = new_faces[t] = _moved(f, u, v)
+            if not _turns_little(positions, f, g, limit):
+                return False
         fault_kept = [t for t in kept if self.fault[t]]
         points: list[int] = []
         nearest: list[int] = []
@@ -308,33 +337,27 @@ class SurfaceComplex:
             points = [u] + [p for t in self.vertex_faces[u] for p in self.assigned[t]]
             if not fault_kept:
                 return False
-            triangles = self.V[np.array([new_faces[t] for t in fault_kept])]
-            distance, strays = self._distances(self.V[points], triangles)
-            if distance.min(axis=0).max() > tolerance or strays > tolerance:
+            found = self._within(points, np.array([new_faces[t] for t in fault_kept], dtype=np.int64), tolerance)
+            if found is None:
                 return False
-            nearest = [fault_kept[i] for i in np.argmin(distance, axis=0).tolist()]
+            nearest = [fault_kept[i] for i in found]
         self._apply(u, v, removed, kept, new_faces, points, nearest, tolerance)
         return True
 
-    def _distances(self, P: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, float]:
-        """Distances (k, p) of the removed fault points P (p, 3) from the new fault faces (k, 3, 3); and how
-        far the new faces stray from the cut fault (the largest distance of a centroid or edge midpoint from
-        its nearest cut fault faces: the other side of the bound, as points near the new faces would let a
-        fold between them pass). One distance call for both, as numpy's overhead dominates on so few points.
+    def _within(self, points: list[int], triangles: np.ndarray, tolerance: float) -> list[int] | None:
+        """The new fault face (index into ``triangles`` (k, 3)) nearest each removed fault point, if every one
+        lies within ``tolerance`` of the new fault faces and the new faces (centroids, edge midpoints) within
+        ``tolerance`` of their nearest cut fault faces (the other side of the bound, as points near the new
+        faces would let a fold between them pass); else None. The arithmetic is compiled
+        (:mod:`.collapse_kernels`): numpy's overhead dominated on so few points.
         """
-        Q = np.concatenate([triangles.mean(axis=1), (triangles + triangles[:, [1, 2, 0]]).reshape(-1, 3) / 2.0])
-        _, near = self.reference_tree.query(Q, k=min(_REFERENCE_CANDIDATES, len(self.reference)))
-        near = near.reshape(len(Q), -1)
-        k, p = len(triangles), len(P)
-        distance = point_triangle_distance(
-            np.concatenate([np.tile(P, (k, 1)), np.repeat(Q, near.shape[1], axis=0)]),
-            np.concatenate([np.repeat(triangles, p, axis=0), self.reference[near.reshape(-1)]]))
-        strays = distance[k * p:].reshape(len(Q), -1).min(axis=1).max()
-        return distance[:k * p].reshape(k, p), float(strays)
+        found = self._kernels.fault_bound(self._positions, np.array(points, dtype=np.int64), triangles, self.reference,
+                                          self._centroids, *self._grid, self._cell, self._candidates, tolerance)
+        return found.tolist() if len(found) else None
 
     def _apply(self, u: int, v: int, removed: list[int], kept: list[int], new_faces: dict, points: list[int],
                nearest: list[int], tolerance: float) -> None:
-        touched = {u}.union(*(self.history[t] for t in removed))
+        touched = (u, tuple(h for t in removed if (h := self.history[t])))
         self.clock += 1
         self.modified.update((t, self.clock) for t in removed)
         self.modified.update((t, self.clock) for t in kept)
@@ -344,7 +367,7 @@ class SurfaceComplex:
             del self.faces[t], self.assigned[t], self.history[t]
         for t in kept:
             self.faces[t] = new_faces[t]
-            self.history[t] = self.history[t] | touched
+            self.history[t] = _merged(self.history[t], touched)
             if self.fault[t]:
                 self.assigned[t] = []
         for point, t in zip(points, nearest):
@@ -380,11 +403,14 @@ class SurfaceComplex:
     def _flip(self, t: int) -> bool:
         """Flip the long edge of face ``t`` if it is a cap needle and the flip is allowed (see :meth:`flip_needles`)."""
         f = self.faces[t]
-        P = [self.points[x] for x in f]
-        lengths = [sum((P[(i + 1) % 3][j] - P[i][j]) ** 2 for j in range(3)) for i in range(3)]
-        i = max(range(3), key=lambda k: lengths[k])  # the long edge: corner i -> corner i + 1
-        n = _normal(self.points, f)
-        if n[0] ** 2 + n[1] ** 2 + n[2] ** 2 > (MIN_SHAPE * lengths[i]) ** 2:
+        (ax, ay, az), (bx, by, bz), (cx, cy, cz) = self.points[f[0]], self.points[f[1]], self.points[f[2]]
+        # Written out (most faces are no needles): squared edge lengths as sum() adds them, and the normal.
+        lengths = ((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2, (cx - bx) ** 2 + (cy - by) ** 2 + (cz - bz) ** 2,
+                   (ax - cx) ** 2 + (ay - cy) ** 2 + (az - cz) ** 2)
+        i = 0 if lengths[0] >= lengths[1] and lengths[0] >= lengths[2] else 1 if lengths[1] >= lengths[2] else 2
+        ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        if nx**2 + ny**2 + nz**2 > (MIN_SHAPE * lengths[i]) ** 2:
             return False
         a, b, c = f[(i + 2) % 3], f[i], f[(i + 1) % 3]
         across = [s for s in self.vertex_faces[b] & self.vertex_faces[c] if s != t]
@@ -405,9 +431,28 @@ class SurfaceComplex:
         self.vertex_faces[a].add(s)
         self.vertex_faces[d].add(t)
         self.faces[t], self.faces[s] = new_t, new_s
-        self.history[t] = self.history[s] = self.history[t] | self.history[s]
+        self.history[t] = self.history[s] = _merged(self.history[t], self.history[s])
         self.modified[t] = self.modified[s] = self.clock
         return True
+
+    def behind(self, faces: list[int]) -> set[int]:
+        """The vertices whose collapses changed any of ``faces`` (or the faces they were made from).
+
+        A face's :attr:`history` is () when no collapse changed it, else a node ``(u, parents)``: the collapse of
+        ``u`` (-1 for a mere union) after those of the ``parents`` nodes.
+        """
+        found: set[int] = set()
+        seen: set[int] = set()
+        stack = [self.history[t] for t in faces]
+        while stack:
+            node = stack.pop()
+            if not node or id(node) in seen:
+                continue
+            seen.add(id(node))
+            if node[0] >= 0:
+                found.add(node[0])
+            stack.extend(node[1])
+        return found
 
     def face_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """Ids (m',) of the faces left, ascending, and their corners (m', 3)."""
@@ -415,41 +460,42 @@ class SurfaceComplex:
         return ids, np.array([self.faces[t] for t in ids.tolist()], dtype=np.int64).reshape(-1, 3)
 
 
-def _quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np.ndarray:
-    """Area-weighted plane quadrics (n, 4, 4) of the fault faces around every vertex (zero on outer faces)."""
-    F = np.asarray(faces, dtype=np.int64)[np.asarray(fault, dtype=bool)]
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    normal = np.cross(b - a, c - a)
-    area = np.linalg.norm(normal, axis=1)
-    unit = normal / np.maximum(area, 1e-300)[:, None]
-    plane = np.sqrt(area)[:, None] * np.column_stack([unit, -np.einsum("ij,ij->i", unit, a)])
-    outer = np.einsum("fi,fj->fij", plane, plane)
-    Q = np.zeros((n, 4, 4))
-    for k in range(3):
-        np.add.at(Q, F[:, k], outer)
-    return Q
+def _kernels() -> ModuleType:
+    """:mod:`.collapse_kernels`, imported on first use: numba loads only when the simplify stage runs."""
+    from fracture_cli.gameready import collapse_kernels
+
+    return collapse_kernels
+
+
+def _merged(a: tuple, b: tuple) -> tuple:
+    """The history of a face changed by the collapses of both ``a`` and ``b`` (:meth:`SurfaceComplex.behind`)."""
+    return b if not a else a if not b or a is b else (-1, (a, b))
 
 
 def _turns_little(points: list, old: tuple, new: tuple, limit: float) -> bool:
     """Whether face ``new`` is not degenerate and its normal's cosine with ``old``'s is ``limit`` or more.
 
-    Corners are ids into ``points``, a list of (x, y, z): plain floats, as numpy is slow on single triangles.
+    Corners are ids into ``points``, a list of (x, y, z): plain floats, as numpy is slow on single triangles
+    (normals written out: a call for each cost a fifth of the test).
     """
-    n_old = _normal(points, old)
-    n_new = _normal(points, new)
-    length2 = n_new[0] ** 2 + n_new[1] ** 2 + n_new[2] ** 2
-    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = (points[x] for x in new)
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[old[0]], points[old[1]], points[old[2]]
+    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+    ox, oy, oz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[new[0]], points[new[1]], points[new[2]]
+    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    length2 = nx**2 + ny**2 + nz**2
     # Written out, in the order sum() adds them (0 + x is x exactly).
     longest = max((ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2, (bx - cx) ** 2 + (by - cy) ** 2 + (bz - cz) ** 2,
                   (cx - ax) ** 2 + (cy - ay) ** 2 + (cz - az) ** 2)
     if length2 == 0.0 or length2 <= (MIN_SHAPE * longest) ** 2:
         return False
-    dot = n_old[0] * n_new[0] + n_old[1] * n_new[1] + n_old[2] * n_new[2]
-    old2 = n_old[0] ** 2 + n_old[1] ** 2 + n_old[2] ** 2
+    dot = ox * nx + oy * ny + oz * nz
+    old2 = ox**2 + oy**2 + oz**2
     return dot > 0 and dot * dot >= limit**2 * old2 * length2
 
 
-def _normal(points: list, f: tuple) -> tuple[float, float, float]:
-    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[f[0]], points[f[1]], points[f[2]]
-    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
-    return uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+def _moved(f: tuple, u: int, v: int) -> tuple[int, int, int]:
+    """Face ``f`` with corner ``u`` replaced by ``v``."""
+    a, b, c = f
+    return (v if a == u else a, v if b == u else b, v if c == u else c)

@@ -185,6 +185,15 @@ class _Checker:
         self.known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves as cut
         self.first: dict[int, tuple] | None = None  # the faces of the first try, all checked
         self.valid_faces: set[bytes] = set()
+        self._pristine: SurfaceComplex | None = None
+
+    def pristine(self) -> SurfaceComplex:
+        """The complex of the fragments as cut, nothing locked (built once: every try starts from a copy)."""
+        if self._pristine is None:
+            classified = self.classified
+            self._pristine = SurfaceComplex(self.welded, classified.faces, classified.groups, classified.owners,
+                                            classified.fault, set())
+        return self._pristine
 
     def check(self, complex_: SurfaceComplex, as_cut: set | frozenset) -> tuple[list[Fragment], list, dict]:
         """The rebuilt fragments (those ``as_cut`` as they were cut), their faces' complex ids, and the bad
@@ -245,8 +254,7 @@ def _within_tolerance(checker: _Checker, tolerance: float,
     earlier: SurfaceComplex | None = None
     attempt = 0
     while True:
-        complex_, over = _decimate(checker.welded, checker.classified, locked, damp, tolerance, limits, count,
-                                   earlier)
+        complex_, over = _decimate(checker, locked, damp, tolerance, limits, count, earlier)
         earlier = complex_
         if tolerance > 0:
             complex_.flip_needles(as_cut)
@@ -255,7 +263,7 @@ def _within_tolerance(checker: _Checker, tolerance: float,
             return _Tried(complex_, locked, damp, frozenset(as_cut)), results, attempt, over
         log.debug("faults: try %d, %d fragment(s) invalid; simplifying again with more held back", attempt, len(bad))
         for k, b in sorted(bad.items()):
-            behind = set().union(*[complex_.history[t] for t in face_ids[k][b].tolist()])
+            behind = complex_.behind(face_ids[k][b].tolist())
             if not behind:  # faces no collapse made (the weld moved them): locking cannot mend them
                 as_cut.add(k)
                 locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
@@ -320,22 +328,22 @@ def _fit(checker: _Checker, tried: _Tried, tolerance: float, limits: Limits, hol
     return _Fitted(complex_, bound, start)
 
 
-def _decimate(welded: np.ndarray, classified: Classified, locked: set, damp: dict, tolerance: float,
-              limits: Limits, count: int, earlier: SurfaceComplex | None = None) -> tuple[SurfaceComplex, int]:
+def _decimate(checker: _Checker, locked: set, damp: dict, tolerance: float, limits: Limits, count: int,
+              earlier: SurfaceComplex | None = None) -> tuple[SurfaceComplex, int]:
     """The complex after collapses to ``tolerance``, then to the limits; and how many fragments stay above
     ``limits.max_triangles``.
 
     ``earlier``: the complex of an earlier try, whose collapses are redone first where still allowed.
     """
-    complex_ = SurfaceComplex(welded, classified.faces, classified.groups, classified.owners, classified.fault,
-                              locked, damp)
+    complex_ = checker.pristine().copy()
+    complex_.locked, complex_.damp = locked, damp or {}
     if tolerance <= 0:
         return complex_, 0
     bound = {k: tolerance for k in range(count)}
     if earlier is not None:
         complex_.replay(earlier.done, bound, earlier.final_refusals())
     complex_.decimate(bound)
-    sizes = _rounds(complex_, classified, limits, bound, tolerance)
+    sizes = _rounds(complex_, checker.classified, limits, bound, tolerance)
     over = int(np.sum(sizes > limits.max_triangles)) if limits.max_triangles > 0 else 0
     return complex_, over
 
