@@ -14,7 +14,7 @@ PYTEST_ARGS ?=
 
 PACKAGE_SOURCES := $(shell find fracture_cli -name '*.py' -not -path '*/__pycache__/*' | sort)
 
-install: $(STAMP)
+install: $(STAMP) $(VENV)/.kernels
 	@$(MAKE) --no-print-directory web || echo "note: 'fracture view' needs its web files: run 'make web' (needs npm)"
 
 $(STAMP): pyproject.toml
@@ -22,6 +22,12 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test,batch]'
 	@touch $(STAMP)
+
+# The simplify stage's numba kernels, compiled once into numba's cache (~10 s) so that the first
+# bake does not pay for it; again when their source changes.
+$(VENV)/.kernels: $(STAMP) fracture_cli/gameready/collapse_kernels.py
+	$(PY) -c "from fracture_cli.gameready.collapse_kernels import warm_kernels; warm_kernels()"
+	@touch $@
 
 # `fracture view`'s browser files: three.js (npm, pinned by web/package-lock.json) and the
 # runtime reader, copied into the package's gitignored static/vendor/; playwright-core (for

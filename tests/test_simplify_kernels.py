@@ -95,3 +95,10 @@ def test_within_tolerance_as_the_numpy_bound():
                 assert found.tolist() == np.argmin(distance, axis=0).tolist()
             else:
                 assert len(found) == 0
+
+
+def test_warm_kernels_simplifies_its_patch():
+    """What ``make install`` runs to compile the kernels does collapses (so it reaches every kernel)."""
+    from fracture_cli.gameready.collapse_kernels import warm_kernels
+
+    assert warm_kernels() > 0

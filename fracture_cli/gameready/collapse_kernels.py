@@ -307,3 +307,24 @@ def fault_bound(V: np.ndarray, points: np.ndarray, tris: np.ndarray, reference: 
     Q = probes(V, tris)
     near = nearest(centroids, (origin, dims, starts, order), cell, Q, k)
     return within_tolerance(V, points, tris, Q, reference, near, tolerance)
+
+
+def warm_kernels() -> int:
+    """Compile (and cache) the simplify stage's numba kernels by simplifying a small curved fault patch.
+
+    ``make install`` calls this once, so that the first bake does not pay the compilation (some seconds);
+    a real complex, not hand-made arguments, so every kernel is compiled for the types the stage passes.
+    Returns the collapses done (the patch is fine enough that some are).
+    """
+    from fracture_cli.gameready.decimate import SurfaceComplex  # (it imports this module)
+
+    n = 6
+    x, y = np.meshgrid(np.linspace(0.0, 1.0, n), np.linspace(0.0, 1.0, n), indexing="ij")
+    V = np.column_stack([x.ravel(), y.ravel(), 0.01 * np.sin(3.0 * x.ravel()) * np.cos(2.0 * y.ravel())])
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a = (i * n + j).ravel()
+    faces = np.concatenate([np.column_stack([a, a + n, a + n + 1]), np.column_stack([a, a + n + 1, a + 1])])
+    border = {int(v) for v in range(n * n) if v // n in (0, n - 1) or v % n in (0, n - 1)}
+    complex_ = SurfaceComplex(V, faces, np.full(len(faces), -1), [(0, 1)] * len(faces),
+                              np.ones(len(faces), dtype=bool), border)
+    return complex_.decimate(0.05)

@@ -499,3 +499,4 @@ def _moved(f: tuple, u: int, v: int) -> tuple[int, int, int]:
     """Face ``f`` with corner ``u`` replaced by ``v``."""
     a, b, c = f
     return (v if a == u else a, v if b == u else b, v if c == u else c)
+
