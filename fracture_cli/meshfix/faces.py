@@ -10,6 +10,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from fracture_cli.meshfix.edges import components, edge_table
 from fracture_cli.meshfix.records import RepairRecord
+from fracture_cli.meshfix.rows import unique_rows
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,7 @@ def unique_faces(W: np.ndarray) -> UniqueFaces:
     if m == 0:
         return UniqueFaces(np.ones(0, dtype=bool), 0, 0)
     key = np.sort(W, axis=1)
-    uniq, group, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    uniq, group, counts = unique_rows(key, return_inverse=True, return_counts=True)
     group = group.reshape(-1)
     if counts.max() == 1:
         return UniqueFaces(np.ones(m, dtype=bool), 0, 0)

@@ -32,6 +32,7 @@ from fracture_cli.meshfix.faces import orient_consistently, unique_faces
 from fracture_cli.meshfix.holes import FillOptions, boundary_loops
 from fracture_cli.meshfix.nonmanifold import NonManifoldSplit, split_nonmanifold
 from fracture_cli.meshfix.records import RepairRecord
+from fracture_cli.meshfix.rows import used_vertices
 from fracture_cli.meshfix.weld_check import collapsed
 from fracture_cli.meshtopo import components
 from fracture_cli.options import option
@@ -252,7 +253,7 @@ def _weld_and_clean(surface: SurfaceMesh, records: list[RepairRecord]) -> tuple[
     unique = unique_faces(W)
     records += unique.records
     mesh = SplitMesh(props, F[unique.keep], material_ids[unique.keep], weld)
-    flat = is_flat(props[np.unique(mesh.faces), :3]) if len(mesh.faces) else True
+    flat = is_flat(props[used_vertices(mesh.faces, len(props)), :3]) if len(mesh.faces) else True
     if len(mesh.faces) == 0:
         raise StageError("no faces are left after removing degenerate and duplicated faces: "
                          + (_FLAT_MESSAGE if flat else "the mesh encloses nothing"), stage=STAGE)

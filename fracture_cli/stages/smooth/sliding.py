@@ -11,6 +11,8 @@ from fracture_cli.types import SurfaceMesh
 # Sliding: a cage triangle next to a slid vertex must stay this far (unit bbox diagonal) from the input; the
 # triangle test is conservative (a separating-axis gap), so the true distance is at least this.
 _SLIDE_CLEARANCE = 1e-3
+# Broad-phase cells of the containment check, as a fraction of the cage's median triangle size.
+_QUERY_CELL = 0.1
 
 
 class CageSurface:
@@ -63,21 +65,45 @@ def _prism_winding(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarr
     return total
 
 
+def _near_plane(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarray, box: np.ndarray,
+                qi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (box, point) pairs whose point ``P`` (k, 3) can be inside the prism swept by triangle ``faces[box]``.
+
+    A triangle whose corners move from ``V0`` to ``X`` by at most ``r`` sweeps a prism within ``r`` of the
+    plane of its old corners (every point of it is a convex combination of corners within that slab), and a
+    closed surface's winding number is 0 outside a convex set holding it. Points farther than ``r`` from the
+    plane are dropped: their prism winding numbers are 0 (up to rounding, far from the 0.5 the caller tests).
+    """
+    if len(box) == 0:
+        return box, qi
+    old, new = V0[faces], X[faces]  # (t, 3, 3)
+    normal = np.cross(old[:, 1] - old[:, 0], old[:, 2] - old[:, 0])
+    length = np.linalg.norm(normal, axis=1)
+    reach = np.linalg.norm(new - old, axis=2).max(axis=1)
+    offset = np.abs(np.einsum("ij,ij->i", P - old[box, 0], normal[box]))
+    # Degenerate old triangles (no plane) keep all their pairs; the margin covers rounding.
+    keep = (length[box] <= 0) | (offset <= (reach[box] * (1.0 + 1e-6) + 1e-9) * length[box])
+    return box[keep], qi[keep]
+
+
 class Containment:
     """Checks that a moved cage (same triangles ``F`` (b, 3), outward) still strictly contains ``surface``."""
 
     def __init__(self, surface: SurfaceMesh, V0: np.ndarray, F: np.ndarray):
         self.SV = np.asarray(surface.vertices, dtype=np.float64)
         self.SF = np.asarray(surface.faces, dtype=np.int64)
-        boxes = trigeom.triangle_boxes(self.SV, self.SF)
-        self.grid = trigeom.BoxGrid(boxes, trigeom.default_cell(boxes))
         self.V0 = V0
         self.F = np.asarray(F, dtype=np.int64)
+        # Both grids are queried with cage-sized boxes: cells of a tenth of a cage triangle keep the cells per
+        # query and the triangles per cell both small (cells of an input triangle's size made every query
+        # span thousands of cells on a million-triangle input; cells of a cage triangle's size held
+        # thousands of triangles each). The pairs found do not depend on the cell size, only the work does.
+        cell = _QUERY_CELL * trigeom.default_cell(trigeom.triangle_boxes(V0, self.F))
+        boxes = trigeom.triangle_boxes(self.SV, self.SF)
+        self.grid = trigeom.BoxGrid(boxes, max(trigeom.default_cell(boxes), cell))
         # The input's vertices (points as boxes), indexed once and queried with the few swept boxes of each
-        # round, in cells about a cage triangle's size (indexing the swept boxes instead and querying every
-        # input vertex each round cost most of the smoothing of a million-triangle input).
-        cage_boxes = trigeom.triangle_boxes(V0, self.F)
-        self.points = trigeom.BoxGrid(np.stack([self.SV, self.SV], axis=1), trigeom.default_cell(cage_boxes))
+        # round (indexing the swept boxes instead and querying every input vertex each round was slower).
+        self.points = trigeom.BoxGrid(np.stack([self.SV, self.SV], axis=1), cell)
 
     def offenders(self, X: np.ndarray, moved: np.ndarray) -> np.ndarray:
         """Moved vertices (ascending ids) to send back: the cage over ``X`` (n, 3) near ``moved`` (n,) is unsafe.
@@ -102,6 +128,7 @@ class Containment:
         swept = np.concatenate([self.V0[faces], X[faces]], axis=1)
         boxes = np.stack([swept.min(axis=1), swept.max(axis=1)], axis=1)
         box, qi = self.points.query(boxes)
+        box, qi = _near_plane(self.SV[qi], self.V0, X, faces, box, qi)
         order = np.lexsort((box, qi))  # by point, then box: the order the sums below were defined in
         qi, box = qi[order], box[order]
         if len(qi):
