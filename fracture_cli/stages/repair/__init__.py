@@ -278,7 +278,7 @@ def _orient_and_split(mesh: SplitMesh, normalization: Normalization, records: li
     table = edge_table(mesh.welded)
     flip, flipped = orient_consistently(mesh.welded, table)
     records += flipped
-    turned = flip.any()
+    turned = bool(flip.any())
     if turned:
         mesh = _flipped(mesh, flip)
     V = mesh.props[:, POS]
