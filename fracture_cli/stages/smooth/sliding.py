@@ -98,12 +98,12 @@ class Containment:
         self.SF = np.asarray(surface.faces, dtype=np.int64)
         self.V0 = V0
         self.F = np.asarray(F, dtype=np.int64)
-        self.boxes = trigeom.triangle_boxes(self.SV, self.SF)
+        T = self.SV[self.SF]
+        self.boxes = np.stack([T.min(axis=1), T.max(axis=1)], axis=1)  # trigeom.triangle_boxes
         cell = _QUERY_CELL * trigeom.default_cell(trigeom.triangle_boxes(V0, self.F))
         # Short input triangles are found from their corners (every corner of a triangle meeting a box lies
         # within its longest edge of the box); the few long ones, whose corners may be far, in a grid of their
         # own. ``reach``: the longest edge of a short triangle.
-        T = self.SV[self.SF]
         longest = np.linalg.norm(T - T[:, [1, 2, 0]], axis=2).max(axis=1) if len(T) else np.zeros(0)
         self.reach = _SHORT_EDGE * cell
         long_ = np.flatnonzero(longest > self.reach)
@@ -120,6 +120,10 @@ class Containment:
         # query span thousands of cells on a million-triangle input). Indexing the query boxes instead and
         # querying every input vertex each round was slower still.
         self.points = trigeom.BoxGrid(np.stack([self.SV, self.SV], axis=1), cell)
+        # Whether each cage triangle comes near the input, for the corners it had when last tested: most
+        # touched triangles keep their corners from one round to the next.
+        self.tested = np.full((len(self.F), 3, 3), np.nan)
+        self.near = np.zeros(len(self.F), dtype=bool)
 
     def offenders(self, X: np.ndarray, moved: np.ndarray) -> np.ndarray:
         """Moved vertices (ascending ids) to send back: the cage over ``X`` (n, 3) near ``moved`` (n,) is unsafe.
@@ -133,12 +137,24 @@ class Containment:
         if not touched.any():
             return np.zeros(0, dtype=np.int64)
         faces = self.F[touched]
-        blame[faces[self._near_input(X, faces)].reshape(-1)] = True
+        blame[faces[self._near_input_cached(X, np.flatnonzero(touched))].reshape(-1)] = True
         pairs = trigeom.self_intersections(X, self.F)
         crossing = pairs[touched[pairs].any(axis=1)]
         blame[self.F[crossing.reshape(-1)].reshape(-1)] = True
         blame[faces[self._swept_past(X, faces)].reshape(-1)] = True
         return np.flatnonzero(blame & moved)
+
+    def _near_input_cached(self, X: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """Whether the cage triangles ``ids`` (t,) over ``X`` come near the input (t,) bool; see :meth:`_near_input`."""
+        corners = X[self.F[ids]]
+        stale = ~np.all(corners == self.tested[ids], axis=(1, 2))
+        if stale.any():
+            fresh = ids[stale]
+            near = np.zeros(len(fresh), dtype=bool)
+            near[self._near_input(X, self.F[fresh])] = True
+            self.tested[fresh] = corners[stale]
+            self.near[fresh] = near
+        return self.near[ids]
 
     def _near_input(self, X: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """Which cage triangles ``faces`` (t, 3) over ``X`` come within ``_SLIDE_CLEARANCE`` of an input triangle.
