@@ -70,13 +70,14 @@ def _prism_winding(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarr
 
 
 def _near_plane(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarray, box: np.ndarray,
-                qi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                qi: np.ndarray, tiny: float) -> tuple[np.ndarray, np.ndarray]:
     """The (box, point) pairs whose point ``P`` (k, 3) can be inside the prism swept by triangle ``faces[box]``.
 
     A triangle whose corners move from ``V0`` to ``X`` by at most ``r`` sweeps a prism within ``r`` of the
     plane of its old corners (every point of it is a convex combination of corners within that slab), and a
     closed surface's winding number is 0 outside a convex set holding it. Points farther than ``r`` from the
     plane are dropped: their prism winding numbers are 0 (up to rounding, far from the 0.5 the caller tests).
+    Triangles whose doubled area is at most ``tiny`` have no reliable plane and keep every pair.
     """
     if len(box) == 0:
         return box, qi
@@ -85,8 +86,8 @@ def _near_plane(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarray,
     length = np.linalg.norm(normal, axis=1)
     reach = np.linalg.norm(new - old, axis=2).max(axis=1)
     offset = np.abs(np.einsum("ij,ij->i", P - old[box, 0], normal[box]))
-    # Degenerate old triangles (no plane) keep all their pairs; the margin covers rounding.
-    keep = (length[box] <= 0) | (offset <= (reach[box] * (1.0 + 1e-6) + 1e-9) * length[box])
+    # The margin covers rounding.
+    keep = (length[box] <= tiny) | (offset <= (reach[box] * (1.0 + 1e-6) + _PLANE_MARGIN) * length[box])
     return box[keep], qi[keep]
 
 
@@ -99,6 +100,11 @@ class Containment:
         self.V0 = V0
         self.F = np.asarray(F, dtype=np.int64)
         T = self.SV[self.SF]
+        # Cage triangles whose doubled area is at most this have no reliable plane to filter pairs with (far
+        # above the separating-axis test's own threshold for an axis, 1e-12 times its pairs' extent squared).
+        extent = max(float(np.ptp(self.SV, axis=0).max(initial=0.0)) if len(self.SV) else 0.0,
+                     float(np.ptp(V0, axis=0).max(initial=0.0)) if len(V0) else 0.0)
+        self.tiny = 1e-9 * (2.0 * extent) ** 2
         self.boxes = np.stack([T.min(axis=1), T.max(axis=1)], axis=1)  # trigeom.triangle_boxes
         cell = _QUERY_CELL * trigeom.default_cell(trigeom.triangle_boxes(V0, self.F))
         # Short input triangles are found from their corners (every corner of a triangle meeting a box lies
@@ -116,7 +122,7 @@ class Containment:
         self.corner_face = short_faces[np.argsort(corners, kind="stable") // 3]
         self.corner_start = np.concatenate([[0], np.cumsum(np.bincount(corners, minlength=len(self.SV)))])
         # The input's vertices (points as boxes), indexed once and queried with the few cage-sized boxes of
-        # each round, in cells of a tenth of a cage triangle (cells of an input triangle's size made every
+        # each round, in cells of a fifth of a cage triangle (cells of an input triangle's size made every
         # query span thousands of cells on a million-triangle input). Indexing the query boxes instead and
         # querying every input vertex each round was slower still.
         self.points = trigeom.BoxGrid(np.stack([self.SV, self.SV], axis=1), cell)
@@ -177,7 +183,7 @@ class Containment:
         # A triangle is separated on the normal if all its corners are beyond the slab on one side; the
         # input lies below the outward cage, so gathering triangles from their corners not below the slab
         # finds every other one (and a few above it). Degenerate cage triangles keep every corner.
-        keep = (length[box] <= 0) | (side >= -reach)
+        keep = (length[box] <= self.tiny) | (side >= -reach)
         box, point = box[keep], point[keep]
         count = self.corner_start[point + 1] - self.corner_start[point]
         qi = np.repeat(box, count)
@@ -199,7 +205,7 @@ class Containment:
         swept = np.concatenate([self.V0[faces], X[faces]], axis=1)
         boxes = np.stack([swept.min(axis=1), swept.max(axis=1)], axis=1)
         all_box, all_qi = self.points.query(boxes)
-        box, qi = _near_plane(self.SV[all_qi], self.V0, X, faces, all_box, all_qi)
+        box, qi = _near_plane(self.SV[all_qi], self.V0, X, faces, all_box, all_qi, self.tiny)
         order = np.lexsort((box, qi))  # by point, then box: the order the sums below were defined in
         qi, box = qi[order], box[order]
         if not len(qi):
