@@ -19,6 +19,7 @@ import numpy as np
 from fracture_cli.errors import InputError
 from fracture_cli.io.parts import read_parts
 from fracture_cli.io.probe import probe_triangles
+from fracture_cli.meshfix.rows import unique_rows, used_vertices
 from fracture_cli.options import option
 from fracture_cli.types import Material, Normalization, SurfaceMesh
 
@@ -70,13 +71,15 @@ def smooth_normals_welded(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray
     Vertices split at UV seams share a position; averaging per position keeps the
     shading continuous across seams, which per-id normals would not.
     """
-    _, pos_id = np.unique(vertices, axis=0, return_inverse=True)
+    _, pos_id = unique_rows(vertices, return_inverse=True)
     pos_id = pos_id.reshape(-1)
     a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
     fn = np.cross(b - a, c - a)  # length = 2 * area: area weighting for free
-    acc = np.zeros((pos_id.max() + 1 if len(pos_id) else 0, 3))
-    for corner in range(3):
-        np.add.at(acc, pos_id[faces[:, corner]], fn)
+    num = pos_id.max() + 1 if len(pos_id) else 0
+    # bincount adds in array order, as np.add.at corner by corner did (same sums, bit for bit), much faster.
+    corner_pos = pos_id[faces.T.reshape(-1)]
+    acc = np.stack([np.bincount(corner_pos, weights=np.tile(fn[:, axis], 3), minlength=num) for axis in range(3)],
+                   axis=1) if len(faces) else np.zeros((num, 3))
     n = acc[pos_id]
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     out = np.zeros_like(n)
@@ -116,18 +119,20 @@ def double_sided_back_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     drop = np.zeros(len(F), dtype=bool)
     if len(F) < 2:
         return drop
-    _, weld = np.unique(V, axis=0, return_inverse=True)
+    _, weld = unique_rows(V, return_inverse=True)
     W = weld.reshape(-1)[F]
     ok = (W[:, 0] != W[:, 1]) & (W[:, 1] != W[:, 2]) & (W[:, 0] != W[:, 2])
     corners = np.sort(W, axis=1)
     first = np.argmin(W, axis=1)  # rotate each triangle to start at its smallest corner: orientation = next < last
     rows = np.arange(len(W))
     facing = W[rows, (first + 1) % 3] < W[rows, (first + 2) % 3]
-    _, key = np.unique(corners, axis=0, return_inverse=True)
+    _, key = unique_rows(corners, return_inverse=True)
     key = key.reshape(-1)
     up = np.bincount(key[ok & facing], minlength=key.max() + 1)
     down = np.bincount(key[ok & ~facing], minlength=key.max() + 1)
     paired = (up[key] > 0) & (down[key] > 0)
+    if not (ok & paired).any():
+        return drop  # no face has a copy facing the other way (the usual case): no parts to find
     n = int(weld.max()) + 1
     edges = np.concatenate([W[:, [0, 1]], W[:, [1, 2]]])
     graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
@@ -246,7 +251,7 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
         log.warning("load: %s: %d triangles are the back sides of a double-sided surface (each has a coincident "
                     "copy facing the other way); one side is kept", path, int(back.sum()))
         F, M = F[~back], M[~back]
-    used = np.unique(F)
+    used = used_vertices(F, len(V))
     if not np.all(np.isfinite(V[used])):
         raise InputError("has non-finite vertex coordinates (NaN or inf)", path=path)
     normalization = Normalization.from_points(V[used])

@@ -8,6 +8,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from fracture_cli.meshfix.rows import unique_inverse, unique_rows, used_vertices
+
 
 @dataclass(frozen=True)
 class EdgeTable:
@@ -68,7 +70,7 @@ def edge_table(F: np.ndarray) -> EdgeTable:
     face = np.tile(np.arange(len(F), dtype=np.int64), 3)
     n = int(F.max()) + 1 if len(F) else 1
     lo, hi = sides.min(axis=1), sides.max(axis=1)
-    keys, edge = np.unique(lo * n + hi, return_inverse=True)
+    keys, edge = unique_inverse(lo * n + hi)
     edge = edge.reshape(-1)
     ends = np.column_stack([keys // n, keys % n])
     return EdgeTable(sides=sides, face=face, edge=edge, ends=ends, count=np.bincount(edge, minlength=len(keys)),
@@ -118,7 +120,7 @@ def corner_fans(F: np.ndarray, table: EdgeTable, glued: np.ndarray | None = None
 def weld_by_position(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unique positions (u, 3) and the index (n,) of each vertex's position (exact equality)."""
     V = np.asarray(V)
-    unique, index = np.unique(V, axis=0, return_inverse=True)
+    unique, index = unique_rows(V, return_inverse=True)
     return unique, index.reshape(-1)
 
 
@@ -127,7 +129,7 @@ def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
     V = np.asarray(V, dtype=np.float64)
     if len(F) == 0:
         return 0.0
-    c = V[np.unique(F)].mean(axis=0)
+    c = V[used_vertices(F, len(V))].mean(axis=0)
     a, b, d = V[F[:, 0]] - c, V[F[:, 1]] - c, V[F[:, 2]] - c
     return float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum() / 6.0)
 

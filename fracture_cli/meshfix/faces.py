@@ -8,8 +8,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from fracture_cli.meshfix.edges import components, edge_table
+from fracture_cli.meshfix.edges import EdgeTable, components, edge_table
 from fracture_cli.meshfix.records import RepairRecord
+from fracture_cli.meshfix.rows import unique_rows
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,7 @@ def unique_faces(W: np.ndarray) -> UniqueFaces:
     if m == 0:
         return UniqueFaces(np.ones(0, dtype=bool), 0, 0)
     key = np.sort(W, axis=1)
-    uniq, group, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    uniq, group, counts = unique_rows(key, return_inverse=True, return_counts=True)
     group = group.reshape(-1)
     if counts.max() == 1:
         return UniqueFaces(np.ones(m, dtype=bool), 0, 0)
@@ -119,16 +120,18 @@ def _repeated_patches(groups: np.ndarray, repeated: np.ndarray) -> tuple[np.ndar
     return repeated & ~bad_patch[patch], repeated & ~not_wall[patch]
 
 
-def orient_consistently(W: np.ndarray) -> tuple[np.ndarray, list[RepairRecord]]:
+def orient_consistently(W: np.ndarray, table: EdgeTable | None = None) -> tuple[np.ndarray, list[RepairRecord]]:
     """Flip mask (m,) making the winding agree across every edge with exactly two faces.
 
     A breadth-first search over each patch (faces joined across two-face
     edges) gives every face its flip relative to the patch's first face; the
-    patch then keeps the winding most of its faces already had.
+    patch then keeps the winding most of its faces already had. ``table`` is
+    ``edge_table(W)`` if the caller has it.
     """
     W = np.asarray(W, dtype=np.int64).reshape(-1, 3)
     m = len(W)
-    table = edge_table(W)
+    if table is None:
+        table = edge_table(W)
     pairs = table.manifold_pairs()
     fa, fb = table.face[pairs[:, 0]], table.face[pairs[:, 1]]
     # Two faces agree when they run their shared edge in opposite directions.

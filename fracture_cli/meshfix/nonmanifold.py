@@ -64,6 +64,7 @@ class NonManifoldSplit:
     body_volume: np.ndarray
     unresolved_edges: np.ndarray
     records: list[RepairRecord] = field(default_factory=list)
+    edges: EdgeTable | None = None  # edge_table(faces)
 
     @property
     def source_face(self) -> np.ndarray:
@@ -130,13 +131,14 @@ def _glue(V: np.ndarray, F: np.ndarray, table: EdgeTable):
     """Glued side pairs (g, 2) of every edge, the wall faces found, and the unresolved many-face edges."""
     glued = [table.manifold_pairs()]
     order, start = table.sides_of_edges()
-    patch = face_bodies(table)
+    patch = None  # the manifold patches, found when a fan has a wall
     walls: set[int] = set()
     unresolved = []
     for e in np.flatnonzero(table.count > 2).tolist():
         sides, sign = _edge_fan(V, F, table, order[start[e]:start[e + 1]])
         pairs, wall_sides = _pair_fan(sides, sign)
         if wall_sides:
+            patch = face_bodies(table) if patch is None else patch
             own = _pair_within_patches(sides, sign, patch[table.face[sides]])
             if own is not None:
                 glued.append(np.array(own, dtype=np.int64))
@@ -148,7 +150,7 @@ def _glue(V: np.ndarray, F: np.ndarray, table: EdgeTable):
     return np.vstack(glued), walls, unresolved
 
 
-def split_nonmanifold(vertices: np.ndarray, faces: np.ndarray) -> NonManifoldSplit:
+def split_nonmanifold(vertices: np.ndarray, faces: np.ndarray, table: EdgeTable | None = None) -> NonManifoldSplit:
     """Split edges with more than two faces, and vertices with several fans, into closed manifold bodies.
 
     Parameters
@@ -158,6 +160,8 @@ def split_nonmanifold(vertices: np.ndarray, faces: np.ndarray) -> NonManifoldSpl
     faces : (m, 3) int
         Triangles, each body oriented outward (its faces' normals point away
         from its material); degenerate faces removed.
+    table : EdgeTable, optional
+        ``edge_table(faces)`` if the caller has it.
 
     Returns
     -------
@@ -183,8 +187,9 @@ def split_nonmanifold(vertices: np.ndarray, faces: np.ndarray) -> NonManifoldSpl
     F = F_in.copy()
     source_corner = np.arange(3 * len(F), dtype=np.int64).reshape(-1, 3)
     doubled = np.zeros(len(F), dtype=bool)  # input faces that have a reversed copy
+    given = table
     for _ in range(_MAX_WALL_ROUNDS):
-        table = edge_table(F)
+        table = given if given is not None and len(F) == len(F_in) else edge_table(F)  # no walls doubled yet
         glued, walls, unresolved = _glue(V, F, table)
         if not walls:
             break
@@ -218,7 +223,8 @@ def _assemble(V: np.ndarray, F: np.ndarray, source_corner: np.ndarray, table: Ed
     vertices_out = V[source_vertex]
     body = face_bodies(table, glued)
     num_bodies = int(body.max()) + 1 if len(body) else 0
-    out_table = edge_table(faces_out)
+    # Without copied vertices the output faces are the input's: so is their edge table.
+    out_table = table if primary.all() and np.array_equal(faces_out, F) else edge_table(faces_out)
     open_edge_faces = out_table.face[out_table.count[out_table.edge] != 2]
     body_closed = np.ones(num_bodies, dtype=bool)
     body_closed[body[open_edge_faces]] = False
@@ -247,4 +253,4 @@ def _assemble(V: np.ndarray, F: np.ndarray, source_corner: np.ndarray, table: Ed
                                     where=tuple(float(x) for x in V[ends[0]].mean(axis=0))))
     return NonManifoldSplit(vertices=vertices_out, source_vertex=source_vertex, faces=faces_out,
                             source_corner=source_corner, body=body, body_closed=body_closed, body_volume=body_volume,
-                            unresolved_edges=ends, records=records)
+                            unresolved_edges=ends, records=records, edges=out_table)

@@ -18,6 +18,7 @@ from scipy.sparse.csgraph import connected_components
 
 from fracture_cli import trigeom
 from fracture_cli.errors import StageError
+from fracture_cli.meshfix.rows import unique_rows, used_vertices
 from fracture_cli.meshtopo import boundary_edges, manifold_patches, nonmanifold_edges
 from fracture_cli.types import SurfaceMesh
 
@@ -76,7 +77,7 @@ def vertex_properties(surface: SurfaceMesh, columns: int = SOLID_COLUMNS) -> np.
         props[:, NORMAL] = surface.normals
     else:
         # Area-weighted normals averaged over vertices sharing a position.
-        unique_positions, pos = np.unique(V, axis=0, return_inverse=True)
+        unique_positions, pos = unique_rows(V, return_inverse=True)
         pos = pos.reshape(-1)
         props[:, NORMAL] = trigeom.vertex_normals(unique_positions, pos[np.asarray(surface.faces, dtype=np.int64)])[pos]
     if columns > SOLID_COLUMNS:
@@ -87,7 +88,7 @@ def vertex_properties(surface: SurfaceMesh, columns: int = SOLID_COLUMNS) -> np.
 def weld_map(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Representative vertex (n,) of each vertex: exact position weld, then manifold3d's open-edge merge."""
     n = len(V)
-    _, first, inverse = np.unique(V, axis=0, return_index=True, return_inverse=True)
+    _, first, inverse = unique_rows(V, return_index=True, return_inverse=True)
     target = first[inverse.reshape(-1)]
     src = np.flatnonzero(target != np.arange(n))
     mesh = manifold3d.Mesh64(
@@ -107,7 +108,7 @@ def weld_map(V: np.ndarray, F: np.ndarray) -> np.ndarray:
         target = nxt
     # The smallest referenced index of each group represents it (stable under input order).
     key = np.arange(n) + n
-    key[np.unique(F)] -= n
+    key[used_vertices(F, n)] -= n
     smallest = np.full(n, 2 * n, dtype=np.int64)
     np.minimum.at(smallest, target, key)
     return smallest[target] % n

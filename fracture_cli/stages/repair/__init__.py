@@ -32,6 +32,7 @@ from fracture_cli.meshfix.faces import orient_consistently, unique_faces
 from fracture_cli.meshfix.holes import FillOptions, boundary_loops
 from fracture_cli.meshfix.nonmanifold import NonManifoldSplit, split_nonmanifold
 from fracture_cli.meshfix.records import RepairRecord
+from fracture_cli.meshfix.rows import used_vertices
 from fracture_cli.meshfix.weld_check import collapsed
 from fracture_cli.meshtopo import components
 from fracture_cli.options import option
@@ -252,7 +253,7 @@ def _weld_and_clean(surface: SurfaceMesh, records: list[RepairRecord]) -> tuple[
     unique = unique_faces(W)
     records += unique.records
     mesh = SplitMesh(props, F[unique.keep], material_ids[unique.keep], weld)
-    flat = is_flat(props[np.unique(mesh.faces), :3]) if len(mesh.faces) else True
+    flat = is_flat(props[used_vertices(mesh.faces, len(props)), :3]) if len(mesh.faces) else True
     if len(mesh.faces) == 0:
         raise StageError("no faces are left after removing degenerate and duplicated faces: "
                          + (_FLAT_MESSAGE if flat else "the mesh encloses nothing"), stage=STAGE)
@@ -274,18 +275,22 @@ def _orient_and_split(mesh: SplitMesh, normalization: Normalization, records: li
         Where the faces around an edge do not bound alternating solid and
         empty wedges (fins, sheets hinged on a solid): no inside there.
     """
-    flip, flipped = orient_consistently(mesh.welded)
+    table = edge_table(mesh.welded)
+    flip, flipped = orient_consistently(mesh.welded, table)
     records += flipped
-    if flip.any():
+    turned = bool(flip.any())
+    if turned:
         mesh = _flipped(mesh, flip)
     V = mesh.props[:, POS]
-    if (edge_table(mesh.welded).count > 2).any():
+    if (table.count > 2).any():  # turning faces keeps the edges and their counts
         outward = closed_patches_outward(V, mesh.welded)
         if outward.any():
             records.append(RepairRecord("flipped_winding", f"turned {int(outward.sum())} faces of inside-out bodies "
                                         "that touch others outward", count=int(outward.sum())))
             mesh = _flipped(mesh, outward)
-    split = split_nonmanifold(V, mesh.welded)
+            turned = True
+    # The table's sides are still the faces' when none was turned.
+    split = split_nonmanifold(V, mesh.welded, None if turned else table)
     _refuse_without_inside(split, normalization)
     changes = [r for r in split.records if r.what != "unclosed_body"]
     if changes:
@@ -302,7 +307,7 @@ def _refuse_without_inside(split: NonManifoldSplit, normalization: Normalization
     two faces after the split, or bodies that close only onto themselves with
     no volume (a fin doubled into a wall of nothing).
     """
-    table = edge_table(split.faces)
+    table = split.edges if split.edges is not None else edge_table(split.faces)
     many = table.ends[table.count > 2]
     flat = split.body_closed & (np.abs(split.body_volume) <= _MIN_VOLUME)
     if len(split.unresolved_edges):

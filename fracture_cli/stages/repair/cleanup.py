@@ -6,6 +6,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fracture_cli.meshfix.edges import components
+from fracture_cli.meshfix.rows import used_vertices
 from fracture_cli.stages._solids import POS
 
 # Smallest / largest singular value of the centred positions below which they are coplanar.
@@ -43,7 +44,7 @@ def snap_between_bodies(props: np.ndarray, faces: np.ndarray, weld: np.ndarray, 
     vertices) move, so small features within one body are never collapsed.
     """
     welded = weld[faces]
-    reps = np.unique(welded)
+    reps = used_vertices(welded, len(weld))
     if len(reps) < 2 or tolerance <= 0:
         return 0
     local = np.searchsorted(reps, welded)

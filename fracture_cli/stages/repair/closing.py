@@ -27,6 +27,8 @@ def interior_slot(materials: tuple[Material, ...]) -> tuple[int, tuple[Material,
 def open_bodies(mesh: SplitMesh) -> list[np.ndarray]:
     """Face indices of every body (faces joined across two-face edges) that has an edge with one face."""
     table = edge_table(mesh.welded)
+    if not (table.count == 1).any():
+        return []  # closed: no bodies to find
     body = face_bodies(table)
     is_open = np.zeros(int(body.max()) + 1 if len(body) else 0, dtype=bool)
     is_open[body[table.face[table.count[table.edge] == 1]]] = True

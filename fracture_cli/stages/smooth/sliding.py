@@ -11,6 +11,12 @@ from fracture_cli.types import SurfaceMesh
 # Sliding: a cage triangle next to a slid vertex must stay this far (unit bbox diagonal) from the input; the
 # triangle test is conservative (a separating-axis gap), so the true distance is at least this.
 _SLIDE_CLEARANCE = 1e-3
+# Broad-phase cells of the containment check, as a fraction of the cage's median triangle size.
+_QUERY_CELL = 0.2
+# Rounding allowance (unit bbox diagonal) of the plane test that stands in for the separating-axis test's own.
+_PLANE_MARGIN = 1e-9
+# Input triangles with edges up to this many query cells are found through their corners.
+_SHORT_EDGE = 1.0
 
 
 class CageSurface:
@@ -63,21 +69,67 @@ def _prism_winding(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarr
     return total
 
 
+def _near_plane(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarray, box: np.ndarray,
+                qi: np.ndarray, tiny: float) -> tuple[np.ndarray, np.ndarray]:
+    """The (box, point) pairs whose point ``P`` (k, 3) can be inside the prism swept by triangle ``faces[box]``.
+
+    A triangle whose corners move from ``V0`` to ``X`` by at most ``r`` sweeps a prism within ``r`` of the
+    plane of its old corners (every point of it is a convex combination of corners within that slab), and a
+    closed surface's winding number is 0 outside a convex set holding it. Points farther than ``r`` from the
+    plane are dropped: their prism winding numbers are 0 (up to rounding, far from the 0.5 the caller tests).
+    Triangles whose doubled area is at most ``tiny`` have no reliable plane and keep every pair.
+    """
+    if len(box) == 0:
+        return box, qi
+    old, new = V0[faces], X[faces]  # (t, 3, 3)
+    normal = np.cross(old[:, 1] - old[:, 0], old[:, 2] - old[:, 0])
+    length = np.linalg.norm(normal, axis=1)
+    reach = np.linalg.norm(new - old, axis=2).max(axis=1)
+    offset = np.abs(np.einsum("ij,ij->i", P - old[box, 0], normal[box]))
+    # The margin covers rounding.
+    keep = (length[box] <= tiny) | (offset <= (reach[box] * (1.0 + 1e-6) + _PLANE_MARGIN) * length[box])
+    return box[keep], qi[keep]
+
+
 class Containment:
     """Checks that a moved cage (same triangles ``F`` (b, 3), outward) still strictly contains ``surface``."""
 
     def __init__(self, surface: SurfaceMesh, V0: np.ndarray, F: np.ndarray):
         self.SV = np.asarray(surface.vertices, dtype=np.float64)
         self.SF = np.asarray(surface.faces, dtype=np.int64)
-        boxes = trigeom.triangle_boxes(self.SV, self.SF)
-        self.grid = trigeom.BoxGrid(boxes, trigeom.default_cell(boxes))
         self.V0 = V0
         self.F = np.asarray(F, dtype=np.int64)
-        # The input's vertices (points as boxes), indexed once and queried with the few swept boxes of each
-        # round, in cells about a cage triangle's size (indexing the swept boxes instead and querying every
-        # input vertex each round cost most of the smoothing of a million-triangle input).
-        cage_boxes = trigeom.triangle_boxes(V0, self.F)
-        self.points = trigeom.BoxGrid(np.stack([self.SV, self.SV], axis=1), trigeom.default_cell(cage_boxes))
+        T = self.SV[self.SF]
+        # Cage triangles whose doubled area is at most this have no reliable plane to filter pairs with (far
+        # above the separating-axis test's own threshold for an axis, 1e-12 times its pairs' extent squared).
+        extent = max(float(np.ptp(self.SV, axis=0).max(initial=0.0)) if len(self.SV) else 0.0,
+                     float(np.ptp(V0, axis=0).max(initial=0.0)) if len(V0) else 0.0)
+        self.tiny = 1e-9 * (2.0 * extent) ** 2
+        self.boxes = np.stack([T.min(axis=1), T.max(axis=1)], axis=1)  # trigeom.triangle_boxes
+        cell = _QUERY_CELL * trigeom.default_cell(trigeom.triangle_boxes(V0, self.F))
+        # Short input triangles are found from their corners (every corner of a triangle meeting a box lies
+        # within its longest edge of the box); the few long ones, whose corners may be far, in a grid of their
+        # own. ``reach``: the longest edge of a short triangle.
+        longest = np.linalg.norm(T - T[:, [1, 2, 0]], axis=2).max(axis=1) if len(T) else np.zeros(0)
+        self.reach = _SHORT_EDGE * cell
+        long_ = np.flatnonzero(longest > self.reach)
+        self.long = long_
+        self.long_grid = trigeom.BoxGrid(self.boxes[long_], trigeom.default_cell(self.boxes[long_])) if len(long_) \
+            else None
+        # Short triangles by corner (CSR).
+        short_faces = np.flatnonzero(longest <= self.reach)
+        corners = self.SF[short_faces].reshape(-1)
+        self.corner_face = short_faces[np.argsort(corners, kind="stable") // 3]
+        self.corner_start = np.concatenate([[0], np.cumsum(np.bincount(corners, minlength=len(self.SV)))])
+        # The input's vertices (points as boxes), indexed once and queried with the few cage-sized boxes of
+        # each round, in cells of a fifth of a cage triangle (cells of an input triangle's size made every
+        # query span thousands of cells on a million-triangle input). Indexing the query boxes instead and
+        # querying every input vertex each round was slower still.
+        self.points = trigeom.BoxGrid(np.stack([self.SV, self.SV], axis=1), cell)
+        # Whether each cage triangle comes near the input, for the corners it had when last tested: most
+        # touched triangles keep their corners from one round to the next.
+        self.tested = np.full((len(self.F), 3, 3), np.nan)
+        self.near = np.zeros(len(self.F), dtype=bool)
 
     def offenders(self, X: np.ndarray, moved: np.ndarray) -> np.ndarray:
         """Moved vertices (ascending ids) to send back: the cage over ``X`` (n, 3) near ``moved`` (n,) is unsafe.
@@ -91,28 +143,84 @@ class Containment:
         if not touched.any():
             return np.zeros(0, dtype=np.int64)
         faces = self.F[touched]
-        qi, j = self.grid.query(trigeom.triangle_boxes(X, faces), pad=_SLIDE_CLEARANCE)
-        hit = trigeom.triangles_intersect(X[faces[qi]], self.SV[self.SF[j]], eps=_SLIDE_CLEARANCE)
-        blame[faces[np.unique(qi[hit])].reshape(-1)] = True
+        blame[faces[self._near_input_cached(X, np.flatnonzero(touched))].reshape(-1)] = True
         pairs = trigeom.self_intersections(X, self.F)
         crossing = pairs[touched[pairs].any(axis=1)]
         blame[self.F[crossing.reshape(-1)].reshape(-1)] = True
+        blame[faces[self._swept_past(X, faces)].reshape(-1)] = True
+        return np.flatnonzero(blame & moved)
+
+    def _near_input_cached(self, X: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """Whether the cage triangles ``ids`` (t,) over ``X`` come near the input (t,) bool; see :meth:`_near_input`."""
+        corners = X[self.F[ids]]
+        stale = ~np.all(corners == self.tested[ids], axis=(1, 2))
+        if stale.any():
+            fresh = ids[stale]
+            near = np.zeros(len(fresh), dtype=bool)
+            near[self._near_input(X, self.F[fresh])] = True
+            self.tested[fresh] = corners[stale]
+            self.near[fresh] = near
+        return self.near[ids]
+
+    def _near_input(self, X: np.ndarray, faces: np.ndarray) -> np.ndarray:
+        """Which cage triangles ``faces`` (t, 3) over ``X`` come within ``_SLIDE_CLEARANCE`` of an input triangle.
+
+        The pairs tested are those of a box broad phase (query boxes padded by the clearance) less the pairs the
+        separating-axis test would reject on the cage triangle's normal anyway (every corner of the input
+        triangle farther than the clearance below its plane): only input triangles with a corner above that
+        are gathered, through their corners, so most of a million-triangle input is never paired.
+        """
+        boxes = trigeom.triangle_boxes(X, faces)
+        padded = boxes.copy()
+        padded[:, 0] -= _SLIDE_CLEARANCE
+        padded[:, 1] += _SLIDE_CLEARANCE
+        box, point = self.points.query(padded, pad=self.reach)
+        A = X[faces]
+        normal = np.cross(A[:, 1] - A[:, 0], A[:, 2] - A[:, 0])
+        length = np.linalg.norm(normal, axis=1)
+        side = np.einsum("ij,ij->i", self.SV[point] - A[box, 0], normal[box])
+        reach = (_SLIDE_CLEARANCE + _PLANE_MARGIN) * length[box]
+        # A triangle is separated on the normal if all its corners are beyond the slab on one side; the
+        # input lies below the outward cage, so gathering triangles from their corners not below the slab
+        # finds every other one (and a few above it). Degenerate cage triangles keep every corner.
+        keep = (length[box] <= self.tiny) | (side >= -reach)
+        box, point = box[keep], point[keep]
+        count = self.corner_start[point + 1] - self.corner_start[point]
+        qi = np.repeat(box, count)
+        local = np.arange(int(count.sum()), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
+        j = self.corner_face[np.repeat(self.corner_start[point], count) + local]
+        if self.long_grid is not None:
+            long_qi, long_j = self.long_grid.query(padded)
+            qi, j = np.concatenate([qi, long_qi]), np.concatenate([j, self.long[long_j]])
+        qi, j = _unique_pairs(qi, j, len(self.SF))
+        overlap = np.all((padded[qi, 0] <= self.boxes[j, 1]) & (self.boxes[j, 0] <= padded[qi, 1]), axis=1)
+        qi, j = qi[overlap], j[overlap]
+        hit = trigeom.triangles_intersect(A[qi], self.SV[self.SF[j]], eps=_SLIDE_CLEARANCE)
+        return np.unique(qi[hit])
+
+    def _swept_past(self, X: np.ndarray, faces: np.ndarray) -> np.ndarray:
+        """Cage triangles ``faces`` (t, 3) whose swept box holds an input vertex the moved cage no longer encloses."""
         # Moving each touched triangle straight from its old to its new corners, the cage sweeps over a point
         # (changing its winding number) only inside the box of some triangle's old and new corners.
         swept = np.concatenate([self.V0[faces], X[faces]], axis=1)
         boxes = np.stack([swept.min(axis=1), swept.max(axis=1)], axis=1)
-        box, qi = self.points.query(boxes)
+        all_box, all_qi = self.points.query(boxes)
+        box, qi = _near_plane(self.SV[all_qi], self.V0, X, faces, all_box, all_qi, self.tiny)
         order = np.lexsort((box, qi))  # by point, then box: the order the sums below were defined in
         qi, box = qi[order], box[order]
-        if len(qi):
-            # The input is strictly inside the original cage (winding number 1) and only the touched
-            # triangles changed: the winding number w.r.t. the moved cage is 1 plus the winding numbers of
-            # the prisms the touched triangles swept (their side walls cancel between neighbours), and a
-            # prism's winding number is 0 outside its box: only (point, box) pairs contribute.
-            change = np.bincount(qi, weights=_prism_winding(self.SV[qi], self.V0, X, faces[box]),
-                                 minlength=len(self.SV))
-            points = np.unique(qi)
-            outside = points[1.0 + change[points] < 0.5]
-            blame[faces[box[np.isin(qi, outside)]].reshape(-1)] = True
-        return np.flatnonzero(blame & moved)
+        if not len(qi):
+            return np.zeros(0, dtype=np.int64)
+        # The input is strictly inside the original cage (winding number 1) and only the touched
+        # triangles changed: the winding number w.r.t. the moved cage is 1 plus the winding numbers of
+        # the prisms the touched triangles swept (their side walls cancel between neighbours), and a
+        # prism's winding number is 0 outside its box: only (point, box) pairs contribute.
+        change = np.bincount(qi, weights=_prism_winding(self.SV[qi], self.V0, X, faces[box]), minlength=len(self.SV))
+        points = np.unique(qi)
+        outside = points[1.0 + change[points] < 0.5]
+        return all_box[np.isin(all_qi, outside)]
 
+
+def _unique_pairs(i: np.ndarray, j: np.ndarray, num_j: int) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct pairs ``(i, j)`` (p,), sorted by ``i`` then ``j``."""
+    key = np.unique(i * np.int64(num_j) + j)
+    return key // num_j, key % num_j
