@@ -145,3 +145,23 @@ def test_collision_shapes_are_the_same_with_one_job_and_two():
     assert [len(p) for p in serial.parts] == [len(p) for p in forked.parts]
     assert all(p.tobytes() == q.tobytes() for a, b in zip(serial.parts, forked.parts) for p, q in zip(a, b))
     assert serial.coverage.tobytes() == forked.coverage.tobytes()
+
+
+def test_bounded_cut_search_chooses_as_trying_every_cut(monkeypatch):
+    """Parts with many vertices rank candidate cuts by lower bounds (thinned hulls) first: same pieces as
+    computing every candidate's cost."""
+    from fracture_cli.gameready import decompose
+
+    # A bumpy torus of ~5,000 vertices: concave, dense, above the bound threshold.
+    torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.35, major_sections=96, minor_sections=48)
+    V = np.asarray(torus.vertices)
+    V = V * (1.0 + 0.05 * np.sin(9 * V[:, :1]) * np.sin(7 * V[:, 1:2]))
+    solid = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.ascontiguousarray(V),
+                                                   tri_verts=np.asarray(torus.faces, dtype=np.uint64)))
+    assert solid.num_vert() > decompose._BOUND_VERTICES
+    bounded = decompose.decomposition_cells(solid, 6, 0.05)
+    monkeypatch.setattr(decompose, "_BOUND_VERTICES", 10 ** 9)
+    exhaustive = decompose.decomposition_cells(solid, 6, 0.05)
+    assert bounded[1] == exhaustive[1] and len(bounded[0]) == len(exhaustive[0]) > 1
+    for a, b in zip(bounded[0], exhaustive[0]):
+        assert np.array_equal(_mesh(a)[0], _mesh(b)[0])

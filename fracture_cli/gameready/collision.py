@@ -116,7 +116,7 @@ class CollisionShapes:
     coverage: np.ndarray
 
 
-def collision_shapes(meshes, options: CollisionOptions = CollisionOptions()) -> CollisionShapes:
+def collision_shapes(meshes, options: CollisionOptions = CollisionOptions(), faults=None) -> CollisionShapes:
     """Non-overlapping convex parts for every fragment.
 
     Parameters
@@ -125,6 +125,12 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions()) -> 
         Closed fragments, one coordinate system (the pipeline's normalized
         coordinates, unit bounding-box diagonal, keep the tolerances meaningful).
     options : CollisionOptions, optional
+    faults : sequence of (m_i,) bool, optional
+        The faces of each fragment that may touch another fragment (its fault,
+        interior-material faces); default all faces. Only these are matched
+        between fragments for the separating planes' interface normals (the
+        outer surface of a 1M-triangle input is most of its faces and touches
+        no other fragment).
 
     Returns
     -------
@@ -147,7 +153,7 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions()) -> 
             owners.append(index)
             cells.append((index, cell))
     # Parts in different cells of one fragment's partition cannot overlap: their pairs need no look.
-    flat = separate_parts(corners, materials, _groups(cells), (meshes, owners))
+    flat = separate_parts(corners, materials, _groups(cells), (meshes, owners, faults))
     owned: list[list[np.ndarray]] = [[] for _ in volumes]
     for owner, points in zip(owners, flat):
         owned[owner].append(points)

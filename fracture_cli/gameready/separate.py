@@ -131,10 +131,12 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=
         Parts of one group are known not to overlap (the cells of one
         fragment's partition): their pairs are not looked at. Default: every
         part its own group.
-    bodies : (meshes, body of each part), optional
+    bodies : (meshes, body of each part[, faces that may touch]), optional
         The closed bodies (fragments) the materials are pieces of, and the
         index of each part's body: shared faces are matched once between
         bodies instead of between pieces. Default: each material its own body.
+        A third item, per body a (m_i,) bool mask (or None: all faces),
+        restricts the matching to the faces that may touch another body.
 
     Returns
     -------
@@ -173,11 +175,12 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=
         index: dict = {}
         group = np.array([index.setdefault(g, len(index)) for g in groups], dtype=np.int64)
         pairs = pairs[group[pairs[:, 0]] != group[pairs[:, 1]]]
-    meshes, body = bodies if bodies is not None else (materials, np.arange(len(materials)))
+    meshes, body, candidates = (tuple(bodies) + (None,))[:3] if bodies is not None else (
+        materials, np.arange(len(materials)), None)
     hull_meshes = [mesh_of(h) for h in hulls]
     shared = _Shared(hulls, corners, solids, masses, tolerance, [face_planes(V, F) for V, F in hull_meshes],
                      [surface_area(V, F) for V, F in hull_meshes], np.asarray(body, dtype=np.int64),
-                     _contacts(meshes, tolerance))
+                     _contacts(meshes, tolerance, candidates))
     planes = parallel.ordered_map(_pair_plane, [(int(i), int(j)) for i, j in pairs], shared)
     clipped = [False] * len(hulls)
     for (i, j), plane in zip(pairs, planes):
@@ -242,11 +245,12 @@ def _separated(a: np.ndarray, b: np.ndarray, centre_a: np.ndarray, centre_b: np.
     return bool(len(a) == 0 or len(b) == 0 or (a @ axis).max() < (b @ axis).min())
 
 
-def _contacts(meshes, tolerance: float) -> dict:
-    """The faces every pair of bodies share: ``(P, Q) -> (area-weighted normals from P to Q (f, 3), centroids)``."""
+def _contacts(meshes, tolerance: float, candidates=None) -> dict:
+    """The faces every pair of bodies share: ``(P, Q) -> (area-weighted normals from P to Q (f, 3), centroids)``;
+    ``candidates``: per body, the (m_i,) bool mask of faces that may touch another (None: all)."""
     from fracture_cli.gameready.components import coincident_faces
 
-    match = coincident_faces(meshes, tolerance=tolerance)
+    match = coincident_faces(meshes, candidates, tolerance=tolerance)
     lo, hi = np.minimum(match.owner, match.other), np.maximum(match.owner, match.other)
     weighted = (match.area * np.where(match.owner < match.other, 1.0, -1.0))[:, None] * match.normal
     order = np.lexsort((hi, lo))

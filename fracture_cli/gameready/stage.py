@@ -51,7 +51,10 @@ def collision(fragments: Fragments, options: CollisionOptions = CollisionOptions
     """
     if options.glb == "none":
         return tuple(() for _ in fragments.fragments), {}
-    shapes = collision_shapes([(f.vertices, f.faces) for f in fragments.fragments], options)
+    interior = fragments.interior_slot
+    # Fragments touch through their fault faces only: the outer surface (most faces of a large input) is not matched.
+    shapes = collision_shapes([(f.vertices, f.faces) for f in fragments.fragments], options,
+                              faults=[f.material_ids == interior for f in fragments.fragments])
     every = [p for parts in shapes.parts for p in parts]
     checks = {
         "collision_parts": len(every),
