@@ -3,10 +3,12 @@
     python bench/bench_assets.py
 
 Runs ``make assets`` twice from scratch (it removes build/assets/ first): once
-serially, once with ``-j2``. Each bake also uses every core for its own
-independent work (``--jobs`` default) and limits BLAS to one thread, so two
-bakes at once should not fight over the cores. Target (issue #16): ``make -j2
-assets`` at most 0.6x the serial time.
+serially, once with ``-j2``. Serially each bake uses every core for its own
+independent work (``--jobs`` default); under ``-j2`` a bake starts worker
+processes only for job slots make's jobserver has free (fracture_cli/jobserver.py),
+so two bakes at once run on one core each and the last one gets both. BLAS is
+limited to one thread either way. Target (issue #16): ``make -j2 assets`` at
+most 0.6x the serial time.
 """
 
 from __future__ import annotations

@@ -16,6 +16,13 @@ use the cores, a BLAS worker thread on top would only oversubscribe them
 varying number of threads would round differently on machines with a
 different core count.
 
+Under a parallel ``make`` (``make -j2 assets``) make already runs several
+bakes at once; a bake's own workers would only add fork and pickle overhead
+and fight for the same cores. Unless ``--jobs`` is given, a map then asks
+make's jobserver (:mod:`fracture_cli.jobserver`) for free job slots and starts
+only that many workers (none when every slot is busy), or runs serially when
+make has no jobserver this process can use. Outside make nothing changes.
+
 Forking a process whose native thread pools are busy is unsafe: a TBB worker
 of manifold3d that holds a task-pool lock at the moment of ``fork()`` leaves
 that lock held forever in the child, whose next boolean then sleeps in
@@ -37,6 +44,8 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from contextvars import ContextVar
 from typing import Any, TypeVar
+
+from fracture_cli import jobserver
 
 log = logging.getLogger(__name__)
 
@@ -60,16 +69,22 @@ def available_cores() -> int:
 
 
 def current_jobs() -> int:
-    """The number of jobs for the work being run: :func:`using`'s, else every core (1 inside a worker)."""
+    """The most jobs for the work being run: :func:`using`'s, else the default (1 inside a worker).
+
+    The default is every core, or 1 under a parallel ``make`` whose jobserver
+    is not usable here (:func:`fracture_cli.jobserver.default_jobs`); with a
+    usable jobserver it is every core, of which :func:`ordered_map` uses as
+    many as make has free slots for.
+    """
     if _IN_WORKER:
         return 1
     value = _JOBS.get()
-    return available_cores() if value is None else max(int(value), 1)
+    return jobserver.default_jobs(available_cores()) if value is None else max(int(value), 1)
 
 
 @contextlib.contextmanager
 def using(jobs: int | None) -> Iterator[None]:
-    """Run the body with ``jobs`` jobs (None: every core) and BLAS limited to one thread."""
+    """Run the body with ``jobs`` jobs (None: the default of :func:`current_jobs`) and BLAS limited to one thread."""
     single_threaded_tbb()
     token = _JOBS.set(jobs)
     try:
@@ -135,7 +150,11 @@ def ordered_map(function: Callable[[Any, T], R], items: Sequence[T], shared: Any
         inherit it when they fork, it is never pickled.
     jobs : int, optional
         At most this many processes (default :func:`current_jobs`). One job, one item,
-        a worker process or a platform without ``fork`` runs serially here.
+        a worker process or a platform without ``fork`` runs serially here. When
+        neither this nor :func:`using` gives a number and make's jobserver is
+        usable, the map runs on 1 + (the tokens it gets from make without
+        waiting) workers: the bake's own job slot and one per token, which go
+        back when the map ends.
 
     Returns
     -------
@@ -145,6 +164,18 @@ def ordered_map(function: Callable[[Any, T], R], items: Sequence[T], shared: Any
     count = min(jobs if jobs is not None else current_jobs(), len(items))
     if count <= 1 or _IN_WORKER or not hasattr(os, "fork"):
         return [function(shared, item) for item in items]
+    make = jobserver.client() if jobs is None and _JOBS.get() is None else None  # an explicit number wins
+    if make is None:
+        return _run_locked(function, shared, items, count)
+    # This process holds make's implicit slot; each further worker needs a token.
+    with make.tokens(count - 1) as extra:
+        if extra == 0:
+            return [function(shared, item) for item in items]
+        return _run_locked(function, shared, items, 1 + extra)
+
+
+def _run_locked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T], count: int) -> list[R]:
+    """:func:`_run_forked` with the work published for the workers to inherit (one map at a time)."""
     single_threaded_tbb()  # no-op in a bake (using() did it); library callers may come here first
     global _WORK
     with _WORK_LOCK:
