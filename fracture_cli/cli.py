@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import signal
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -284,14 +285,25 @@ from fracture_cli.batch.command import register as _register_batch  # noqa: E402
 _register_batch(cli, TerminalCommand)
 
 
+def _terminated(signum: int, frame: Any) -> None:
+    """SIGTERM (a build tool or a timeout stopping the bake) ends it as Ctrl-C does: through the SIGINT handler
+    in place (the output set is finished or left as it was, temporary files go, make's job tokens go back)."""
+    handler = signal.getsignal(signal.SIGINT)
+    if callable(handler):
+        handler(signal.SIGINT, frame)
+    else:  # SIGINT ignored (started in the background) or not set from Python: SIGTERM still stops the bake
+        raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``fracture`` console script."""
+    if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _terminated)
     try:
         cli.main(args=argv, prog_name="fracture")
     except SystemExit:
-        import signal
-
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # exiting: a second Ctrl-C must not break the clean exit
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)  # and a SIGTERM now just ends the process
         raise
 
 

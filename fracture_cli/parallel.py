@@ -260,6 +260,9 @@ def _workers_cpu_ticks(pool: Any) -> int | None:
 def _start_worker() -> None:
     global _IN_WORKER
     _IN_WORKER = True
+    import signal
+
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the parent's SIGTERM-as-Ctrl-C (cli.main) is not for workers
     from fracture_cli import progress
 
     progress.configure(None)  # the parent process owns the terminal

@@ -632,3 +632,22 @@ def test_chain_save_and_export_never_replace_their_input(tmp_path):
     with pytest.raises(OutputError, match="is an input of this bake"):  # the chain's `export` step
         write_outputs(str(tmp_path), "prop", PipelineState(source=str(glb)), {}, Runner("t"))
     assert glb.read_bytes() == original and os.listdir(tmp_path) == ["prop.glb"]
+
+
+@pytest.mark.skipif(shutil.which("pgrep") is None, reason="needs pgrep (procps) to find the TetGen worker")
+def test_sigterm_stops_a_bake_as_ctrl_c_does(asset, tmp_path):
+    """A build tool's SIGTERM (a timeout, make stopping a job) to the bake process alone: the same clean exit as
+    Ctrl-C (exit 130, one line, no output written, the worker's folder gone), even with SIGINT ignored as in a
+    background job."""
+    out = str(tmp_path / "out")
+    bake = subprocess.Popen(fracture("bake", asset, "-o", out, *SMALL), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=REPO, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    _wait_for_worker(bake.pid)
+    os.kill(bake.pid, signal.SIGTERM)
+    _, stderr = bake.communicate(timeout=60)
+    assert bake.returncode == 130, stderr
+    assert "Traceback" not in stderr and "Exception ignored" not in stderr, stderr
+    assert "interrupted; no output was written (previous outputs are unchanged)" in stderr
+    assert _worker_dirs(bake.pid) == []
+    assert not os.path.exists(out) or os.listdir(out) == []
