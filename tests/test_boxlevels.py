@@ -50,3 +50,17 @@ def test_queries_in_chunks_give_the_same_pairs(monkeypatch):
     chunked = LevelGrid(boxes).query(queries, 0.01)
     assert len(whole[0]) > 100
     assert np.array_equal(whole[0], chunked[0]) and np.array_equal(whole[1], chunked[1])
+
+
+def test_point_queries_match_one_grid():
+    # Face centroids (point boxes, most inside one cell: the looked-up-in-one-cell path) next to boxes across cells.
+    rng = np.random.default_rng(4)
+    boxes = _mixed_boxes(rng, 1200)
+    centres = rng.uniform(-1.1, 1.1, (3000, 3))
+    sizes = np.where(rng.random(3000) < 0.9, 0.0, 0.05)[:, None]
+    queries = np.stack([centres, centres + sizes], axis=1)
+    for pad in (0.0, 1e-4):
+        expected = BoxGrid(boxes, default_cell(boxes)).query(queries, pad)
+        found = LevelGrid(boxes).query(queries, pad)
+        assert len(found[0]) > 1000
+        assert np.array_equal(found[0], expected[0]) and np.array_equal(found[1], expected[1])

@@ -39,6 +39,7 @@ class LevelGrid:
         self.boxes = np.asarray(boxes, dtype=np.float64)
         self.cell = default_cell(self.boxes)
         self.origin = self.boxes[:, 0].min(axis=0) - self.cell  # as BoxGrid's: its cells give the pair order
+        self.lo_cells = np.floor((self.boxes[:, 0] - self.origin) / self.cell).astype(np.int64)
         extent = (self.boxes[:, 1] - self.boxes[:, 0]).max(axis=1)
         level = np.zeros(len(self.boxes), dtype=np.int64)
         big = extent > _SPAN * self.cell
@@ -55,16 +56,48 @@ class LevelGrid:
         grown[:, 0] -= pad
         grown[:, 1] += pad
         found = [(q + chunk.start, members[j]) for members, grid in self.levels
-                 for chunk in _chunks(grid, grown) for q, j in [grid.query(grown[chunk.start:chunk.stop])]]
+                 for chunk in _chunks(grid, grown) for q, j in [_level_query(grid, grown[chunk.start:chunk.stop])]]
         q = np.concatenate([f[0] for f in found]) if found else np.zeros(0, dtype=np.int64)
         j = np.concatenate([f[1] for f in found]) if found else np.zeros(0, dtype=np.int64)
         lo = np.floor((grown[:, 0] - self.origin) / self.cell).astype(np.int64)
         span = np.floor((grown[:, 1] - self.origin) / self.cell).astype(np.int64) - lo + 1
-        cell_j = np.floor((self.boxes[j, 0] - self.origin) / self.cell).astype(np.int64)
-        local = np.maximum(lo[q], cell_j) - lo[q]
+        local = np.maximum(lo[q], self.lo_cells[j]) - lo[q]
         rank = local[:, 0] + span[q, 0] * (local[:, 1] + span[q, 1] * local[:, 2])
-        order = np.lexsort((j, rank, q))
+        # Pairs are distinct, so (q, rank, j) is too: one int64 key sorts them as the lexsort does, faster.
+        ranks = int(span.prod(axis=1).max()) if len(span) else 1
+        if len(boxes) * ranks * len(self.boxes) < 2 ** 62:
+            order = np.argsort((q * ranks + rank) * len(self.boxes) + j)
+        else:
+            order = np.lexsort((j, rank, q))
         return q[order], j[order]
+
+
+def _level_query(grid: BoxGrid, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs ``grid.query(boxes)`` finds (p,) int64, in another order (:meth:`LevelGrid.query` sorts them).
+
+    Queries inside one cell of ``grid`` (a face centroid's point box, nearly always) are looked up in that
+    cell alone: each box there is a candidate once, so BoxGrid's once-per-pair cell test and its (p, 3) cell
+    and (p, 2, 3) box temporaries are not needed; the overlap test is the same comparisons, axis by axis.
+    The other queries go through :meth:`~fracture_cli.trigeom.BoxGrid.query`.
+    """
+    lo, hi = grid._cells(boxes)
+    single = np.flatnonzero(np.all(lo == hi, axis=1))
+    other = np.flatnonzero(~np.all(lo == hi, axis=1))
+    ids, keys = grid._expand(boxes[single])
+    left = np.searchsorted(grid.keys, keys, side="left")
+    count = np.searchsorted(grid.keys, keys, side="right") - left
+    q = np.repeat(single[ids], count)
+    start = np.cumsum(count) - count
+    j = grid.ids[np.repeat(left - start, count) + np.arange(int(count.sum()), dtype=np.int64)]
+    keep = np.ones(len(q), dtype=bool)
+    for axis in range(3):
+        keep &= boxes[q, 0, axis] <= grid.boxes[j, 1, axis]
+        keep &= grid.boxes[j, 0, axis] <= boxes[q, 1, axis]
+    q, j = q[keep], j[keep]
+    if len(other):
+        qo, jo = grid.query(boxes[other])
+        q, j = np.concatenate([q, other[qo]]), np.concatenate([j, jo])
+    return q, j
 
 
 def _chunks(grid: BoxGrid, boxes: np.ndarray) -> list[range]:
