@@ -15,6 +15,7 @@ import numpy as np
 from fracture_cli import parallel, trigeom
 from fracture_cli.errors import StageError
 from fracture_cli.faultshape import fragment_faults
+from fracture_cli.meshfix.rows import unique_rows
 from fracture_cli.meshfix.weld_check import MeshCheck, as_written, check_mesh, collapsed, weld_by_position
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, SurfaceMesh
 
@@ -54,7 +55,8 @@ def written_fragments(fragments: Fragments, pivot: str = "center_of_mass") -> tu
     for frag, body in zip(fragments.fragments, fragment_physics(fragments, pivot=pivot)):
         world = fragments.normalization.to_world(frag.vertices)
         stored = as_written(world, body.origin)
-        _, index = weld_by_position(stored)
+        welded = weld_by_position(stored)  # checked below too: the faces left out do not change the positions
+        index = welded[1]
         degenerate = collapsed(index[frag.faces])
         if degenerate.any():
             # Corners one written position joins take one float64 position too (the first's): without the
@@ -64,7 +66,7 @@ def written_fragments(fragments: Fragments, pivot: str = "center_of_mass") -> tu
             frag = dataclasses.replace(frag, vertices=frag.vertices[first[index]], faces=frag.faces[~degenerate],
                                        material_ids=frag.material_ids[~degenerate])
         out.append(frag)
-        checks.append(check_mesh(stored, frag.faces))
+        checks.append(check_mesh(stored, frag.faces, welded))
     return dataclasses.replace(fragments, fragments=tuple(out)), checks
 
 
@@ -193,7 +195,7 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
 
 
 def _solid(V: np.ndarray, F: np.ndarray):
-    _, first, pos = np.unique(V, axis=0, return_index=True, return_inverse=True)
+    _, first, pos = unique_rows(V, return_index=True, return_inverse=True)  # np.unique's, by column sorts
     pos = pos.reshape(-1)
     target = first[pos]
     src = np.flatnonzero(target != np.arange(len(V)))

@@ -50,3 +50,33 @@ def test_queries_in_chunks_give_the_same_pairs(monkeypatch):
     chunked = LevelGrid(boxes).query(queries, 0.01)
     assert len(whole[0]) > 100
     assert np.array_equal(whole[0], chunked[0]) and np.array_equal(whole[1], chunked[1])
+
+
+def test_point_queries_match_one_grid():
+    # Face centroids (point boxes, most inside one cell: the looked-up-in-one-cell path) next to boxes across cells.
+    rng = np.random.default_rng(4)
+    boxes = _mixed_boxes(rng, 1200)
+    centres = rng.uniform(-1.1, 1.1, (3000, 3))
+    sizes = np.where(rng.random(3000) < 0.9, 0.0, 0.05)[:, None]
+    queries = np.stack([centres, centres + sizes], axis=1)
+    for pad in (0.0, 1e-4):
+        expected = BoxGrid(boxes, default_cell(boxes)).query(queries, pad)
+        found = LevelGrid(boxes).query(queries, pad)
+        assert len(found[0]) > 1000
+        assert np.array_equal(found[0], expected[0]) and np.array_equal(found[1], expected[1])
+
+
+def test_kept_pairs_in_order_are_the_query_filtered():
+    # coincident_faces filters the unordered pairs, then orders what it keeps: the query's order, filtered.
+    rng = np.random.default_rng(5)
+    boxes = _mixed_boxes(rng, 1000)
+    centres = rng.uniform(-1.1, 1.1, (2000, 3))
+    queries = np.stack([centres, centres + np.where(rng.random(2000) < 0.8, 0.0, 0.05)[:, None]], axis=1)
+    grid = LevelGrid(boxes)
+    q, j = grid.query(queries, 1e-3)
+    pq, pj = grid.pairs(queries, 1e-3)
+    assert len(pq) == len(q) and set(zip(pq.tolist(), pj.tolist())) == set(zip(q.tolist(), j.tolist()))
+    keep = (pq + pj) % 3 == 0
+    kq, kj = grid.in_order(queries, 1e-3, pq[keep], pj[keep])
+    expected = (q + j) % 3 == 0
+    assert np.array_equal(kq, q[expected]) and np.array_equal(kj, j[expected])

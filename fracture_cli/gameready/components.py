@@ -228,14 +228,17 @@ def _block_matches(shared: tuple, start: int) -> tuple[np.ndarray, np.ndarray]:
     """Matched ``(face, face it lies on)`` pairs (p,) int64 for the faces ``start : start + _QUERY_BLOCK``."""
     grid, T, owner_all, unit, centroid, tolerance = shared
     block = centroid[start:start + _QUERY_BLOCK]
-    q, g = grid.query(np.stack([block, block], axis=1), pad=tolerance)
-    q = q + start
+    points = np.stack([block, block], axis=1)
+    # The grid's order (it picks each face's match) only for the pairs kept: most overlapping boxes fail below.
+    local, g = grid.pairs(points, pad=tolerance)
+    q = local + start
     keep = (owner_all[q] != owner_all[g]) & (np.einsum("ij,ij->i", unit[q], unit[g]) < _OPPOSITE_COS)
     q, g = q[keep], g[keep]
     keep = np.abs(np.einsum("ij,ij->i", unit[g], centroid[q] - T[g, 0])) <= tolerance
     q, g = q[keep], g[keep]
     keep = _inside(centroid[q], T[g], tolerance)
-    return q[keep], g[keep]
+    local, g = grid.in_order(points, tolerance, q[keep] - start, g[keep])
+    return local + start, g
 
 
 def _inside(points: np.ndarray, triangles: np.ndarray, tolerance: float) -> np.ndarray:
