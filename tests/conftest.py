@@ -47,3 +47,15 @@ def _pristine_fracture_logger():
     logger.handlers[:], logger.level, logger.propagate = [], logging.NOTSET, True
     yield
     logger.handlers[:], logger.level, logger.propagate = [], logging.NOTSET, True
+
+
+@pytest.fixture
+def outside_make(monkeypatch):
+    """The test runs as outside make (the suite itself may run under `make -j2 test`, whose MAKEFLAGS would
+    change the default jobs), with no jobserver client kept from another test."""
+    from fracture_cli import jobserver
+
+    monkeypatch.delenv("MAKEFLAGS", raising=False)
+    jobserver.forget()
+    yield
+    jobserver.forget()

@@ -19,13 +19,8 @@ from conftest import REPO
 TOKENS = b"abc"  # make writes '+'; distinct bytes show that exactly the bytes read go back (in any order)
 
 
-@pytest.fixture(autouse=True)
-def _no_make(monkeypatch):
-    """Each test starts outside make (the suite itself may run under `make -j2 test`) and with no client kept."""
-    monkeypatch.delenv("MAKEFLAGS", raising=False)
-    jobserver.forget()
-    yield
-    jobserver.forget()
+# Every test starts outside make, with no jobserver client kept (see conftest).
+pytestmark = pytest.mark.usefixtures("outside_make")
 
 
 @pytest.fixture

@@ -556,6 +556,16 @@ def _worker_dirs(pid: int) -> list[str]:
     return [n for n in os.listdir(tempfile.gettempdir()) if n.startswith(prefix)]
 
 
+def _assert_stopped_cleanly(bake: subprocess.Popen, out: str) -> None:
+    """The bake ended as an interrupt does: exit 130, one line, nothing written, its TetGen worker's folder gone."""
+    _, stderr = bake.communicate(timeout=60)
+    assert bake.returncode == 130, stderr
+    assert "Traceback" not in stderr and "Exception ignored" not in stderr, stderr
+    assert "interrupted; no output was written (previous outputs are unchanged)" in stderr
+    assert _worker_dirs(bake.pid) == []
+    assert not os.path.exists(out) or os.listdir(out) == []
+
+
 @pytest.mark.skipif(shutil.which("pgrep") is None, reason="needs pgrep (procps) to find the TetGen worker")
 def test_double_ctrl_c_to_the_process_group_is_clean(asset, tmp_path):
     out = str(tmp_path / "out")
@@ -566,12 +576,7 @@ def test_double_ctrl_c_to_the_process_group_is_clean(asset, tmp_path):
     os.killpg(bake.pid, signal.SIGINT)
     time.sleep(0.05)
     os.killpg(bake.pid, signal.SIGINT)
-    _, stderr = bake.communicate(timeout=60)
-    assert bake.returncode == 130, stderr
-    assert "Traceback" not in stderr and "Exception ignored" not in stderr, stderr
-    assert "interrupted; no output was written (previous outputs are unchanged)" in stderr
-    assert _worker_dirs(bake.pid) == []
-    assert not os.path.exists(out) or os.listdir(out) == []
+    _assert_stopped_cleanly(bake, out)
 
 
 @pytest.mark.skipif(shutil.which("pgrep") is None, reason="needs pgrep (procps) to find the TetGen worker")
@@ -645,9 +650,4 @@ def test_sigterm_stops_a_bake_as_ctrl_c_does(asset, tmp_path):
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     _wait_for_worker(bake.pid)
     os.kill(bake.pid, signal.SIGTERM)
-    _, stderr = bake.communicate(timeout=60)
-    assert bake.returncode == 130, stderr
-    assert "Traceback" not in stderr and "Exception ignored" not in stderr, stderr
-    assert "interrupted; no output was written (previous outputs are unchanged)" in stderr
-    assert _worker_dirs(bake.pid) == []
-    assert not os.path.exists(out) or os.listdir(out) == []
+    _assert_stopped_cleanly(bake, out)

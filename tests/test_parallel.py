@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from fracture_cli import jobserver, parallel
+from fracture_cli import parallel
 from fracture_cli.cli import cli
 from fracture_cli.cli_options import hoist_global_flags
 from fracture_cli.errors import StageError
@@ -21,13 +21,8 @@ from conftest import SAMPLE_ASSETS
 FAST = ["--set", "cage.target_faces=600", "--set", "modes.num_modes=4", "--set", "smooth.refine=1"]
 
 
-@pytest.fixture(autouse=True)
-def _outside_make(monkeypatch):
-    """The defaults asserted here are those outside make (the suite may run under `make -j2 test`)."""
-    monkeypatch.delenv("MAKEFLAGS", raising=False)
-    jobserver.forget()
-    yield
-    jobserver.forget()
+# Every test starts outside make, with no jobserver client kept (see conftest).
+pytestmark = pytest.mark.usefixtures("outside_make")
 
 
 def _square_plus(shared, item):
