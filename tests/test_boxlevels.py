@@ -52,13 +52,19 @@ def test_queries_in_chunks_give_the_same_pairs(monkeypatch):
     assert np.array_equal(whole[0], chunked[0]) and np.array_equal(whole[1], chunked[1])
 
 
+def _point_and_box_queries(rng: np.random.Generator, n: int, points: float) -> np.ndarray:
+    """(n, 2, 3) query boxes around [-1.1, 1.1]^3: about ``points`` of them points, the rest cubes of side 0.05
+    (the same random draws, in the same order, as the tests had inline)."""
+    centres = rng.uniform(-1.1, 1.1, (n, 3))
+    sizes = np.where(rng.random(n) < points, 0.0, 0.05)[:, None]
+    return np.stack([centres, centres + sizes], axis=1)
+
+
 def test_point_queries_match_one_grid():
     # Face centroids (point boxes, most inside one cell: the looked-up-in-one-cell path) next to boxes across cells.
     rng = np.random.default_rng(4)
     boxes = _mixed_boxes(rng, 1200)
-    centres = rng.uniform(-1.1, 1.1, (3000, 3))
-    sizes = np.where(rng.random(3000) < 0.9, 0.0, 0.05)[:, None]
-    queries = np.stack([centres, centres + sizes], axis=1)
+    queries = _point_and_box_queries(rng, 3000, 0.9)
     for pad in (0.0, 1e-4):
         expected = BoxGrid(boxes, default_cell(boxes)).query(queries, pad)
         found = LevelGrid(boxes).query(queries, pad)
@@ -70,8 +76,7 @@ def test_kept_pairs_in_order_are_the_query_filtered():
     # coincident_faces filters the unordered pairs, then orders what it keeps: the query's order, filtered.
     rng = np.random.default_rng(5)
     boxes = _mixed_boxes(rng, 1000)
-    centres = rng.uniform(-1.1, 1.1, (2000, 3))
-    queries = np.stack([centres, centres + np.where(rng.random(2000) < 0.8, 0.0, 0.05)[:, None]], axis=1)
+    queries = _point_and_box_queries(rng, 2000, 0.8)
     grid = LevelGrid(boxes)
     q, j = grid.query(queries, 1e-3)
     pq, pj = grid.pairs(queries, 1e-3)

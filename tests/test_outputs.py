@@ -556,6 +556,15 @@ def _worker_dirs(pid: int) -> list[str]:
     return [n for n in os.listdir(tempfile.gettempdir()) if n.startswith(prefix)]
 
 
+def _bake_in_tetgen(asset: str, out: str, sigint: signal.Handlers) -> subprocess.Popen:
+    """A bake in a session of its own (SIGINT set to ``sigint``), once it runs its TetGen worker."""
+    bake = subprocess.Popen(fracture("bake", asset, "-o", out, *SMALL), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=REPO, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, sigint))
+    _wait_for_worker(bake.pid)
+    return bake
+
+
 def _assert_stopped_cleanly(bake: subprocess.Popen, out: str) -> None:
     """The bake ended as an interrupt does: exit 130, one line, nothing written, its TetGen worker's folder gone."""
     _, stderr = bake.communicate(timeout=60)
@@ -569,10 +578,7 @@ def _assert_stopped_cleanly(bake: subprocess.Popen, out: str) -> None:
 @pytest.mark.skipif(shutil.which("pgrep") is None, reason="needs pgrep (procps) to find the TetGen worker")
 def test_double_ctrl_c_to_the_process_group_is_clean(asset, tmp_path):
     out = str(tmp_path / "out")
-    bake = subprocess.Popen(fracture("bake", asset, "-o", out, *SMALL), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=REPO, start_new_session=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    _wait_for_worker(bake.pid)
+    bake = _bake_in_tetgen(asset, out, signal.SIG_DFL)
     os.killpg(bake.pid, signal.SIGINT)
     time.sleep(0.05)
     os.killpg(bake.pid, signal.SIGINT)
@@ -645,9 +651,6 @@ def test_sigterm_stops_a_bake_as_ctrl_c_does(asset, tmp_path):
     Ctrl-C (exit 130, one line, no output written, the worker's folder gone), even with SIGINT ignored as in a
     background job."""
     out = str(tmp_path / "out")
-    bake = subprocess.Popen(fracture("bake", asset, "-o", out, *SMALL), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=REPO, start_new_session=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
-    _wait_for_worker(bake.pid)
+    bake = _bake_in_tetgen(asset, out, signal.SIG_IGN)
     os.kill(bake.pid, signal.SIGTERM)
     _assert_stopped_cleanly(bake, out)
