@@ -113,18 +113,21 @@ def _best_cut(part: manifold3d.Manifold):
     edges = unique_edges(F)  # (a row-wise np.unique took 8 s of the 1M bench bake)
     props = mass_properties(V, F)
     _, axes = props.principal()
-    candidates = []  # (normal, offset, heights of the vertices along the normal), in the fixed order
+    # (normal, offset, heights of the vertices along the normal, points where the edges cross the plane), in
+    # the fixed order; the crossings once, for the bound and the cost alike.
+    candidates = []
     for normal in _cut_normals(axes):
         s = V @ normal
         lo, hi = float(s.min()), float(s.max())
-        candidates += [(normal, offset, s) for offset in lo + (hi - lo) * _CUT_FRACTIONS]
-    bounds = _cost_bounds(V, edges, candidates) if len(V) > _BOUND_VERTICES else np.zeros(len(candidates))
+        candidates += [(normal, offset, s, _cut_points(V, edges, s, offset))
+                       for offset in lo + (hi - lo) * _CUT_FRACTIONS]
+    bounds = _cost_bounds(V, candidates) if len(V) > _BOUND_VERTICES else np.zeros(len(candidates))
     best, best_cost = None, part.hull().volume() * (1.0 - 1e-9)
     for index in np.argsort(bounds, kind="stable").tolist():
         if bounds[index] * (1.0 - _BOUND_SLACK) > best_cost:
             break  # this bound and every later one exceed the best cost
-        normal, offset, s = candidates[index]
-        cost = _halves_hull_volume(V, edges, s, offset)
+        normal, offset, s, cut = candidates[index]
+        cost = _halves_hull_volume(V, s, offset, cut)
         if cost < best_cost or (cost == best_cost and best is not None and index < best[0]):
             best, best_cost = (index, normal, offset), cost
     if best is None:
@@ -133,7 +136,7 @@ def _best_cut(part: manifold3d.Manifold):
     return components(above), components(below)
 
 
-def _cost_bounds(V: np.ndarray, edges: np.ndarray, candidates: list) -> np.ndarray:
+def _cost_bounds(V: np.ndarray, candidates: list) -> np.ndarray:
     """Lower bounds (c,) of the candidates' costs (:func:`_halves_hull_volume`): hull volumes of thinned halves.
 
     Each normal's vertices fall into slabs between its offsets; a half is a union of slabs, whose hull corners
@@ -147,8 +150,8 @@ def _cost_bounds(V: np.ndarray, edges: np.ndarray, candidates: list) -> np.ndarr
         s = candidates[start][2]
         offsets = np.array([c[1] for c in candidates[start:start + count]])
         slabs = [_thin(p, cell) for p in _slab_corners(V, s, offsets)]
-        for k, offset in enumerate(offsets):
-            cut = _cut_points(V, edges, s, offset)
+        for k in range(len(offsets)):
+            cut = candidates[start + k][3]
             bounds[start + k] = sum(_hull_volume(np.vstack(side + [cut])) for side in (slabs[k + 1:], slabs[:k + 1]))
     return bounds
 
@@ -216,15 +219,14 @@ def _cut_points(V: np.ndarray, edges: np.ndarray, s: np.ndarray, offset: float) 
     return V[edges[crossing, 0]] + t[:, None] * (V[edges[crossing, 1]] - V[edges[crossing, 0]])
 
 
-def _halves_hull_volume(V: np.ndarray, edges: np.ndarray, s: np.ndarray, offset: float) -> float:
+def _halves_hull_volume(V: np.ndarray, s: np.ndarray, offset: float, cut: np.ndarray) -> float:
     """Total hull volume of the two halves of a closed mesh cut at ``s == offset``.
 
     The corners of a half are the mesh vertices on its side plus the points
-    where edges cross the plane, so each half's hull comes from points alone,
-    without a boolean.
+    ``cut`` (c, 3) where edges cross the plane (:func:`_cut_points`), so each
+    half's hull comes from points alone, without a boolean.
     """
     d = s - offset
-    cut = _cut_points(V, edges, s, offset)
     total = 0.0
     for side in (d > 0, d <= 0):
         points = np.vstack([V[side], cut])
