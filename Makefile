@@ -23,10 +23,11 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e '.[test,batch]'
 	@touch $(STAMP)
 
-# The simplify stage's numba kernels, compiled once into numba's cache (~10 s) so that the first
-# bake does not pay for it; again when their source changes.
-$(VENV)/.kernels: $(STAMP) fracture_cli/gameready/collapse_kernels.py
+# The numba kernels (the simplify stage's collapses, the triangle-pair test), compiled once into
+# numba's cache (~15 s) so that the first bake does not pay for it; again when their source changes.
+$(VENV)/.kernels: $(STAMP) fracture_cli/gameready/collapse_kernels.py fracture_cli/trigeom_kernels.py
 	$(PY) -c "from fracture_cli.gameready.collapse_kernels import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.trigeom_kernels import warm_kernels; warm_kernels()"
 	@touch $@
 
 # `fracture view`'s browser files: three.js (npm, pinned by web/package-lock.json) and the

@@ -18,7 +18,6 @@ from scipy.sparse.csgraph import connected_components
 # as touching, i.e. as an intersection.
 SEPARATION_EPS = 1e-12
 
-_PAIR_CHUNK = 20_000
 # Point-triangle pairs per chunk of :func:`winding_numbers` (bounds its memory).
 _WINDING_CHUNK = 2_000_000
 
@@ -310,48 +309,13 @@ def triangles_intersect(A: np.ndarray, B: np.ndarray, eps: float = SEPARATION_EP
     coplanar pairs, including a segment lying in the other triangle's plane). Axes of near-zero length
     are ignored, so degenerate input is reported as intersecting, never missed.
     """
-    A = np.asarray(A, dtype=np.float64)
-    B = np.asarray(B, dtype=np.float64)
-    hit = np.zeros(len(A), dtype=bool)
-    for s in range(0, len(A), _PAIR_CHUNK):
-        a, b = A[s:s + _PAIR_CHUNK], B[s:s + _PAIR_CHUNK]
-        # Work relative to one corner: smaller numbers, better cancellation.
-        origin = a[:, :1, :]
-        a, b = a - origin, b - origin
-        scale = max(float(np.abs(a).max(initial=0.0)), float(np.abs(b).max(initial=0.0)), 1e-300)
-        ea = a[:, [1, 2, 0]] - a  # (p, 3, 3) edges
-        eb = b[:, [1, 2, 0]] - b
-        na = np.cross(ea[:, 0], ea[:, 1])
-        nb = np.cross(eb[:, 0], eb[:, 1])
-        # The two normals separate most pairs; test the other 15 axes only on the rest.
-        open_ = ~_separated(np.stack([na, nb], axis=1), a, b, scale, eps)
-        idx = np.flatnonzero(open_)
-        if len(idx):
-            a, b, ea, eb, na, nb = a[idx], b[idx], ea[idx], eb[idx], na[idx], nb[idx]
-            axes = np.concatenate([
-                np.cross(ea[:, :, None, :], eb[:, None, :, :]).reshape(-1, 9, 3),
-                np.cross(na[:, None, :], ea), np.cross(nb[:, None, :], eb),
-                # In-plane normals of one triangle's edges in the other's plane:
-                # needed when a triangle is degenerate (a segment) and coplanar.
-                np.cross(na[:, None, :], eb), np.cross(nb[:, None, :], ea)], axis=1)
-            open_[idx] = ~_separated(axes, a, b, scale, eps)
-        hit[s:s + _PAIR_CHUNK] = open_
-    return hit
+    # Compiled: numpy's (p, 17, 3) temporaries of every axis were most of the callers' time. Imported
+    # here so that modules that never test triangles do not import numba.
+    from fracture_cli.trigeom_kernels import intersect_pairs
 
-
-def _separated(axes: np.ndarray, a: np.ndarray, b: np.ndarray, scale: float, eps: float) -> np.ndarray:
-    """Whether any of ``axes`` (p, k, 3) separates triangles ``a``, ``b`` (p, 3, 3) by more than ``eps``."""
-    length = np.sqrt(np.sum(axes * axes, axis=2))
-    valid = length > 1e-12 * scale * scale
-    axes = axes / np.where(valid, length, 1.0)[:, :, None]
-    pa = np.matmul(axes, a.transpose(0, 2, 1))  # (p, k, 3) projections of a's corners
-    pb = np.matmul(axes, b.transpose(0, 2, 1))
-    # Explicit 3-way min/max: reductions over a length-3 axis are slow in numpy.
-    a0, a1, a2 = pa[:, :, 0], pa[:, :, 1], pa[:, :, 2]
-    b0, b1, b2 = pb[:, :, 0], pb[:, :, 1], pb[:, :, 2]
-    gap = np.maximum(np.minimum(np.minimum(a0, a1), a2) - np.maximum(np.maximum(b0, b1), b2),
-                     np.minimum(np.minimum(b0, b1), b2) - np.maximum(np.maximum(a0, a1), a2))
-    return np.any(valid & (gap > eps), axis=1)
+    A = np.ascontiguousarray(A, dtype=np.float64).reshape(-1, 3, 3)
+    B = np.ascontiguousarray(B, dtype=np.float64).reshape(-1, 3, 3)
+    return intersect_pairs(A, B, float(eps))
 
 
 def self_intersections(V: np.ndarray, F: np.ndarray, fold_cos: float = -0.9998) -> np.ndarray:
