@@ -89,8 +89,8 @@ class MinCut:
         return (np.concatenate([fa, fb, np.full(t, t), arange]), np.concatenate([fb, fa, arange, np.full(t, t + 1)]))
 
     def _one_arc_graph(self):
-        """OR-Tools solver, arcs, node order (t,) (solver node -> node) and face-node incidence (t, f) of the
-        one-arc form.
+        """Face arcs (lower, higher) (f,) int32, node order (t,) (solver node -> node) and face-node
+        incidence (t, f) of the one-arc form.
 
         The nodes are numbered in reverse Cuthill-McKee order (neighbours close in memory: about 8%
         faster max-flows on the sample assets' tet meshes); the cut is mapped back.
@@ -106,12 +106,7 @@ class MinCut:
         # +1 at a face's lower node, -1 at its higher one, in int64: the terminal shifts are exact.
         incidence = sp.csr_matrix((np.concatenate([np.ones(f, dtype=np.int64), -np.ones(f, dtype=np.int64)]),
                                    (np.concatenate([lo, hi]), np.tile(np.arange(f), 2))), shape=(t, f))
-        arange = np.arange(t)
-        tails = np.concatenate([lo, np.full(t, t), arange]).astype(np.int32)
-        heads = np.concatenate([hi, arange, np.full(t, t + 1)]).astype(np.int32)
-        solver = self._module.SimpleMaxFlow()
-        arcs = solver.add_arcs_with_capacity(tails, heads, np.zeros(len(tails), dtype=np.int64))
-        return solver, arcs, order, incidence
+        return lo.astype(np.int32), hi.astype(np.int32), order, incidence
 
     def source_side(self, supply: np.ndarray) -> np.ndarray:
         """Sorted node ids (k,) of the minimal source side (empty if the minimum is 0 at S = {})."""
@@ -136,18 +131,28 @@ class MinCut:
 
         ``faces`` (f,) are the integer face capacities, ``terminal`` (t,) the integer supplies.
         """
-        solver, arcs, order, incidence = self._one_arc
+        lo, hi, order, incidence = self._one_arc
+        t = self.t
         # Node i of the solver is node order[i]; face capacity w_f becomes 2 w_f from the lower node to the
         # higher one, plus w_f from the source to the lower node and w_f to the sink from the higher one.
         net = terminal[order] + incidence @ faces
         if float(np.abs(net).sum()) >= _ONE_ARC_TOTAL:
             return None
-        solver.set_arcs_capacity(arcs, np.concatenate([2 * faces, np.maximum(net, 0), np.maximum(-net, 0)]))
-        status = solver.solve(self.t, self.t + 1)
+        # A new solver with the non-zero terminal arcs only (about one per node, not two): building it
+        # costs less than the push-relabel saves on the zero-capacity arcs.
+        sources, sinks = np.flatnonzero(net > 0), np.flatnonzero(net < 0)
+        solver = self._module.SimpleMaxFlow()
+        solver.add_arc_with_capacity(t, t + 1, 0)  # both terminals exist even without arcs of their own
+        solver.add_arcs_with_capacity(np.concatenate([lo, np.full(len(sources), t, dtype=np.int32),
+                                                      sinks.astype(np.int32)]),
+                                      np.concatenate([hi, sources.astype(np.int32),
+                                                      np.full(len(sinks), t + 1, dtype=np.int32)]),
+                                      np.concatenate([2 * faces, net[sources], -net[sinks]]))
+        status = solver.solve(t, t + 1)
         if status != solver.OPTIMAL:
             raise RuntimeError(f"OR-Tools max-flow returned status {status}")
         side = np.array(solver.get_source_side_min_cut(), dtype=np.int64)
-        return np.sort(order[side[side < self.t]])
+        return np.sort(order[side[side < t]])
 
     def _two_arc_side(self, faces: np.ndarray, terminal: np.ndarray) -> np.ndarray:
         """The cut with both arcs of every face (no shifted terminal capacities: no overflow)."""
