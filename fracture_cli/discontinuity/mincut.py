@@ -42,8 +42,15 @@ class MinCut:
 
     Uses OR-Tools' push-relabel (int64 capacities) when it is installed, else
     scipy's Dinic (int32 capacities). Both return the unique minimal source side
-    of a minimum cut. The graph is built once: every call only sets the
-    capacities of the terminal arcs (and the face arcs, rescaled with the supply).
+    of a minimum cut, on the same integer capacities (the supply scaled so that
+    its positive part is 2**52 units with OR-Tools, 2**29 with scipy).
+
+    With OR-Tools, each call builds the one-arc form (module notes) with the
+    non-zero terminal arcs only, about 40% fewer arcs than both arcs of every
+    face plus two terminal arcs per node, and ~25% less time per max-flow on the
+    sample assets; when its shifted terminal capacities could overflow int64
+    (faces weighted ~1e9 times the mean), the two-arc form instead. Scipy's
+    graph is built once; every call sets its capacities.
 
     Parameters
     ----------
