@@ -214,7 +214,11 @@ class CutSubproblemSolver:
             key, inverse = np.unique(lo * n + hi, return_inverse=True)
             edge_omega = np.bincount(inverse.reshape(-1), weights=self.omega[between], minlength=len(key))
             edges = np.column_stack([key // n, key % n])
-            indicator = sp.csr_matrix((self.vol, (self.cells, np.arange(self.t))), shape=(n, self.t))
+            # CSR directly (tets ascending within each cell, as a COO conversion would give: same sums in G).
+            order = np.argsort(self.cells, kind="stable")
+            indptr = np.zeros(n + 1, dtype=np.int32)
+            np.cumsum(np.bincount(self.cells, minlength=n), out=indptr[1:])
+            indicator = sp.csr_matrix((self.vol[order], order.astype(np.int32), indptr), shape=(n, self.t))
             self._cell_cache = (n, edges, edge_omega, indicator)
         return self._cell_cache
 
