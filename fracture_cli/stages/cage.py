@@ -17,7 +17,7 @@ import numpy as np
 
 from fracture_cli import trigeom
 from fracture_cli.errors import StageError
-from fracture_cli.meshfix.rows import unique_rows, used_vertices
+from fracture_cli.meshfix.rows import group_rows, used_vertices
 from fracture_cli.options import option
 from fracture_cli.stages import _tetgen
 from fracture_cli.types import Cage, SurfaceMesh
@@ -225,14 +225,18 @@ class _ContainmentCheck:
         self.cell = cell
         # Only vertices of triangles count; loaders may leave unreferenced ones.
         used = used_vertices(faces, len(vertices))
-        self.query_vertices, inverse = unique_rows(vertices[used], return_inverse=True)
+        # One query per position (UV seams split vertices); the queries' order does not matter, only which
+        # corners share one.
+        inverse = group_rows(vertices[used])
+        first = np.empty(int(inverse.max()) + 1 if len(inverse) else 0, dtype=np.int64)
+        first[inverse] = np.arange(len(inverse))  # any vertex of a position stands for it
+        self.query_vertices = vertices[used][first]
         # Query point of every corner, and every triangle's longest edge: no point of a triangle is farther
         # than that from any of its corners.
         query = np.zeros(len(vertices), dtype=np.int64)
         query[used] = inverse
         self.corner_query = query[faces]
-        T = vertices[faces]
-        self.longest_edge = np.linalg.norm(T - T[:, [1, 2, 0]], axis=2).max(axis=1)
+        self.longest_edge = _longest_edges(vertices, faces)
 
     def __call__(self, cage_vertices: np.ndarray, cage_faces: np.ndarray) -> str | None:
         """Return why the cage does not strictly contain the input, or None if it does."""
@@ -247,13 +251,7 @@ class _ContainmentCheck:
         too_close = int(np.sum(clearance < MIN_CLEARANCE))
         if too_close:
             return f"{too_close} input vertices touch the cage"
-        votes = np.zeros(len(points), dtype=np.int64)
-        for direction in _RAY_DIRECTIONS:
-            unit = (direction / np.linalg.norm(direction)).astype(np.float32)
-            rays = np.concatenate([points, np.broadcast_to(unit, points.shape)], axis=1)
-            hits = cage_scene.count_intersections(o3d.core.Tensor(rays)).numpy()
-            votes += hits % 2
-        outside = int(np.sum(votes < 2))
+        outside = _outside_by_vote(cage_scene, points)
         if outside:
             return f"{outside} input vertices outside"
         # Only cage triangles whose bounding sphere reaches the input can cross it.
@@ -278,6 +276,37 @@ class _ContainmentCheck:
         if len(pairs):
             return f"{len(np.unique(pairs[:, 0]))} cage triangles cross the input"
         return None
+
+
+def _outside_by_vote(scene: Any, points: np.ndarray) -> int:
+    """How many ``points`` (k, 3) float32 fewer than two of the :data:`_RAY_DIRECTIONS` rays find inside ``scene``.
+
+    A ray from an inside point crosses the closed cage an odd number of times. The third ray is cast only
+    from the points on which the first two disagree: the others' vote is decided.
+    """
+    from fracture_cli._open3d import open3d as _import_open3d
+    o3d = _import_open3d()
+
+    def odd(direction: np.ndarray, at: np.ndarray) -> np.ndarray:
+        unit = (direction / np.linalg.norm(direction)).astype(np.float32)
+        rays = np.concatenate([at, np.broadcast_to(unit, at.shape)], axis=1)
+        return scene.count_intersections(o3d.core.Tensor(rays)).numpy() % 2 == 1
+
+    first, second = odd(_RAY_DIRECTIONS[0], points), odd(_RAY_DIRECTIONS[1], points)
+    undecided = np.flatnonzero(first != second)
+    third = odd(_RAY_DIRECTIONS[2], points[undecided]) if len(undecided) else np.zeros(0, dtype=bool)
+    return int(np.sum(~first & ~second)) + int(np.sum(~third))
+
+
+def _longest_edges(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Longest edge length (m,) of each triangle ``F`` (m, 3) over ``V`` (n, 3).
+
+    ``np.linalg.norm`` of the edges, bit for bit (the same sums of squares and square roots), from the
+    corner arrays instead of a (m, 3, 3) array, several times faster on a million triangles.
+    """
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    ab, bc, ca = (np.sqrt(np.add.reduce(e * e, axis=1)) for e in (a - b, b - c, c - a))
+    return np.maximum(np.maximum(ab, bc), ca)
 
 
 def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
