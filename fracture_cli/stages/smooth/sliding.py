@@ -153,6 +153,10 @@ class Containment:
         # touched triangles keep their corners from one round to the next.
         self.tested = np.full((len(self.F), 3, 3), np.nan)
         self.near = np.zeros(len(self.F), dtype=bool)
+        # Likewise the prism winding numbers of each touched triangle at the input vertices near it, with the
+        # corners they were computed for (pairs (point ids, values) by cage triangle).
+        self.swept_tested = np.full((len(self.F), 3, 3), np.nan)
+        self.swept: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def offenders(self, X: np.ndarray, moved: np.ndarray) -> np.ndarray:
         """Moved vertices (ascending ids) to send back: the cage over ``X`` (n, 3) near ``moved`` (n,) is unsafe.
@@ -170,7 +174,7 @@ class Containment:
         pairs = trigeom.self_intersections(X, self.F)
         crossing = pairs[touched[pairs].any(axis=1)]
         blame[self.F[crossing.reshape(-1)].reshape(-1)] = True
-        blame[faces[self._swept_past(X, faces)].reshape(-1)] = True
+        blame[faces[self._swept_past(X, np.flatnonzero(touched))].reshape(-1)] = True
         return np.flatnonzero(blame & moved)
 
     def _near_input_cached(self, X: np.ndarray, ids: np.ndarray) -> np.ndarray:
@@ -221,28 +225,55 @@ class Containment:
         hit = trigeom.triangles_intersect(A[qi], self.SV[self.SF[j]], eps=_SLIDE_CLEARANCE)
         return np.unique(qi[hit])
 
-    def _swept_past(self, X: np.ndarray, faces: np.ndarray) -> np.ndarray:
-        """Cage triangles ``faces`` (t, 3) whose swept box holds an input vertex the moved cage no longer encloses."""
-        # Moving each touched triangle straight from its old to its new corners, the cage sweeps over a point
-        # (changing its winding number) only inside the box of some triangle's old and new corners.
-        swept = np.concatenate([self.V0[faces], X[faces]], axis=1)
-        boxes = np.stack([swept.min(axis=1), swept.max(axis=1)], axis=1)
-        all_box, all_qi = self.points.query(boxes)
-        box, qi = _near_plane(self.SV[all_qi], self.V0, X, faces, all_box, all_qi, self.tiny)
-        order = np.lexsort((box, qi))  # by point, then box: the order the sums below were defined in
-        qi, box = qi[order], box[order]
+    def _swept_past(self, X: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """Cage triangles ``ids`` (t,) (positions into ``ids``) whose swept box holds an input vertex the moved
+        cage over ``X`` no longer encloses."""
+        faces = self.F[ids]
+        corners = X[faces]
+        stale = ~np.all(corners == self.swept_tested[ids], axis=(1, 2))
+        if stale.any():
+            fresh = ids[stale]
+            box, qi, values = self._swept_pairs(X, self.F[fresh])
+            order = np.argsort(box, kind="stable")
+            cuts = np.searchsorted(box[order], np.arange(1, len(fresh)))
+            for face, q, v in zip(fresh.tolist(), np.split(qi[order], cuts), np.split(values[order], cuts)):
+                self.swept[face] = (q, v)
+            self.swept_tested[fresh] = corners[stale]
+        kept = [self.swept[face] for face in ids.tolist()]
+        qi = np.concatenate([q for q, _ in kept])
         if not len(qi):
             return np.zeros(0, dtype=np.int64)
+        values = np.concatenate([v for _, v in kept])
+        box = np.repeat(np.arange(len(ids), dtype=np.int64), [len(q) for q, _ in kept])
+        order = np.lexsort((box, qi))  # by point, then box: the order the sums below were defined in
+        qi = qi[order]
         # The input is strictly inside the original cage (winding number 1) and only the touched
         # triangles changed: the winding number w.r.t. the moved cage is 1 plus the winding numbers of
         # the prisms the touched triangles swept (their side walls cancel between neighbours), and a
         # prism's winding number is 0 outside its box: only (point, box) pairs contribute.
-        change = np.bincount(qi, weights=_prism_winding(self.SV[qi], self.V0, X, faces[box]), minlength=len(self.SV))
+        change = np.bincount(qi, weights=values[order], minlength=len(self.SV))
         points = qi[np.r_[True, qi[1:] != qi[:-1]]]  # np.unique(qi): qi is sorted
         outside = points[1.0 + change[points] < 0.5]
         if not len(outside):
             return np.zeros(0, dtype=np.int64)
+        all_box, all_qi = self.points.query(_swept_boxes(self.V0, X, faces))
         return all_box[np.isin(all_qi, outside)]
+
+    def _swept_pairs(self, X: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(box, point) pairs (p,) of triangles ``faces`` (t, 3) moved to ``X`` and input vertices that may be inside
+        their prisms, with each prism's winding number (p,) there."""
+        # Moving each touched triangle straight from its old to its new corners, the cage sweeps over a point
+        # (changing its winding number) only inside the box of some triangle's old and new corners.
+        all_box, all_qi = self.points.query(_swept_boxes(self.V0, X, faces))
+        box, qi = _near_plane(self.SV[all_qi], self.V0, X, faces, all_box, all_qi, self.tiny)
+        values = _prism_winding(self.SV[qi], self.V0, X, faces[box]) if len(qi) else np.zeros(0)
+        return box, qi, values
+
+
+def _swept_boxes(V0: np.ndarray, X: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Boxes (t, 2, 3) of the old and new corners of triangles ``faces`` (t, 3)."""
+    swept = np.concatenate([V0[faces], X[faces]], axis=1)
+    return np.stack([swept.min(axis=1), swept.max(axis=1)], axis=1)
 
 
 def _boxes_and_longest_edges(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
