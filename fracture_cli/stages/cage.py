@@ -19,6 +19,7 @@ from fracture_cli import trigeom
 from fracture_cli.errors import StageError
 from fracture_cli.meshfix.rows import group_rows, used_vertices
 from fracture_cli.options import option
+from fracture_cli.scenes import surface_scene
 from fracture_cli.stages import _tetgen
 from fracture_cli.types import Cage, SurfaceMesh
 
@@ -348,9 +349,6 @@ def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
     monotone in ``d``, so the search brackets upward from ``initial_offset``
     (doubling), then bisects, keeping the tightest success seen.
     """
-    from fracture_cli._open3d import open3d as _import_open3d
-    o3d = _import_open3d()
-
     vertices = np.asarray(surface.vertices, dtype=np.float64)
     faces = np.asarray(surface.faces, dtype=np.int64)
     if len(faces) == 0 or len(vertices) == 0:
@@ -364,8 +362,7 @@ def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
     started = time.perf_counter()
     resolution = options.grid_resolution or auto_grid_resolution(options.target_faces)
     spacing = diagonal / resolution
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32)))
+    scene = surface_scene(surface.vertices, surface.faces)  # the pieces stage queries it again
     # About the edge length of the target cage on a unit-area surface: the broad-phase cell.
     cage_edge = diagonal * math.sqrt(4.0 / (math.sqrt(3.0) * options.target_faces))
     check = _ContainmentCheck(vertices, faces, scene, 0.5 * cage_edge)
