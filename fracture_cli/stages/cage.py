@@ -139,13 +139,12 @@ class _DistanceField:
 
 def _surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> np.ndarray:
     """Points on the surface such that every surface point is within ``spacing`` of one."""
-    T = vertices[faces]
-    longest = np.max(np.linalg.norm(T - T[:, [1, 2, 0]], axis=2), axis=1)
+    longest = _longest_edges(vertices, faces)
     parts = [vertices]
     # Triangles with edges <= spacing are covered by their corners; split the others.
     n_split = np.ceil(longest / spacing).astype(np.int64)
     for n in np.unique(n_split[n_split > 1]):
-        tri = T[n_split == n]
+        tri = vertices[faces[n_split == n]]
         i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
         keep = (i + j) <= n
         u = (i[keep] / n)[:, None]
