@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from fracture_cli import trigeom
+from fracture_cli.edgelengths import longest_edges
 from fracture_cli.errors import StageError
 from fracture_cli.meshfix.rows import group_rows, used_vertices
 from fracture_cli.options import option
@@ -139,7 +140,7 @@ class _DistanceField:
 
 def _surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> np.ndarray:
     """Points on the surface such that every surface point is within ``spacing`` of one."""
-    longest = _longest_edges(vertices, faces)
+    longest = longest_edges(vertices, faces)
     parts = [vertices]
     # Triangles with edges <= spacing are covered by their corners; split the others.
     n_split = np.ceil(longest / spacing).astype(np.int64)
@@ -236,7 +237,7 @@ class _ContainmentCheck:
         query = np.zeros(len(vertices), dtype=np.int64)
         query[used] = inverse
         self.corner_query = query[faces]
-        self.longest_edge = _longest_edges(vertices, faces)
+        self.longest_edge = longest_edges(vertices, faces)
 
     def __call__(self, cage_vertices: np.ndarray, cage_faces: np.ndarray) -> str | None:
         """Return why the cage does not strictly contain the input, or None if it does."""
@@ -296,17 +297,6 @@ def _outside_by_vote(scene: Any, points: np.ndarray) -> int:
     undecided = np.flatnonzero(first != second)
     third = odd(_RAY_DIRECTIONS[2], points[undecided]) if len(undecided) else np.zeros(0, dtype=bool)
     return int(np.sum(~first & ~second)) + int(np.sum(~third))
-
-
-def _longest_edges(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Longest edge length (m,) of each triangle ``F`` (m, 3) over ``V`` (n, 3).
-
-    ``np.linalg.norm`` of the edges, bit for bit (the same sums of squares and square roots), from the
-    corner arrays instead of a (m, 3, 3) array, several times faster on a million triangles.
-    """
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    ab, bc, ca = (np.sqrt(np.add.reduce(e * e, axis=1)) for e in (a - b, b - c, c - a))
-    return np.maximum(np.maximum(ab, bc), ca)
 
 
 def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
