@@ -220,18 +220,19 @@ def glb_bytes(meshes: Sequence[tuple[str, list[Primitive]] | tuple[str, list[Pri
     while len(buffer.binary) % 4:
         buffer.binary.append(0)
     doc["buffers"] = [{"byteLength": len(buffer.binary)}]
-    return pack_glb(doc, bytes(buffer.binary))
+    return pack_glb(doc, buffer.binary)
 
 
-def pack_glb(doc: dict, binary: bytes | None) -> bytes:
+def pack_glb(doc: dict, binary: bytes | bytearray | None) -> bytes:
     """A GLB container: the JSON chunk (space-padded) and the binary chunk (zero-padded), if any."""
     text = json.dumps(doc, separators=(",", ":"), sort_keys=False).encode("utf-8")
     text += b" " * ((4 - len(text) % 4) % 4)
-    chunks = struct.pack("<II", len(text), _CHUNK_JSON) + text
+    parts: list[bytes | bytearray] = [struct.pack("<II", len(text), _CHUNK_JSON), text]
     if binary is not None:
-        binary = binary + b"\0" * ((4 - len(binary) % 4) % 4)
-        chunks += struct.pack("<II", len(binary), _CHUNK_BIN) + binary
-    return struct.pack("<4sII", _GLB_MAGIC, 2, 12 + len(chunks)) + chunks
+        pad = (4 - len(binary) % 4) % 4
+        parts += [struct.pack("<II", len(binary) + pad, _CHUNK_BIN), binary, b"\0" * pad]
+    # One join: the binary chunk (tens of MB for a big asset) is copied once, not once per concatenation.
+    return b"".join([struct.pack("<4sII", _GLB_MAGIC, 2, 12 + sum(len(p) for p in parts)), *parts])
 
 
 def read_glb_chunks(path: str) -> tuple[dict, bytes | None]:

@@ -19,7 +19,7 @@ import numpy as np
 from fracture_cli.errors import InputError
 from fracture_cli.io.parts import read_parts
 from fracture_cli.io.probe import probe_triangles
-from fracture_cli.meshfix.rows import unique_rows, used_vertices
+from fracture_cli.meshfix.rows import group_rows, unique_inverse, unique_rows, used_vertices
 from fracture_cli.options import option
 from fracture_cli.types import Material, Normalization, SurfaceMesh
 
@@ -71,8 +71,7 @@ def smooth_normals_welded(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray
     Vertices split at UV seams share a position; averaging per position keeps the
     shading continuous across seams, which per-id normals would not.
     """
-    _, pos_id = unique_rows(vertices, return_inverse=True)
-    pos_id = pos_id.reshape(-1)
+    pos_id = group_rows(vertices)  # which vertices share a position (the sums do not depend on the ids)
     a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
     fn = np.cross(b - a, c - a)  # length = 2 * area: area weighting for free
     num = pos_id.max() + 1 if len(pos_id) else 0
@@ -119,15 +118,14 @@ def double_sided_back_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     drop = np.zeros(len(F), dtype=bool)
     if len(F) < 2:
         return drop
-    _, weld = unique_rows(V, return_inverse=True)
-    W = weld.reshape(-1)[F]
+    weld = group_rows(V)  # any ids: what is dropped depends only on which corners share a position
+    W = weld[F]
     ok = (W[:, 0] != W[:, 1]) & (W[:, 1] != W[:, 2]) & (W[:, 0] != W[:, 2])
     corners = np.sort(W, axis=1)
     first = np.argmin(W, axis=1)  # rotate each triangle to start at its smallest corner: orientation = next < last
     rows = np.arange(len(W))
     facing = W[rows, (first + 1) % 3] < W[rows, (first + 2) % 3]
-    _, key = unique_rows(corners, return_inverse=True)
-    key = key.reshape(-1)
+    key = _row_ids(corners)
     up = np.bincount(key[ok & facing], minlength=key.max() + 1)
     down = np.bincount(key[ok & ~facing], minlength=key.max() + 1)
     paired = (up[key] > 0) & (down[key] > 0)
@@ -147,6 +145,14 @@ def double_sided_back_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     repeat = np.zeros(len(F), dtype=bool)
     repeat[order[1:]] = key[order[1:]] == key[order[:-1]]
     return whole & ok & repeat
+
+
+def _row_ids(rows: np.ndarray) -> np.ndarray:
+    """Id (m,) of each row of ``rows`` (m, 3) of ints in [0, n) among the sorted distinct rows (as ``np.unique``)."""
+    n = int(rows.max()) + 1
+    if n ** 3 < 2 ** 62:  # the three ids packed into one integer sort in the rows' order
+        return unique_inverse((rows[:, 0] * n + rows[:, 1]) * n + rows[:, 2])[1]
+    return unique_rows(rows, return_inverse=True)[1].reshape(-1)
 
 
 def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) -> SurfaceMesh:

@@ -48,7 +48,7 @@ def split_by_material(vertices, faces, normals, uvs, material_ids, normalization
     prims = []
     for mat in np.unique(material_ids):
         sel = faces[material_ids == mat]
-        used, local = np.unique(sel, return_inverse=True)
+        used, local = _compact(sel, len(vertices))
         prims.append(
             Primitive(
                 positions=world[used],
@@ -115,6 +115,16 @@ def prefixed_materials(materials, stem: str | None):
     if not stem:
         return tuple(materials)
     return tuple(dataclasses.replace(m, name=f"{stem}_{m.name}") for m in materials)
+
+
+def _compact(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(faces, return_inverse=True)`` of vertex ids ``faces`` (k, 3) in [0, n), by counting."""
+    if faces.size == 0 or faces.min() < 0:
+        return np.unique(faces, return_inverse=True)
+    used = np.flatnonzero(np.bincount(faces.reshape(-1), minlength=n))
+    local = np.zeros(max(n, int(faces.max()) + 1), dtype=np.intp)
+    local[used] = np.arange(len(used))
+    return used, local[faces]
 
 
 def node_origin(world_points: np.ndarray) -> np.ndarray:

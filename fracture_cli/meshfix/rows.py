@@ -56,6 +56,52 @@ def unique_rows(A: np.ndarray, return_index: bool = False, return_inverse: bool 
     return out[0] if len(out) == 1 else tuple(out)
 
 
+def group_rows(A: np.ndarray) -> np.ndarray:
+    """A group id (m,) per row of ``A`` (m, k): equal rows, and only they, share one; ids are not ordered.
+
+    For callers that need which rows are equal but not ``np.unique``'s sorted order: one sort of a 64-bit hash
+    of each row instead of a lexicographic sort of all columns (several times faster on a million vertices).
+    Rows compare as in :func:`unique_rows` (``-0.0 == 0.0``); rows that differ but hash alike make it fall back
+    to :func:`unique_rows`, so the grouping is always exact.
+
+    Parameters
+    ----------
+    A : (m, k) array
+        Integers or finite floats.
+
+    Returns
+    -------
+    (m,) intp
+        Ids 0 .. u - 1 (u distinct rows).
+    """
+    A = np.asarray(A)
+    if A.ndim != 2 or len(A) == 0 or A.shape[1] == 0 or A.dtype.itemsize != 8 or A.dtype.kind not in "fiu":
+        return unique_rows(A, return_inverse=True)[1].reshape(-1)
+    P = np.ascontiguousarray(A + 0 if A.dtype.kind == "f" else A)  # + 0 turns -0.0 into 0.0: equal rows, equal bits
+    bits = P.view(np.uint64)
+    h = np.zeros(len(P), dtype=np.uint64)
+    for column in range(P.shape[1]):
+        h = _mix(h ^ bits[:, column])
+    order = np.argsort(h)
+    ordered = h[order]
+    new = np.empty(len(P), dtype=bool)
+    new[0] = True
+    np.not_equal(ordered[1:], ordered[:-1], out=new[1:])
+    alike = np.flatnonzero(~new)
+    if len(alike) and not np.all(P[order[alike]] == P[order[alike - 1]]):
+        return unique_rows(A, return_inverse=True)[1].reshape(-1)  # a hash collision (or an unordered run)
+    group = np.empty(len(P), dtype=np.intp)
+    group[order] = np.cumsum(new) - 1
+    return group
+
+
+def _mix(x: np.ndarray) -> np.ndarray:
+    """splitmix64's finalizer (x (m,) uint64): every input bit affects every output bit."""
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
 def used_vertices(F: np.ndarray, n: int | None = None) -> np.ndarray:
     """Sorted ids (u,) of the vertices referenced by faces ``F`` (m, k): ``np.unique(F)`` by counting.
 

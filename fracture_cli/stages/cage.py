@@ -16,9 +16,11 @@ from typing import Any
 import numpy as np
 
 from fracture_cli import trigeom
+from fracture_cli.edgelengths import longest_edges
 from fracture_cli.errors import StageError
-from fracture_cli.meshfix.rows import unique_rows, used_vertices
+from fracture_cli.meshfix.rows import group_rows, used_vertices
 from fracture_cli.options import option
+from fracture_cli.scenes import surface_scene
 from fracture_cli.stages import _tetgen
 from fracture_cli.types import Cage, SurfaceMesh
 
@@ -138,13 +140,12 @@ class _DistanceField:
 
 def _surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> np.ndarray:
     """Points on the surface such that every surface point is within ``spacing`` of one."""
-    T = vertices[faces]
-    longest = np.max(np.linalg.norm(T - T[:, [1, 2, 0]], axis=2), axis=1)
+    longest = longest_edges(vertices, faces)
     parts = [vertices]
     # Triangles with edges <= spacing are covered by their corners; split the others.
     n_split = np.ceil(longest / spacing).astype(np.int64)
     for n in np.unique(n_split[n_split > 1]):
-        tri = T[n_split == n]
+        tri = vertices[faces[n_split == n]]
         i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
         keep = (i + j) <= n
         u = (i[keep] / n)[:, None]
@@ -225,14 +226,18 @@ class _ContainmentCheck:
         self.cell = cell
         # Only vertices of triangles count; loaders may leave unreferenced ones.
         used = used_vertices(faces, len(vertices))
-        self.query_vertices, inverse = unique_rows(vertices[used], return_inverse=True)
+        # One query per position (UV seams split vertices); the queries' order does not matter, only which
+        # corners share one.
+        inverse = group_rows(vertices[used])
+        first = np.empty(int(inverse.max()) + 1 if len(inverse) else 0, dtype=np.int64)
+        first[inverse] = np.arange(len(inverse))  # any vertex of a position stands for it
+        self.query_vertices = vertices[used][first]
         # Query point of every corner, and every triangle's longest edge: no point of a triangle is farther
         # than that from any of its corners.
         query = np.zeros(len(vertices), dtype=np.int64)
         query[used] = inverse
         self.corner_query = query[faces]
-        T = vertices[faces]
-        self.longest_edge = np.linalg.norm(T - T[:, [1, 2, 0]], axis=2).max(axis=1)
+        self.longest_edge = longest_edges(vertices, faces)
 
     def __call__(self, cage_vertices: np.ndarray, cage_faces: np.ndarray) -> str | None:
         """Return why the cage does not strictly contain the input, or None if it does."""
@@ -247,13 +252,7 @@ class _ContainmentCheck:
         too_close = int(np.sum(clearance < MIN_CLEARANCE))
         if too_close:
             return f"{too_close} input vertices touch the cage"
-        votes = np.zeros(len(points), dtype=np.int64)
-        for direction in _RAY_DIRECTIONS:
-            unit = (direction / np.linalg.norm(direction)).astype(np.float32)
-            rays = np.concatenate([points, np.broadcast_to(unit, points.shape)], axis=1)
-            hits = cage_scene.count_intersections(o3d.core.Tensor(rays)).numpy()
-            votes += hits % 2
-        outside = int(np.sum(votes < 2))
+        outside = _outside_by_vote(cage_scene, points)
         if outside:
             return f"{outside} input vertices outside"
         # Only cage triangles whose bounding sphere reaches the input can cross it.
@@ -278,6 +277,26 @@ class _ContainmentCheck:
         if len(pairs):
             return f"{len(np.unique(pairs[:, 0]))} cage triangles cross the input"
         return None
+
+
+def _outside_by_vote(scene: Any, points: np.ndarray) -> int:
+    """How many ``points`` (k, 3) float32 fewer than two of the :data:`_RAY_DIRECTIONS` rays find inside ``scene``.
+
+    A ray from an inside point crosses the closed cage an odd number of times. The third ray is cast only
+    from the points on which the first two disagree: the others' vote is decided.
+    """
+    from fracture_cli._open3d import open3d as _import_open3d
+    o3d = _import_open3d()
+
+    def odd(direction: np.ndarray, at: np.ndarray) -> np.ndarray:
+        unit = (direction / np.linalg.norm(direction)).astype(np.float32)
+        rays = np.concatenate([at, np.broadcast_to(unit, at.shape)], axis=1)
+        return scene.count_intersections(o3d.core.Tensor(rays)).numpy() % 2 == 1
+
+    first, second = odd(_RAY_DIRECTIONS[0], points), odd(_RAY_DIRECTIONS[1], points)
+    undecided = np.flatnonzero(first != second)
+    third = odd(_RAY_DIRECTIONS[2], points[undecided]) if len(undecided) else np.zeros(0, dtype=bool)
+    return int(np.sum(~first & ~second)) + int(np.sum(~third))
 
 
 def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
@@ -319,9 +338,6 @@ def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
     monotone in ``d``, so the search brackets upward from ``initial_offset``
     (doubling), then bisects, keeping the tightest success seen.
     """
-    from fracture_cli._open3d import open3d as _import_open3d
-    o3d = _import_open3d()
-
     vertices = np.asarray(surface.vertices, dtype=np.float64)
     faces = np.asarray(surface.faces, dtype=np.int64)
     if len(faces) == 0 or len(vertices) == 0:
@@ -335,8 +351,7 @@ def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
     started = time.perf_counter()
     resolution = options.grid_resolution or auto_grid_resolution(options.target_faces)
     spacing = diagonal / resolution
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32)))
+    scene = surface_scene(surface.vertices, surface.faces)  # the pieces stage queries it again
     # About the edge length of the target cage on a unit-area surface: the broad-phase cell.
     cage_edge = diagonal * math.sqrt(4.0 / (math.sqrt(3.0) * options.target_faces))
     check = _ContainmentCheck(vertices, faces, scene, 0.5 * cage_edge)

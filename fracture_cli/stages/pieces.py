@@ -56,6 +56,7 @@ def tet_material_fraction(tet_mesh: TetMesh, surface: SurfaceMesh) -> np.ndarray
     or an empty inside get 0.
     """
     from fracture_cli._open3d import open3d
+    from fracture_cli.scenes import surface_scene
 
     o3d = open3d()
     n = _SAMPLE_ORDER
@@ -64,9 +65,7 @@ def tet_material_fraction(tet_mesh: TetMesh, surface: SurfaceMesh) -> np.ndarray
     weights = (lattice + 0.25) / (n + 1)  # (s, 4), rows sum to 1
     corners = tet_mesh.vertices[tet_mesh.tets]  # (t, 4, 3)
     points = np.einsum("sc,tcd->tsd", weights, corners).reshape(-1, 3)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(surface.vertices, dtype=np.float32)),
-                        o3d.core.Tensor(np.asarray(surface.faces, dtype=np.uint32)))
+    scene = surface_scene(surface.vertices, surface.faces)  # the cage stage's, when it ran on this surface
     inside = scene.compute_occupancy(o3d.core.Tensor(points.astype(np.float32))).numpy()
     return inside.reshape(len(corners), len(weights)).mean(axis=1)
 

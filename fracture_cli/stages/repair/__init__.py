@@ -50,6 +50,7 @@ from fracture_cli.stages._solids import (
     weld_map,
 )
 from fracture_cli.stages.repair.carry import after_split
+from fracture_cli.stages.repair.clean import closed_as_given
 from fracture_cli.stages.repair.cleanup import is_flat, snap_between_bodies
 from fracture_cli.stages.repair.closing import fill_where_planned, interior_slot, open_bodies, thicken_sheets
 from fracture_cli.stages.repair.orient import (
@@ -183,6 +184,13 @@ def repair_surface(surface: SurfaceMesh, options: RepairOptions = RepairOptions(
     union overlapping bodies.
     """
     t0 = time.perf_counter()
+    clean, clean_volume = closed_as_given(surface)
+    if clean:
+        # Every step below would find nothing to do (see .clean): the same result, without the work.
+        decision = describe([], False)
+        log.info("%s: %s: %s; volume %.6g (%.2f s)", STAGE, surface.name, decision.detail, clean_volume,
+                 time.perf_counter() - t0)
+        return RepairResult(surface, (decision,))
     records: list[RepairRecord] = []
     mesh, flat = _weld_and_clean(surface, records)
     mesh = _orient_and_split(mesh, surface.normalization, records)

@@ -6,6 +6,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fracture_cli import trigeom
+from fracture_cli.edgelengths import longest_edges
+from fracture_cli.stages.smooth.pointgrid import PointGrid
 from fracture_cli.types import SurfaceMesh
 
 # Sliding: a cage triangle next to a slid vertex must stay this far (unit bbox diagonal) from the input; the
@@ -53,20 +55,44 @@ def _prism_winding(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarr
     side quad per edge. Each quad is split along the diagonal from the edge's lower vertex id (old) to its
     higher one (new), so the two triangles sharing an edge build the same wall with opposite orientations
     and their walls cancel exactly in a sum.
+
+    The eight triangles share six corners: their vectors from ``P`` and lengths are computed once (the
+    values :func:`fracture_cli.trigeom.triangle_winding` computes for each, bit for bit).
     """
-    total = trigeom.triangle_winding(P, X[faces[:, 0]], X[faces[:, 1]], X[faces[:, 2]])
-    total -= trigeom.triangle_winding(P, V0[faces[:, 0]], V0[faces[:, 1]], V0[faces[:, 2]])
+    old = [_Corner(V0[faces[:, k]] - P) for k in range(3)]
+    new = [_Corner(X[faces[:, k]] - P) for k in range(3)]
+    total = _solid_angle_fraction(*new)
+    total -= _solid_angle_fraction(*old)
     for i, j in ((0, 1), (1, 2), (2, 0)):
-        p, q = faces[:, i], faces[:, j]
-        p0, q0, p1, q1 = V0[p], V0[q], X[p], X[q]
-        low_first = (p < q)[:, None]
+        low_first = faces[:, i] < faces[:, j]
+        p0, q0, p1, q1 = old[i], old[j], new[i], new[j]
         # Quad (p0, q0, q1, p1), outward for a counter-clockwise triangle moving along its normal.
         # Diagonal p0-q1 when p < q, else q0-p1.
-        t1 = (p0, q0, np.where(low_first, q1, p1))
-        t2 = (np.where(low_first, p0, q0), np.where(low_first, q1, q1), p1)
-        total += trigeom.triangle_winding(P, *t1)
-        total += trigeom.triangle_winding(P, *t2)
+        total += _solid_angle_fraction(p0, q0, _Corner.where(low_first, q1, p1))
+        total += _solid_angle_fraction(_Corner.where(low_first, p0, q0), q1, p1)
     return total
+
+
+class _Corner:
+    """A triangle corner relative to the query point: vector (k, 3) and its length (k,)."""
+
+    def __init__(self, vector: np.ndarray, length: np.ndarray | None = None):
+        self.vector = vector
+        self.length = np.sqrt(np.einsum("...j,...j->...", vector, vector)) if length is None else length
+
+    @staticmethod
+    def where(mask: np.ndarray, a: _Corner, b: _Corner) -> _Corner:
+        return _Corner(np.where(mask[:, None], a.vector, b.vector), np.where(mask, a.length, b.length))
+
+
+def _solid_angle_fraction(a: _Corner, b: _Corner, c: _Corner) -> np.ndarray:
+    """Signed solid angle / 4 pi of triangles ``(a, b, c)`` seen from the origin: trigeom's formula and order."""
+    la, lb, lc = a.length, b.length, c.length
+    x, y, z = a.vector, b.vector, c.vector
+    det = np.einsum("...j,...j->...", x, np.cross(y, z))
+    dot = (la * lb * lc + np.einsum("...j,...j->...", x, y) * lc + np.einsum("...j,...j->...", y, z) * la
+           + np.einsum("...j,...j->...", z, x) * lb)
+    return np.arctan2(det, dot) / (2.0 * np.pi)
 
 
 def _near_plane(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarray, box: np.ndarray,
@@ -99,18 +125,16 @@ class Containment:
         self.SF = np.asarray(surface.faces, dtype=np.int64)
         self.V0 = V0
         self.F = np.asarray(F, dtype=np.int64)
-        T = self.SV[self.SF]
         # Cage triangles whose doubled area is at most this have no reliable plane to filter pairs with (far
         # above the separating-axis test's own threshold for an axis, 1e-12 times its pairs' extent squared).
         extent = max(float(np.ptp(self.SV, axis=0).max(initial=0.0)) if len(self.SV) else 0.0,
                      float(np.ptp(V0, axis=0).max(initial=0.0)) if len(V0) else 0.0)
         self.tiny = 1e-9 * (2.0 * extent) ** 2
-        self.boxes = np.stack([T.min(axis=1), T.max(axis=1)], axis=1)  # trigeom.triangle_boxes
+        self.boxes, longest = _boxes_and_longest_edges(self.SV, self.SF)
         cell = _QUERY_CELL * trigeom.default_cell(trigeom.triangle_boxes(V0, self.F))
         # Short input triangles are found from their corners (every corner of a triangle meeting a box lies
         # within its longest edge of the box); the few long ones, whose corners may be far, in a grid of their
         # own. ``reach``: the longest edge of a short triangle.
-        longest = np.linalg.norm(T - T[:, [1, 2, 0]], axis=2).max(axis=1) if len(T) else np.zeros(0)
         self.reach = _SHORT_EDGE * cell
         long_ = np.flatnonzero(longest > self.reach)
         self.long = long_
@@ -125,11 +149,15 @@ class Containment:
         # each round, in cells of a fifth of a cage triangle (cells of an input triangle's size made every
         # query span thousands of cells on a million-triangle input). Indexing the query boxes instead and
         # querying every input vertex each round was slower still.
-        self.points = trigeom.BoxGrid(np.stack([self.SV, self.SV], axis=1), cell)
+        self.points = PointGrid(self.SV, cell)
         # Whether each cage triangle comes near the input, for the corners it had when last tested: most
         # touched triangles keep their corners from one round to the next.
         self.tested = np.full((len(self.F), 3, 3), np.nan)
         self.near = np.zeros(len(self.F), dtype=bool)
+        # Likewise the prism winding numbers of each touched triangle at the input vertices near it, with the
+        # corners they were computed for (pairs (point ids, values) by cage triangle).
+        self.swept_tested = np.full((len(self.F), 3, 3), np.nan)
+        self.swept: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def offenders(self, X: np.ndarray, moved: np.ndarray) -> np.ndarray:
         """Moved vertices (ascending ids) to send back: the cage over ``X`` (n, 3) near ``moved`` (n,) is unsafe.
@@ -147,7 +175,7 @@ class Containment:
         pairs = trigeom.self_intersections(X, self.F)
         crossing = pairs[touched[pairs].any(axis=1)]
         blame[self.F[crossing.reshape(-1)].reshape(-1)] = True
-        blame[faces[self._swept_past(X, faces)].reshape(-1)] = True
+        blame[faces[self._swept_past(X, np.flatnonzero(touched))].reshape(-1)] = True
         return np.flatnonzero(blame & moved)
 
     def _near_input_cached(self, X: np.ndarray, ids: np.ndarray) -> np.ndarray:
@@ -198,26 +226,67 @@ class Containment:
         hit = trigeom.triangles_intersect(A[qi], self.SV[self.SF[j]], eps=_SLIDE_CLEARANCE)
         return np.unique(qi[hit])
 
-    def _swept_past(self, X: np.ndarray, faces: np.ndarray) -> np.ndarray:
-        """Cage triangles ``faces`` (t, 3) whose swept box holds an input vertex the moved cage no longer encloses."""
-        # Moving each touched triangle straight from its old to its new corners, the cage sweeps over a point
-        # (changing its winding number) only inside the box of some triangle's old and new corners.
-        swept = np.concatenate([self.V0[faces], X[faces]], axis=1)
-        boxes = np.stack([swept.min(axis=1), swept.max(axis=1)], axis=1)
-        all_box, all_qi = self.points.query(boxes)
-        box, qi = _near_plane(self.SV[all_qi], self.V0, X, faces, all_box, all_qi, self.tiny)
-        order = np.lexsort((box, qi))  # by point, then box: the order the sums below were defined in
-        qi, box = qi[order], box[order]
+    def _swept_past(self, X: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """Cage triangles ``ids`` (t,) (positions into ``ids``) whose swept box holds an input vertex the moved
+        cage over ``X`` no longer encloses."""
+        faces = self.F[ids]
+        corners = X[faces]
+        stale = ~np.all(corners == self.swept_tested[ids], axis=(1, 2))
+        if stale.any():
+            fresh = ids[stale]
+            box, qi, values = self._swept_pairs(X, self.F[fresh])
+            order = np.argsort(box, kind="stable")
+            cuts = np.searchsorted(box[order], np.arange(1, len(fresh)))
+            for face, q, v in zip(fresh.tolist(), np.split(qi[order], cuts), np.split(values[order], cuts)):
+                self.swept[face] = (q, v)
+            self.swept_tested[fresh] = corners[stale]
+        kept = [self.swept[face] for face in ids.tolist()]
+        qi = np.concatenate([q for q, _ in kept])
         if not len(qi):
             return np.zeros(0, dtype=np.int64)
+        values = np.concatenate([v for _, v in kept])
+        box = np.repeat(np.arange(len(ids), dtype=np.int64), [len(q) for q, _ in kept])
+        order = np.lexsort((box, qi))  # by point, then box: the order the sums below were defined in
+        qi = qi[order]
         # The input is strictly inside the original cage (winding number 1) and only the touched
         # triangles changed: the winding number w.r.t. the moved cage is 1 plus the winding numbers of
         # the prisms the touched triangles swept (their side walls cancel between neighbours), and a
         # prism's winding number is 0 outside its box: only (point, box) pairs contribute.
-        change = np.bincount(qi, weights=_prism_winding(self.SV[qi], self.V0, X, faces[box]), minlength=len(self.SV))
-        points = np.unique(qi)
+        change = np.bincount(qi, weights=values[order], minlength=len(self.SV))
+        points = qi[np.r_[True, qi[1:] != qi[:-1]]]  # np.unique(qi): qi is sorted
         outside = points[1.0 + change[points] < 0.5]
+        if not len(outside):
+            return np.zeros(0, dtype=np.int64)
+        all_box, all_qi = self.points.query(_swept_boxes(self.V0, X, faces))
         return all_box[np.isin(all_qi, outside)]
+
+    def _swept_pairs(self, X: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(box, point) pairs (p,) of triangles ``faces`` (t, 3) moved to ``X`` and input vertices that may be inside
+        their prisms, with each prism's winding number (p,) there."""
+        # Moving each touched triangle straight from its old to its new corners, the cage sweeps over a point
+        # (changing its winding number) only inside the box of some triangle's old and new corners.
+        all_box, all_qi = self.points.query(_swept_boxes(self.V0, X, faces))
+        box, qi = _near_plane(self.SV[all_qi], self.V0, X, faces, all_box, all_qi, self.tiny)
+        values = _prism_winding(self.SV[qi], self.V0, X, faces[box]) if len(qi) else np.zeros(0)
+        return box, qi, values
+
+
+def _swept_boxes(V0: np.ndarray, X: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Boxes (t, 2, 3) of the old and new corners of triangles ``faces`` (t, 3)."""
+    swept = np.concatenate([V0[faces], X[faces]], axis=1)
+    return np.stack([swept.min(axis=1), swept.max(axis=1)], axis=1)
+
+
+def _boxes_and_longest_edges(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bounding boxes (m, 2, 3) and longest edge lengths (m,) of triangles ``F`` (m, 3) over ``V`` (n, 3).
+
+    The values of ``trigeom.triangle_boxes`` (minima and maxima of the corners) and
+    :func:`fracture_cli.edgelengths.longest_edges`, from the three corner arrays rather than reductions over a
+    (m, 3, 3) array, which took several times longer on a million triangles.
+    """
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    return (np.stack([np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)], axis=1),
+            longest_edges(V, F))
 
 
 def _unique_pairs(i: np.ndarray, j: np.ndarray, num_j: int) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,132 @@
+"""Repair's fast path: is the input already one closed, outward, manifold solid that repair would keep as given?
+
+Most inputs of a bake (and every million-triangle scan we have seen) are: the
+full repair (welding through manifold3d, the winding search, the non-manifold
+split, the manifold3d solid) then spends seconds to change nothing. The checks
+here are each a sort or a gather, and together they imply that every step of
+:func:`~fracture_cli.stages.repair.repair_surface` would record nothing and
+keep the surface:
+
+* every vertex at its own position (no weld, no snap: one body has nothing to
+  snap to), finite, no face with a repeated corner;
+* every directed edge once, and its reverse once (closed, edge-manifold,
+  consistently wound: no flip, no split edge, nothing open to fill);
+* one fan of faces around every vertex (no pinched vertex to split);
+* one connected body, of clearly positive volume (no cavity to orient, no
+  union, nothing flat); with one body and closed edges, no face can repeat;
+* no shading normal pointing against its faces (computed as repair does).
+
+Anything else, or any doubt, takes the full repair.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from fracture_cli.meshfix.rows import group_rows, used_vertices
+from fracture_cli.types import SurfaceMesh
+
+# Smallest volume (of a unit-diagonal box) accepted as "clearly positive"; repair refuses at or below 1e-9.
+_MIN_FAST_VOLUME = 1e-6
+
+
+def closed_as_given(surface: SurfaceMesh) -> tuple[bool, float]:
+    """Whether repair would return ``surface`` unchanged with no record, and its volume (0 when not known).
+
+    Parameters
+    ----------
+    surface : SurfaceMesh
+        Vertices (n, 3) float64, faces (m, 3) int, normals (n, 3) or None.
+
+    Returns
+    -------
+    ok : bool
+        True only when every check of the module docstring passes.
+    volume : float
+        The enclosed volume when ``ok``.
+    """
+    V = np.asarray(surface.vertices, dtype=np.float64)
+    F = np.asarray(surface.faces, dtype=np.int64).reshape(-1, 3)
+    n, m = len(V), len(F)
+    if m < 4 or n < 4 or F.min() < 0 or F.max() >= n:
+        return False, 0.0
+    if not all(a is None or np.isfinite(a).all() for a in (V, surface.normals, surface.uvs, surface.colors)):
+        return False, 0.0
+    if ((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])).any():
+        return False, 0.0
+    twin = _twin_sides(F, n)
+    if twin is None or not _vertex_manifold(F, twin) or not _one_body(twin, m):
+        return False, 0.0
+    if not _distinct_positions(V):
+        return False, 0.0
+    volume = _volume(V, F)
+    if not volume > _MIN_FAST_VOLUME:
+        return False, 0.0
+    if surface.normals is not None and _normals_against(V, F, np.asarray(surface.normals, dtype=np.float64)):
+        return False, 0.0
+    return True, volume
+
+
+def _twin_sides(F: np.ndarray, n: int) -> np.ndarray | None:
+    """The opposite side (3m,) of every side ``3 f + k`` (corner k to k + 1), or None unless every edge has
+    exactly two sides, running it in opposite directions."""
+    a = F.reshape(-1)
+    b = F[:, [1, 2, 0]].reshape(-1)
+    lo = np.minimum(a, b)
+    key = lo * np.int64(n) + np.maximum(a, b)
+    # Stable: a mesh's edge keys come mostly in order, which timsort sorts several times faster.
+    order = np.argsort(key, kind="stable")
+    ordered = key[order]
+    first, second = order[0::2], order[1::2]
+    if len(first) != len(second) or not np.array_equal(ordered[0::2], ordered[1::2]):
+        return None
+    if (ordered[2::2] == ordered[1:-1:2]).any():  # an edge with four sides
+        return None
+    if ((a[first] == lo[first]) == (a[second] == lo[second])).any():  # both sides one way
+        return None
+    twin = np.empty(len(a), dtype=np.int64)
+    twin[first] = second
+    twin[second] = first
+    return twin
+
+
+def _vertex_manifold(F: np.ndarray, twin: np.ndarray) -> bool:
+    """Whether the corners around every vertex form one fan (a closed, consistently wound mesh)."""
+    # Corner c = 3 f + k at vertex v: its outgoing side's twin (3 g + j) runs into v, whose corner in g is
+    # 3 g + (j + 1) % 3. That step permutes v's corners; one cycle per vertex means one fan.
+    step = 3 * (twin // 3) + (twin % 3 + 1) % 3
+    corners = len(step)
+    graph = sp.csr_matrix((np.ones(corners, dtype=np.int8), step, np.arange(corners + 1)), shape=(corners, corners))
+    fans, _ = connected_components(graph, directed=True, connection="weak")
+    return fans == len(used_vertices(F))
+
+
+def _one_body(twin: np.ndarray, m: int) -> bool:
+    """Whether the faces form one body through their shared edges."""
+    graph = sp.csr_matrix((np.ones(3 * m, dtype=np.int8), twin // 3, np.arange(0, 3 * m + 1, 3)), shape=(m, m))
+    count, _ = connected_components(graph, directed=True, connection="weak")
+    return count == 1
+
+
+def _distinct_positions(V: np.ndarray) -> bool:
+    """Whether no two vertices share a position (exact equality, ``-0.0 == 0.0``)."""
+    return int(group_rows(V).max()) + 1 == len(V)
+
+
+def _volume(V: np.ndarray, F: np.ndarray) -> float:
+    """Signed volume enclosed by the faces."""
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
+def _normals_against(V: np.ndarray, F: np.ndarray, N: np.ndarray) -> bool:
+    """Whether any shading normal points against the area-weighted normal of its faces.
+
+    The sums are :func:`~fracture_cli.stages.repair.orient.fix_shading_normals`'s, bit for bit.
+    """
+    from fracture_cli.stages.repair.orient import face_normal_sums
+
+    acc = face_normal_sums(V, F)
+    return bool((np.einsum("ij,ij->i", acc, N) < 0).any())

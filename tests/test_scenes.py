@@ -1,0 +1,39 @@
+"""fracture_cli.scenes: one open3d scene per surface, kept while its arrays live."""
+
+from __future__ import annotations
+
+import gc
+
+import numpy as np
+import trimesh
+
+from fracture_cli import scenes
+
+
+def test_same_arrays_same_scene_and_forgotten_with_them():
+    mesh = trimesh.creation.icosphere(1)
+    V, F = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    first = scenes.surface_scene(V, F)
+    assert scenes.surface_scene(V, F) is first
+    assert scenes.surface_scene(V.copy(), F) is not first  # a copy is other arrays
+    V2 = V.copy()
+    second = scenes.surface_scene(V2, F)
+    assert scenes.surface_scene(V2, F) is second
+    del V2
+    gc.collect()
+    assert scenes._last == {}  # the scene went with its arrays
+
+
+def test_scene_answers_like_a_new_one():
+    mesh = trimesh.creation.icosphere(2)
+    V, F = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    from fracture_cli._open3d import open3d
+
+    o3d = open3d()
+    points = o3d.core.Tensor(np.random.default_rng(0).normal(size=(200, 3)).astype(np.float32))
+    shared = scenes.surface_scene(V, F)
+    shared.compute_distance(points)
+    fresh = o3d.t.geometry.RaycastingScene()
+    fresh.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
+    assert np.array_equal(scenes.surface_scene(V, F).compute_occupancy(points).numpy(),
+                          fresh.compute_occupancy(points).numpy())
