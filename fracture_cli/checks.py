@@ -247,7 +247,7 @@ def _max_overlap(fragments: Fragments, volumes: np.ndarray, max_pairs: int, jobs
     # in centroid order), so a worker builds the solids of its group (and their neighbours) once, instead of the
     # parent building them all before the fork. The same max on any number of processes.
     count = parallel.current_jobs() if jobs is None else max(int(jobs), 1)
-    groups = _pair_groups(todo, [len(f.faces) for f in frags], count)
+    groups = _pair_groups(todo, centres, np.array([len(f.faces) for f in frags]), count)
     overlaps: dict[tuple[int, int], float] = {}
     for group, values in zip(groups, parallel.ordered_map(_group_overlaps, groups, _Overlaps(frags, {}), jobs=jobs)):
         overlaps.update(zip(group, values))
@@ -267,15 +267,35 @@ class _Overlaps:
     solids: dict
 
 
-def _pair_groups(pairs: list[tuple[int, int]], sizes: list[int], count: int) -> list[list[tuple[int, int]]]:
-    """``pairs`` sorted, in at most ``count`` runs of about equal cost (the triangles of both fragments)."""
-    ordered = sorted(pairs)
-    if not ordered:
+def _pair_groups(pairs: list[tuple[int, int]], centres: np.ndarray, sizes: np.ndarray,
+                 count: int) -> list[list[tuple[int, int]]]:
+    """``pairs`` in at most ``count`` groups of about equal cost, each pair with the group of its larger fragment.
+
+    The fragments are split into ``count`` sets of about equal triangle count by halving the heaviest set at
+    its weighted median along its widest axis (``centres`` (q, 3), ``sizes`` (q,) triangles); a pair whose
+    fragments fall in two sets goes with the larger one, so the solid a second process builds is the smaller.
+    """
+    if not pairs:
         return []
-    cost = np.cumsum([sizes[a] + sizes[b] for a, b in ordered], dtype=np.float64)
-    cuts = np.searchsorted(cost, cost[-1] * np.arange(1, count) / count, side="right")
-    bounds = [0, *sorted(set(cuts.tolist()) - {0, len(ordered)}), len(ordered)]
-    return [ordered[lo:hi] for lo, hi in zip(bounds[:-1], bounds[1:])]
+    involved = np.unique(np.array(pairs, dtype=np.int64))
+    sets = [involved]
+    while len(sets) < count:
+        heaviest = max(range(len(sets)), key=lambda s: (int(sizes[sets[s]].sum()), -s))
+        members = sets[heaviest]
+        if len(members) < 2:
+            break
+        axis = int(np.argmax(np.ptp(centres[members], axis=0)))
+        ordered = members[np.lexsort((members, centres[members, axis]))]
+        weight = np.cumsum(sizes[ordered], dtype=np.float64)
+        half = int(np.clip(np.searchsorted(weight, weight[-1] / 2), 1, len(ordered) - 1))
+        sets[heaviest:heaviest + 1] = [np.sort(ordered[:half]), np.sort(ordered[half:])]
+    owner = np.zeros(len(sizes), dtype=np.int64)
+    for index, members in enumerate(sets):
+        owner[members] = index
+    groups: list[list[tuple[int, int]]] = [[] for _ in sets]
+    for a, b in sorted(pairs):
+        groups[owner[b] if sizes[b] > sizes[a] else owner[a]].append((a, b))
+    return [g for g in groups if g]
 
 
 def _group_overlaps(shared: _Overlaps, pairs: list[tuple[int, int]]) -> list[float]:

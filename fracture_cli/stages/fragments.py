@@ -11,6 +11,7 @@ import numpy as np
 
 from fracture_cli import parallel, trigeom
 from fracture_cli.errors import StageError
+from fracture_cli.meshfix.rows import unique_rows, used_vertices
 from fracture_cli.options import option
 from fracture_cli.stages._solids import SHELL_VOLUME, shell_mask, surface_solid
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Regions, SurfaceMesh
@@ -293,10 +294,10 @@ def _to_fragment(part, piece: int, id_to_material: dict, interior_index: int, su
     fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
     offset = np.einsum("ij,ij->i", fn, a)
     plane_key = np.column_stack([np.round(fn * 1e6), np.round(offset * 1e9)]).astype(np.int64)
-    _, plane = np.unique(plane_key, axis=0, return_inverse=True)
+    _, plane = unique_rows(plane_key, return_inverse=True)
     plane = plane.reshape(-1)
     corner_key = np.column_stack([ti.reshape(-1), np.repeat(plane, 3)])
-    uniq, corner_vertex = np.unique(corner_key, axis=0, return_inverse=True)
+    uniq, corner_vertex = unique_rows(corner_key, return_inverse=True)
     corner_vertex = corner_vertex.reshape(-1)
     new_positions = positions[uniq[:, 0]]
     # Each plane's normal: mean of its faces' normals (they agree to 1e-6).
@@ -306,7 +307,7 @@ def _to_fragment(part, piece: int, id_to_material: dict, interior_index: int, su
     new_normals = plane_normal[uniq[:, 1]]
     new_uvs = _box_uvs(surface.normalization.to_world(new_positions), new_normals, options.uv_scale)
 
-    outer_used = np.unique(tris[~inside])
+    outer_used = used_vertices(tris[~inside], len(props))
     remap = np.full(len(props), -1, dtype=np.int64)
     remap[outer_used] = np.arange(len(outer_used))
     vertices = np.vstack([positions[outer_used], new_positions])
