@@ -17,7 +17,7 @@ from fracture_cli.errors import StageError
 from fracture_cli.faultshape import fragment_faults
 from fracture_cli.meshfix.rows import unique_rows
 from fracture_cli.meshfix.weld_check import MeshCheck, as_written, check_mesh, collapsed, weld_by_position
-from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, SurfaceMesh
+from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, SurfaceMesh
 
 log = logging.getLogger(__name__)
 
@@ -49,25 +49,34 @@ def written_fragments(fragments: Fragments, pivot: str = "center_of_mass") -> tu
         One per fragment, welded by exact written position (see
         :func:`~fracture_cli.meshfix.weld_check.check_mesh`).
     """
+    # Each fragment on its own (pivot, written positions, check): on parallel.current_jobs() processes, in order.
+    done = parallel.ordered_map(_written_fragment, range(len(fragments.fragments)), (fragments, pivot))
+    out = [frag if changed is None else changed for frag, (changed, _) in zip(fragments.fragments, done)]
+    return dataclasses.replace(fragments, fragments=tuple(out)), [check for _, check in done]
+
+
+def _written_fragment(shared: tuple[Fragments, str], index: int) -> tuple[Fragment | None, MeshCheck]:
+    """Fragment ``index`` without the faces its written positions collapse (None: none do) and its check."""
     from fracture_cli.gameready.stage import fragment_physics
 
-    out, checks = [], []
-    for frag, body in zip(fragments.fragments, fragment_physics(fragments, pivot=pivot)):
-        world = fragments.normalization.to_world(frag.vertices)
-        stored = as_written(world, body.origin)
-        welded = weld_by_position(stored)  # checked below too: the faces left out do not change the positions
-        index = welded[1]
-        degenerate = collapsed(index[frag.faces])
-        if degenerate.any():
-            # Corners one written position joins take one float64 position too (the first's): without the
-            # faces, the later stages (collision: welded by exact float64 position) would find a hole there.
-            first = np.full(int(index.max()) + 1, len(index))
-            np.minimum.at(first, index, np.arange(len(index)))
-            frag = dataclasses.replace(frag, vertices=frag.vertices[first[index]], faces=frag.faces[~degenerate],
-                                       material_ids=frag.material_ids[~degenerate])
-        out.append(frag)
-        checks.append(check_mesh(stored, frag.faces, welded))
-    return dataclasses.replace(fragments, fragments=tuple(out)), checks
+    fragments, pivot = shared
+    frag = fragments.fragments[index]
+    # The pivot of one fragment depends on that fragment only.
+    body = fragment_physics(dataclasses.replace(fragments, fragments=(frag,)), pivot=pivot)[0]
+    world = fragments.normalization.to_world(frag.vertices)
+    stored = as_written(world, body.origin)
+    welded = weld_by_position(stored)  # checked below too: the faces left out do not change the positions
+    index_of = welded[1]
+    degenerate = collapsed(index_of[frag.faces])
+    changed = None
+    if degenerate.any():
+        # Corners one written position joins take one float64 position too (the first's): without the
+        # faces, the later stages (collision: welded by exact float64 position) would find a hole there.
+        first = np.full(int(index_of.max()) + 1, len(index_of))
+        np.minimum.at(first, index_of, np.arange(len(index_of)))
+        changed = dataclasses.replace(frag, vertices=frag.vertices[first[index_of]], faces=frag.faces[~degenerate],
+                                      material_ids=frag.material_ids[~degenerate])
+    return changed, check_mesh(stored, (frag if changed is None else changed).faces, welded)
 
 
 def written_summary(checks: list[MeshCheck]) -> dict:
@@ -234,21 +243,67 @@ def _max_overlap(fragments: Fragments, volumes: np.ndarray, max_pairs: int, jobs
     centres = (lo + hi) / 2
     order = np.argsort(np.linalg.norm(centres[i] - centres[j], axis=1), kind="stable")[:max_pairs]
     todo = list(zip(i[order].tolist(), j[order].tolist()))
-    # Each solid built once here (the workers inherit them), then one boolean per pair, independent: on worker
-    # processes, results in order (the same max either way).
-    used = set(i[order].tolist()) | set(j[order].tolist())
-    solids = {k: _solid(frags[k].vertices, frags[k].faces) for k in sorted(used)}
-    overlaps = parallel.ordered_map(_pair_overlap, todo, solids, jobs=jobs)
+    # One boolean per pair, independent; the pairs go to the workers in groups of nearby fragments (fragments are
+    # in centroid order), so a worker builds the solids of its group (and their neighbours) once, instead of the
+    # parent building them all before the fork. The same max on any number of processes.
+    count = parallel.current_jobs() if jobs is None else max(int(jobs), 1)
+    groups = _pair_groups(todo, centres, np.array([len(f.faces) for f in frags]), count)
+    overlaps: dict[tuple[int, int], float] = {}
+    for group, values in zip(groups, parallel.ordered_map(_group_overlaps, groups, _Overlaps(frags, {}), jobs=jobs)):
+        overlaps.update(zip(group, values))
     worst = 0.0
-    for (a, b), overlap in zip(todo, overlaps):
+    for a, b in todo:
         smaller = min(volumes[a], volumes[b])
         if smaller > 0:
-            worst = max(worst, overlap / smaller)
+            worst = max(worst, overlaps[a, b] / smaller)
     return worst
 
 
-def _pair_overlap(solids: dict, pair: tuple[int, int]) -> float:
-    return float((solids[pair[0]] ^ solids[pair[1]]).volume())
+@dataclasses.dataclass(frozen=True)
+class _Overlaps:
+    """The fragments and the solids a process has built of them (each forked worker fills its own copy)."""
+
+    fragments: tuple
+    solids: dict
+
+
+def _pair_groups(pairs: list[tuple[int, int]], centres: np.ndarray, sizes: np.ndarray,
+                 count: int) -> list[list[tuple[int, int]]]:
+    """``pairs`` in at most ``count`` groups of about equal cost, each pair with the group of its larger fragment.
+
+    The fragments are split into ``count`` sets of about equal triangle count by halving the heaviest set at
+    its weighted median along its widest axis (``centres`` (q, 3), ``sizes`` (q,) triangles); a pair whose
+    fragments fall in two sets goes with the larger one, so the solid a second process builds is the smaller.
+    """
+    if not pairs:
+        return []
+    involved = np.unique(np.array(pairs, dtype=np.int64))
+    sets = [involved]
+    while len(sets) < count:
+        heaviest = max(range(len(sets)), key=lambda s: (int(sizes[sets[s]].sum()), -s))
+        members = sets[heaviest]
+        if len(members) < 2:
+            break
+        axis = int(np.argmax(np.ptp(centres[members], axis=0)))
+        ordered = members[np.lexsort((members, centres[members, axis]))]
+        weight = np.cumsum(sizes[ordered], dtype=np.float64)
+        half = int(np.clip(np.searchsorted(weight, weight[-1] / 2), 1, len(ordered) - 1))
+        sets[heaviest:heaviest + 1] = [np.sort(ordered[:half]), np.sort(ordered[half:])]
+    owner = np.zeros(len(sizes), dtype=np.int64)
+    for index, members in enumerate(sets):
+        owner[members] = index
+    groups: list[list[tuple[int, int]]] = [[] for _ in sets]
+    for a, b in sorted(pairs):
+        groups[owner[b] if sizes[b] > sizes[a] else owner[a]].append((a, b))
+    return [g for g in groups if g]
+
+
+def _group_overlaps(shared: _Overlaps, pairs: list[tuple[int, int]]) -> list[float]:
+    """Intersection volume of each pair of fragments (solids built once per process)."""
+    for k in sorted({k for pair in pairs for k in pair} - shared.solids.keys()):
+        frag = shared.fragments[k]
+        shared.solids[k] = _solid(frag.vertices, frag.faces)
+    return [float((shared.solids[a] ^ shared.solids[b]).volume()) for a, b in pairs]
 
 
 def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> float:
@@ -257,6 +312,9 @@ def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -
     open3d's ray-casting scene finds the closest triangle (float32); the
     distance to that triangle is then recomputed in float64.
     """
+    # Most outer vertices are the input's own vertices, at distance 0 exactly: only the others (where a fault
+    # crosses the surface) are measured.
+    points = points[~_on_vertices(points, V, F)]
     if len(points) == 0:
         return 0.0
     from fracture_cli._open3d import open3d as _import_open3d
@@ -286,3 +344,12 @@ def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -
         np.minimum.at(best, point, pair_distance)
         distance[far] = best[far]
     return float(distance.max())
+
+
+def _on_vertices(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Points (n,) bool with exactly (bit for bit) the coordinates of a corner of a triangle ``F`` (f, 3) over ``V``."""
+    used = np.zeros(len(V), dtype=bool)
+    used[np.asarray(F).reshape(-1)] = True  # an unreferenced vertex is not on the surface
+    row = np.dtype((np.void, 3 * np.dtype(np.float64).itemsize))
+    keys = np.ascontiguousarray(points, dtype=np.float64).view(row).reshape(-1)
+    return np.isin(keys, np.ascontiguousarray(V[used], dtype=np.float64).view(row).reshape(-1))

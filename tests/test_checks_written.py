@@ -7,12 +7,14 @@ but not once written is caught.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 import numpy as np
 import pytest
 import trimesh
 
+from fracture_cli import checks
 from fracture_cli.checks import (
     VOLUME_TOLERANCE,
     fragment_invariants,
@@ -22,7 +24,7 @@ from fracture_cli.checks import (
 )
 from fracture_cli.errors import StageError
 from fracture_cli.trigeom import edge_manifold_closed
-from fracture_cli.types import Fragment, Fragments, Material, Normalization, SurfaceMesh
+from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Normalization, SurfaceMesh
 
 
 def fragment(V, F, piece=0) -> Fragment:
@@ -119,3 +121,36 @@ def test_volume_error_above_the_tolerance_fails():
         require_volume({"volume_error": 0.19})
     with pytest.raises(StageError):
         require_volume({"volume_error": float("nan")})
+
+
+def test_overlap_pairs_in_groups_give_the_same_max_on_any_number_of_processes():
+    """Every pair is measured once whatever the grouping; one and two processes agree bit for bit."""
+    rng = np.random.default_rng(3)
+    centres = rng.random((12, 3))
+    sizes = rng.integers(10, 1000, 12)
+    pairs = [(a, b) for a in range(12) for b in range(a + 1, 12) if rng.random() < 0.4]
+    for count in (1, 2, 3, 5):
+        groups = checks._pair_groups(pairs, centres, sizes, count)
+        assert len(groups) <= count and sorted(p for g in groups for p in g) == sorted(pairs)
+    # Two overlapping unit cubes (overlap 0.5 of the smaller) and a third that only touches the second.
+    # All faces interior (fault faces), so the fragments are neighbours.
+    parts = [fragment(*cube(offset)) for offset in ((0.0, 0.0, 0.0), (0.5, 0.0, 0.0), (1.5, 0.0, 0.0))]
+    parts = [dataclasses.replace(f, material_ids=np.ones(len(f.faces), np.int32)) for f in parts]
+    frags = dataclasses.replace(fragments(*parts), materials=(Material("m"), Material(INTERIOR_MATERIAL_NAME)))
+    assert checks.fragment_neighbours(frags).tolist() == [[0, 1], [1, 2]]
+    volumes = np.ones(3)
+    with_one = checks._max_overlap(frags, volumes, 2000, 1)
+    assert with_one == pytest.approx(0.5, rel=1e-12)
+    assert checks._max_overlap(frags, volumes, 2000, 2) == with_one
+
+
+def test_outer_distance_skips_only_points_on_used_surface_vertices():
+    V, F = cube()
+    far = np.array([[5.0, 5.0, 5.0]])
+    unused = np.vstack([V, far])  # a vertex no triangle uses is not on the surface
+    points = np.vstack([V, far, V[:1] + [0.0, 0.0, 0.25]])
+    on = checks._on_vertices(points, unused, F)
+    assert on.tolist() == [True] * 8 + [False, False]
+    distance = checks._max_distance_to_surface(points, unused, F)
+    assert distance == pytest.approx(np.linalg.norm(far[0] - 0.5), rel=1e-6)
+    assert checks._max_distance_to_surface(V, V, F) == 0.0

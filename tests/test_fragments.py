@@ -277,3 +277,17 @@ def test_box_uv_axis_ties_do_not_depend_on_rounding():
     np.testing.assert_array_equal(uvs, np.repeat(uvs[:1], 3, axis=0))
     # A clear winner still wins.
     assert not np.array_equal(_box_uvs(world, np.array([[0.1, 0.99, 0.0]]), 1.0), uvs[:1])
+
+
+def test_one_body_cuts_give_what_split_fragments_gives():
+    """The stage skips split_fragments when the workers found one body per cut: the same fragments and report."""
+    from fracture_cli.gameready.components import split_fragments
+    from fracture_cli.stages.fragments import fragments_with_split
+
+    surf = uv_sphere()
+    tm = cage_tets(4)
+    R = smooth(tm, octant_pieces(tm), SmoothOptions(smoothing=0.0))
+    options = FragmentOptions()
+    frags, report = fragments_with_split(surf, R, options)
+    again, expected = split_fragments(frags, options.min_body_fraction)
+    assert again is frags and report == expected

@@ -11,6 +11,7 @@ import numpy as np
 
 from fracture_cli import parallel, trigeom
 from fracture_cli.errors import StageError
+from fracture_cli.meshfix.rows import unique_rows, used_vertices
 from fracture_cli.options import option
 from fracture_cli.stages._solids import SHELL_VOLUME, shell_mask, surface_solid
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Regions, SurfaceMesh
@@ -137,12 +138,13 @@ def fragments_with_split(surface: SurfaceMesh, regions: Regions,
     # One boolean per piece, independent of the others: on parallel.current_jobs() processes, results in order.
     if solid.num_tri() > _CROP_TRIANGLES and len(regions.meshes) > 1:
         groups = _piece_groups(regions.meshes, _CROP_GROUPS)
-        cuts: list[Fragment | None] = [None] * len(regions.meshes)
+        done: list[_Piece | None] = [None] * len(regions.meshes)
         for group, parts in zip(groups, parallel.ordered_map(_cut_group, groups, cut)):
             for piece, part in zip(group, parts):
-                cuts[piece] = part
+                done[piece] = part
     else:
-        cuts = parallel.ordered_map(_cut_piece, range(len(regions.meshes)), cut)
+        done = parallel.ordered_map(_cut_piece, range(len(regions.meshes)), cut)
+    cuts = [None if d is None else d[0] for d in done]
     results = [f for f in cuts if f is not None]
     empty = [piece for piece, f in enumerate(cuts) if f is None]
     if empty:
@@ -161,8 +163,14 @@ def fragments_with_split(surface: SurfaceMesh, regions: Regions,
         normalization=surface.normalization,
         input_volume=input_volume,
     )
-    from fracture_cli.gameready.components import split_fragments  # imports this module's _stable_order
+    from fracture_cli.gameready.components import SplitReport, split_fragments  # imports our _stable_order
 
+    # The workers found each cut's bodies (body_faces) and their volumes: when there are as many bodies as cuts,
+    # none of them tiny, split_fragments returns the fragments as they are (its first test), so it is not run again.
+    counts = tuple(len(d[1]) for d in done if d is not None)
+    volumes = np.array([volume for d in done if d is not None for volume in d[1]])
+    if sum(counts) == len(results) and not np.any(volumes < options.min_body_fraction * input_volume):
+        return cut_fragments, SplitReport(bodies=counts, source=tuple(range(len(counts))), merged=0, isolated=0)
     return split_fragments(cut_fragments, options.min_body_fraction)
 
 
@@ -206,7 +214,11 @@ def _piece_groups(meshes: tuple, count: int) -> list[list[int]]:
     return [g.tolist() for g in groups]
 
 
-def _cut_group(cut: _Cut, pieces: list[int]) -> list[Fragment | None]:
+# A cut fragment and the volume of each of its closed bodies (gameready.components.body_faces).
+_Piece = tuple[Fragment, list[float]]
+
+
+def _cut_group(cut: _Cut, pieces: list[int]) -> list[_Piece | None]:
     """The fragments of ``pieces``, cut from the input cropped to a box around their regions."""
     boxes = [(V.min(axis=0), V.max(axis=0)) for V, _ in (cut.meshes[p] for p in pieces) if len(V)]
     if not boxes:
@@ -217,15 +229,22 @@ def _cut_group(cut: _Cut, pieces: list[int]) -> list[Fragment | None]:
     return [_cut_piece(cut, piece, crop) for piece in pieces]
 
 
-def _cut_piece(cut: _Cut, piece: int, solid: manifold3d.Manifold | None = None) -> Fragment | None:
-    """The fragment of ``piece`` (``input ^ region``; ``solid``: the input or a crop of it around the region),
-    or None where the region misses the input."""
+def _cut_piece(cut: _Cut, piece: int, solid: manifold3d.Manifold | None = None) -> _Piece | None:
+    """The fragment of ``piece`` (``input ^ region``; ``solid``: the input or a crop of it around the region) and
+    its bodies' volumes, or None where the region misses the input."""
+    from fracture_cli.gameready.components import body_faces
+    from fracture_cli.gameready.mass import mass_properties
+
     rv, rf = cut.meshes[piece]
     part = (cut.solid if solid is None else solid) ^ _region_manifold(rv, rf, cut.region_id, piece)
     if part.is_empty() or part.volume() <= cut.min_volume:
         return None
-    return _to_fragment(part, piece, cut.id_to_material, cut.interior_index, cut.surface, cut.options,
+    frag = _to_fragment(part, piece, cut.id_to_material, cut.interior_index, cut.surface, cut.options,
                         cut.min_volume)
+    # As split_fragments measures them, here on the workers.
+    volumes = [mass_properties(frag.vertices, frag.faces[faces]).volume for faces in body_faces(frag.vertices,
+                                                                                                 frag.faces)]
+    return frag, volumes
 
 
 def _with_interior(materials: tuple[Material, ...], color: list) -> tuple[int, tuple[Material, ...]]:
@@ -293,10 +312,10 @@ def _to_fragment(part, piece: int, id_to_material: dict, interior_index: int, su
     fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
     offset = np.einsum("ij,ij->i", fn, a)
     plane_key = np.column_stack([np.round(fn * 1e6), np.round(offset * 1e9)]).astype(np.int64)
-    _, plane = np.unique(plane_key, axis=0, return_inverse=True)
+    _, plane = unique_rows(plane_key, return_inverse=True)
     plane = plane.reshape(-1)
     corner_key = np.column_stack([ti.reshape(-1), np.repeat(plane, 3)])
-    uniq, corner_vertex = np.unique(corner_key, axis=0, return_inverse=True)
+    uniq, corner_vertex = unique_rows(corner_key, return_inverse=True)
     corner_vertex = corner_vertex.reshape(-1)
     new_positions = positions[uniq[:, 0]]
     # Each plane's normal: mean of its faces' normals (they agree to 1e-6).
@@ -306,7 +325,7 @@ def _to_fragment(part, piece: int, id_to_material: dict, interior_index: int, su
     new_normals = plane_normal[uniq[:, 1]]
     new_uvs = _box_uvs(surface.normalization.to_world(new_positions), new_normals, options.uv_scale)
 
-    outer_used = np.unique(tris[~inside])
+    outer_used = used_vertices(tris[~inside], len(props))
     remap = np.full(len(props), -1, dtype=np.int64)
     remap[outer_used] = np.arange(len(outer_used))
     vertices = np.vstack([positions[outer_used], new_positions])
