@@ -318,10 +318,11 @@ def _max_distance_to_surface(points: np.ndarray, V: np.ndarray, F: np.ndarray) -
     if len(points) == 0:
         return 0.0
     from fracture_cli._open3d import open3d as _import_open3d
-    o3d = _import_open3d()
+    from fracture_cli.scenes import surface_scene
 
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
+    o3d = _import_open3d()
+    # The cage stage's scene of the same surface arrays when it is still alive (its BVH costs 0.6 s at 1M).
+    scene = surface_scene(V, F)
     result = scene.compute_closest_points(o3d.core.Tensor(points.astype(np.float32)))
     tri = result["primitive_ids"].numpy().astype(np.int64)
     distance = trigeom.point_triangle_distance(points, V[F[tri]])

@@ -63,10 +63,13 @@ def vertex_normals(V: np.ndarray, F: np.ndarray, n: int | None = None, unit: boo
         Normalize to unit length (vertices without faces stay 0).
     """
     n = len(V) if n is None else n
+    F = np.asarray(F, dtype=np.int64)
     fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    acc = np.zeros((n, 3))
-    for k in range(3):
-        np.add.at(acc, F[:, k], fn)
+    # bincount adds in array order (first corners, then second, then third), as np.add.at over the three
+    # corners did, bit for bit, several times faster.
+    corners = F.T.reshape(-1)
+    acc = np.stack([np.bincount(corners, weights=np.tile(fn[:, axis], 3), minlength=n) for axis in range(3)],
+                   axis=1).reshape(n, 3)
     if not unit:
         return acc
     return acc / np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-300)

@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from fracture_cli import trigeom
 from fracture_cli.meshfix.rows import group_rows, used_vertices
 from fracture_cli.types import SurfaceMesh
 
@@ -61,7 +62,7 @@ def closed_as_given(surface: SurfaceMesh) -> tuple[bool, float]:
         return False, 0.0
     if not _distinct_positions(V):
         return False, 0.0
-    volume = _volume(V, F)
+    volume = trigeom.signed_volume(V, F)
     if not volume > _MIN_FAST_VOLUME:
         return False, 0.0
     if surface.normals is not None and _normals_against(V, F, np.asarray(surface.normals, dtype=np.float64)):
@@ -115,18 +116,10 @@ def _distinct_positions(V: np.ndarray) -> bool:
     return int(group_rows(V).max()) + 1 == len(V)
 
 
-def _volume(V: np.ndarray, F: np.ndarray) -> float:
-    """Signed volume enclosed by the faces."""
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
-
-
 def _normals_against(V: np.ndarray, F: np.ndarray, N: np.ndarray) -> bool:
     """Whether any shading normal points against the area-weighted normal of its faces.
 
     The sums are :func:`~fracture_cli.stages.repair.orient.fix_shading_normals`'s, bit for bit.
     """
-    from fracture_cli.stages.repair.orient import face_normal_sums
-
-    acc = face_normal_sums(V, F)
+    acc = trigeom.vertex_normals(V, F, unit=False)
     return bool((np.einsum("ij,ij->i", acc, N) < 0).any())

@@ -75,22 +75,9 @@ def component_orientation(V: np.ndarray, F: np.ndarray, component: np.ndarray) -
     return (volume > 0) != positive
 
 
-def face_normal_sums(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Sum (n, 3) of the (twice-area) normals of the faces ``F`` (m, 3) at each vertex of ``V`` (n, 3).
-
-    :func:`fracture_cli.trigeom.vertex_normals` (``unit=False``) bit for bit: ``bincount`` adds in array order,
-    as its ``np.add.at`` over the first, second and third corners does, several times faster.
-    """
-    F = np.asarray(F, dtype=np.int64)
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    corners = F.T.reshape(-1)
-    return np.stack([np.bincount(corners, weights=np.tile(fn[:, axis], 3), minlength=len(V)) for axis in range(3)],
-                    axis=1)
-
-
 def fix_shading_normals(props: np.ndarray, F: np.ndarray) -> int:
     """Flip vertex normals (in place) that point against their own faces; returns how many."""
-    acc = face_normal_sums(props[:, POS], F)
+    acc = trigeom.vertex_normals(props[:, POS], F, unit=False)
     against = np.einsum("ij,ij->i", acc, props[:, NORMAL]) < 0
     props[against, NORMAL] *= -1.0
     return int(against.sum())
