@@ -137,7 +137,8 @@ def require_volume(report: dict) -> None:
 
 
 def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs: int = 2000,
-                        written: list[MeshCheck] | None = None, jobs: int | None = None) -> dict:
+                        written: list[MeshCheck] | None = None, jobs: int | None = None,
+                        faults: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict:
     """Measure what ALGORITHM.md section 6 promises of the fragments.
 
     Parameters
@@ -153,6 +154,8 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
         Processes for the pairwise booleans; the result does not depend on it.
     written : list of MeshCheck, optional
         The checks of :func:`written_fragments` (computed when not given).
+    faults : tuple of arrays, optional
+        :func:`~fracture_cli.faultshape.fragment_faults` of ``fragments`` (computed when not given).
 
     Returns
     -------
@@ -195,7 +198,7 @@ def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs
         **written_summary(written),
         "volume_error": float(abs(volumes.sum() - reference) / reference) if reference > 0 else float("nan"),
         "max_outer_distance": float(_max_distance_to_surface(points, surface.vertices, surface.faces)),
-        "max_overlap": float(_max_overlap(fragments, volumes, max_pairs, jobs)),
+        "max_overlap": float(_max_overlap(fragments, volumes, max_pairs, jobs, faults)),
         "min_fragment_volume": float(relative[0]),
         "fragment_volume_min": float(relative[0]),
         "fragment_volume_median": float(np.median(relative)),
@@ -217,26 +220,29 @@ def _solid(V: np.ndarray, F: np.ndarray):
     return manifold3d.Manifold(mesh)
 
 
-def fragment_neighbours(fragments: Fragments) -> np.ndarray:
+def fragment_neighbours(fragments: Fragments,
+                        faults: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Pairs ``(i, j)``, ``i < j`` (e, 2) int64, of fragments that share a fault (the fragment graph).
 
     Measured on the meshes: ``j`` owns the interior face nearest to some
-    interior face of ``i`` (or the other way round), as in :func:`fragment_faults`.
+    interior face of ``i`` (or the other way round), as in :func:`fragment_faults`
+    (``faults``: its result, when the caller has it).
     """
     q = len(fragments.fragments)
-    fault = fragment_faults(fragments)[2]
+    fault = (fragment_faults(fragments) if faults is None else faults)[2]
     labels = np.unique(fault[fault >= 0])
     pairs = np.sort(np.column_stack([labels // max(q, 1), labels % max(q, 1)]), axis=1)
     return np.unique(pairs, axis=0) if len(pairs) else np.zeros((0, 2), dtype=np.int64)
 
 
-def _max_overlap(fragments: Fragments, volumes: np.ndarray, max_pairs: int, jobs: int | None) -> float:
+def _max_overlap(fragments: Fragments, volumes: np.ndarray, max_pairs: int, jobs: int | None,
+                 faults: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> float:
     frags = fragments.fragments
     if len(frags) < 2:
         return 0.0
     lo = np.array([f.vertices.min(axis=0) for f in frags])
     hi = np.array([f.vertices.max(axis=0) for f in frags])
-    pairs = fragment_neighbours(fragments)
+    pairs = fragment_neighbours(fragments, faults)
     i, j = pairs[:, 0], pairs[:, 1]
     touching = np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)
     i, j = i[touching], j[touching]

@@ -185,16 +185,17 @@ def _fragments(state: PipelineState, options: Any) -> PipelineState:
 def _checked(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments, dict[str, CheckValue]]:
     """The fragments as they will be written and the report's checks; a broken fragment stops the bake here."""
     from fracture_cli.checks import fragment_invariants, require_sound, require_volume, written_fragments
-    from fracture_cli.faultshape import fragment_fault_shape
+    from fracture_cli.faultshape import fault_shape, fragment_faults
 
     # Checked as they will be written (float32 about each pivot).
     frags, written = written_fragments(frags, frags.pivot)
     require_sound(written)
-    checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written))
+    faults = fragment_faults(frags)  # the overlap check's fragment graph and the fault shape both read them
+    checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written, faults=faults))
     require_volume(checks)
     checks["input_volume"] = float(frags.input_volume * surface.normalization.scale**3)
     # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
-    shape = fragment_fault_shape(frags)
+    shape = fault_shape(*faults)
     checks["fault_mean_dihedral_degrees"] = round(shape["mean_dihedral_degrees"], 6)
     checks["fault_crease_density"] = round(shape["crease_density"], 6)
     return frags, checks
