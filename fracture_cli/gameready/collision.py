@@ -38,8 +38,9 @@ import manifold3d
 import numpy as np
 
 from fracture_cli import parallel
-from fracture_cli.gameready.decompose import convex_decomposition, decomposition_cells
+from fracture_cli.gameready.decompose import convex_decomposition, decomposition_hulls
 from fracture_cli.gameready.hulls import (
+    canonical,
     face_planes,
     hull_corners,
     hull_mesh,
@@ -180,9 +181,10 @@ def _decompose(shared: tuple, index: int) -> tuple[float, float, list[tuple[np.n
     volume = solid.volume()
     ratio = solid.hull().volume() / volume if volume > 0 else 1.0
     intrusion = _Intrusion(solids, boxes, index) if options.intrusion > 0 else None
-    leaves, cells = decomposition_cells(solid, options.max_parts, options.concavity, intrusion, options.intrusion)
-    return volume, ratio, [(simplify_hull(hull_corners(leaf), options.max_vertices), mesh_of(leaf), cell)
-                           for leaf, cell in zip(leaves, cells)]
+    leaves, cells, hulls = decomposition_hulls(solid, options.max_parts, options.concavity, intrusion,
+                                               options.intrusion)
+    return volume, ratio, [(simplify_hull(canonical(mesh_of(hull)[0]), options.max_vertices), mesh_of(leaf), cell)
+                           for leaf, cell, hull in zip(leaves, cells, hulls)]
 
 
 def _groups(cells: list[tuple[int, int]]) -> list[tuple[int, int]]:

@@ -104,14 +104,20 @@ def simplify_hull(points: np.ndarray, max_vertices: int) -> np.ndarray:
         return corners
     chosen = _initial_tetrahedron(corners)
     scale = float(np.linalg.norm(np.ptp(corners, axis=0)))
-    while len(chosen) < max_vertices:
+    # The corners still outside the current hull, in order. One inside it stays inside the larger hulls that
+    # follow (up to rounding, far below the 1e-12 that stops the loop), so it is never the farthest again and
+    # is not looked at again: most of a dense hull's corners drop out after a few insertions.
+    outside_ids = np.setdiff1d(np.arange(len(corners)), chosen)
+    while len(chosen) < max_vertices and len(outside_ids):
         normal, offset = face_planes(*hull_mesh(corners[chosen]))
-        outside = (corners @ normal.T - offset[None, :]).max(axis=1)
-        outside[chosen] = -np.inf
-        farthest = int(np.argmax(outside))
+        outside = (corners[outside_ids] @ normal.T - offset[None, :]).max(axis=1)
+        farthest = int(np.argmax(outside))  # the first of equals: the ids are in order
         if outside[farthest] <= 1e-12 * scale:
             break
-        chosen.append(farthest)
+        chosen.append(int(outside_ids[farthest]))
+        keep = outside > 0
+        keep[farthest] = False
+        outside_ids = outside_ids[keep]
     return hull_corners(hull_of(corners[chosen]))
 
 
