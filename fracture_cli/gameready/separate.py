@@ -45,6 +45,12 @@ class _Material:
         a, b, c = self.triangles[:, 0], self.triangles[:, 1], self.triangles[:, 2]
         self.area = 0.5 * cross3(b - a, c - a)
         self.centroid = self.triangles.mean(axis=1)
+        # A corner's height along a unit normal is within this of its centroid's (radius, grown for rounding).
+        radius = np.sqrt(np.einsum("tcj,tcj->tc", self.triangles - self.centroid[:, None, :],
+                                   self.triangles - self.centroid[:, None, :]).max(axis=1)) if len(self.faces) else \
+            np.zeros(0)
+        scale = float(np.abs(self.vertices).max()) if len(self.vertices) else 0.0
+        self.radius = radius * (1.0 + 1e-9) + 1e-9 * scale
 
 
 @dataclass(frozen=True)
@@ -99,8 +105,12 @@ def volume_beyond(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, o
 def _volume_beyond(material: _Material, normal: np.ndarray, offsets) -> np.ndarray:
     normal = np.asarray(normal, dtype=np.float64)
     offsets = np.atleast_1d(np.asarray(offsets, dtype=np.float64))
-    h = np.sort(material.triangles @ normal, axis=1)
-    weight = material.area @ normal
+    # Triangles wholly below every plane add nothing: only the others are measured (found from their centroids'
+    # heights; a part's overlap with its neighbour is near its surface, so they are few). The kept triangles are
+    # in order and measured as if all were: the same sums, bit for bit.
+    near = np.flatnonzero(material.centroid @ normal + material.radius > offsets.min())
+    h = np.sort(material.triangles[near] @ normal, axis=1)
+    weight = material.area[near] @ normal
     # Triangles wholly beyond every plane: a mean that is linear in the offset, summed once.
     full = h[:, 0] > offsets.max()
     result = weight[full] @ h[full].mean(axis=1) - offsets * weight[full].sum()
