@@ -19,6 +19,7 @@ import numpy as np
 from fracture_cli import parallel
 from fracture_cli.gameready.hulls import (
     MIN_PART_VOLUME,
+    max_beyond,
     face_planes,
     hull_corners,
     hull_of,
@@ -46,9 +47,9 @@ class _Material:
         self.area = 0.5 * cross3(b - a, c - a)
         self.centroid = self.triangles.mean(axis=1)
         # A corner's height along a unit normal is within this of its centroid's (radius, grown for rounding).
-        radius = np.sqrt(np.einsum("tcj,tcj->tc", self.triangles - self.centroid[:, None, :],
-                                   self.triangles - self.centroid[:, None, :]).max(axis=1)) if len(self.faces) else \
-            np.zeros(0)
+        arm = self.triangles - self.centroid[:, None, :]
+        squared = np.einsum("tcj,tcj->tc", arm, arm)
+        radius = np.sqrt(np.maximum(np.maximum(squared[:, 0], squared[:, 1]), squared[:, 2]))
         scale = float(np.abs(self.vertices).max()) if len(self.vertices) else 0.0
         self.radius = radius * (1.0 + 1e-9) + 1e-9 * scale
 
@@ -279,7 +280,7 @@ def _interface_normal(shared: _Shared, i: int, j: int) -> np.ndarray | None:
     weighted, centroid = shared.contacts[(min(p, q), max(p, q))]
     inside = np.ones(len(centroid), dtype=bool)
     for normal, offset in (shared.planes[i], shared.planes[j]):
-        inside &= (centroid @ normal.T - offset[None, :]).max(axis=1) <= shared.tolerance
+        inside &= max_beyond(centroid, normal, offset) <= shared.tolerance
     total = weighted[inside].sum(axis=0) * (1.0 if p < q else -1.0)
     length = float(np.linalg.norm(total))
     return total / length if length > 0 else None
