@@ -131,7 +131,8 @@ def _best_cut(part: manifold3d.Manifold, hull: manifold3d.Manifold):
     for normal in _cut_normals(axes):
         s = V @ normal
         lo, hi = float(s.min()), float(s.max())
-        candidates += [(normal, offset, s, _cut_points(V, edges, s, offset))
+        ends = (s[edges[:, 0]], s[edges[:, 1]])  # once per normal, not per offset
+        candidates += [(normal, offset, s, _cut_points(V, edges, ends, offset))
                        for offset in lo + (hi - lo) * _CUT_FRACTIONS]
     bounds = _cost_bounds(V, candidates) if len(V) > _BOUND_VERTICES else np.zeros(len(candidates))
     best, best_cost = None, hull.volume() * (1.0 - 1e-9)
@@ -205,13 +206,19 @@ def _thin(points: np.ndarray, cell: float) -> np.ndarray:
     return points[np.sort(first)]
 
 
-def _cut_points(V: np.ndarray, edges: np.ndarray, s: np.ndarray, offset: float) -> np.ndarray:
-    """The points (c, 3) where the mesh edges (e, 2) cross the plane ``s == offset`` (``s``: (n,) vertex heights)."""
-    d = s - offset
-    da, db = d[edges[:, 0]], d[edges[:, 1]]
-    crossing = (da > 0) != (db > 0)
-    t = da[crossing] / (da[crossing] - db[crossing])
-    return V[edges[crossing, 0]] + t[:, None] * (V[edges[crossing, 1]] - V[edges[crossing, 0]])
+def _cut_points(V: np.ndarray, edges: np.ndarray, ends: tuple[np.ndarray, np.ndarray], offset: float) -> np.ndarray:
+    """The points (c, 3) where the mesh edges (e, 2) cross the plane ``s == offset``; ``ends``: the heights
+    ``s`` (e,) of the edges' first and second vertices.
+
+    ``s - offset > 0`` exactly when ``s > offset`` (a difference of two floats is 0 only if they are equal), so
+    the crossing edges are found without a difference per edge.
+    """
+    sa, sb = ends
+    crossing = np.flatnonzero((sa > offset) != (sb > offset))
+    da, db = sa[crossing] - offset, sb[crossing] - offset
+    t = da / (da - db)
+    a = V[edges[crossing, 0]]
+    return a + t[:, None] * (V[edges[crossing, 1]] - a)
 
 
 def _halves_hull_volume(V: np.ndarray, s: np.ndarray, offset: float, cut: np.ndarray) -> float:

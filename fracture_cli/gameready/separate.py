@@ -119,11 +119,16 @@ def _volume_beyond(material: _Material, normal: np.ndarray, offsets) -> np.ndarr
     x = h[None, reach, :] - offsets[:, None, None]  # (k, t, 3)
     x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
     mean = (x0 + x1 + x2) / 3.0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        two = mean + np.maximum(-x0, 0.0) ** 3 / (3.0 * (x1 - x0) * (x2 - x0))
-        one = x2 ** 3 / (3.0 * (x2 - x0) * (x2 - x1))
-    positive = np.where(x1 > 0, two, np.where(x2 > 0, one, 0.0))
-    positive = np.where(x0 > 0, mean, positive)
+    # Each case's formula only where it applies (the cubes are libm pow calls, ~60 ns each): the same values.
+    positive = np.zeros_like(mean)
+    every = x0 > 0
+    positive[every] = mean[every]
+    two = ~every & (x1 > 0)
+    a0, a1, a2 = x0[two], x1[two], x2[two]
+    positive[two] = mean[two] + np.maximum(-a0, 0.0) ** 3 / (3.0 * (a1 - a0) * (a2 - a0))
+    one = ~every & ~(x1 > 0) & (x2 > 0)
+    a0, a1, a2 = x0[one], x1[one], x2[one]
+    positive[one] = a2 ** 3 / (3.0 * (a2 - a0) * (a2 - a1))
     return result + positive @ weight[reach]
 
 
