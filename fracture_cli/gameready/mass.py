@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli.trigeom import cross3
+
 
 @dataclass(frozen=True)
 class MassProperties:
@@ -97,7 +99,7 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> MassProperties:
     used = V[mask]
     origin = (used.min(axis=0) + used.max(axis=0)) / 2.0
     a, b, c = V[F[:, 0]] - origin, V[F[:, 1]] - origin, V[F[:, 2]] - origin
-    v = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    v = np.einsum("ij,ij->i", a, cross3(b, c)) / 6.0  # np.cross's products, without its axis handling
     volume = float(v.sum())
     s = a + b + c
     if not abs(volume) > 1e-300:
