@@ -199,18 +199,27 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=
                      _contacts(meshes, tolerance, candidates))
     planes = parallel.ordered_map(_pair_plane, [(int(i), int(j)) for i, j in pairs], shared)
     clipped = [False] * len(hulls)
+    stale: set[int] = set()  # clipped parts whose corners are read back from their hull when next needed
+
+    def current(part: int) -> np.ndarray:
+        if part in stale:
+            stale.discard(part)
+            corners[part] = mesh_of(hulls[part])[0]
+        return corners[part]
+
     for (i, j), plane in zip(pairs, planes):
         if plane is None:
             continue
         normal, offset = plane
         # Once a part was clipped by an earlier pair, this pair may be apart already: then it keeps its material.
-        if (clipped[i] or clipped[j]) and not _overlapping(hulls[i], hulls[j], corners[i], corners[j], normal, offset):
+        if (clipped[i] or clipped[j]) and not _overlapping(hulls[i], hulls[j], current(i), current(j), normal,
+                                                           offset):
             continue
         # A part wholly on its side of the plane stays as it is (and needs no trim).
         for part, side, level in ((i, -normal, -offset), (j, normal, offset)):
-            if len(corners[part]) and (corners[part] @ side).min() < level:
+            if len(current(part)) and (corners[part] @ side).min() < level:
                 hulls[part] = hulls[part].trim_by_plane(side, level)
-                corners[part] = mesh_of(hulls[part])[0]
+                stale.add(part)
                 clipped[part] = True
     return [hull_corners(h) if not h.is_empty() and h.volume() > MIN_PART_VOLUME else np.zeros((0, 3))
             for h in hulls]
