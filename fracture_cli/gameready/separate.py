@@ -19,10 +19,10 @@ import numpy as np
 from fracture_cli import parallel
 from fracture_cli.gameready.hulls import (
     MIN_PART_VOLUME,
-    max_beyond,
     face_planes,
     hull_corners,
     hull_of,
+    max_beyond,
     mesh_of,
     overlap_bound_separated,
     surface_area,
@@ -132,7 +132,8 @@ def _volume_beyond(material: _Material, normal: np.ndarray, offsets) -> np.ndarr
     return result + positive @ weight[reach]
 
 
-def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=None) -> list[np.ndarray]:
+def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=None,
+                   masses=None) -> list[np.ndarray]:
     """Clip every overlapping pair of convex parts by one plane so that they only touch.
 
     Parameters
@@ -153,6 +154,10 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=
         bodies instead of between pieces. Default: each material its own body.
         A third item, per body a (m_i,) bool mask (or None: all faces),
         restricts the matching to the faces that may touch another body.
+
+    masses : list of MassProperties, optional
+        :func:`~fracture_cli.gameready.mass.mass_properties` of each material, if already known (the stage
+        computes them on its worker processes); default computed here.
 
     Returns
     -------
@@ -181,7 +186,8 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=
     if materials is None:
         materials = [mesh_of(h) for h in hulls]
     solids = [_Material(V, F) for V, F in materials]
-    masses = [mass_properties(V, F) for V, F in materials]
+    if masses is None:
+        masses = [mass_properties(V, F) for V, F in materials]
     points = np.vstack([m.vertices for m in solids]) if solids else np.zeros((1, 3))
     from fracture_cli.gameready.components import INTERFACE_TOLERANCE
 
