@@ -38,8 +38,9 @@ import manifold3d
 import numpy as np
 
 from fracture_cli import parallel
-from fracture_cli.gameready.decompose import convex_decomposition, decomposition_cells
+from fracture_cli.gameready.decompose import convex_decomposition, decomposition_hulls
 from fracture_cli.gameready.hulls import (
+    canonical,
     face_planes,
     hull_corners,
     hull_mesh,
@@ -50,6 +51,7 @@ from fracture_cli.gameready.hulls import (
     solid_of,
     surface_area,
 )
+from fracture_cli.gameready.mass import MassProperties, mass_properties
 from fracture_cli.gameready.separate import overlapping_boxes, separate_parts, volume_beyond
 from fracture_cli.options import option
 
@@ -141,19 +143,20 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions(), fau
     """
     solids = [solid_of(V, F) for V, F in meshes]
     boxes = np.array([s.bounding_box() for s in solids]).reshape(-1, 6)
-    corners, materials, owners, cells, volumes, hull_ratio = [], [], [], [], [], []
+    corners, materials, masses, owners, cells, volumes, hull_ratio = [], [], [], [], [], [], []
     # Fragments decompose independently: on parallel.current_jobs() processes (forked: the solids are inherited).
     decomposed = parallel.ordered_map(_decompose, range(len(solids)), (solids, boxes, options))
     for index, (volume, ratio, leaves) in enumerate(decomposed):
         volumes.append(volume)
         hull_ratio.append(ratio)
-        for leaf_corners, leaf_mesh, cell in leaves:
+        for leaf_corners, leaf_mesh, leaf_mass, cell in leaves:
             corners.append(leaf_corners)
             materials.append(leaf_mesh)
+            masses.append(leaf_mass)
             owners.append(index)
             cells.append((index, cell))
     # Parts in different cells of one fragment's partition cannot overlap: their pairs need no look.
-    flat = separate_parts(corners, materials, _groups(cells), (meshes, owners, faults))
+    flat = separate_parts(corners, materials, _groups(cells), (meshes, owners, faults), masses)
     owned: list[list[np.ndarray]] = [[] for _ in volumes]
     for owner, points in zip(owners, flat):
         owned[owner].append(points)
@@ -172,17 +175,23 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions(), fau
                            coverage=covered / np.maximum(volumes_arr, 1e-300))
 
 
-def _decompose(shared: tuple, index: int) -> tuple[float, float, list[tuple[np.ndarray, tuple, int]]]:
-    """Volume, hull ratio and convex leaves ``(corners, (V, F), cell)`` of fragment ``index`` (numpy only:
-    picklable)."""
+def _decompose(shared: tuple, index: int) -> tuple[float, float, list[tuple[np.ndarray, tuple, MassProperties, int]]]:
+    """Volume, hull ratio and convex leaves ``(corners, (V, F), mass properties, cell)`` of fragment ``index``
+    (numpy only: picklable)."""
     solids, boxes, options = shared
     solid = solids[index]
     volume = solid.volume()
     ratio = solid.hull().volume() / volume if volume > 0 else 1.0
     intrusion = _Intrusion(solids, boxes, index) if options.intrusion > 0 else None
-    leaves, cells = decomposition_cells(solid, options.max_parts, options.concavity, intrusion, options.intrusion)
-    return volume, ratio, [(simplify_hull(hull_corners(leaf), options.max_vertices), mesh_of(leaf), cell)
-                           for leaf, cell in zip(leaves, cells)]
+    leaves, cells, hulls = decomposition_hulls(solid, options.max_parts, options.concavity, intrusion,
+                                               options.intrusion)
+    out = []
+    for leaf, cell, hull in zip(leaves, cells, hulls):
+        V, F = mesh_of(leaf)
+        # The separation's mass properties of the leaf, here on a worker rather than one after another there.
+        out.append((simplify_hull(canonical(mesh_of(hull)[0]), options.max_vertices), (V, F), mass_properties(V, F),
+                    cell))
+    return volume, ratio, out
 
 
 def _groups(cells: list[tuple[int, int]]) -> list[tuple[int, int]]:

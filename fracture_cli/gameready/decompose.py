@@ -23,8 +23,8 @@ _SAME_AXIS = 0.966
 _CUT_FRACTIONS = np.arange(1, 8) / 8.0
 # Parts with more vertices get a lower bound of each candidate cut's cost first, from a thinned point set ...
 _BOUND_VERTICES = 2000
-# ... of one point per cell of this fraction of the part's diagonal.
-_BOUND_CELLS = 64
+# ... of one point per cell of this fraction of the part's diagonal (the cut's points: per half cell).
+_BOUND_CELLS = 24
 # A bound is trusted up to this relative error: a hull of fewer points has no more volume, but the costs are
 # manifold3d's hull volumes, which differ from qhull's by up to ~2e-4 (its hull merges near-flat corners).
 _BOUND_SLACK = 1e-3
@@ -68,32 +68,44 @@ def decomposition_cells(solid: manifold3d.Manifold, max_parts: int, concavity: f
     convex); pieces of one cell (the components of one side of a cut, or of
     the solid) may interlock.
     """
-    def excess(part: manifold3d.Manifold) -> float:
+    leaves, cells, _ = decomposition_hulls(solid, max_parts, concavity, intrusion, max_intrusion)
+    return leaves, cells
+
+
+def decomposition_hulls(solid: manifold3d.Manifold, max_parts: int, concavity: float, intrusion=None,
+                        max_intrusion: float = 0.05) -> tuple[list[manifold3d.Manifold], list[int],
+                                                              list[manifold3d.Manifold]]:
+    """:func:`decomposition_cells` and the convex hull of each piece (computed once: a dense piece's hull is
+    a large share of the decomposition's time)."""
+    def excess(part: manifold3d.Manifold, hull: manifold3d.Manifold) -> float:
         # How far a part is from acceptable, as a volume (> 0: cut it); the worst part is cut first.
-        hull, volume = part.hull(), part.volume()
+        volume = part.volume()
         own = hull.volume() - (1.0 + concavity) * volume
         if intrusion is None:
             return own
         return max(own, intrusion(hull) - max_intrusion * volume)
 
     leaves = components(solid)
+    hulls = [p.hull() for p in leaves]
     cells = [0] * len(leaves)
-    waste = [excess(p) for p in leaves]
+    waste = [excess(p, h) for p, h in zip(leaves, hulls)]
     next_cell = 1
     while len(leaves) < max_parts:
         worst = int(np.argmax(waste))
         if waste[worst] <= 0:
             break
-        sides = _best_cut(leaves[worst])
+        sides = _best_cut(leaves[worst], hulls[worst])
         count = sum(len(side) for side in sides) if sides else 0
         if count < 2 or len(leaves) - 1 + count > max_parts:
             waste[worst] = -np.inf  # final: no cut helps, or no room for its pieces
             continue
-        leaves[worst:worst + 1] = [p for side in sides for p in side]
+        pieces = [p for side in sides for p in side]
+        leaves[worst:worst + 1] = pieces
+        hulls[worst:worst + 1] = [p.hull() for p in pieces]
         cells[worst:worst + 1] = [next_cell + k for k, side in enumerate(sides) for _ in side]
         next_cell += len(sides)
-        waste[worst:worst + 1] = [excess(p) for side in sides for p in side]
-    return leaves, cells
+        waste[worst:worst + 1] = [excess(p, h) for p, h in zip(pieces, hulls[worst:worst + len(pieces)])]
+    return leaves, cells, hulls
 
 
 def components(solid: manifold3d.Manifold) -> list[manifold3d.Manifold]:
@@ -102,7 +114,7 @@ def components(solid: manifold3d.Manifold) -> list[manifold3d.Manifold]:
     return sorted(parts, key=lambda p: (-round(p.volume(), 15), tuple(np.round(p.bounding_box()[:3], 12))))
 
 
-def _best_cut(part: manifold3d.Manifold):
+def _best_cut(part: manifold3d.Manifold, hull: manifold3d.Manifold):
     """The pieces above and below the candidate plane with the smallest total hull volume; None if no cut helps.
 
     A part with many vertices first gets a lower bound of every candidate's cost (:func:`_cost_bounds`); the
@@ -119,10 +131,11 @@ def _best_cut(part: manifold3d.Manifold):
     for normal in _cut_normals(axes):
         s = V @ normal
         lo, hi = float(s.min()), float(s.max())
-        candidates += [(normal, offset, s, _cut_points(V, edges, s, offset))
+        ends = (s[edges[:, 0]], s[edges[:, 1]])  # once per normal, not per offset
+        candidates += [(normal, offset, s, _cut_points(V, edges, ends, offset))
                        for offset in lo + (hi - lo) * _CUT_FRACTIONS]
     bounds = _cost_bounds(V, candidates) if len(V) > _BOUND_VERTICES else np.zeros(len(candidates))
-    best, best_cost = None, part.hull().volume() * (1.0 - 1e-9)
+    best, best_cost = None, hull.volume() * (1.0 - 1e-9)
     for index in np.argsort(bounds, kind="stable").tolist():
         if bounds[index] * (1.0 - _BOUND_SLACK) > best_cost:
             break  # this bound and every later one exceed the best cost
@@ -139,20 +152,20 @@ def _best_cut(part: manifold3d.Manifold):
 def _cost_bounds(V: np.ndarray, candidates: list) -> np.ndarray:
     """Lower bounds (c,) of the candidates' costs (:func:`_halves_hull_volume`): hull volumes of thinned halves.
 
-    Each normal's vertices fall into slabs between its offsets; a half is a union of slabs, whose hull corners
-    are among the slabs' own hull corners. Those are thinned to one per grid cell (1 / :data:`_BOUND_CELLS`
-    of the part's diagonal), so a bound costs a hull of a few thousand points, not of half the (dense) surface.
+    A half's hull holds the hull of any subset of its points: here the part's vertices thinned to one per grid
+    cell (1 / :data:`_BOUND_CELLS` of the part's diagonal; the one farthest from the centroid, the likeliest
+    hull corner) on that side, and the cut's crossing points thinned to one per half cell. A bound then costs
+    a hull of a few hundred points, not of half the (dense) surface: the cheap bounds are within ~0.1 % of the
+    costs, so the exact cost is computed for one or two candidates per cut.
     """
-    cell = float(np.linalg.norm(np.ptp(V, axis=0))) / _BOUND_CELLS
+    diagonal = float(np.linalg.norm(np.ptp(V, axis=0)))
+    thinned = _thin(V, diagonal / _BOUND_CELLS)
     bounds = np.empty(len(candidates))
-    count = len(_CUT_FRACTIONS)
-    for start in range(0, len(candidates), count):
-        s = candidates[start][2]
-        offsets = np.array([c[1] for c in candidates[start:start + count]])
-        slabs = [_thin(p, cell) for p in _slab_corners(V, s, offsets)]
-        for k in range(len(offsets)):
-            cut = candidates[start + k][3]
-            bounds[start + k] = sum(_hull_volume(np.vstack(side + [cut])) for side in (slabs[k + 1:], slabs[:k + 1]))
+    for index, (normal, offset, _, cut) in enumerate(candidates):
+        s = thinned @ normal
+        ring = _thin(cut, 0.5 * diagonal / _BOUND_CELLS)
+        bounds[index] = (_hull_volume(np.vstack([thinned[s > offset], ring]))
+                         + _hull_volume(np.vstack([thinned[s <= offset], ring])))
     return bounds
 
 
@@ -160,12 +173,14 @@ def _hull_volume(points: np.ndarray) -> float:
     """Volume of the convex hull of points (k, 3) by qhull; 0 for a flat set.
 
     qhull, not manifold3d, for the bounds: manifold3d's hull of a few hundred points with many coplanar ones
-    (the cut's ring, a planar fault) came out 5 % too large, which would make a bound exceed the cost.
+    (the cut's ring, a planar fault) came out 5 % too large, which would make a bound exceed the cost. Joggled
+    input (QJ, a fixed seed): the cut's coplanar ring made qhull's exact merging 7x slower, and the joggle
+    changes the volume by ~1e-10 of it, far inside :data:`_BOUND_SLACK`.
     """
     if len(points) < 4:
         return 0.0
     try:
-        return float(ConvexHull(points).volume)
+        return float(ConvexHull(points, qhull_options="QJ").volume)
     except QhullError:
         return 0.0
 
@@ -178,45 +193,32 @@ def _cut_normals(axes: np.ndarray) -> np.ndarray:
     return np.vstack([principal] + extra) if extra else principal
 
 
-def _slab_corners(V: np.ndarray, s: np.ndarray, offsets: np.ndarray) -> list[np.ndarray]:
-    """The vertices (k_j, 3) of each slab between consecutive ``offsets`` (and beyond the first and last) that
-    are corners of the slab's hull: a superset of the corners of any union of slabs.
-
-    Slab ``j`` holds the vertices with ``offsets[j - 1] < s <= offsets[j]`` (the same comparisons as the halves
-    of :func:`_halves_hull_volume`), so the slabs beyond an offset are exactly the vertices on its side; a
-    half's hull is then found from a few corners per slab instead of every vertex of a dense surface.
-    """
-    slab = np.searchsorted(offsets, s, side="left")  # offsets[j - 1] < s <= offsets[j]
-    order = np.argsort(slab, kind="stable")
-    bounds = np.searchsorted(slab[order], np.arange(len(offsets) + 2))
-    out = []
-    for j in range(len(offsets) + 1):
-        points = V[order[bounds[j]:bounds[j + 1]]]
-        if len(points) > 16:
-            corners = mesh_of(hull_of(points))[0]
-            if len(corners) >= 4:  # a flat slab has no solid hull: keep every point
-                points = corners
-        out.append(points)
-    return out
-
-
 def _thin(points: np.ndarray, cell: float) -> np.ndarray:
-    """The first of the points (k, 3) in each grid cell of size ``cell``: a subset spread like the set."""
+    """In each grid cell of size ``cell``, the point (k, 3) farthest from the points' centroid (the lowest
+    index on ties), in their order: a subset spread like the set, biased to its hull corners."""
     if len(points) == 0:
         return points
     key = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
     key = (key[:, 0] * (1 << 21) + key[:, 1]) * (1 << 21) + key[:, 2]
-    first = np.unique(key, return_index=True)[1]
+    offset = points - points.mean(axis=0)
+    order = np.lexsort((-np.einsum("ij,ij->i", offset, offset), key))
+    first = order[np.r_[True, key[order][1:] != key[order][:-1]]]
     return points[np.sort(first)]
 
 
-def _cut_points(V: np.ndarray, edges: np.ndarray, s: np.ndarray, offset: float) -> np.ndarray:
-    """The points (c, 3) where the mesh edges (e, 2) cross the plane ``s == offset`` (``s``: (n,) vertex heights)."""
-    d = s - offset
-    da, db = d[edges[:, 0]], d[edges[:, 1]]
-    crossing = (da > 0) != (db > 0)
-    t = da[crossing] / (da[crossing] - db[crossing])
-    return V[edges[crossing, 0]] + t[:, None] * (V[edges[crossing, 1]] - V[edges[crossing, 0]])
+def _cut_points(V: np.ndarray, edges: np.ndarray, ends: tuple[np.ndarray, np.ndarray], offset: float) -> np.ndarray:
+    """The points (c, 3) where the mesh edges (e, 2) cross the plane ``s == offset``; ``ends``: the heights
+    ``s`` (e,) of the edges' first and second vertices.
+
+    ``s - offset > 0`` exactly when ``s > offset`` (a difference of two floats is 0 only if they are equal), so
+    the crossing edges are found without a difference per edge.
+    """
+    sa, sb = ends
+    crossing = np.flatnonzero((sa > offset) != (sb > offset))
+    da, db = sa[crossing] - offset, sb[crossing] - offset
+    t = da / (da - db)
+    a = V[edges[crossing, 0]]
+    return a + t[:, None] * (V[edges[crossing, 1]] - a)
 
 
 def _halves_hull_volume(V: np.ndarray, s: np.ndarray, offset: float, cut: np.ndarray) -> float:
