@@ -370,6 +370,20 @@ def _distinct(values: np.ndarray, skip: int) -> np.ndarray:  # pragma: no cover 
 
 
 @njit(cache=True)
+def logged(log: np.ndarray, top: int, u: int, v: int, points: np.ndarray, nearest: np.ndarray, removed: np.ndarray,
+           kept: np.ndarray) -> tuple:  # pragma: no cover (compiled)
+    """Append a collapse to ``log`` at ``top``: u, v, the counts of points, removed and kept faces, then those
+    points, their nearest faces, the removed and the kept faces. The log and its new top."""
+    log = grown(log, top, 5 + 2 * len(points) + len(removed) + len(kept))
+    log[top], log[top + 1], log[top + 2], log[top + 3], log[top + 4] = u, v, len(points), len(removed), len(kept)
+    at = top + 5
+    for part in (points, nearest, removed, kept):
+        log[at:at + len(part)] = part
+        at += len(part)
+    return log, at
+
+
+@njit(cache=True)
 def _context(geo: tuple, F: np.ndarray, fan: np.ndarray) -> tuple:  # pragma: no cover (compiled)
     """:meth:`.SurfaceComplex._fan` of a vertex with faces ``fan``: (polygons, fragments, single, limit, on_fault);
     polygons and fragments in no order (they are only looked up and maxed)."""
@@ -409,7 +423,7 @@ def collapse_loop(geo: tuple, grid: tuple, quadric: np.ndarray, F: np.ndarray, v
     Returns
     -------
     collapses : tuple
-        (u, v, bound, offsets (c + 1,), points, nearest faces) of the collapses made, in order.
+        The collapses made, in order: their :func:`logged` records, and their bounds (c,).
     refusals : tuple
         Per vertex its last refusal here: (clock (n,), -1 for none; bound (n,); region start (n,), length (n,),
         pool).
@@ -424,8 +438,7 @@ def collapse_loop(geo: tuple, grid: tuple, quadric: np.ndarray, F: np.ndarray, v
     qpool, qcost, qtop = np.empty(1024, dtype=np.int64), np.empty(1024), 0
     heap = (np.empty(1024), np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64))
     size = 0
-    ev_u, ev_v, ev_bound, ev_at = [0], [0], [0.0], [0]
-    ev_points, ev_nearest, etop = np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64), 0
+    log, ltop, bounds = np.empty(4096, dtype=np.int64), 0, [0.0]
     ref_clock, ref_bound = np.full(n, -1, dtype=np.int64), np.zeros(n)
     ref_start, ref_len, refpool, rtop = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.empty(
         1024, dtype=np.int64), 0
@@ -471,14 +484,8 @@ def collapse_loop(geo: tuple, grid: tuple, quadric: np.ndarray, F: np.ndarray, v
             clock += 1
             vpool, vtop, apool, atop = _apply(F, quadric, geo[5], vkey, modified, clock, vf, vpool, vtop, asg,
                                               apool, atop, u, v, removed, kept, points, nearest)
-            ev_u.append(u)
-            ev_v.append(v)
-            ev_bound.append(bound)
-            ev_points, ev_nearest = grown(ev_points, etop, len(points)), grown(ev_nearest, etop, len(points))
-            ev_points[etop:etop + len(points)] = points
-            ev_nearest[etop:etop + len(points)] = nearest
-            etop += len(points)
-            ev_at.append(etop)
+            log, ltop = logged(log, ltop, u, v, points, nearest, removed, kept)
+            bounds.append(bound)
             near = neighbours(F, _fan_of(vf, vpool, v), v, geo[12], geo[13])
             pending = np.unique(np.append(near, v))
             done = True
@@ -490,7 +497,5 @@ def collapse_loop(geo: tuple, grid: tuple, quadric: np.ndarray, F: np.ndarray, v
             refpool[rtop:rtop + len(region)] = region
             ref_clock[u], ref_bound[u], ref_start[u], ref_len[u] = clock, bound, rtop, len(region)
             rtop += len(region)
-    collapses = (np.array(ev_u[1:], dtype=np.int64), np.array(ev_v[1:], dtype=np.int64),
-                 np.array(ev_bound[1:]), np.array(ev_at, dtype=np.int64), ev_points[:etop].copy(),
-                 ev_nearest[:etop].copy())
+    collapses = (log[:ltop].copy(), np.array(bounds[1:]))
     return collapses, (ref_clock, ref_bound, ref_start, ref_len, refpool[:rtop].copy()), clock

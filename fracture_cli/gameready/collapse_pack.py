@@ -112,12 +112,13 @@ def decimate(complex_: SurfaceComplex, tolerance: dict[int, float] | float, vert
     """:meth:`.SurfaceComplex.decimate_python`, compiled; returns how many collapses were done."""
     n, m = len(complex_.points), len(complex_.groups)
     seeds = np.array(sorted(complex_.vertex_faces) if vertices is None else sorted(vertices), dtype=np.int64)
-    collapses, refusals, clock = collapse_loop(*_packed(complex_, tolerance), _mask(m, complex_._changed),
-                                               complex_._replayed, _earlier(complex_, n), seeds)
-    _replay_onto(complex_, collapses)
+    packed = _packed(complex_, tolerance)
+    collapses, refusals, clock = collapse_loop(*packed, _mask(m, complex_._changed), complex_._replayed,
+                                               _earlier(complex_, n), seeds)
+    _replay_onto(complex_, collapses, packed[2])
     _record_refusals(complex_, refusals)
     assert complex_.clock == clock
-    return len(collapses[0])
+    return len(collapses[1])
 
 
 def replay(complex_: SurfaceComplex, collapses: list[tuple[int, int, float, list[int], list[int]]],
@@ -130,24 +131,49 @@ def replay(complex_: SurfaceComplex, collapses: list[tuple[int, int, float, list
                np.array([p for c in collapses for p in c[3]], dtype=np.int64),
                np.array([t for c in collapses for t in c[4]], dtype=np.int64))
     changed = _mask(m, complex_._changed)
-    made, clock = replay_loop(*_packed(complex_, tolerance), changed, earlier)
+    packed = _packed(complex_, tolerance)
+    made, clock = replay_loop(*packed, changed, earlier)
     complex_._changed = set(np.flatnonzero(changed).tolist())
-    _replay_onto(complex_, made)
+    _replay_onto(complex_, made, packed[2])
     assert complex_.clock == clock
 
 
-def _replay_onto(complex_: SurfaceComplex, collapses: tuple) -> None:
-    """Apply the loop's collapses to the complex, with the points and faces it chose."""
-    from fracture_cli.gameready.decimate import _moved
+def _replay_onto(complex_: SurfaceComplex, collapses: tuple, quadric: np.ndarray) -> None:
+    """Apply the loop's collapses (:func:`.collapse_loop.logged`) to the complex, as
+    :meth:`.SurfaceComplex._apply` does, with the points and faces the loop chose; ``quadric``: the loop's."""
+    from fracture_cli.gameready.decimate import _merged
 
-    us, vs, bounds, at, points, nearest = (a.tolist() for a in collapses)
-    faces, vertex_faces = complex_.faces, complex_.vertex_faces
-    for i, (u, v, bound) in enumerate(zip(us, vs, bounds)):
-        fan, v_fan = vertex_faces[u], vertex_faces[v]
-        removed = [t for t in fan if t in v_fan]
-        kept = sorted(fan.difference(removed))
-        new_faces = {t: _moved(faces[t], u, v) for t in kept}
-        complex_._apply(u, v, removed, kept, new_faces, points[at[i]:at[i + 1]], nearest[at[i]:at[i + 1]], bound)
+    log, bounds = collapses[0].tolist(), collapses[1].tolist()
+    faces, vertex_faces, assigned, history = complex_.faces, complex_.vertex_faces, complex_.assigned, complex_.history
+    modified, fault, done = complex_.modified, complex_.fault, complex_.done
+    clock, at = complex_.clock, 0
+    for bound in bounds:
+        u, v, p, r, k = log[at:at + 5]
+        at += 5
+        points, nearest, removed, kept = (log[at:at + p], log[at + p:at + 2 * p], log[at + 2 * p:at + 2 * p + r],
+                                          log[at + 2 * p + r:at + 2 * p + r + k])
+        at += 2 * p + r + k
+        touched = (u, tuple(h for t in removed if (h := history[t])))
+        clock += 1
+        for t in removed:
+            modified[t] = clock
+            for x in faces.pop(t):
+                vertex_faces[x].discard(t)
+            del assigned[t], history[t]
+        for t in kept:
+            modified[t] = clock
+            a, b, c = faces[t]
+            faces[t] = (v if a == u else a, v if b == u else b, v if c == u else c)
+            history[t] = _merged(history[t], touched)
+            if fault[t]:
+                assigned[t] = []
+        for point, t in zip(points, nearest):
+            assigned[t].append(point)
+        vertex_faces[v].update(kept)
+        del vertex_faces[u]
+        done.append((u, v, bound, points, nearest))
+    complex_.clock = clock
+    complex_.quadric = quadric
 
 
 def _record_refusals(complex_: SurfaceComplex, refusals: tuple) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from fracture_cli.gameready.collapse_kernels import njit
-from fracture_cli.gameready.collapse_loop import _apply, _bound, _context, _fan_of, _has, _try, grown
+from fracture_cli.gameready.collapse_loop import _apply, _bound, _context, _fan_of, _has, _try, grown, logged
 
 
 @njit(cache=True)
@@ -49,8 +49,7 @@ def replay_loop(geo: tuple, grid: tuple, quadric: np.ndarray, F: np.ndarray, vke
     vtop, atop = len(vpool), len(apool)
     vpool, apool = grown(vpool, vtop, vtop + 16), grown(apool, atop, atop + 16)
     changed_vertices = np.zeros(len(vkey), dtype=np.bool_)
-    ev_u, ev_v, ev_bound, ev_at = [0], [0], [0.0], [0]
-    ev_points, ev_nearest, etop = np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64), 0
+    log, ltop, bounds = np.empty(4096, dtype=np.int64), 0, [0.0]
     for i in range(len(e_u)):
         u, v, was = e_u[i], e_v[i], e_bound[i]
         if locked[u] or not vkey[u] or not vkey[v]:
@@ -75,14 +74,7 @@ def replay_loop(geo: tuple, grid: tuple, quadric: np.ndarray, F: np.ndarray, vke
         clock += 1
         vpool, vtop, apool, atop = _apply(F, quadric, geo[5], vkey, modified, clock, vf, vpool, vtop, asg, apool,
                                           atop, u, v, removed, kept, points, nearest)
-        ev_u.append(u)
-        ev_v.append(v)
-        ev_bound.append(bound)
-        ev_points, ev_nearest = grown(ev_points, etop, len(points)), grown(ev_nearest, etop, len(points))
-        ev_points[etop:etop + len(points)] = points
-        ev_nearest[etop:etop + len(points)] = nearest
-        etop += len(points)
-        ev_at.append(etop)
-    collapses = (np.array(ev_u[1:], dtype=np.int64), np.array(ev_v[1:], dtype=np.int64), np.array(ev_bound[1:]),
-                 np.array(ev_at, dtype=np.int64), ev_points[:etop].copy(), ev_nearest[:etop].copy())
+        log, ltop = logged(log, ltop, u, v, points, nearest, removed, kept)
+        bounds.append(bound)
+    collapses = (log[:ltop].copy(), np.array(bounds[1:]))
     return collapses, clock
