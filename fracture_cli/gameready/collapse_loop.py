@@ -82,11 +82,7 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:  # pragma: no cover (compiled)
 @njit(cache=True)
 def _before(c1: float, u1: int, s1: int, c2: float, u2: int, s2: int) -> bool:  # pragma: no cover (compiled)
     """Whether (c1, u1, s1) < (c2, u2, s2) as Python compares tuples."""
-    if c1 != c2:
-        return c1 < c2
-    if u1 != u2:
-        return u1 < u2
-    return s1 < s2
+    return c1 < c2 if c1 != c2 else u1 < u2 if u1 != u2 else s1 < s2
 
 
 @njit(cache=True)

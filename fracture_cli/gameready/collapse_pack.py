@@ -26,9 +26,12 @@ def static_arrays(complex_: SurfaceComplex) -> tuple:
     damp (and two scratch arrays) are filled per call."""
     from fracture_cli.gameready import decimate as d
 
-    own = np.full((len(complex_.owners), 2), -1, dtype=np.int64)
-    for t, owners in enumerate(complex_.owners):
-        own[t, :len(owners)] = owners
+    owners = complex_.owners
+    own = np.full((len(owners), 2), -1, dtype=np.int64)
+    pairs = np.fromiter((len(o) == 2 for o in owners), dtype=bool, count=len(owners))
+    own[:, 0] = np.fromiter((o[0] for o in owners), dtype=np.int64, count=len(owners))
+    own[pairs, 1] = np.fromiter((o[1] for o, two in zip(owners, pairs.tolist()) if two), dtype=np.int64,
+                                count=int(pairs.sum()))
     return (complex_._positions, complex_._positions, complex_._homogeneous,
             np.asarray(complex_.groups, dtype=np.int64), own, np.asarray(complex_.fault, dtype=np.bool_), None, None,
             d.MIN_NORMAL_COS, d.MIN_NORMAL_COS_OUTER, 2.0, d.MIN_SHAPE, None, None)

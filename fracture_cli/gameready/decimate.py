@@ -127,10 +127,7 @@ class SurfaceComplex:
         self._cell = self._kernels.grid_cell(self.reference)
         self._grid = self._kernels.grid_index(self._centroids, self._cell)
         self._finite = bool(np.isfinite(self.quadric).all() and np.isfinite(self._positions).all())
-        self.static = self._pack().static_arrays(self)  # what the compiled loop reads and never changes
-
-    def _pack(self) -> ModuleType:
-        return _collapse_pack()
+        self.static = _collapse_pack().static_arrays(self)  # what the compiled loop reads and never changes
 
     def copy(self) -> SurfaceComplex:
         """An independent copy, to go on from (positions, input polygons and the cut fault are shared: they
@@ -168,7 +165,7 @@ class SurfaceComplex:
         """
         self._refusals = dict(refusals or {})
         if self._finite:
-            self._pack().replay(self, collapses, tolerance)
+            _collapse_pack().replay(self, collapses, tolerance)
         else:
             self.replay_python(collapses, tolerance)
         self._replayed = self.clock
@@ -226,7 +223,7 @@ class SurfaceComplex:
         queue order then rests on how Python compares nan).
         """
         if self._finite:
-            return self._pack().decimate(self, tolerance, vertices)
+            return _collapse_pack().decimate(self, tolerance, vertices)
         return self.decimate_python(tolerance, vertices)
 
     def decimate_python(self, tolerance: dict[int, float] | float, vertices: list[int] | None = None) -> int:
