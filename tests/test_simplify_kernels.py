@@ -102,3 +102,44 @@ def test_warm_kernels_simplifies_its_patch():
     from fracture_cli.gameready.collapse_kernels import warm_kernels
 
     assert warm_kernels() > 0
+
+
+def _patch_complex(n: int = 14):
+    """A wavy grid: its left half a fault between fragments 0 and 1, its right half outer faces of fragment 0
+    on one input polygon; the border locked."""
+    from fracture_cli.gameready.decimate import SurfaceComplex
+
+    x, y = np.meshgrid(np.linspace(0.0, 1.0, n), np.linspace(0.0, 1.0, n), indexing="ij")
+    V = np.column_stack([x.ravel(), y.ravel(), 0.02 * np.sin(4.0 * x.ravel()) * np.cos(3.0 * y.ravel())])
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a = (i * n + j).ravel()
+    faces = np.concatenate([np.column_stack([a, a + n, a + n + 1]), np.column_stack([a, a + n + 1, a + 1])])
+    fault = V[faces].mean(axis=1)[:, 0] < 0.5
+    owners = [(0, 1) if f else (0,) for f in fault.tolist()]
+    border = {int(v) for v in range(n * n) if v // n in (0, n - 1) or v % n in (0, n - 1)}
+    return SurfaceComplex(V, faces, np.where(fault, -1, 5), owners, fault, border)
+
+
+def _state(c) -> tuple:
+    """What a complex holds after collapses (points as sets: their order in a list does not matter)."""
+    return (c.faces, {u: sorted(f) for u, f in c.vertex_faces.items()},
+            [(u, v, b, sorted(zip(p, q))) for u, v, b, p, q in c.done], {t: sorted(p) for t, p in c.assigned.items()},
+            c.refused, c.modified, c.clock, c.quadric.tobytes(), c.behind(list(c.faces)), c._changed)
+
+
+def test_compiled_collapse_loops_make_the_python_loops_collapses():
+    states = []
+    for compiled in (False, True):
+        base = _patch_complex()
+        base._finite = compiled  # False: decimate_python and replay_python
+        first = base.copy()
+        first.decimate({0: 0.01, 1: 0.01})
+        first.decimate({0: 0.04, 1: 0.01}, sorted(first.vertex_faces)[::2])
+        again = base.copy()
+        again.locked |= {c[0] for c in first.done[::5]}
+        again.damp = {c[0]: 0.25 for c in first.done[2::5]}
+        again.replay(first.done, {0: 0.01, 1: 0.01}, first.final_refusals())
+        again.decimate({0: 0.01, 1: 0.01})
+        assert len(first.done) > 20 and len(again.done) > 10
+        states.append((_state(first), _state(again)))
+    assert states[0] == states[1]

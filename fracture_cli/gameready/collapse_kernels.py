@@ -312,7 +312,8 @@ def fault_bound(V: np.ndarray, points: np.ndarray, tris: np.ndarray, reference: 
 def warm_kernels() -> int:
     """Compile (and cache) the simplify stage's numba kernels by simplifying a small curved fault patch.
 
-    ``make install`` calls this once, so that the first bake does not pay the compilation (some seconds);
+    ``make install`` calls this once, so that the first bake does not pay the compilation (some seconds; the
+    collapse loop and replay of :mod:`.collapse_loop` and :mod:`.collapse_replay` half a minute);
     a real complex, not hand-made arguments, so every kernel is compiled for the types the stage passes.
     Returns the collapses done (the patch is fine enough that some are).
     """
@@ -327,4 +328,7 @@ def warm_kernels() -> int:
     border = {int(v) for v in range(n * n) if v // n in (0, n - 1) or v % n in (0, n - 1)}
     complex_ = SurfaceComplex(V, faces, np.full(len(faces), -1), [(0, 1)] * len(faces),
                               np.ones(len(faces), dtype=bool), border)
-    return complex_.decimate(0.05)
+    again = complex_.copy()
+    done = complex_.decimate(0.05)
+    again.replay(complex_.done, 0.05, complex_.final_refusals())  # (the compiled replay of a retry)
+    return done

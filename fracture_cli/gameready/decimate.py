@@ -126,6 +126,8 @@ class SurfaceComplex:
         self._centroids = np.ascontiguousarray(self.reference.mean(axis=1))
         self._cell = self._kernels.grid_cell(self.reference)
         self._grid = self._kernels.grid_index(self._centroids, self._cell)
+        self._finite = bool(np.isfinite(self.quadric).all() and np.isfinite(self._positions).all())
+        self.static = _collapse_pack().static_arrays(self)  # what the compiled loop reads and never changes
 
     def copy(self) -> SurfaceComplex:
         """An independent copy, to go on from (positions, input polygons and the cut fault are shared: they
@@ -161,8 +163,17 @@ class SurfaceComplex:
         earlier try (``refusals``: its :meth:`final_refusals`) is not tried again by :meth:`decimate` while
         the faces they looked at are as they were, at the same tolerance.
         """
-        changed_faces = self._changed
         self._refusals = dict(refusals or {})
+        if self._finite:
+            _collapse_pack().replay(self, collapses, tolerance)
+        else:
+            self.replay_python(collapses, tolerance)
+        self._replayed = self.clock
+
+    def replay_python(self, collapses: list[tuple[int, int, float, list[int], list[int]]],
+                      tolerance: dict[int, float] | float) -> None:
+        """The collapses of :meth:`replay` in Python: the reference the compiled one follows."""
+        changed_faces = self._changed
         changed_vertices: set[int] = set()
         for u, v, was, points, nearest in collapses:
             if u in self.locked or u not in self.vertex_faces or v not in self.vertex_faces:
@@ -179,7 +190,6 @@ class SurfaceComplex:
                 continue
             self._mark_changed(u, v, changed_faces, changed_vertices)
             self._collapse(u, v, bound)
-        self._replayed = self.clock
 
     def final_refusals(self) -> dict[int, tuple[float, frozenset[int]]]:
         """The vertices whose last refusal saw the faces as they are now: (tolerance, faces looked at)."""
@@ -207,7 +217,18 @@ class SurfaceComplex:
     def decimate(self, tolerance: dict[int, float] | float, vertices: list[int] | None = None) -> int:
         """Collapse, cheapest first, until no allowed collapse is left; returns how many were done.
 
-        ``tolerance`` is one bound or a bound per fragment (a vertex takes the largest of its fragments').
+        ``tolerance`` is one bound or a bound per fragment (a vertex takes the largest of its fragments'); with
+        ``vertices``, only those are queued at first. The loop is compiled (:mod:`.collapse_loop`); it makes
+        the collapses :meth:`decimate_python` makes, which runs instead when a quadric is not finite (its
+        queue order then rests on how Python compares nan).
+        """
+        if self._finite:
+            return _collapse_pack().decimate(self, tolerance, vertices)
+        return self.decimate_python(tolerance, vertices)
+
+    def decimate_python(self, tolerance: dict[int, float] | float, vertices: list[int] | None = None) -> int:
+        """:meth:`decimate` in Python: the reference the compiled loop follows.
+
         Each vertex is queued once, at the cost of its cheapest collapse; when that one is refused the
         next cheapest are tried. A new stamp (a neighbour changed) makes its older entry obsolete.
         """
@@ -465,6 +486,13 @@ def _kernels() -> ModuleType:
     from fracture_cli.gameready import collapse_kernels
 
     return collapse_kernels
+
+
+def _collapse_pack() -> ModuleType:
+    """:mod:`.collapse_pack` (and the compiled loop), imported on first use as :func:`_kernels`."""
+    from fracture_cli.gameready import collapse_pack
+
+    return collapse_pack
 
 
 def _merged(a: tuple, b: tuple) -> tuple:
