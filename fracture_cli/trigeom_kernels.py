@@ -18,35 +18,12 @@ only for a gap within a few units in the last place of ``eps``, which
 
 from __future__ import annotations
 
-import logging
-from collections.abc import Callable
-from typing import Any
-
-import numba
 import numpy as np
 
-log = logging.getLogger(__name__)
+from fracture_cli.jit import njit
 
 #: Pairs per chunk; the degenerate-axis threshold scales with the largest coordinate of a chunk.
 PAIR_CHUNK = 20_000
-_UNCACHED: list[str] = []
-
-
-def njit(**options: Any) -> Callable[[Callable], Any]:
-    """``numba.njit(cache=True)``, or without the cache where no cache directory is writable (a read-only
-    install and home: numba then has nowhere to put it, and every process compiles again)."""
-
-    def wrap(function: Callable) -> Any:
-        try:
-            return numba.njit(cache=True, **options)(function)
-        except RuntimeError:
-            if not _UNCACHED:
-                log.warning("numba cannot cache its compiled kernels here (set NUMBA_CACHE_DIR to a writable "
-                            "folder): each bake compiles them again")
-            _UNCACHED.append(function.__name__)
-            return numba.njit(**options)(function)
-
-    return wrap
 
 
 @njit(error_model="numpy")

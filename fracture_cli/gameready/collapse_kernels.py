@@ -23,32 +23,9 @@ beside this file, or in the user's cache directory when that is read-only);
 
 from __future__ import annotations
 
-import logging
-from collections.abc import Callable
-from typing import Any
-
-import numba
 import numpy as np
 
-log = logging.getLogger(__name__)
-_UNCACHED: list[str] = []
-
-
-def njit(cache: bool = True, **options: Any) -> Callable[[Callable], Any]:
-    """``numba.njit`` with ``cache``, or without it where no cache directory is writable (a read-only install
-    and home: numba then has nowhere to put it, and every process compiles again, some seconds)."""
-
-    def wrap(function: Callable) -> Any:
-        try:
-            return numba.njit(cache=cache, **options)(function)
-        except RuntimeError:
-            if not _UNCACHED:
-                log.warning("simplify: numba cannot cache its compiled kernels here (set NUMBA_CACHE_DIR to a "
-                            "writable folder): each bake compiles them again")
-            _UNCACHED.append(function.__name__)
-            return numba.njit(**options)(function)
-
-    return wrap
+from fracture_cli.jit import njit
 
 
 def grid_cell(triangles: np.ndarray) -> float:

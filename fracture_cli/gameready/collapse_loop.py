@@ -25,7 +25,8 @@ import math
 
 import numpy as np
 
-from fracture_cli.gameready.collapse_kernels import fault_bound, njit, quadric_costs
+from fracture_cli.gameready.collapse_kernels import fault_bound, quadric_costs
+from fracture_cli.jit import njit
 
 
 @njit(cache=True)

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli.gameready.collapse_kernels import njit
 from fracture_cli.gameready.collapse_loop import _apply, _bound, _context, _fan_of, _has, _try, grown, logged
+from fracture_cli.jit import njit
 
 
 @njit(cache=True)
