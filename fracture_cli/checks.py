@@ -236,7 +236,7 @@ def fragment_neighbours(fragments: Fragments,
 
 
 def _max_overlap(fragments: Fragments, volumes: np.ndarray, max_pairs: int, jobs: int | None,
-                 faults: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> float:
+                 faults: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> float:
     frags = fragments.fragments
     if len(frags) < 2:
         return 0.0
