@@ -51,8 +51,15 @@ from fracture_cli.gameready.hulls import (
     solid_of,
     surface_area,
 )
-from fracture_cli.gameready.mass import MassProperties, mass_properties
-from fracture_cli.gameready.separate import overlapping_boxes, separate_parts, volume_beyond
+from fracture_cli.gameready.mass import mass_properties
+from fracture_cli.gameready.separate import (
+    hull_faces,
+    overlapping_boxes,
+    separate_hulls,
+    separate_parts,
+    separated_corners,
+    volume_beyond,
+)
 from fracture_cli.options import option
 
 log = logging.getLogger(__name__)
@@ -116,6 +123,7 @@ class CollisionShapes:
     hull_ratio: np.ndarray
     parts_ratio: np.ndarray
     coverage: np.ndarray
+    part_faces: tuple | None = None  # per part in order, (face planes, surface area, volume) of its hull
 
 
 def collision_shapes(meshes, options: CollisionOptions = CollisionOptions(), faults=None) -> CollisionShapes:
@@ -143,28 +151,30 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions(), fau
     """
     solids = [solid_of(V, F) for V, F in meshes]
     boxes = np.array([s.bounding_box() for s in solids]).reshape(-1, 6)
-    corners, materials, masses, owners, cells, volumes, hull_ratio = [], [], [], [], [], [], []
+    corners, materials, masses, owners, cells, volumes, hull_ratio, faces = [], [], [], [], [], [], [], []
     # Fragments decompose independently: on parallel.current_jobs() processes (forked: the solids are inherited).
     decomposed = parallel.ordered_map(_decompose, range(len(solids)), (solids, boxes, options))
     for index, (volume, ratio, leaves) in enumerate(decomposed):
         volumes.append(volume)
         hull_ratio.append(ratio)
-        for leaf_corners, leaf_mesh, leaf_mass, cell in leaves:
+        for leaf_corners, leaf_mesh, leaf_mass, cell, leaf_faces in leaves:
             corners.append(leaf_corners)
+            faces.append(leaf_faces)
             materials.append(leaf_mesh)
             masses.append(leaf_mass)
             owners.append(index)
             cells.append((index, cell))
     # Parts in different cells of one fragment's partition cannot overlap: their pairs need no look.
-    flat = separate_parts(corners, materials, _groups(cells), (meshes, owners, faults), masses)
-    owned: list[list[np.ndarray]] = [[] for _ in volumes]
-    for owner, points in zip(owners, flat):
-        owned[owner].append(points)
+    # The clipped hulls go to the workers of _finish as they are (forked: inherited), their corners read there.
+    flat = separate_hulls(corners, materials, _groups(cells), (meshes, owners, faults), masses, faces)
+    owned: list[list[manifold3d.Manifold]] = [[] for _ in volumes]
+    for owner, hull in zip(owners, flat):
+        owned[owner].append(hull)
     finished = parallel.ordered_map(_finish, range(len(solids)), (solids, owned, options.max_vertices))
-    result = [parts for parts, _, _ in finished]
+    result = [parts for parts, _, _, _ in finished]
     volumes_arr = np.array(volumes)
-    parts_volume = np.array([v for _, v, _ in finished])
-    covered = np.array([c for _, _, c in finished])
+    parts_volume = np.array([v for _, v, _, _ in finished])
+    covered = np.array([c for _, _, c, _ in finished])
     empty = [i for i, parts in enumerate(result) if not parts]
     if empty:
         log.warning("%s: %d fragment(s) lost every collision part to their neighbours: %s", STAGE, len(empty),
@@ -172,12 +182,13 @@ def collision_shapes(meshes, options: CollisionOptions = CollisionOptions(), fau
     return CollisionShapes(parts=tuple(tuple(p) for p in result), volumes=volumes_arr,
                            hull_ratio=np.array(hull_ratio),
                            parts_ratio=parts_volume / np.maximum(volumes_arr, 1e-300),
-                           coverage=covered / np.maximum(volumes_arr, 1e-300))
+                           coverage=covered / np.maximum(volumes_arr, 1e-300),
+                           part_faces=tuple(f for _, _, _, faces in finished for f in faces))
 
 
-def _decompose(shared: tuple, index: int) -> tuple[float, float, list[tuple[np.ndarray, tuple, MassProperties, int]]]:
-    """Volume, hull ratio and convex leaves ``(corners, (V, F), mass properties, cell)`` of fragment ``index``
-    (numpy only: picklable)."""
+def _decompose(shared: tuple, index: int) -> tuple[float, float, list[tuple]]:
+    """Volume, hull ratio and convex leaves ``(corners, (V, F), mass properties, cell, hull faces)`` of fragment
+    ``index`` (numpy only: picklable; hull faces as :func:`~fracture_cli.gameready.separate.hull_faces`)."""
     solids, boxes, options = shared
     solid = solids[index]
     volume = solid.volume()
@@ -188,9 +199,9 @@ def _decompose(shared: tuple, index: int) -> tuple[float, float, list[tuple[np.n
     out = []
     for leaf, cell, hull in zip(leaves, cells, hulls):
         V, F = mesh_of(leaf)
-        # The separation's mass properties of the leaf, here on a worker rather than one after another there.
-        out.append((simplify_hull(canonical(mesh_of(hull)[0]), options.max_vertices), (V, F), mass_properties(V, F),
-                    cell))
+        leaf_corners = simplify_hull(canonical(mesh_of(hull)[0]), options.max_vertices)
+        # The separation's mass properties and hull planes of the leaf, here on a worker rather than serially there.
+        out.append((leaf_corners, (V, F), mass_properties(V, F), cell, hull_faces(leaf_corners)))
     return volume, ratio, out
 
 
@@ -203,16 +214,20 @@ def _groups(cells: list[tuple[int, int]]) -> list[tuple[int, int]]:
     return [(key[0], -1 - k) if count[key] > 1 else (key[0], 0) for k, key in enumerate(cells)]
 
 
-def _finish(shared: tuple, index: int) -> tuple[list[np.ndarray], float, float]:
-    """Fragment ``index``'s separated parts under the vertex cap, their total volume and the fragment's volume
-    inside them (numpy only: picklable)."""
+def _finish(shared: tuple, index: int) -> tuple[list[np.ndarray], float, float, list[tuple]]:
+    """Fragment ``index``'s separated parts under the vertex cap, their total volume, the fragment's volume
+    inside them and each part's ``(face planes, surface area, volume)`` for :func:`max_overlap_fraction`
+    (numpy only: picklable)."""
     solids, owned, max_vertices = shared
-    parts = [simplify_hull(points, max_vertices) for points in owned[index] if len(points) >= 4]
+    corners = [separated_corners(hull) for hull in owned[index]]
+    parts = [simplify_hull(points, max_vertices) for points in corners if len(points) >= 4]
     if not parts:
-        return parts, 0.0, 0.0
+        return parts, 0.0, 0.0, []
     hulls = [hull_of(p) for p in parts]
+    meshes = [mesh_of(h) for h in hulls]
+    faces = [(face_planes(V, F), surface_area(V, F), h.volume()) for h, (V, F) in zip(hulls, meshes)]
     union = manifold3d.Manifold.batch_boolean(hulls, manifold3d.OpType.Add)
-    return parts, float(sum(h.volume() for h in hulls)), float((solids[index] ^ union).volume())
+    return parts, float(sum(h.volume() for h in hulls)), float((solids[index] ^ union).volume()), faces
 
 
 class _Intrusion:
@@ -228,7 +243,7 @@ class _Intrusion:
         return float(sum((hull ^ self.solids[k]).volume() for k in near.tolist() if k != self.own))
 
 
-def max_overlap_fraction(parts_a, parts_b=None) -> float:
+def max_overlap_fraction(parts_a, parts_b=None, faces=None) -> float:
     """Largest overlap volume between two convex parts, over the smaller part's volume.
 
     Parameters
@@ -247,8 +262,15 @@ def max_overlap_fraction(parts_a, parts_b=None) -> float:
         for pairs that a face plane of one part separates up to a slab so thin
         that their overlap is below 1e-12 of the smaller part: they count as 0.
         Pairs are checked on ``--jobs`` worker processes.
+
+    Other Parameters
+    ----------------
+    faces : sequence of (face planes, surface area, volume), optional
+        Of each part of ``parts_a`` (without ``parts_b``), if already known
+        (:class:`CollisionShapes` ``part_faces``); default computed here.
     """
-    a = [p for p in parts_a if len(p) >= 4]
+    keep = [len(p) >= 4 for p in parts_a]
+    a = [p for p, k in zip(parts_a, keep) if k]
     b = a if parts_b is None else [p for p in parts_b if len(p) >= 4]
     every = a if parts_b is None else a + b
     hulls = [hull_of(p) for p in every]
@@ -258,9 +280,12 @@ def max_overlap_fraction(parts_a, parts_b=None) -> float:
         pairs = pairs[(pairs[:, 0] < len(a)) & (pairs[:, 1] >= len(a))]
     if len(pairs) == 0:
         return 0.0
-    meshes = [mesh_of(h) for h in hulls]
-    shared = (every, hulls, [face_planes(V, F) for V, F in meshes], [surface_area(V, F) for V, F in meshes],
-              [h.volume() for h in hulls])
+    if faces is None or parts_b is not None:
+        meshes = [mesh_of(h) for h in hulls]
+        faces = [(face_planes(V, F), surface_area(V, F), h.volume()) for h, (V, F) in zip(hulls, meshes)]
+    else:
+        faces = [f for f, k in zip(faces, keep) if k]
+    shared = (every, hulls, [f[0] for f in faces], [f[1] for f in faces], [f[2] for f in faces])
     return max(parallel.ordered_map(_overlap_fraction, [(int(i), int(j)) for i, j in pairs], shared))
 
 

@@ -32,6 +32,9 @@ from fracture_cli.trigeom import cross3
 
 # Overlaps below this volume (fraction of the smaller part) are contact, not overlap.
 _TOUCH = 1e-9
+# Rounding allowance (normalized coordinates, unit diagonal) of a point's depth inside clipped parts (_depth):
+# far above the error of a plane distance or of a clip's corners, far below a part's size.
+_MARGIN = 1e-7
 # Offsets tried for a separating plane, as fractions of the overlap's extent along its normal.
 _PLANE_FRACTIONS = np.linspace(0.0, 1.0, 9)
 
@@ -133,7 +136,19 @@ def _volume_beyond(material: _Material, normal: np.ndarray, offsets) -> np.ndarr
 
 
 def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=None,
-                   masses=None) -> list[np.ndarray]:
+                   masses=None, hull_faces=None) -> list[np.ndarray]:
+    """Clip every overlapping pair of convex parts by one plane so that they only touch: the corners of
+    :func:`separate_hulls` (same parameters), an empty (0, 3) array for a part clipped away."""
+    return [separated_corners(h) for h in separate_hulls(parts, materials, groups, bodies, masses, hull_faces)]
+
+
+def separated_corners(hull: manifold3d.Manifold) -> np.ndarray:
+    """Hull corners (k, 3) of a part from :func:`separate_hulls`, sorted; (0, 3) if it was clipped away."""
+    return hull_corners(hull) if not hull.is_empty() and hull.volume() > MIN_PART_VOLUME else np.zeros((0, 3))
+
+
+def separate_hulls(parts: list[np.ndarray], materials=None, groups=None, bodies=None,
+                   masses=None, hull_faces=None) -> list[manifold3d.Manifold]:
     """Clip every overlapping pair of convex parts by one plane so that they only touch.
 
     Parameters
@@ -158,12 +173,15 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=
     masses : list of MassProperties, optional
         :func:`~fracture_cli.gameready.mass.mass_properties` of each material, if already known (the stage
         computes them on its worker processes); default computed here.
+    hull_faces : list of ((normals (m_i, 3), offsets (m_i,)), area), optional
+        :func:`hull_faces` of each part, if already known (the stage computes them on its worker processes);
+        default computed here.
 
     Returns
     -------
-    list of (k_i', 3) float64
-        Hull corners of each clipped part (an empty (0, 3) array if a part was
-        clipped away entirely).
+    list of manifold3d.Manifold
+        Each clipped part (its corners by :func:`separated_corners`; the stage
+        reads them on its worker processes).
 
     Notes
     -----
@@ -199,12 +217,14 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=
         pairs = pairs[group[pairs[:, 0]] != group[pairs[:, 1]]]
     meshes, body, candidates = (tuple(bodies) + (None,))[:3] if bodies is not None else (
         materials, np.arange(len(materials)), None)
-    hull_meshes = [mesh_of(h) for h in hulls]
-    shared = _Shared(hulls, corners, solids, masses, tolerance, [face_planes(V, F) for V, F in hull_meshes],
-                     [surface_area(V, F) for V, F in hull_meshes], np.asarray(body, dtype=np.int64),
+    if hull_faces is None:
+        hull_faces = [_faces_of(h) for h in hulls]
+    shared = _Shared(hulls, corners, solids, masses, tolerance, [f[0] for f in hull_faces],
+                     [f[1] for f in hull_faces], np.asarray(body, dtype=np.int64),
                      _contacts(meshes, tolerance, candidates))
     planes = parallel.ordered_map(_pair_plane, [(int(i), int(j)) for i, j in pairs], shared)
     clipped = [False] * len(hulls)
+    trims: list[list[tuple[np.ndarray, float]]] = [[] for _ in hulls]  # the half-spaces side . x >= level kept
     stale: set[int] = set()  # clipped parts whose corners are read back from their hull when next needed
 
     def current(part: int) -> np.ndarray:
@@ -213,22 +233,40 @@ def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=
             corners[part] = mesh_of(hulls[part])[0]
         return corners[part]
 
+    volumes = [h.volume() for h in hulls]  # before any clip: at least each part's volume as clipped later
     for (i, j), plane in zip(pairs, planes):
         if plane is None:
             continue
-        normal, offset = plane
+        normal, offset, centre = plane
+        # A ball of this radius lies in both parts as clipped so far (none if <= 0): when it holds far more than
+        # contact, they overlap, and a part reaching beyond its side of the plane inside the ball needs its trim,
+        # both known without reading the clipped corners back (a clip is only computed when they are).
+        radius = _depth(shared, trims, (i, j), centre) - _MARGIN if clipped[i] or clipped[j] else 0.0
+        deep = radius > 0 and 4.0 / 3.0 * np.pi * radius ** 3 > 1e3 * _TOUCH * min(volumes[i], volumes[j])
         # Once a part was clipped by an earlier pair, this pair may be apart already: then it keeps its material.
-        if (clipped[i] or clipped[j]) and not _overlapping(hulls[i], hulls[j], current(i), current(j), normal,
-                                                           offset):
+        if (clipped[i] or clipped[j]) and not deep and not _overlapping(hulls[i], hulls[j], current(i), current(j),
+                                                                        normal, offset):
             continue
         # A part wholly on its side of the plane stays as it is (and needs no trim).
         for part, side, level in ((i, -normal, -offset), (j, normal, offset)):
-            if len(current(part)) and (corners[part] @ side).min() < level:
+            if ((deep and part in stale and float(side @ centre) - radius < level - _MARGIN)
+                    or (len(current(part)) and (corners[part] @ side).min() < level)):
                 hulls[part] = hulls[part].trim_by_plane(side, level)
+                trims[part].append((side, level))
                 stale.add(part)
                 clipped[part] = True
-    return [hull_corners(h) if not h.is_empty() and h.volume() > MIN_PART_VOLUME else np.zeros((0, 3))
-            for h in hulls]
+    return hulls
+
+
+def hull_faces(points: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], float]:
+    """Face planes (unit normals (m, 3), offsets (m,)) and surface area of the hull of points (k, 3), as
+    :func:`separate_parts` reads them."""
+    return _faces_of(hull_of(points))
+
+
+def _faces_of(hull: manifold3d.Manifold) -> tuple[tuple[np.ndarray, np.ndarray], float]:
+    V, F = mesh_of(hull)
+    return face_planes(V, F), surface_area(V, F)
 
 
 def _overlapping(a: manifold3d.Manifold, b: manifold3d.Manifold, corners_a: np.ndarray, corners_b: np.ndarray,
@@ -241,6 +279,21 @@ def _overlapping(a: manifold3d.Manifold, b: manifold3d.Manifold, corners_a: np.n
     return (a ^ b).volume() > _TOUCH * min(a.volume(), b.volume())
 
 
+def _depth(shared: _Shared, trims: list, pair: tuple[int, int], centre: np.ndarray) -> float:
+    """How deep a point (3,) lies inside both parts of a pair as clipped so far (< 0: outside one): its least
+    distance to their hulls' face planes and to the clip planes applied to them (each part is the intersection
+    of these half-spaces)."""
+    depth = np.inf
+    for part in pair:
+        normal, offset = shared.planes[part]
+        if len(normal) == 0:
+            return 0.0  # no face planes (a degenerate hull): nothing known
+        depth = min(depth, float((offset - normal @ centre).min()))
+        for side, level in trims[part]:
+            depth = min(depth, float(side @ centre - level))
+    return depth if np.isfinite(depth) else 0.0
+
+
 def overlapping_boxes(boxes) -> np.ndarray:
     """Pairs ``(i, j)``, ``i < j`` (e, 2), of axis-aligned boxes (n, 6) (min, max) that touch or overlap."""
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 6)
@@ -249,8 +302,9 @@ def overlapping_boxes(boxes) -> np.ndarray:
     return np.argwhere(np.triu(touching, 1))
 
 
-def _pair_plane(shared: _Shared, pair: tuple[int, int]) -> tuple[np.ndarray, float] | None:
-    """The separating plane of pair ``(i, j)``, None if their hulls do not overlap (numpy only: picklable)."""
+def _pair_plane(shared: _Shared, pair: tuple[int, int]) -> tuple[np.ndarray, float, np.ndarray] | None:
+    """The separating plane of pair ``(i, j)`` and its overlap's centre (:func:`_best_plane`), None if their
+    hulls do not overlap (numpy only: picklable)."""
     i, j = pair
     a, b = shared.hulls[i], shared.hulls[j]
     mass_a, mass_b = shared.masses[i], shared.masses[j]
@@ -307,12 +361,15 @@ def _interface_normal(shared: _Shared, i: int, j: int) -> np.ndarray | None:
 
 
 def _best_plane(overlap: manifold3d.Manifold, material_a: _Material, material_b: _Material, mass_a: MassProperties,
-                mass_b: MassProperties, interface_normal: np.ndarray | None) -> tuple[np.ndarray, float] | None:
-    """The candidate plane ``(unit normal from a to b, offset)`` that leaves the least material on the wrong side."""
+                mass_b: MassProperties, interface_normal: np.ndarray | None
+                ) -> tuple[np.ndarray, float, np.ndarray] | None:
+    """The candidate plane ``(unit normal from a to b, offset)`` that leaves the least material on the wrong side,
+    and the overlap's centre of volume (3,)."""
     corners, triangles = mesh_of(overlap)
     towards_b = mass_b.center - mass_a.center
     # Largest principal moment of inertia = smallest second moment: the overlap's thinnest direction.
-    moments, axes = mass_properties(corners, triangles).principal()
+    overlap_mass = mass_properties(corners, triangles)
+    moments, axes = overlap_mass.principal()
     candidates = [axes[:, int(np.argmax(moments))], towards_b]
     if interface_normal is not None:
         candidates.insert(0, interface_normal)
@@ -334,4 +391,5 @@ def _best_plane(overlap: manifold3d.Manifold, material_a: _Material, material_b:
         k = int(np.argmin(cost))
         if cost[k] < best_cost - 1e-15:
             best, best_cost = (normal, float(offsets[k])), float(cost[k])
-    return best
+    # With the overlap's centre: a point that is in both parts unless later clips cut it off (see _depth).
+    return None if best is None else (best[0], best[1], overlap_mass.center)

@@ -59,7 +59,7 @@ def collision(fragments: Fragments, options: CollisionOptions = CollisionOptions
     checks = {
         "collision_parts": len(every),
         "collision_max_parts": max((len(parts) for parts in shapes.parts), default=0),
-        "collision_max_overlap": round(float(max_overlap_fraction(every)), 9),
+        "collision_max_overlap": round(float(max_overlap_fraction(every, faces=shapes.part_faces)), 9),
         "collision_min_coverage": round(float(shapes.coverage.min()), 6) if len(shapes.coverage) else 1.0,
     }
     log.info("%s: %d convex parts for %d fragments (at most %d each), largest overlap %.2g, coverage >= %.3f",
