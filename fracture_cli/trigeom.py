@@ -342,10 +342,10 @@ def self_intersections(V: np.ndarray, F: np.ndarray, fold_cos: float = -0.9998) 
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     boxes = triangle_boxes(V, F)
-    grid = BoxGrid(boxes, default_cell(boxes))
-    i, j = grid.query(boxes)
-    keep = i < j
-    return _intersecting_pairs(V, F, i[keep], j[keep], fold_cos)
+    from fracture_cli import trigeom_grid  # compiled; imported here as triangles_intersect's kernels are
+
+    pairs = trigeom_grid.self_pairs(boxes, *_grid_cells(boxes))
+    return _intersecting_pairs(V, F, pairs[:, 0], pairs[:, 1], fold_cos)
 
 
 def self_intersections_among(V: np.ndarray, F: np.ndarray, faces: np.ndarray,
@@ -372,11 +372,22 @@ def self_intersections_among(V: np.ndarray, F: np.ndarray, faces: np.ndarray,
     if len(faces) == 0 or len(F) < 2:
         return np.zeros((0, 2), dtype=np.int64)
     boxes = triangle_boxes(V, F)
-    qi, j = BoxGrid(boxes, default_cell(boxes)).query(boxes[faces])
-    i = faces[qi]
-    pairs = np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1)
-    pairs = np.unique(pairs[pairs[:, 0] < pairs[:, 1]], axis=0)
+    from fracture_cli import trigeom_grid
+
+    pairs = trigeom_grid.among_pairs(boxes, *_grid_cells(boxes), faces)
     return _intersecting_pairs(V, F, pairs[:, 0], pairs[:, 1], fold_cos)
+
+
+def _grid_cells(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First and last cells (m, 3) int64 of ``boxes`` (m, 2, 3) in ``BoxGrid(boxes, default_cell(boxes))``.
+
+    The same arithmetic as BoxGrid's, so the compiled search (:mod:`fracture_cli.trigeom_grid`) walks its cells.
+    """
+    cell = float(default_cell(boxes))
+    origin = boxes[:, 0].min(axis=0) - cell
+    lo = np.floor((boxes[:, 0] - origin) / cell).astype(np.int64)
+    hi = np.floor((boxes[:, 1] - origin) / cell).astype(np.int64)
+    return lo, hi
 
 
 def _intersecting_pairs(V: np.ndarray, F: np.ndarray, i: np.ndarray, j: np.ndarray, fold_cos: float) -> np.ndarray:
