@@ -11,8 +11,6 @@ intersection breaks TetGen or the containment guarantee.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 # Separation below this (normalized units, unit bounding-box diagonal) counts
 # as touching, i.e. as an intersection.
@@ -165,31 +163,12 @@ def vertex_manifold(F: np.ndarray) -> bool:
     Assumes :func:`edge_manifold_closed` holds. Two cones touching at a vertex
     pass the edge test but not this one.
     """
-    F = np.asarray(F, dtype=np.int64)
-    m = len(F)
-    n = int(F.max()) + 1
-    # Corner (f, k) is vertex F[f, k] in face f; the corner of vertex a in face f
-    # is glued to the corner of a in the face across edge (a -> b).
-    corner = np.arange(3 * m).reshape(m, 3)
-    a = F.reshape(-1)
-    b = F[:, [1, 2, 0]].reshape(-1)
-    key_ab = a * n + b
-    order = np.argsort(key_ab, kind="stable")
-    twin_pos = np.searchsorted(key_ab[order], b * n + a)
-    twin_pos = np.minimum(twin_pos, len(order) - 1)
-    twin_edge = order[twin_pos]  # the halfedge b -> a, starting at corner of b
-    ok = key_ab[twin_edge] == b * n + a
-    # In the twin face the halfedge is b -> a, so a is the next corner after b.
-    twin_face = twin_edge // 3
-    twin_corner_of_a = twin_face * 3 + (twin_edge % 3 + 1) % 3
-    src = corner.reshape(-1)[ok]
-    dst = twin_corner_of_a[ok]
-    graph = sp.coo_matrix((np.ones(len(src)), (src, dst)), shape=(3 * m, 3 * m))
-    _, labels = connected_components(graph, directed=False)
-    pairs = np.unique(np.stack([a, labels], axis=1), axis=0)
-    fans_per_vertex = np.bincount(pairs[:, 0], minlength=n)
-    used = np.bincount(a, minlength=n) > 0
-    return bool(np.all(fans_per_vertex[used] == 1))
+    # Compiled (a union-find of the corners glued across edges); imported here so that modules that never
+    # test meshes do not import numba.
+    from fracture_cli.trigeom_topology import single_fans
+
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    return bool(single_fans(F, int(F.max()) + 1))
 
 
 def triangle_boxes(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -392,9 +371,12 @@ def _grid_cells(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _intersecting_pairs(V: np.ndarray, F: np.ndarray, i: np.ndarray, j: np.ndarray, fold_cos: float) -> np.ndarray:
     """Of the candidate face pairs ``(i, j)`` (p,), those that intersect other than along shared corners/edges."""
+    from fracture_cli.trigeom_grid import shared_corners
+
     Fi, Fj = F[i], F[j]
-    shared = (Fi[:, :, None] == Fj[:, None, :])  # (p, 3, 3)
-    n_shared = shared.any(axis=2).sum(axis=1)
+    # Compiled: numpy's (p, 3, 3) comparisons of every candidate pair were much of the fault checks' time.
+    n_shared, first_i, first_j = shared_corners(F, np.ascontiguousarray(i, dtype=np.int64),
+                                                np.ascontiguousarray(j, dtype=np.int64))
     bad = np.zeros(len(i), dtype=bool)
 
     # Disjoint vertex sets: plain triangle-triangle test.
@@ -405,9 +387,8 @@ def _intersecting_pairs(V: np.ndarray, F: np.ndarray, i: np.ndarray, j: np.ndarr
     # shared vertex in one triangle meets the other triangle.
     s1 = np.flatnonzero(n_shared == 1)
     if len(s1):
-        fi, fj, sh = Fi[s1], Fj[s1], shared[s1]
-        ki = np.argmax(sh.any(axis=2), axis=1)  # corner of the shared vertex in fi
-        kj = np.argmax(sh.any(axis=1), axis=1)
+        fi, fj = Fi[s1], Fj[s1]
+        ki, kj = first_i[s1], first_j[s1]  # corners of the shared vertex in fi and in fj
         r = np.arange(len(s1))
         opp_i = np.stack([fi[r, (ki + 1) % 3], fi[r, (ki + 2) % 3], fi[r, (ki + 2) % 3]], axis=1)
         opp_j = np.stack([fj[r, (kj + 1) % 3], fj[r, (kj + 2) % 3], fj[r, (kj + 2) % 3]], axis=1)

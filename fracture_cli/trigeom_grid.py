@@ -92,6 +92,29 @@ def _query(boxes: np.ndarray, lo: np.ndarray, hi: np.ndarray, queries: np.ndarra
     return out[:n].copy()
 
 
+@njit()
+def shared_corners(F: np.ndarray, i: np.ndarray,
+                   j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover (compiled)
+    """For face pairs ``(i, j)`` (p,) of ``F`` (m, 3): how many corners of ``F[i]`` are corners of ``F[j]`` (p,),
+    the first such corner of ``F[i]`` (p,) and the first of ``F[j]`` that is a corner of ``F[i]`` (p,), 0 if none.
+    """
+    p = len(i)
+    count = np.zeros(p, dtype=np.int64)
+    first_i = np.zeros(p, dtype=np.int64)
+    first_j = np.zeros(p, dtype=np.int64)
+    for r in range(p):
+        f, g = F[i[r]], F[j[r]]
+        found_i = found_j = False
+        for k in range(3):
+            if f[k] == g[0] or f[k] == g[1] or f[k] == g[2]:
+                count[r] += 1
+                if not found_i:
+                    first_i[r], found_i = k, True
+            if not found_j and (g[k] == f[0] or g[k] == f[1] or g[k] == f[2]):
+                first_j[r], found_j = k, True
+    return count, first_i, first_j
+
+
 def self_pairs(boxes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The pairs (p, 2) ``(i, j)``, ``i < j``, of ``BoxGrid(boxes, cell).query(boxes)``, in its order.
 
@@ -124,3 +147,4 @@ def warm_kernels() -> None:
     hi = np.ones((2, 3), dtype=np.int64)
     self_pairs(boxes, lo, hi)
     among_pairs(boxes, lo, hi, np.array([0]))
+    shared_corners(np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64), np.array([0]), np.array([1]))

@@ -40,3 +40,15 @@ def test_among_pairs_are_boxgrids(seed):
 
 def test_warm_kernels():
     trigeom_grid.warm_kernels()
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_shared_corners_match_numpy(seed):
+    _, F, rng = _mesh(seed)  # random faces, some with a repeated corner
+    i, j = rng.integers(0, len(F), 50), rng.integers(0, len(F), 50)
+    shared = F[i][:, :, None] == F[j][:, None, :]
+    count, first_i, first_j = trigeom_grid.shared_corners(F, i, j)
+    assert np.array_equal(count, shared.any(axis=2).sum(axis=1))
+    some = count > 0
+    assert np.array_equal(first_i[some], np.argmax(shared.any(axis=2), axis=1)[some])
+    assert np.array_equal(first_j[some], np.argmax(shared.any(axis=1), axis=1)[some])
