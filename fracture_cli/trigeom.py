@@ -143,18 +143,12 @@ def edge_manifold_closed(F: np.ndarray) -> bool:
 
     This is "closed, edge-manifold and consistently oriented" in one test.
     """
-    F = np.asarray(F, dtype=np.int64)
+    from fracture_cli.trigeom_topology import closed_oriented  # compiled; see vertex_manifold
+
+    F = np.ascontiguousarray(F, dtype=np.int64)
     if len(F) == 0:
         return False
-    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    if np.any(directed[:, 0] == directed[:, 1]):
-        return False
-    n = int(F.max()) + 1
-    key = directed[:, 0] * n + directed[:, 1]
-    if len(np.unique(key)) != len(key):
-        return False  # a directed edge used twice: non-manifold or flipped neighbour
-    twin = directed[:, 1] * n + directed[:, 0]
-    return bool(np.all(np.isin(twin, key)))
+    return bool(closed_oriented(F.reshape(-1, 3), int(F.max()) + 1))
 
 
 def vertex_manifold(F: np.ndarray) -> bool:

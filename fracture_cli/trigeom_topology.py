@@ -1,4 +1,4 @@
-"""Compiled (numba) vertex-manifold test, for :func:`fracture_cli.trigeom.vertex_manifold`.
+"""Compiled (numba) manifold tests, for :func:`fracture_cli.trigeom.vertex_manifold` and ``edge_manifold_closed``.
 
 The numpy test builds a sparse graph of the corners glued across edges and
 labels its components with scipy; the simplify stage calls it on every
@@ -63,6 +63,31 @@ def single_fans(F: np.ndarray, n: int) -> bool:  # pragma: no cover (compiled)
     return True
 
 
+@njit()
+def closed_oriented(F: np.ndarray, n: int) -> bool:  # pragma: no cover (compiled)
+    """Whether every edge of ``F`` (m, 3) int64 (ids below ``n``) is used once in each direction, by distinct
+    vertices (:func:`fracture_cli.trigeom.edge_manifold_closed`, same verdict)."""
+    m = F.shape[0]
+    key = np.empty(3 * m, dtype=np.int64)
+    for f in range(m):
+        for k in range(3):
+            a, b = F[f, k], F[f, (k + 1) % 3]
+            if a == b:
+                return False
+            key[3 * f + k] = a * n + b
+    key = np.sort(key)
+    for e in range(1, 3 * m):
+        if key[e] == key[e - 1]:
+            return False  # a directed edge used twice: non-manifold or flipped neighbour
+    for e in range(3 * m):
+        twin = (key[e] % n) * n + key[e] // n
+        pos = np.searchsorted(key, twin)
+        if pos >= 3 * m or key[pos] != twin:
+            return False
+    return True
+
+
 def warm_kernels() -> None:
-    """Compile (or load from the cache) the kernel, on a tetrahedron."""
+    """Compile (or load from the cache) the kernels, on a tetrahedron."""
+    closed_oriented(np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]], dtype=np.int64), 4)
     single_fans(np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]], dtype=np.int64), 4)

@@ -44,3 +44,30 @@ def test_single_fans_match_reference(seed):
 
 def test_warm_kernels():
     warm_kernels()
+
+
+def _closed_reference(F):
+    """The numpy test edge_manifold_closed used before the kernel."""
+    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    if np.any(directed[:, 0] == directed[:, 1]):
+        return False
+    n = int(F.max()) + 1
+    key = directed[:, 0] * n + directed[:, 1]
+    if len(np.unique(key)) != len(key):
+        return False
+    return bool(np.all(np.isin(directed[:, 1] * n + directed[:, 0], key)))
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_closed_oriented_matches_reference(seed):
+    rng = np.random.default_rng(seed)
+    F = np.concatenate([_octahedron(), _octahedron() + 6])
+    if seed % 3 == 1:
+        F[int(rng.integers(0, len(F)))] = F[int(rng.integers(0, len(F)))][::-1]  # a flipped or duplicated face
+    elif seed % 3 == 2:
+        F = F[1:]  # a hole
+    F = rng.permutation(12)[F][rng.permutation(len(F))]
+    assert trigeom.edge_manifold_closed(F) == _closed_reference(F)
+    G = rng.integers(0, 6, (int(rng.integers(1, 30)), 3))
+    assert trigeom.edge_manifold_closed(G) == _closed_reference(G)
+    assert trigeom.edge_manifold_closed(_octahedron()) and not trigeom.edge_manifold_closed(np.zeros((0, 3), int))
