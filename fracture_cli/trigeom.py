@@ -11,8 +11,6 @@ intersection breaks TetGen or the containment guarantee.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 # Separation below this (normalized units, unit bounding-box diagonal) counts
 # as touching, i.e. as an intersection.
@@ -145,18 +143,12 @@ def edge_manifold_closed(F: np.ndarray) -> bool:
 
     This is "closed, edge-manifold and consistently oriented" in one test.
     """
-    F = np.asarray(F, dtype=np.int64)
+    from fracture_cli.trigeom_topology import closed_oriented  # compiled; see vertex_manifold
+
+    F = np.ascontiguousarray(F, dtype=np.int64)
     if len(F) == 0:
         return False
-    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    if np.any(directed[:, 0] == directed[:, 1]):
-        return False
-    n = int(F.max()) + 1
-    key = directed[:, 0] * n + directed[:, 1]
-    if len(np.unique(key)) != len(key):
-        return False  # a directed edge used twice: non-manifold or flipped neighbour
-    twin = directed[:, 1] * n + directed[:, 0]
-    return bool(np.all(np.isin(twin, key)))
+    return bool(closed_oriented(F.reshape(-1, 3), int(F.max()) + 1))
 
 
 def vertex_manifold(F: np.ndarray) -> bool:
@@ -165,31 +157,12 @@ def vertex_manifold(F: np.ndarray) -> bool:
     Assumes :func:`edge_manifold_closed` holds. Two cones touching at a vertex
     pass the edge test but not this one.
     """
-    F = np.asarray(F, dtype=np.int64)
-    m = len(F)
-    n = int(F.max()) + 1
-    # Corner (f, k) is vertex F[f, k] in face f; the corner of vertex a in face f
-    # is glued to the corner of a in the face across edge (a -> b).
-    corner = np.arange(3 * m).reshape(m, 3)
-    a = F.reshape(-1)
-    b = F[:, [1, 2, 0]].reshape(-1)
-    key_ab = a * n + b
-    order = np.argsort(key_ab, kind="stable")
-    twin_pos = np.searchsorted(key_ab[order], b * n + a)
-    twin_pos = np.minimum(twin_pos, len(order) - 1)
-    twin_edge = order[twin_pos]  # the halfedge b -> a, starting at corner of b
-    ok = key_ab[twin_edge] == b * n + a
-    # In the twin face the halfedge is b -> a, so a is the next corner after b.
-    twin_face = twin_edge // 3
-    twin_corner_of_a = twin_face * 3 + (twin_edge % 3 + 1) % 3
-    src = corner.reshape(-1)[ok]
-    dst = twin_corner_of_a[ok]
-    graph = sp.coo_matrix((np.ones(len(src)), (src, dst)), shape=(3 * m, 3 * m))
-    _, labels = connected_components(graph, directed=False)
-    pairs = np.unique(np.stack([a, labels], axis=1), axis=0)
-    fans_per_vertex = np.bincount(pairs[:, 0], minlength=n)
-    used = np.bincount(a, minlength=n) > 0
-    return bool(np.all(fans_per_vertex[used] == 1))
+    # Compiled (a union-find of the corners glued across edges); imported here so that modules that never
+    # test meshes do not import numba.
+    from fracture_cli.trigeom_topology import single_fans
+
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    return bool(single_fans(F, int(F.max()) + 1))
 
 
 def triangle_boxes(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -342,10 +315,10 @@ def self_intersections(V: np.ndarray, F: np.ndarray, fold_cos: float = -0.9998) 
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     boxes = triangle_boxes(V, F)
-    grid = BoxGrid(boxes, default_cell(boxes))
-    i, j = grid.query(boxes)
-    keep = i < j
-    return _intersecting_pairs(V, F, i[keep], j[keep], fold_cos)
+    from fracture_cli import trigeom_grid  # compiled; imported here as triangles_intersect's kernels are
+
+    pairs = trigeom_grid.self_pairs(boxes, *_grid_cells(boxes))
+    return _intersecting_pairs(V, F, pairs[:, 0], pairs[:, 1], fold_cos)
 
 
 def self_intersections_among(V: np.ndarray, F: np.ndarray, faces: np.ndarray,
@@ -372,18 +345,32 @@ def self_intersections_among(V: np.ndarray, F: np.ndarray, faces: np.ndarray,
     if len(faces) == 0 or len(F) < 2:
         return np.zeros((0, 2), dtype=np.int64)
     boxes = triangle_boxes(V, F)
-    qi, j = BoxGrid(boxes, default_cell(boxes)).query(boxes[faces])
-    i = faces[qi]
-    pairs = np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1)
-    pairs = np.unique(pairs[pairs[:, 0] < pairs[:, 1]], axis=0)
+    from fracture_cli import trigeom_grid
+
+    pairs = trigeom_grid.among_pairs(boxes, *_grid_cells(boxes), faces)
     return _intersecting_pairs(V, F, pairs[:, 0], pairs[:, 1], fold_cos)
+
+
+def _grid_cells(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First and last cells (m, 3) int64 of ``boxes`` (m, 2, 3) in ``BoxGrid(boxes, default_cell(boxes))``.
+
+    The same arithmetic as BoxGrid's, so the compiled search (:mod:`fracture_cli.trigeom_grid`) walks its cells.
+    """
+    cell = float(default_cell(boxes))
+    origin = boxes[:, 0].min(axis=0) - cell
+    lo = np.floor((boxes[:, 0] - origin) / cell).astype(np.int64)
+    hi = np.floor((boxes[:, 1] - origin) / cell).astype(np.int64)
+    return lo, hi
 
 
 def _intersecting_pairs(V: np.ndarray, F: np.ndarray, i: np.ndarray, j: np.ndarray, fold_cos: float) -> np.ndarray:
     """Of the candidate face pairs ``(i, j)`` (p,), those that intersect other than along shared corners/edges."""
+    from fracture_cli.trigeom_grid import shared_corners
+
     Fi, Fj = F[i], F[j]
-    shared = (Fi[:, :, None] == Fj[:, None, :])  # (p, 3, 3)
-    n_shared = shared.any(axis=2).sum(axis=1)
+    # Compiled: numpy's (p, 3, 3) comparisons of every candidate pair were much of the fault checks' time.
+    n_shared, first_i, first_j = shared_corners(F, np.ascontiguousarray(i, dtype=np.int64),
+                                                np.ascontiguousarray(j, dtype=np.int64))
     bad = np.zeros(len(i), dtype=bool)
 
     # Disjoint vertex sets: plain triangle-triangle test.
@@ -394,9 +381,8 @@ def _intersecting_pairs(V: np.ndarray, F: np.ndarray, i: np.ndarray, j: np.ndarr
     # shared vertex in one triangle meets the other triangle.
     s1 = np.flatnonzero(n_shared == 1)
     if len(s1):
-        fi, fj, sh = Fi[s1], Fj[s1], shared[s1]
-        ki = np.argmax(sh.any(axis=2), axis=1)  # corner of the shared vertex in fi
-        kj = np.argmax(sh.any(axis=1), axis=1)
+        fi, fj = Fi[s1], Fj[s1]
+        ki, kj = first_i[s1], first_j[s1]  # corners of the shared vertex in fi and in fj
         r = np.arange(len(s1))
         opp_i = np.stack([fi[r, (ki + 1) % 3], fi[r, (ki + 2) % 3], fi[r, (ki + 2) % 3]], axis=1)
         opp_j = np.stack([fj[r, (kj + 1) % 3], fj[r, (kj + 2) % 3], fj[r, (kj + 2) % 3]], axis=1)

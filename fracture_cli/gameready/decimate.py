@@ -413,17 +413,24 @@ class SurfaceComplex:
         """
         flips = 0
         again = True
+        # Faces found well shaped, as they were then: the points do not move here, so such a face is no
+        # needle in a later pass either unless a flip changed it (skipping it skips a no-op: same flips).
+        shaped: dict[int, tuple[int, ...]] = {}
         while again:
             again = False
             for t in sorted(self.faces):
-                if t in self.faces and frozen.isdisjoint(self.owners[t]) and self._flip(t):
+                if t not in self.faces or not frozen.isdisjoint(self.owners[t]) or shaped.get(t) == self.faces[t]:
+                    continue
+                i = self._needle_edge(self.faces[t])
+                if i < 0:
+                    shaped[t] = self.faces[t]
+                elif self._flip(t, i):
                     flips += 1
                     again = True
         return flips
 
-    def _flip(self, t: int) -> bool:
-        """Flip the long edge of face ``t`` if it is a cap needle and the flip is allowed (see :meth:`flip_needles`)."""
-        f = self.faces[t]
+    def _needle_edge(self, f: tuple[int, ...]) -> int:
+        """The corner (0-2) starting the long edge of face ``f`` if it is a cap needle, else -1."""
         (ax, ay, az), (bx, by, bz), (cx, cy, cz) = self.points[f[0]], self.points[f[1]], self.points[f[2]]
         # Written out (most faces are no needles): squared edge lengths as sum() adds them, and the normal.
         lengths = ((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2, (cx - bx) ** 2 + (cy - by) ** 2 + (cz - bz) ** 2,
@@ -432,7 +439,12 @@ class SurfaceComplex:
         ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
         nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
         if nx**2 + ny**2 + nz**2 > (MIN_SHAPE * lengths[i]) ** 2:
-            return False
+            return -1
+        return i
+
+    def _flip(self, t: int, i: int) -> bool:
+        """Flip the long edge (from corner ``i``) of needle face ``t`` if allowed (see :meth:`flip_needles`)."""
+        f = self.faces[t]
         a, b, c = f[(i + 2) % 3], f[i], f[(i + 1) % 3]
         across = [s for s in self.vertex_faces[b] & self.vertex_faces[c] if s != t]
         if len(across) != 1:

@@ -57,7 +57,7 @@ from fracture_cli.gameready.faultmatch import (
     valid,
     weld,
 )
-from fracture_cli.gameready.rebuild import Classified, rebuild, uv_scale
+from fracture_cli.gameready.rebuild import Classified, fragment_rows, rebuild, uv_scale
 from fracture_cli.types import Fragment, Fragments, SurfaceMesh
 
 __all__ = ["FaultReport", "simplify_faults", "valid"]
@@ -227,11 +227,12 @@ class _Checker:
         faces (local indices) of each invalid fragment."""
         fragments, count = self.fragments, len(self.fragments.fragments)
         ids, faces = complex_.face_arrays()
-        results, face_ids = zip(*[rebuild(fragments, k, self.welded, self.classified, ids, faces, self.interior,
-                                          self.uv_scale) for k in range(count)])
+        rows = fragment_rows(self.classified.owner_pair[ids], count)
+        results, face_ids = zip(*[rebuild(fragments, k, self.welded, self.classified, ids[rows[k]], faces[rows[k]],
+                                          self.interior, self.uv_scale) for k in range(count)])
         bad = {}
         # A fragment whose faces are those of a fragment found valid in an earlier try is valid again.
-        signatures = {k: np.sort(np.sort(faces[np.isin(ids, face_ids[k])], axis=1), axis=0).tobytes()
+        signatures = {k: np.sort(np.sort(faces[rows[k]], axis=1), axis=0).tobytes()
                       for k in range(count) if k not in as_cut}
         todo = [k for k, signature in signatures.items() if signature not in self.valid_faces]
         # The first try is checked whole; later ones only where a face differs from the first try's (pairs of
