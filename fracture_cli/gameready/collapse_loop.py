@@ -129,7 +129,7 @@ def _heap_pop(heap: tuple, size: int) -> tuple:  # pragma: no cover (compiled)
 @njit(cache=True)
 def turns_little(P: np.ndarray, old: np.ndarray, new: np.ndarray, limit: float, two: float,
                  min_shape: float) -> bool:  # pragma: no cover (compiled)
-    """:func:`.decimate._turns_little` on arrays: the same operations in the same order."""
+    """:func:`.decimate_faces.turns_little` on arrays: the same operations in the same order."""
     ax, ay, az = P[old[0], 0], P[old[0], 1], P[old[0], 2]
     bx, by, bz = P[old[1], 0], P[old[1], 1], P[old[1], 2]
     cx, cy, cz = P[old[2], 0], P[old[2], 1], P[old[2], 2]

@@ -144,7 +144,7 @@ def replay(complex_: SurfaceComplex, collapses: list[tuple[int, int, float, list
 def _replay_onto(complex_: SurfaceComplex, collapses: tuple, quadric: np.ndarray) -> None:
     """Apply the loop's collapses (:func:`.collapse_loop.logged`) to the complex, as
     :meth:`.SurfaceComplex._apply` does, with the points and faces the loop chose; ``quadric``: the loop's."""
-    from fracture_cli.gameready.decimate import _merged
+    from fracture_cli.gameready.decimate_faces import merged
 
     log, bounds = collapses[0].tolist(), collapses[1].tolist()
     faces, vertex_faces, assigned, history = complex_.faces, complex_.vertex_faces, complex_.assigned, complex_.history
@@ -167,7 +167,7 @@ def _replay_onto(complex_: SurfaceComplex, collapses: tuple, quadric: np.ndarray
             modified[t] = clock
             a, b, c = faces[t]
             faces[t] = (v if a == u else a, v if b == u else b, v if c == u else c)
-            history[t] = _merged(history[t], touched)
+            history[t] = merged(history[t], touched)
             if fault[t]:
                 assigned[t] = []
         for point, t in zip(points, nearest):

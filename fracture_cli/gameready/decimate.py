@@ -33,6 +33,8 @@ from types import ModuleType
 
 import numpy as np
 
+from fracture_cli.gameready.decimate_faces import MIN_SHAPE, merged, moved, turns_little
+
 # A collapse may not turn a triangle by more than this (cosine of the angle between old and new normal): inside a
 # fault 30 degrees, so a smooth fault stays smooth under flat shading; 60 degrees for a vertex on the outer
 # surface, where a fault curve straightens or snaps to input vertices across a thin wall.
@@ -40,8 +42,6 @@ MIN_NORMAL_COS = 0.85
 MIN_NORMAL_COS_OUTER = 0.5
 # Cut fault faces (nearest centroids) a point of a new fault face is measured against.
 _REFERENCE_CANDIDATES = 8
-# A face is degenerate when twice its area is below this fraction of its longest edge squared.
-MIN_SHAPE = 1e-6
 
 
 class _Fan:
@@ -185,7 +185,7 @@ class SurfaceComplex:
                     and changed_faces.isdisjoint(fan) and changed_faces.isdisjoint(v_fan)):
                 removed = [t for t in fan if t in v_fan]
                 kept = sorted(fan.difference(removed))
-                new_faces = {t: _moved(self.faces[t], u, v) for t in kept}
+                new_faces = {t: moved(self.faces[t], u, v) for t in kept}
                 self._apply(u, v, removed, kept, new_faces, points, nearest, bound)
                 continue
             self._mark_changed(u, v, changed_faces, changed_vertices)
@@ -348,8 +348,8 @@ class SurfaceComplex:
         new_faces = {}
         for t in kept:
             f = faces[t]
-            g = new_faces[t] = _moved(f, u, v)
-            if not _turns_little(positions, f, g, limit):
+            g = new_faces[t] = moved(f, u, v)
+            if not turns_little(positions, f, g, limit):
                 return False
         fault_kept = [t for t in kept if self.fault[t]]
         points: list[int] = []
@@ -388,7 +388,7 @@ class SurfaceComplex:
             del self.faces[t], self.assigned[t], self.history[t]
         for t in kept:
             self.faces[t] = new_faces[t]
-            self.history[t] = _merged(self.history[t], touched)
+            self.history[t] = merged(self.history[t], touched)
             if self.fault[t]:
                 self.assigned[t] = []
         for point, t in zip(points, nearest):
@@ -456,7 +456,7 @@ class SurfaceComplex:
                 or g[(g.index(c) + 1) % 3] != b or self.vertex_faces[a] & self.vertex_faces[d]):
             return False  # another surface, misoriented, or an edge a-d already there (the flip would pinch)
         new_t, new_s = (a, b, d), (a, d, c)
-        if not (_turns_little(self.points, g, new_t, 0.0) and _turns_little(self.points, g, new_s, 0.0)):
+        if not (turns_little(self.points, g, new_t, 0.0) and turns_little(self.points, g, new_s, 0.0)):
             return False
         self.clock += 1
         self.vertex_faces[b].discard(s)
@@ -464,7 +464,7 @@ class SurfaceComplex:
         self.vertex_faces[a].add(s)
         self.vertex_faces[d].add(t)
         self.faces[t], self.faces[s] = new_t, new_s
-        self.history[t] = self.history[s] = _merged(self.history[t], self.history[s])
+        self.history[t] = self.history[s] = merged(self.history[t], self.history[s])
         self.modified[t] = self.modified[s] = self.clock
         return True
 
@@ -505,38 +505,3 @@ def _collapse_pack() -> ModuleType:
     from fracture_cli.gameready import collapse_pack
 
     return collapse_pack
-
-
-def _merged(a: tuple, b: tuple) -> tuple:
-    """The history of a face changed by the collapses of both ``a`` and ``b`` (:meth:`SurfaceComplex.behind`)."""
-    return b if not a else a if not b or a is b else (-1, (a, b))
-
-
-def _turns_little(points: list, old: tuple, new: tuple, limit: float) -> bool:
-    """Whether face ``new`` is not degenerate and its normal's cosine with ``old``'s is ``limit`` or more.
-
-    Corners are ids into ``points``, a list of (x, y, z): plain floats, as numpy is slow on single triangles
-    (normals written out: a call for each cost a fifth of the test).
-    """
-    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[old[0]], points[old[1]], points[old[2]]
-    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
-    ox, oy, oz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[new[0]], points[new[1]], points[new[2]]
-    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
-    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    length2 = nx**2 + ny**2 + nz**2
-    # Written out, in the order sum() adds them (0 + x is x exactly).
-    longest = max((ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2, (bx - cx) ** 2 + (by - cy) ** 2 + (bz - cz) ** 2,
-                  (cx - ax) ** 2 + (cy - ay) ** 2 + (cz - az) ** 2)
-    if length2 == 0.0 or length2 <= (MIN_SHAPE * longest) ** 2:
-        return False
-    dot = ox * nx + oy * ny + oz * nz
-    old2 = ox**2 + oy**2 + oz**2
-    return dot > 0 and dot * dot >= limit**2 * old2 * length2
-
-
-def _moved(f: tuple, u: int, v: int) -> tuple[int, int, int]:
-    """Face ``f`` with corner ``u`` replaced by ``v``."""
-    a, b, c = f
-    return (v if a == u else a, v if b == u else b, v if c == u else c)
-

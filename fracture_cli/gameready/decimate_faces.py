@@ -1,0 +1,45 @@
+"""Plain-Python face helpers of :class:`fracture_cli.gameready.decimate.SurfaceComplex`'s reference loops.
+
+The compiled loops (:mod:`.collapse_loop`) repeat these operations in the same
+order on arrays; these are the Python statements they follow, on tuples.
+"""
+
+from __future__ import annotations
+
+# A face is degenerate when twice its area is below this fraction of its longest edge squared.
+MIN_SHAPE = 1e-6
+
+
+def merged(a: tuple, b: tuple) -> tuple:
+    """The history of a face changed by the collapses of both ``a`` and ``b`` (:meth:`SurfaceComplex.behind`)."""
+    return b if not a else a if not b or a is b else (-1, (a, b))
+
+
+def turns_little(points: list, old: tuple, new: tuple, limit: float) -> bool:
+    """Whether face ``new`` is not degenerate and its normal's cosine with ``old``'s is ``limit`` or more.
+
+    Corners are ids into ``points``, a list of (x, y, z): plain floats, as numpy is slow on single triangles
+    (normals written out: a call for each cost a fifth of the test).
+    """
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[old[0]], points[old[1]], points[old[2]]
+    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+    ox, oy, oz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[new[0]], points[new[1]], points[new[2]]
+    ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    length2 = nx**2 + ny**2 + nz**2
+    # Written out, in the order sum() adds them (0 + x is x exactly).
+    longest = max((ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2, (bx - cx) ** 2 + (by - cy) ** 2 + (bz - cz) ** 2,
+                  (cx - ax) ** 2 + (cy - ay) ** 2 + (cz - az) ** 2)
+    if length2 == 0.0 or length2 <= (MIN_SHAPE * longest) ** 2:
+        return False
+    dot = ox * nx + oy * ny + oz * nz
+    old2 = ox**2 + oy**2 + oz**2
+    return dot > 0 and dot * dot >= limit**2 * old2 * length2
+
+
+def moved(f: tuple, u: int, v: int) -> tuple[int, int, int]:
+    """Face ``f`` with corner ``u`` replaced by ``v``."""
+    a, b, c = f
+    return (v if a == u else a, v if b == u else b, v if c == u else c)
+
