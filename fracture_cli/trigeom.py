@@ -193,9 +193,7 @@ class BoxGrid:
         self.ids = ids[order]
 
     def _cells(self, boxes: np.ndarray):
-        lo = np.floor((boxes[:, 0] - self.origin) / self.cell).astype(np.int64)
-        hi = np.floor((boxes[:, 1] - self.origin) / self.cell).astype(np.int64)
-        return lo, hi
+        return _cell_range(boxes, self.origin, self.cell)
 
     def _expand(self, boxes: np.ndarray, with_cells: bool = False):
         lo, hi = self._cells(boxes)
@@ -352,12 +350,14 @@ def self_intersections_among(V: np.ndarray, F: np.ndarray, faces: np.ndarray,
 
 
 def _grid_cells(boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First and last cells (m, 3) int64 of ``boxes`` (m, 2, 3) in ``BoxGrid(boxes, default_cell(boxes))``.
-
-    The same arithmetic as BoxGrid's, so the compiled search (:mod:`fracture_cli.trigeom_grid`) walks its cells.
-    """
+    """First and last cells (m, 3) int64 of ``boxes`` (m, 2, 3) in ``BoxGrid(boxes, default_cell(boxes))``,
+    without building its index: the compiled search (:mod:`fracture_cli.trigeom_grid`) walks these cells."""
     cell = float(default_cell(boxes))
-    origin = boxes[:, 0].min(axis=0) - cell
+    return _cell_range(boxes, boxes[:, 0].min(axis=0) - cell, cell)
+
+
+def _cell_range(boxes: np.ndarray, origin: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """First and last grid cells (m, 3) int64 of ``boxes`` (m, 2, 3) in cells of size ``cell`` from ``origin``."""
     lo = np.floor((boxes[:, 0] - origin) / cell).astype(np.int64)
     hi = np.floor((boxes[:, 1] - origin) / cell).astype(np.int64)
     return lo, hi
