@@ -73,12 +73,17 @@ def vertex_normals(V: np.ndarray, F: np.ndarray, n: int | None = None, unit: boo
     return acc / np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-300)
 
 
-def _solid_angle_fraction(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+def solid_angle_fraction(a: np.ndarray, b: np.ndarray, c: np.ndarray,
+                         lengths: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Signed solid angle / 4 pi of triangles ``(a, b, c)`` seen from the origin (arrays (..., 3)).
 
-    Van Oosterom and Strackee's formula, tan(omega / 2) = det / dot.
+    Van Oosterom and Strackee's formula, tan(omega / 2) = det / dot. ``lengths``: the corners' lengths
+    (...,), when the caller already has them (as computed here: the same bits).
     """
-    la, lb, lc = (np.sqrt(np.einsum("...j,...j->...", x, x)) for x in (a, b, c))
+    if lengths is None:
+        la, lb, lc = (np.sqrt(np.einsum("...j,...j->...", x, x)) for x in (a, b, c))
+    else:
+        la, lb, lc = lengths
     det = np.einsum("...j,...j->...", a, np.cross(b, c))
     dot = (la * lb * lc + np.einsum("...j,...j->...", a, b) * lc + np.einsum("...j,...j->...", b, c) * la
            + np.einsum("...j,...j->...", c, a) * lb)
@@ -87,7 +92,7 @@ def _solid_angle_fraction(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.nda
 
 def triangle_winding(P: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
     """Winding-number contribution (k,) of triangle ``(A[i], B[i], C[i])`` at ``P[i]`` (all (k, 3))."""
-    return _solid_angle_fraction(A - P, B - P, C - P)
+    return solid_angle_fraction(A - P, B - P, C - P)
 
 
 def winding_numbers(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -100,7 +105,7 @@ def winding_numbers(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndar
     chunk = max(1, _WINDING_CHUNK // max(len(F), 1))
     for s in range(0, len(points), chunk):
         q = points[s:s + chunk, None, :]
-        out[s:s + chunk] = _solid_angle_fraction(A[None] - q, B[None] - q, C[None] - q).sum(axis=1)
+        out[s:s + chunk] = solid_angle_fraction(A[None] - q, B[None] - q, C[None] - q).sum(axis=1)
     return out
 
 

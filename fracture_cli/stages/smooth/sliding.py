@@ -86,13 +86,8 @@ class _Corner:
 
 
 def _solid_angle_fraction(a: _Corner, b: _Corner, c: _Corner) -> np.ndarray:
-    """Signed solid angle / 4 pi of triangles ``(a, b, c)`` seen from the origin: trigeom's formula and order."""
-    la, lb, lc = a.length, b.length, c.length
-    x, y, z = a.vector, b.vector, c.vector
-    det = np.einsum("...j,...j->...", x, np.cross(y, z))
-    dot = (la * lb * lc + np.einsum("...j,...j->...", x, y) * lc + np.einsum("...j,...j->...", y, z) * la
-           + np.einsum("...j,...j->...", z, x) * lb)
-    return np.arctan2(det, dot) / (2.0 * np.pi)
+    """:func:`fracture_cli.trigeom.solid_angle_fraction` of corners whose lengths are known."""
+    return trigeom.solid_angle_fraction(a.vector, b.vector, c.vector, (a.length, b.length, c.length))
 
 
 def _near_plane(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarray, box: np.ndarray,
