@@ -11,8 +11,8 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
+from fracture_cli.discontinuity import partition_kernels
 from fracture_cli.discontinuity.energy import Constraints, SubproblemResult, scaled_problem
 from fracture_cli.discontinuity.master import MasterLP
 from fracture_cli.discontinuity.mincut import MinCut
@@ -103,11 +103,9 @@ class CutSubproblemSolver:
         self.max_iter = int(max_iter)
         self.merge_cells = int(merge_cells)
         self._constraints = Constraints(self.vol)
-        self._fa, self._fb = self.face_tets[:, 0], self.face_tets[:, 1]
-        # The face graph in CSR order (by first tet), so that a subgraph is a mask away (:meth:`_components`).
-        self._csr_order = np.argsort(self._fa, kind="stable")
-        self._csr_rows = self._fa[self._csr_order]
-        self._csr_cols = self._fb[self._csr_order].astype(np.int32)
+        # Contiguous int64 copies: the compiled partition kernels take them as they are.
+        self._fa = np.ascontiguousarray(self.face_tets[:, 0], dtype=np.int64)
+        self._fb = np.ascontiguousarray(self.face_tets[:, 1], dtype=np.int64)
         self._max_flow = MinCut(self.face_tets, self.omega, self.t, max_flow)
         self._master_lp = MasterLP(self.vol)
         self.cells = np.zeros(self.t, dtype=np.int64)
@@ -189,14 +187,8 @@ class CutSubproblemSolver:
 
     def _components(self, keep: np.ndarray) -> tuple[int, np.ndarray]:
         """Connected components (count, labels (t,)) of the tets joined by the faces in ``keep`` (f,) bool."""
-        # Built as CSR directly (no COO round trip: this runs after every pricing round).
-        mask = keep[self._csr_order]
-        indptr = np.zeros(self.t + 1, dtype=np.int32)
-        np.cumsum(np.bincount(self._csr_rows[mask], minlength=self.t), out=indptr[1:])
-        cols = self._csr_cols[mask]
-        graph = sp.csr_matrix((np.ones(len(cols)), cols, indptr), shape=(self.t, self.t))
-        count, labels = connected_components(graph, directed=False)
-        return int(count), labels.astype(np.int64)
+        count, labels = partition_kernels.masked_components(self._fa, self._fb, keep, self.t)
+        return int(count), labels
 
     def _set_cells(self, cells: np.ndarray) -> None:
         self.cells = cells
@@ -207,18 +199,9 @@ class CutSubproblemSolver:
         """``(n, edges (E, 2), edge_omega (E,), indicator (n, t))`` of the current partition (cached)."""
         if self._cell_cache is None:
             n = int(self.cells.max()) + 1
-            ca, cb = self.cells[self._fa], self.cells[self._fb]
-            between = ca != cb
-            lo = np.minimum(ca[between], cb[between])
-            hi = np.maximum(ca[between], cb[between])
-            key, inverse = np.unique(lo * n + hi, return_inverse=True)
-            edge_omega = np.bincount(inverse.reshape(-1), weights=self.omega[between], minlength=len(key))
-            edges = np.column_stack([key // n, key % n])
-            # CSR directly (tets ascending within each cell, as a COO conversion would give: same sums in G).
-            order = np.argsort(self.cells, kind="stable")
-            indptr = np.zeros(n + 1, dtype=np.int32)
-            np.cumsum(np.bincount(self.cells, minlength=n), out=indptr[1:])
-            indicator = sp.csr_matrix((self.vol[order], order.astype(np.int32), indptr), shape=(n, self.t))
+            edges, edge_omega = partition_kernels.cell_graph(self.cells, self._fa, self._fb, self.omega, n)
+            order, indptr = partition_kernels.cell_order(self.cells, n)
+            indicator = sp.csr_matrix((self.vol[order], order, indptr), shape=(n, self.t))
             self._cell_cache = (n, edges, edge_omega, indicator)
         return self._cell_cache
 
