@@ -232,7 +232,7 @@ def fragment_neighbours(fragments: Fragments,
     fault = (fragment_faults(fragments) if faults is None else faults)[2]
     labels = np.unique(fault[fault >= 0])
     pairs = np.sort(np.column_stack([labels // max(q, 1), labels % max(q, 1)]), axis=1)
-    return np.unique(pairs, axis=0) if len(pairs) else np.zeros((0, 2), dtype=np.int64)
+    return unique_rows(pairs) if len(pairs) else np.zeros((0, 2), dtype=np.int64)
 
 
 def _max_overlap(fragments: Fragments, volumes: np.ndarray, max_pairs: int, jobs: int | None,

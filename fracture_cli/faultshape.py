@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fracture_cli.meshfix.rows import unique_rows
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, Regions
 
 # Degenerate-triangle threshold for fault_roughness: a triangle whose area is below
@@ -35,7 +36,7 @@ def _fault_edges(vertices: np.ndarray, faces: np.ndarray, fault: np.ndarray):
     nothing = (np.zeros(0), np.zeros(0), 0.0)
     if len(faces) == 0:
         return nothing
-    _, weld = np.unique(np.round(vertices / _WELD), axis=0, return_inverse=True)
+    _, weld = unique_rows(np.round(vertices / _WELD), return_inverse=True)
     F = weld.reshape(-1)[faces]
     P = vertices[faces]
     normal = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
@@ -164,9 +165,9 @@ def region_faults(regions: Regions):
     V = np.concatenate(all_vertices)
     F = np.concatenate(tris)
     owner = np.concatenate(owners)
-    _, weld = np.unique(np.round(V / _WELD), axis=0, return_inverse=True)
+    _, weld = unique_rows(np.round(V / _WELD), return_inverse=True)
     W = np.sort(weld.reshape(-1)[F], axis=1)
-    _, inverse, counts = np.unique(W, axis=0, return_inverse=True, return_counts=True)
+    _, inverse, counts = unique_rows(W, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     # Per triangle (by welded corners): the lowest and highest owner; a fault triangle has two.
     lo = np.full(len(counts), np.iinfo(np.int64).max)

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from fracture_cli.meshfix.rows import unique_rows
+
 # Faces of a positively oriented tet (a, b, c, d), each oriented outward (its
 # normal points away from the opposite vertex).
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
@@ -70,7 +72,7 @@ def tet_faces(T: np.ndarray):
     all_faces = T[:, TET_FACES].reshape(-1, 3)  # (4t, 3), outward per tet
     owner = np.repeat(np.arange(t, dtype=np.int64), 4)
     key = np.sort(all_faces, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    _, inverse, counts = unique_rows(key, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     if np.any(counts > 2):
         raise ValueError(f"{int(np.sum(counts > 2))} faces are shared by more than two tets")
@@ -206,7 +208,7 @@ def refine_red(V: np.ndarray, T: np.ndarray):
     T = np.asarray(T, dtype=np.int64)
     n, t = len(V), len(T)
     E = np.sort(T[:, TET_EDGES].reshape(-1, 2), axis=1)
-    edges, inverse = np.unique(E, axis=0, return_inverse=True)
+    edges, inverse = unique_rows(E, return_inverse=True)
     mid = n + inverse.reshape(t, 6)
     V2 = np.vstack([V, 0.5 * (V[edges[:, 0]] + V[edges[:, 1]])])
     a, b, c, d = T.T

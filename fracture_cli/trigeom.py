@@ -170,6 +170,20 @@ def vertex_manifold(F: np.ndarray) -> bool:
     return bool(single_fans(F, int(F.max()) + 1))
 
 
+def face_components(F: np.ndarray) -> int:
+    """How many groups the faces of ``F`` (m, 3) form, joined across shared edges (0 for no faces).
+
+    Faces are joined when they use the same two vertex ids as an edge, in either direction and however many
+    faces share it; faces that meet only at a vertex are not. Compiled, as :func:`vertex_manifold`.
+    """
+    from fracture_cli.trigeom_topology import edge_components
+
+    F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
+    if len(F) == 0:
+        return 0
+    return int(edge_components(F, int(F.max()) + 1))
+
+
 def triangle_boxes(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Axis-aligned boxes (m, 2, 3) of triangles: ``[:, 0]`` min corner, ``[:, 1]`` max corner."""
     T = V[F]

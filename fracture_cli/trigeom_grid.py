@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from fracture_cli.jit import njit
+from fracture_cli.meshfix.rows import unique_rows
 
 # Offset and stride of the cell keys (as BoxGrid's: cells may be negative, keys must not collide).
 _STRIDE = 1 << 20
@@ -137,7 +138,7 @@ def among_pairs(boxes: np.ndarray, lo: np.ndarray, hi: np.ndarray, faces: np.nda
     keys, ids = _index(lo, hi)
     pairs = _query(boxes, lo, hi, np.asarray(faces, dtype=np.int64), keys, ids, False)
     pairs = np.stack([np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])], axis=1)
-    return np.unique(pairs, axis=0) if len(pairs) else pairs.reshape(0, 2)
+    return unique_rows(pairs) if len(pairs) else pairs.reshape(0, 2)
 
 
 def warm_kernels() -> None:

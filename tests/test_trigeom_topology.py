@@ -71,3 +71,30 @@ def test_closed_oriented_matches_reference(seed):
     G = rng.integers(0, 6, (int(rng.integers(1, 30)), 3))
     assert trigeom.edge_manifold_closed(G) == _closed_reference(G)
     assert trigeom.edge_manifold_closed(_octahedron()) and not trigeom.edge_manifold_closed(np.zeros((0, 3), int))
+
+
+def _components_reference(F):
+    """Faces joined across shared undirected edges, by scipy on the face-edge incidence graph."""
+    m = len(F)
+    a, b = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1)
+    _, edge = np.unique(np.minimum(a, b) * (int(F.max()) + 1) + np.maximum(a, b), return_inverse=True)
+    size = m + int(edge.max()) + 1
+    graph = sp.coo_matrix((np.ones(3 * m), (np.repeat(np.arange(m), 3), m + edge.reshape(-1))), shape=(size, size))
+    labels = connected_components(graph, directed=False)[1]
+    return len(np.unique(labels[:m]))
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_face_components_match_reference(seed):
+    rng = np.random.default_rng(seed)
+    F = np.concatenate([_octahedron(), _octahedron() + 6, _octahedron() + 12])
+    if seed % 3 == 1:
+        F = np.where(F == 6 + int(rng.integers(0, 6)), int(rng.integers(0, 6)), F)  # two solids pinched at a vertex
+    elif seed % 3 == 2:
+        F = np.where(F == 12, 0, np.where(F == 14, 2, F))  # two solids on one edge (four faces)
+    F = rng.permutation(18)[F][rng.permutation(len(F))]
+    # A shared vertex joins nothing; a shared edge joins its four faces.
+    assert trigeom.face_components(F) == _components_reference(F) == (2 if seed % 3 == 2 else 3)
+    G = rng.integers(0, 12, (int(rng.integers(1, 30)), 3))
+    assert trigeom.face_components(G) == _components_reference(G)
+    assert trigeom.face_components(np.zeros((0, 3), int)) == 0

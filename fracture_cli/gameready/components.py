@@ -23,6 +23,7 @@ import numpy as np
 from fracture_cli import parallel
 from fracture_cli.gameready.boxlevels import LevelGrid
 from fracture_cli.gameready.mass import mass_properties
+from fracture_cli.meshfix.rows import unique_rows
 from fracture_cli.meshtopo import manifold_patches
 from fracture_cli.stages._solids import SplitMesh, from_manifold, shell_mask, to_manifold
 from fracture_cli.stages.fragments import _stable_order
@@ -88,7 +89,7 @@ def body_faces(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
     F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if len(F) == 0:
         return []
-    _, weld = np.unique(V, axis=0, return_inverse=True)
+    _, weld = unique_rows(V, return_inverse=True)
     W = weld.reshape(-1)[F]
     patch = manifold_patches(W)[0]
     _, patch = np.unique(patch, return_inverse=True)
@@ -432,7 +433,7 @@ def _group_fragment(fragments: Fragments, members: list, piece: int) -> Fragment
         used, local = np.unique(frag.faces[faces], return_inverse=True)
         uvs = frag.uvs[used] if frag.uvs is not None else np.zeros((len(used), 2))
         props = np.column_stack([frag.vertices[used], uvs, frag.normals[used]])
-        _, first, weld = np.unique(props[:, :3], axis=0, return_index=True, return_inverse=True)
+        _, first, weld = unique_rows(props[:, :3], return_index=True, return_inverse=True)
         body = SplitMesh(props, local.reshape(-1, 3), frag.material_ids[faces], first[weld.reshape(-1)])
         solid, ids = to_manifold(body, len(fragments.materials))
         solids.append(solid)

@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 
 from fracture_cli import parallel
 from fracture_cli.exactgeom import real_pairs
+from fracture_cli.meshfix.rows import group_rows, unique_rows
 from fracture_cli.meshtopo import manifold_patches, undirected_edges
 from fracture_cli.trigeom import (
     BoxGrid,
@@ -40,8 +41,7 @@ _CANDIDATES = 16
 
 def closed_when_welded(fragment: Fragment) -> bool:
     """Whether the fragment is closed and manifold once vertices at one position are welded."""
-    _, weld = np.unique(fragment.vertices, axis=0, return_inverse=True)
-    W = weld.reshape(-1)[fragment.faces]
+    W = group_rows(fragment.vertices)[fragment.faces]  # any ids: the verdicts do not depend on their order
     return bool(edge_manifold_closed(W) and vertex_manifold(W))
 
 
@@ -58,7 +58,7 @@ def bad_faces(fragment: Fragment, changed: np.ndarray | None = None) -> np.ndarr
     (:func:`~fracture_cli.exactgeom.real_pairs`): needles the booleans leave (height ~1e-10 of their edges)
     "intersect" the faces they share a corner with by rounding alone, and would keep fragments as cut.
     """
-    V, weld = np.unique(fragment.vertices, axis=0, return_inverse=True)
+    V, weld = unique_rows(fragment.vertices, return_inverse=True)
     W = weld.reshape(-1)[fragment.faces]
     if not (edge_manifold_closed(W) and vertex_manifold(W)):
         return np.arange(len(W))
@@ -75,7 +75,7 @@ def weld(positions: np.ndarray, owner: np.ndarray, tolerance: float) -> tuple[np
     ``tolerance``, closest pairs first, never so that two distinct points of
     one fragment end up as one (which would collapse a sliver edge).
     """
-    _, exact = np.unique(np.column_stack([owner, positions]), axis=0, return_inverse=True)
+    _, exact = unique_rows(np.column_stack([owner, positions]), return_inverse=True)
     exact = exact.reshape(-1)
     m = exact.max() + 1
     first = np.full(m, len(positions))
@@ -111,7 +111,7 @@ def twins(G: np.ndarray, owner: np.ndarray, candidate: np.ndarray) -> np.ndarray
     """For each face (n,) the index of its opposite twin in another fragment, or -1 (only ``candidate`` faces)."""
     twin = np.full(len(G), -1, dtype=np.int64)
     rows = np.flatnonzero(candidate)
-    _, group, counts = np.unique(np.sort(G[rows], axis=1), axis=0, return_inverse=True, return_counts=True)
+    _, group, counts = unique_rows(np.sort(G[rows], axis=1), return_inverse=True, return_counts=True)
     group = group.reshape(-1)
     order = np.argsort(group, kind="stable")
     starts = np.searchsorted(group[order], np.arange(len(counts)))
@@ -138,7 +138,7 @@ def coplanar_groups(surface: SurfaceMesh) -> np.ndarray:
     normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     plane = np.column_stack([np.round(normal * 1e6), np.round(np.einsum("ij,ij->i", normal, V[F[:, 0]]) * 1e9)])
-    _, plane_id = np.unique(plane.astype(np.int64), axis=0, return_inverse=True)
+    _, plane_id = unique_rows(plane.astype(np.int64), return_inverse=True)
     plane_id = plane_id.reshape(-1)
     _, edge_id, face = undirected_edges(F)
     order = np.argsort(edge_id, kind="stable")
@@ -254,4 +254,4 @@ def _cluster_key(G: np.ndarray) -> tuple:
     """What two triangulations of one polygon share: their vertices and their boundary's (undirected) edges."""
     directed, edge_id, _ = undirected_edges(G)
     boundary = np.sort(directed[np.bincount(edge_id)[edge_id] == 1], axis=1)
-    return tuple(np.unique(G).tolist()), tuple(map(tuple, np.unique(boundary, axis=0).tolist()))
+    return tuple(np.unique(G).tolist()), tuple(map(tuple, unique_rows(boundary).tolist()))

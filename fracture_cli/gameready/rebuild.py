@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli.meshfix.rows import unique_rows
 from fracture_cli.stages.fragments import _box_uvs
 from fracture_cli.types import Fragment, Fragments
 
@@ -84,7 +85,7 @@ def rebuild(fragments: Fragments, k: int, welded: np.ndarray, classified: Classi
     uvs = np.array([fragments.fragments[f].uvs[v] if fragments.fragments[f].uvs is not None else (0.0, 0.0)
                     for f, v in source]).reshape(-1, 2)
     corner = np.column_stack([kept_faces.reshape(-1), normals, uvs])
-    _, first, local = np.unique(corner, axis=0, return_index=True, return_inverse=True)
+    _, first, local = unique_rows(corner, return_index=True, return_inverse=True)
     rank = np.empty(len(first), dtype=np.int64)
     rank[np.argsort(first)] = np.arange(len(first))  # vertices in the order of first use
     first, local = np.sort(first), rank[local.reshape(-1)]
@@ -115,10 +116,10 @@ def _flat(V: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     normal = np.cross(b - a, c - a)
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     key = np.column_stack([np.round(normal * 1e6), np.round(np.einsum("ij,ij->i", normal, a) * 1e9)])
-    _, plane = np.unique(key.astype(np.int64), axis=0, return_inverse=True)
+    _, plane = unique_rows(key.astype(np.int64), return_inverse=True)
     plane = plane.reshape(-1)
     plane_normal = np.zeros((plane.max() + 1, 3))
     np.add.at(plane_normal, plane, normal)
     plane_normal /= np.maximum(np.linalg.norm(plane_normal, axis=1, keepdims=True), 1e-300)
-    uniq, corner = np.unique(np.column_stack([faces.reshape(-1), np.repeat(plane, 3)]), axis=0, return_inverse=True)
+    uniq, corner = unique_rows(np.column_stack([faces.reshape(-1), np.repeat(plane, 3)]), return_inverse=True)
     return V[uniq[:, 0]], plane_normal[uniq[:, 1]], corner.reshape(-1, 3)

@@ -28,6 +28,7 @@ from fracture_cli.gameready.hulls import (
     surface_area,
 )
 from fracture_cli.gameready.mass import MassProperties, mass_properties
+from fracture_cli.meshfix.rows import unique_rows
 from fracture_cli.trigeom import cross3
 
 # Overlaps below this volume (fraction of the smaller part) are contact, not overlap.
@@ -339,7 +340,7 @@ def _contacts(meshes, tolerance: float, candidates=None) -> dict:
     lo, hi = np.minimum(match.owner, match.other), np.maximum(match.owner, match.other)
     weighted = (match.area * np.where(match.owner < match.other, 1.0, -1.0))[:, None] * match.normal
     order = np.lexsort((hi, lo))
-    keys, start = np.unique(np.stack([lo[order], hi[order]], axis=1), axis=0, return_index=True)
+    keys, start = unique_rows(np.stack([lo[order], hi[order]], axis=1), return_index=True)
     stops = np.append(start[1:], len(order))
     return {(int(p), int(q)): (weighted[order[a:b]], match.centroid[order[a:b]])
             for (p, q), a, b in zip(keys, start, stops)}

@@ -10,6 +10,7 @@ import scipy.sparse as sp
 
 from fracture_cli.errors import StageError
 from fracture_cli.meshfix.edges import components, renumber_by_first
+from fracture_cli.meshfix.rows import unique_rows
 from fracture_cli.options import option
 from fracture_cli.types import Modes, Pieces, SurfaceMesh, TetMesh
 
@@ -256,7 +257,7 @@ def _piece_graph(tet_mesh: TetMesh, tet_piece: np.ndarray, centroids: np.ndarray
     areas = tet_mesh.interior_face_areas[between]
     normals = tet_mesh.interior_face_normals[between] * sign[:, None]
     centres = tet_mesh.vertices[tet_mesh.interior_faces[between]].mean(axis=1)
-    pairs, inverse = np.unique(np.stack([P, Q], axis=1), axis=0, return_inverse=True)
+    pairs, inverse = unique_rows(np.stack([P, Q], axis=1), return_inverse=True)
     inverse = inverse.reshape(-1)
     e = len(pairs)
     edge_areas = np.bincount(inverse, weights=areas, minlength=e)

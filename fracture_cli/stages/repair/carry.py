@@ -18,6 +18,7 @@ import numpy as np
 from fracture_cli import trigeom
 from fracture_cli.meshfix.holes import FilledMesh, HoleLoop
 from fracture_cli.meshfix.nonmanifold import NonManifoldSplit
+from fracture_cli.meshfix.rows import unique_rows
 from fracture_cli.meshfix.thicken import ThickenedSheet
 from fracture_cli.stages._solids import COLOR, NORMAL, POS, UV, SplitMesh
 
@@ -42,7 +43,7 @@ def after_split(mesh: SplitMesh, split: NonManifoldSplit) -> SplitMesh:
     faces = source.copy()
     props, weld = mesh.props, mesh.weld
     if copied.any():
-        pairs, inverse = np.unique(np.column_stack([source[copied], welded[copied]]), axis=0, return_inverse=True)
+        pairs, inverse = unique_rows(np.column_stack([source[copied], welded[copied]]), return_inverse=True)
         new_ids = n + np.arange(len(pairs))
         faces[copied] = new_ids[inverse.reshape(-1)]
         props = np.vstack([props, props[pairs[:, 0]]])
@@ -95,8 +96,7 @@ def after_fill(mesh: SplitMesh, filled: FilledMesh, loops: list[HoleLoop], inter
     area_vector = np.cross(V[patch[:, 1]] - V[patch[:, 0]], V[patch[:, 2]] - V[patch[:, 0]])
     summed = np.stack([np.bincount(loop_of, weights=area_vector[:, k], minlength=len(loops)) for k in range(3)], 1)
     normal = summed / np.maximum(np.linalg.norm(summed, axis=1, keepdims=True), 1e-300)
-    keys, inverse = np.unique(np.column_stack([np.repeat(loop_of, 3), patch.reshape(-1)]), axis=0,
-                              return_inverse=True)
+    keys, inverse = unique_rows(np.column_stack([np.repeat(loop_of, 3), patch.reshape(-1)]), return_inverse=True)
     loop_id, welded = keys[:, 0], keys[:, 1]
     block = np.zeros((len(keys), mesh.props.shape[1]))
     block[:, POS] = V[welded]

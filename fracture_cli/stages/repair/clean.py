@@ -3,9 +3,9 @@
 Most inputs of a bake (and every million-triangle scan we have seen) are: the
 full repair (welding through manifold3d, the winding search, the non-manifold
 split, the manifold3d solid) then spends seconds to change nothing. The checks
-here are each a sort or a gather, and together they imply that every step of
-:func:`~fracture_cli.stages.repair.repair_surface` would record nothing and
-keep the surface:
+here are each a sort, a gather or a compiled pass over the faces, and together
+they imply that every step of :func:`~fracture_cli.stages.repair.repair_surface`
+would record nothing and keep the surface:
 
 * every vertex at its own position (no weld, no snap: one body has nothing to
   snap to), finite, no face with a repeated corner;
@@ -22,11 +22,9 @@ Anything else, or any doubt, takes the full repair.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from fracture_cli import trigeom
-from fracture_cli.meshfix.rows import group_rows, used_vertices
+from fracture_cli.meshfix.rows import group_rows
 from fracture_cli.types import SurfaceMesh
 
 # Smallest volume (of a unit-diagonal box) accepted as "clearly positive"; repair refuses at or below 1e-9.
@@ -57,8 +55,8 @@ def closed_as_given(surface: SurfaceMesh) -> tuple[bool, float]:
         return False, 0.0
     if ((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])).any():
         return False, 0.0
-    twin = _twin_sides(F, n)
-    if twin is None or not _vertex_manifold(F, twin) or not _one_body(twin, m):
+    # Compiled, each a pass over every vertex's corners (trigeom_topology).
+    if not trigeom.edge_manifold_closed(F) or not trigeom.vertex_manifold(F) or trigeom.face_components(F) != 1:
         return False, 0.0
     if not _distinct_positions(V):
         return False, 0.0
@@ -68,47 +66,6 @@ def closed_as_given(surface: SurfaceMesh) -> tuple[bool, float]:
     if surface.normals is not None and _normals_against(V, F, np.asarray(surface.normals, dtype=np.float64)):
         return False, 0.0
     return True, volume
-
-
-def _twin_sides(F: np.ndarray, n: int) -> np.ndarray | None:
-    """The opposite side (3m,) of every side ``3 f + k`` (corner k to k + 1), or None unless every edge has
-    exactly two sides, running it in opposite directions."""
-    a = F.reshape(-1)
-    b = F[:, [1, 2, 0]].reshape(-1)
-    lo = np.minimum(a, b)
-    key = lo * np.int64(n) + np.maximum(a, b)
-    # Stable: a mesh's edge keys come mostly in order, which timsort sorts several times faster.
-    order = np.argsort(key, kind="stable")
-    ordered = key[order]
-    first, second = order[0::2], order[1::2]
-    if len(first) != len(second) or not np.array_equal(ordered[0::2], ordered[1::2]):
-        return None
-    if (ordered[2::2] == ordered[1:-1:2]).any():  # an edge with four sides
-        return None
-    if ((a[first] == lo[first]) == (a[second] == lo[second])).any():  # both sides one way
-        return None
-    twin = np.empty(len(a), dtype=np.int64)
-    twin[first] = second
-    twin[second] = first
-    return twin
-
-
-def _vertex_manifold(F: np.ndarray, twin: np.ndarray) -> bool:
-    """Whether the corners around every vertex form one fan (a closed, consistently wound mesh)."""
-    # Corner c = 3 f + k at vertex v: its outgoing side's twin (3 g + j) runs into v, whose corner in g is
-    # 3 g + (j + 1) % 3. That step permutes v's corners; one cycle per vertex means one fan.
-    step = 3 * (twin // 3) + (twin % 3 + 1) % 3
-    corners = len(step)
-    graph = sp.csr_matrix((np.ones(corners, dtype=np.int8), step, np.arange(corners + 1)), shape=(corners, corners))
-    fans, _ = connected_components(graph, directed=True, connection="weak")
-    return fans == len(used_vertices(F))
-
-
-def _one_body(twin: np.ndarray, m: int) -> bool:
-    """Whether the faces form one body through their shared edges."""
-    graph = sp.csr_matrix((np.ones(3 * m, dtype=np.int8), twin // 3, np.arange(0, 3 * m + 1, 3)), shape=(m, m))
-    count, _ = connected_components(graph, directed=True, connection="weak")
-    return count == 1
 
 
 def _distinct_positions(V: np.ndarray) -> bool:

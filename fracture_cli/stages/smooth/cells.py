@@ -12,6 +12,7 @@ from scipy.spatial import cKDTree
 
 from fracture_cli import tetgeom, trigeom
 from fracture_cli.errors import StageError
+from fracture_cli.meshfix.rows import group_rows
 from fracture_cli.stages._solids import SHELL_VOLUME, shell_mask
 from fracture_cli.stages.smooth.field import forced_field
 from fracture_cli.stages.smooth.topology import SINGULAR_TOL, STAGE, combinations
@@ -131,12 +132,13 @@ def _whole_tets_solids(V: np.ndarray, T: np.ndarray, tets: np.ndarray) -> list:
             break
         faces = T[body][:, tetgeom.TET_FACES].reshape(-1, 3)
         owner = np.repeat(body, 4)
-        _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
-        outer = counts[inverse.reshape(-1)] == 1
+        # Which faces are equal is all that counts here (not the ids' order): a row hash is enough.
+        same_face = group_rows(np.sort(faces, axis=1))
+        outer = np.bincount(same_face)[same_face] == 1
         faces, owner = faces[outer], owner[outer]
         edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-        _, e_inverse, e_counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
-        bad = e_counts[e_inverse.reshape(-1)] > 2
+        same_edge = group_rows(edges)
+        bad = np.bincount(same_edge)[same_edge] > 2
         if not bad.any():
             used, local = np.unique(faces, return_inverse=True)
             mesh = manifold3d.Mesh64(
@@ -165,9 +167,8 @@ def _separate_pinches(vertices: np.ndarray, faces: np.ndarray, distance: float =
     of the solid (against the mean normal of its faces), which opens a gap far
     below any modelling tolerance but above position-welding tolerances.
     """
-    _, first, pos = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
-    pos = pos.reshape(-1)
-    shared = np.bincount(pos, minlength=len(first))[pos] > 1
+    pos = group_rows(vertices)  # only which vertices share a position counts
+    shared = np.bincount(pos)[pos] > 1
     if not shared.any():
         return vertices, faces
     step = trigeom.vertex_normals(vertices, faces) * distance

@@ -11,6 +11,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
 from fracture_cli import tetgeom
+from fracture_cli.meshfix.rows import unique_rows
 from fracture_cli.stages.smooth.sliding import CageSurface, Containment
 from fracture_cli.stages.smooth.topology import FACE_EDGE_PAIRS, STAGE, Topology
 from fracture_cli.types import SurfaceMesh, TetMesh
@@ -110,7 +111,7 @@ def _fault_graph(tet_mesh: TetMesh, topo: Topology, tet_piece: np.ndarray, p: in
     links = np.concatenate(link_blocks)
     graph = sp.coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(3 * k, 3 * k))
     _, component = connected_components(graph, directed=False)
-    vertex_component = np.unique(np.column_stack([corner_vertex, component]), axis=0)
+    vertex_component = unique_rows(np.column_stack([corner_vertex, component]))
     discs = np.bincount(vertex_component[:, 0], minlength=n)
 
     single_sheet = fault_vertex & ~on_curve & (lo == hi) & (discs == 1)

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli import tetgeom
+from fracture_cli.meshfix.rows import group_rows
 from fracture_cli.stages.smooth.pinches import aligned_pinches, notches, spindle_faces
 from fracture_cli.stages.smooth.ties import fan, tie_points
 from fracture_cli.stages.smooth.topology import Topology, join
@@ -311,8 +312,9 @@ def _defect_edges(positions: np.ndarray, tris: np.ndarray, owner: np.ndarray) ->
     found = set()
     if len(tris) == 0:
         return []
-    _, weld = np.unique(positions, axis=0, return_inverse=True)
-    weld = weld.reshape(-1)
+    # Any ids: which edges are bad does not depend on their order (a relabelling turns every directed edge
+    # of one undirected pair forward or backward together, so the forward count of a pair is n or count - n).
+    weld = group_rows(positions)
     N = len(positions)
     original = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     piece = np.tile(owner, 3)
@@ -334,8 +336,8 @@ def region_defects(vertices: np.ndarray, faces: np.ndarray) -> int:
     if len(faces) == 0:
         return 1
     worst = 0
-    _, weld = np.unique(vertices, axis=0, return_inverse=True)
-    for F in (faces, weld.reshape(-1)[faces]):
+    weld = group_rows(vertices)  # any ids: the defect count does not depend on their order
+    for F in (faces, weld[faces]):
         directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
         m = int(directed.max()) + 1
         code = directed[:, 0] * m + directed[:, 1]
