@@ -23,16 +23,19 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e '.[test,batch]'
 	@touch $(STAMP)
 
-# The numba kernels (the simplify stage's collapses, the triangle-pair test, the cut solver's partitions), compiled once into
-# numba's cache (~30-40 s) so that the first bake does not pay for it; again when their source changes.
+# The numba kernels (the simplify stage's collapses, the triangle-pair test, the cut solver's partitions and
+# max-flow), compiled once into numba's cache (~30-40 s) so that the first bake does not pay for it; again when
+# their source changes.
 KERNELS := fracture_cli/jit.py fracture_cli/trigeom_kernels.py fracture_cli/trigeom_grid.py fracture_cli/trigeom_topology.py \
-           fracture_cli/discontinuity/partition_kernels.py $(wildcard fracture_cli/gameready/collapse_*.py)
+           fracture_cli/discontinuity/partition_kernels.py fracture_cli/discontinuity/maxflow_kernel.py \
+           $(wildcard fracture_cli/gameready/collapse_*.py)
 $(VENV)/.kernels: $(STAMP) $(KERNELS)
 	$(PY) -c "from fracture_cli.gameready.collapse_kernels import warm_kernels; warm_kernels()"
 	$(PY) -c "from fracture_cli.trigeom_kernels import warm_kernels; warm_kernels()"
 	$(PY) -c "from fracture_cli.trigeom_grid import warm_kernels; warm_kernels()"
 	$(PY) -c "from fracture_cli.trigeom_topology import warm_kernels; warm_kernels()"
 	$(PY) -c "from fracture_cli.discontinuity.partition_kernels import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.discontinuity.maxflow_kernel import warm_kernels; warm_kernels()"
 	@touch $@
 
 # `fracture view`'s browser files: three.js (npm, pinned by web/package-lock.json) and the

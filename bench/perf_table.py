@@ -138,7 +138,7 @@ def _modes_rows(secs: dict[str, str]) -> list[tuple[str, str]]:
     body = _find(secs, "Fracture modes")
     rows = [r for t in (tables(body) if body else []) for r in t]
     fast = [r for r in rows if r.get("solver") == "fast" and r.get("s/mode") and r.get("tets")
-            and r.get("max-flow", "ortools") in ("ortools", "")]
+            and r.get("max-flow", "kernel") in ("kernel", "ortools", "")]
     if not fast:
         return []
     seen: dict[str, str] = {}

@@ -208,10 +208,13 @@ def test_max_flow_backends_agree():
     ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
     c = mesh.tet_centroids[:, 0] + 0.5 * mesh.tet_centroids[:, 1] ** 2
     fixed = [mesh.tet_centroids[:, 2] - mesh.tet_centroids[:, 2].mean()]
-    results = [CutSubproblemSolver(ft, w, vol, max_flow=name).solve(c, fixed) for name in ("scipy", "ortools")]
+    results = [CutSubproblemSolver(ft, w, vol, max_flow=name).solve(c, fixed)
+               for name in ("scipy", "ortools", "kernel")]
     assert abs(results[0].energy - results[1].energy) <= 1e-9 * results[1].energy
     assert adjusted_rand_index(mode_pieces(results[0].u, ft, mesh.num_tets, 1e-3)[1],
                                mode_pieces(results[1].u, ft, mesh.num_tets, 1e-3)[1]) >= 0.99
+    # The compiled kernel and OR-Tools cut the same integer capacities: the same sets, the same bits.
+    np.testing.assert_array_equal(results[2].u, results[1].u)
 
 
 def test_dim3_anisotropic_fast_matches_vector_baseline():

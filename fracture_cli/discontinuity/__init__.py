@@ -14,7 +14,7 @@ subproblem and two solvers for it:
   the one place where this choice is made) and what the solvers share;
 * :mod:`.cut`: :class:`CutSubproblemSolver` (``d = 1``, the default, exact): a
   master LP over a partition of the tets into cells (:mod:`.master`, HiGHS),
-  priced by minimum s-t cuts (:mod:`.mincut`, OR-Tools or scipy);
+  priced by minimum s-t cuts (:mod:`.mincut`: :mod:`.maxflow_kernel`, OR-Tools or scipy);
 * :mod:`.conic`: :class:`ConicSubproblemSolver` (any ``d``, baseline): the whole
   problem handed to the interior-point solver Clarabel.
 
