@@ -19,7 +19,10 @@ from fracture_cli.recipe import load_recipe
 t0 = time.perf_counter()
 result = bake(sys.argv[1], sys.argv[2], load_recipe(sys.argv[3]))
 total = time.perf_counter() - t0
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+# VmHWM, this process's own peak (ru_maxrss would carry the parent's across fork and exec).
+with open("/proc/self/status") as fh:
+    peak = next((int(line.split()[1]) / 1024.0 for line in fh if line.startswith("VmHWM:")),
+                resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
 print(json.dumps({"report": result.report, "total": total, "peak_mb": peak}))
 """
 

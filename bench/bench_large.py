@@ -1,7 +1,7 @@
 """Bake a large generated input (a bumpy sphere, ~1M triangles): per-stage seconds and peak memory.
 
 The input is generated on the fly (never committed) and baked in a
-subprocess, so its peak resident memory (``ru_maxrss``) is the bake's alone.
+subprocess, so its peak resident memory (``VmHWM``) is the bake's alone.
 ``quick`` uses ~200k triangles.
 """
 
@@ -50,7 +50,7 @@ def run(quick: bool = False) -> str:
         "",
         f"A bumpy UV sphere of {triangles:,} triangles ({size_mb:.1f} MB binary PLY, generated), baked with "
         f"`{' '.join('--set ' + s for s in SETTINGS)}` in a subprocess: {wall:.1f} s wall, peak memory "
-        f"{data['peak_mb']:,.0f} MiB (ru_maxrss; largest worker {data['worker_peak_mb']:,.0f} MiB), "
+        f"{data['peak_mb']:,.0f} MiB (VmHWM; largest worker {data['worker_peak_mb']:,.0f} MiB), "
         f"{cpu:.1f} s CPU ({100 * cpu / wall:.0f} %), {report['counts']['fragments']} fragments, volume error "
         f"{report['checks']['volume_error']:.1e}, watertight {report['checks']['watertight']}. "
         "Target: under 60 s wall, peak under 2 GB.",

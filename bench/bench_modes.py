@@ -150,18 +150,32 @@ def sweep(quick: bool = False) -> str:
         lines += ["", (f"The target k = {TARGET_K} in a run of its own (same meshes; the modes, and so the cost of "
                        f"each, differ from the first {TARGET_K} of the k = {k_max} run above by ICCM's sensitivity "
                        "to the start vectors' round-off):"), "",
-                  "| mesh | k | modes CPU s | median mode s | max mode s | max/median | max-flows | sum of energies |",
-                  "|---|---:|---:|---:|---:|---:|---:|---:|"]
+                  "| mesh | k | modes CPU s | median mode s | max mode s | max/median | max-flows | max-flows "
+                  "max/median | CPU s per piece max/median | sum of energies |",
+                  "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for name, per_mode, result in own_runs:
             median = float(np.median(per_mode))
+            flows = np.asarray(result.stats["inner_iterations"], dtype=float)
+            per_piece = per_mode / np.maximum(np.asarray(result.piece_counts, dtype=float), 1.0)
             lines.append(f"| {name} | {TARGET_K} | {per_mode.sum():.2f} | {median:.3f} | {per_mode.max():.3f} "
-                         f"| {per_mode.max() / max(median, 1e-9):.1f} | {int(np.sum(result.stats['inner_iterations']))} "
+                         f"| {per_mode.max() / max(median, 1e-9):.1f} | {int(flows.sum())} "
+                         f"| {flows.max() / max(float(np.median(flows)), 1.0):.1f} "
+                         f"| {per_piece.max() / max(float(np.median(per_piece)), 1e-9):.1f} "
                          f"| {float(np.sum(result.energies)):.6g} |")
-    lines += ["", "Per-mode CPU seconds by mode index (ICCM rounds in brackets):", "",
+        counts = [np.asarray(result.piece_counts) for _, _, result in own_runs]
+        lines += ["", ("A mode's cost follows its pieces: the solver refines its partition one max-flow at a time "
+                       "until the mode's pieces, and the cells that certify it optimal, are found, and the late "
+                       "modes of a run have the most pieces (the first four modes: "
+                       f"{min(int(c[:4].min()) for c in counts)}-{max(int(c[:4].max()) for c in counts)} pieces; "
+                       f"the last eight: {min(int(c[-8:].min()) for c in counts)}-"
+                       f"{max(int(c[-8:].max()) for c in counts)}). 'max-flows max/median' is the spread of that "
+                       "count; 'CPU s per piece' divides each mode's time by its pieces.")]
+    lines += ["", "Per-mode CPU seconds by mode index (ICCM rounds, pieces in brackets):", "",
               "| mode | " + " | ".join(name for name, *_ in runs) + " |",
               "|---:|" + "---:|" * len(runs)]
     for i in range(max(len(r[3]) for r in runs)):
-        cells = [f"{r[3][i]:.3f} ({r[4].iterations[i]})" if i < len(r[3]) else "" for r in runs]
+        cells = [f"{r[3][i]:.3f} ({r[4].iterations[i]}, {r[4].piece_counts[i]})" if i < len(r[3]) else ""
+                 for r in runs]
         lines.append(f"| {i} | " + " | ".join(cells) + " |")
     lines += ["", "Whole stage (CPU s, eigensolver included): " + ", ".join(f"{name} {total:.1f}"
                                                                          for name, total, *_ in runs) + "."]

@@ -18,6 +18,9 @@ import numpy as np
 from fracture_cli.jit import njit
 
 
+# The same four lines as trigeom_topology._root, on purpose: numba keys a kernel's cache to its own file only,
+# so a kernel here calling a compiled function of another module would go on running that function's old code
+# after it changed.
 @njit()
 def _root(parent: np.ndarray, x: int) -> int:  # pragma: no cover (compiled)
     while parent[x] != x:
