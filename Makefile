@@ -61,7 +61,7 @@ test: install gltf-validator lint
 
 # The lint and type gate (configured in pyproject.toml), run by `make test` before the tests.
 lint: install
-	$(VENV)/bin/ruff check fracture_cli tests
+	$(VENV)/bin/ruff check fracture_cli tests bench
 	$(VENV)/bin/mypy
 
 # The Khronos glTF validator (npm) checks every GLB the tests bake. Optional:

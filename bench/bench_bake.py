@@ -34,8 +34,9 @@ def run(quick: bool = False) -> str:
     stages = None
     for asset, recipe in assets:
         with tempfile.TemporaryDirectory() as out:
-            proc = subprocess.run([sys.executable, "-c", _CHILD, os.path.join(REPO, "sample_assets", asset), out, recipe],
-                                  capture_output=True, text=True, cwd=REPO, check=True)
+            proc = subprocess.run(
+                [sys.executable, "-c", _CHILD, os.path.join(REPO, "sample_assets", asset), out, recipe],
+                capture_output=True, text=True, cwd=REPO, check=True)
         data = json.loads(proc.stdout.strip().splitlines()[-1])
         report = data["report"]
         stages = stages or list(report["seconds"])

@@ -59,6 +59,7 @@ def run(quick: bool = False) -> str:
     # Imports (open3d, scikit-image, ...) and the TetGen worker start are one-off
     # costs per process (about 1.5 s together); keep them out of the timings.
     import fast_simplification  # noqa: F401
+
     from fracture_cli._open3d import open3d as _o3d
     _o3d()
     import skimage.measure  # noqa: F401
@@ -84,7 +85,8 @@ def run(quick: bool = False) -> str:
             rows.append([name, f"{surface.num_faces:,}", f"{target:,}", f"{len(result.faces):,}",
                          f"{result.offset:.4f}", str(len(result.log)), f"{final['tets']:,}"]
                         + [f"{steps[k]:.2f}" for k in STEPS] + [f"{total:.2f}"])
-    header = ["input", "triangles", "target", "faces", "offset", "iterations", "tets (search)"] + list(STEPS) + ["total s"]
+    header = (["input", "triangles", "target", "faces", "offset", "iterations", "tets (search)"] + list(STEPS)
+              + ["total s"])
     lines = ["## Cage (nested cage search, paper Algorithm 2)", "",
              "Seconds summed over all iterations of the search; offset relative to the bounding-box diagonal.",
              "Target: a 2,000-face cage of a 50k-triangle input in under 5 s. Excludes one-off imports and "

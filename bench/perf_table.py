@@ -97,8 +97,11 @@ def _recipe_rows(secs: dict[str, str]) -> list[tuple[str, str]]:
     default = [r for r in rows if r["recipe"] == "default"]
     if default:
         ratios = [_number(r["ratio"]) for r in default]
+        startup = f", of which start-up {_span([_number(r['start-up s']) for r in default], '{:.1f}')} s" \
+            if all("start-up s" in r for r in default) else ""
         out.append(("default bake / plain Voronoi shatter (same asset, same fragment count)",
-                    f"{_span(ratios, '{:.1f}')}x"))
+                    f"{_span(ratios, '{:.1f}')}x (bake {_span([_number(r['wall s']) for r in default], '{:.1f}')} s"
+                    f"{startup}; shatter {_span([_number(r['baseline s']) for r in default], '{:.2f}')} s)"))
     return out
 
 
