@@ -291,6 +291,18 @@ def test_self_intersections_and_manifold_checks():
     assert not trigeom.edge_manifold_closed(flipped)
 
 
+def test_tetgen_prestart_starts_the_worker_that_runs_next():
+    _tetgen.shutdown()
+    _tetgen.prestart()
+    process = _tetgen._worker._process
+    assert process is not None and process.poll() is None
+    _tetgen.prestart()  # running: nothing happens
+    assert _tetgen._worker._process is process
+    sphere = trimesh.creation.icosphere(1)
+    nodes, tets = _tetgen.tetrahedralize(sphere.vertices, sphere.faces, "pYQ", timeout=30)
+    assert len(tets) > 0 and _tetgen._worker._process is process
+
+
 def test_tetgen_crash_is_reported_not_fatal(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     _tetgen.shutdown()  # the next worker starts from this directory

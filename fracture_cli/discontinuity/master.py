@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import linprog
 
 _highspy: Any
 try:  # HiGHS's own bindings allow warm starts; scipy's linprog (same HiGHS) is the fallback
@@ -317,6 +316,9 @@ class MasterLP:
         return result
 
     def _solve_linprog(self, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+        # Imported here: scipy.optimize costs ~0.1 s to import, and with highspy this fallback rarely runs.
+        from scipy.optimize import linprog
+
         self.slack_edges = None
         E, m = len(edges), G.shape[0]
         A, cost, col_lower, col_upper, _, row_upper = self._dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost)

@@ -349,6 +349,7 @@ def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
         raise StageError("the input is a single point; nothing to enclose", stage=STAGE)
 
     started = time.perf_counter()
+    _tetgen.prestart()  # its start-up runs beside the first try's distance field and marching cubes
     resolution = options.grid_resolution or auto_grid_resolution(options.target_faces)
     spacing = diagonal / resolution
     scene = surface_scene(surface.vertices, surface.faces)  # the pieces stage queries it again
