@@ -354,3 +354,20 @@ def test_master_with_dependent_fixed_rows_solves_on_their_row_space(monkeypatch)
     assert abs(got.energy - expected.energy) <= 1e-9 * expected.energy
     assert got.energy - got.lower_bound <= 1e-7 * got.energy
     assert _constraint_residual(got.u[:, 0], c, [y0], vol) < 1e-8
+
+
+def test_master_without_highspy_solves_with_linprog(monkeypatch):
+    """scipy's linprog (imported only for this fallback) reaches the warm-started HiGHS master's optimum."""
+    from fracture_cli.discontinuity import master
+
+    mesh = asymmetric_mesh()
+    ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
+    x, y, z = (mesh.tet_centroids[:, i] for i in range(3))
+    c = x + 0.5 * y**2 - 0.3 * z
+    fixed = [y - float(np.dot(vol, y)) / vol.sum()]
+    warm = CutSubproblemSolver(ft, w, vol).solve(c, fixed)
+    monkeypatch.setattr(master, "_highspy", None)
+    assert master.lp_backend() == "scipy"
+    fallback = CutSubproblemSolver(ft, w, vol).solve(c, fixed)
+    assert abs(fallback.energy - warm.energy) <= 1e-7 * warm.energy
+    assert fallback.energy - fallback.lower_bound <= 1e-7 * fallback.energy
