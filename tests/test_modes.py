@@ -42,6 +42,15 @@ def asymmetric_mesh():
     return grid_tetmesh(mask.shape, mask=mask, spacing=0.2)
 
 
+def asymmetric_subproblem():
+    """One subproblem on :func:`asymmetric_mesh`: ``(face_tets, weights, volumes, c, fixed)``, ``fixed`` holding
+    the mesh's y coordinate made orthogonal to translations."""
+    mesh = asymmetric_mesh()
+    ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
+    x, y, z = (mesh.tet_centroids[:, i] for i in range(3))
+    return ft, w, vol, x + 0.5 * y**2 - 0.3 * z, [y - float(np.dot(vol, y)) / vol.sum()]
+
+
 @pytest.fixture(scope="module")
 def neck():
     mesh = two_boxes_with_neck(3)
@@ -279,11 +288,7 @@ def test_merging_cells_keeps_the_optimum(monkeypatch):
     """Merging equal-valued cells (always, here) and undoing a merge after an LP failure leave the optimum as is."""
     from fracture_cli.discontinuity.master import MasterLP
 
-    mesh = asymmetric_mesh()
-    ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
-    x, y, z = (mesh.tet_centroids[:, i] for i in range(3))
-    c = x + 0.5 * y**2 - 0.3 * z
-    fixed = [y - float(np.dot(vol, y)) / vol.sum()]
+    ft, w, vol, c, fixed = asymmetric_subproblem()
     plain = CutSubproblemSolver(ft, w, vol, merge_cells=10**9).solve(c, fixed)
     merging = CutSubproblemSolver(ft, w, vol, merge_cells=0)
     merged = merging.solve(c, fixed)
@@ -301,6 +306,7 @@ def test_merging_cells_keeps_the_optimum(monkeypatch):
         return real(self, cells, *args)
 
     # The next ICCM round starts on the merged partition; its first master LP "fails".
+    x, _, z = asymmetric_mesh().tet_centroids.T
     c2 = c + 0.7 * x * z
     expected = CutSubproblemSolver(ft, w, vol, merge_cells=10**9).solve(c2, fixed)
     assert merging._before_merge is not None
@@ -312,11 +318,7 @@ def test_merging_cells_keeps_the_optimum(monkeypatch):
 
 def test_round_on_a_max_flow_budget_is_feasible_and_descends():
     """A subproblem stopped on its max-flow budget is feasible, uncertified, and no worse than c itself."""
-    mesh = asymmetric_mesh()
-    ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
-    x, y, z = (mesh.tet_centroids[:, i] for i in range(3))
-    c = x + 0.5 * y**2 - 0.3 * z
-    fixed = [y - float(np.dot(vol, y)) / vol.sum()]
+    ft, w, vol, c, fixed = asymmetric_subproblem()
     exact = CutSubproblemSolver(ft, w, vol).solve(c, fixed)
     assert exact.stats["certified"] and exact.stats["max_flows"] > 2
     short = CutSubproblemSolver(ft, w, vol).solve(c, fixed, max_flows=2)
@@ -335,11 +337,7 @@ def test_master_with_dependent_fixed_rows_solves_on_their_row_space(monkeypatch)
     orthonormal basis of their row space instead: same optimum, certified, multipliers mapped back."""
     from fracture_cli.discontinuity.master import MasterLP
 
-    mesh = asymmetric_mesh()
-    ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
-    x, y, z = (mesh.tet_centroids[:, i] for i in range(3))
-    c = x + 0.5 * y**2 - 0.3 * z
-    y0 = y - float(np.dot(vol, y)) / vol.sum()
+    ft, w, vol, c, (y0,) = asymmetric_subproblem()
     expected = CutSubproblemSolver(ft, w, vol).solve(c, [y0])
     real = MasterLP._solve_any
 
@@ -360,11 +358,7 @@ def test_master_without_highspy_solves_with_linprog(monkeypatch):
     """scipy's linprog (imported only for this fallback) reaches the warm-started HiGHS master's optimum."""
     from fracture_cli.discontinuity import master
 
-    mesh = asymmetric_mesh()
-    ft, w, vol = mesh.interior_face_tets, face_weights(mesh), mesh.tet_volumes
-    x, y, z = (mesh.tet_centroids[:, i] for i in range(3))
-    c = x + 0.5 * y**2 - 0.3 * z
-    fixed = [y - float(np.dot(vol, y)) / vol.sum()]
+    ft, w, vol, c, fixed = asymmetric_subproblem()
     warm = CutSubproblemSolver(ft, w, vol).solve(c, fixed)
     monkeypatch.setattr(master, "_highspy", None)
     assert master.lp_backend() == "scipy"

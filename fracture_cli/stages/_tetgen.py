@@ -237,20 +237,21 @@ class _Worker:
             return "no exit code"
         return f"signal {-code}" if code < 0 else f"exit code {code}"
 
+    def _running(self) -> subprocess.Popen:
+        """The child, started (again) if none is running; the caller holds the lock."""
+        if self._process is None or self._process.poll() is not None:
+            self._kill()
+            return self._start()
+        return self._process
+
     def prestart(self) -> None:
         """Start the child now if none is running, without waiting for it (its imports take ~0.1 s)."""
         with self._lock:
-            if self._process is None or self._process.poll() is not None:
-                self._kill()
-                self._start()
+            self._running()
 
     def run(self, vertices: np.ndarray, faces: np.ndarray, switches: str, timeout: float):
         with self._lock:
-            if self._process is None or self._process.poll() is not None:
-                self._kill()
-                process = self._start()
-            else:
-                process = self._process
+            process = self._running()
             try:
                 _write_frame(process.stdin, (vertices, faces, switches))
             except OSError:
