@@ -96,12 +96,12 @@ def _recipe_rows(secs: dict[str, str]) -> list[tuple[str, str]]:
             f"peak {_span(peaks)} MB")]
     default = [r for r in rows if r["recipe"] == "default"]
     if default:
-        ratios = [_number(r["ratio"]) for r in default]
-        startup = f", of which start-up {_span([_number(r['start-up s']) for r in default], '{:.1f}')} s" \
-            if all("start-up s" in r for r in default) else ""
+        def span(column: str, fmt: str) -> str:
+            return _span([_number(r[column]) for r in default], fmt)
+
         out.append(("default bake / plain Voronoi shatter (same asset, same fragment count)",
-                    f"{_span(ratios, '{:.1f}')}x (bake {_span([_number(r['wall s']) for r in default], '{:.1f}')} s"
-                    f"{startup}; shatter {_span([_number(r['baseline s']) for r in default], '{:.2f}')} s)"))
+                    f"{span('ratio', '{:.1f}')}x (bake {span('wall s', '{:.1f}')} s, of which start-up "
+                    f"{span('start-up s', '{:.1f}')} s; shatter {span('baseline s', '{:.2f}')} s)"))
     return out
 
 
