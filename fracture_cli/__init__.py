@@ -9,6 +9,11 @@ only parses options) are generated from.
 
 __version__ = "0.1.0"
 
+# Before anything imports numpy: the numeric kernels that give the same bits on every CPU (numerics.py).
+from fracture_cli.numerics import pin_environment  # noqa: E402
+
+pin_environment()
+
 from fracture_cli.errors import FractureError, InputError, StageError  # noqa: E402
 
 __all__ = ["__version__", "FractureError", "InputError", "StageError"]
