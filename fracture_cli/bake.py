@@ -24,7 +24,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from fracture_cli import __version__, trigeom
+from fracture_cli import __version__, numeric_env, trigeom
 from fracture_cli.cache import file_sha256
 from fracture_cli.errors import FractureError, UsageError
 from fracture_cli.io.inputs import estimate_output_bytes, input_files
@@ -72,7 +72,7 @@ def fragment_summary(fragments: Fragments, stem: str | None = None) -> list[dict
             "name": fragment_name(i, stem),
             "piece": int(frag.piece),
             "triangles": int(len(frag.faces)),
-            "volume": float(trigeom.signed_volume(frag.vertices, frag.faces) * scale**3),
+            "volume": float(trigeom.signed_volume(frag.vertices, frag.faces) * scale * scale * scale),
             "bbox_min": [float(x) for x in world.min(axis=0)],
             "bbox_max": [float(x) for x in world.max(axis=0)],
         })
@@ -129,6 +129,9 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
 
             cache = StageCache(cache_dir)
         runner = Runner(f"bake {stem}", total=len(STEPS), cache=cache, jobs=jobs)
+        if not numeric_env.pinned():
+            log.warning("%s: numeric kernels not pinned (%s): the outputs may differ from another machine's", stem,
+                        numeric_env.unpinned_because())
         state = run_pipeline(input_path, recipe, runner)
         report = build_report(state, recipe, runner)
         outputs = write_outputs(out_dir, stem, state, report, runner, preview_size)
@@ -166,6 +169,8 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
     return {
         "tool": "fracture",
         "version": __version__,
+        # The numeric kernels and the versions of what computes the outputs (same values: same bytes).
+        "numerics": numeric_env.environment(),
         "input": {"name": os.path.basename(state.need("source", "export")), "sha256": state.source_sha256,
                   "triangles": loaded.num_faces, "vertices": loaded.num_vertices,
                   "scale": surface.normalization.scale},

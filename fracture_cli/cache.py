@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fracture_cli import __version__
+from fracture_cli import __version__, numeric_env
 from fracture_cli.io.atomic import atomic_path
 from fracture_cli.io.inputs import file_sha256  # noqa: F401 (part of this module's API: the input hash)
 from fracture_cli.types import Cage, Modes, Normalization, TetMesh
@@ -86,7 +86,9 @@ def cache_key(*parts: Any) -> str:
             return {str(k): encode(v) for k, v in sorted(value.items())}
         return value
 
-    text = json.dumps([__version__] + [encode(p) for p in parts], sort_keys=True, default=str)
+    # Other numeric kernels or dependency versions may give other bits: never reuse across them.
+    text = json.dumps([__version__, numeric_env.environment()] + [encode(p) for p in parts], sort_keys=True,
+                      default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
 

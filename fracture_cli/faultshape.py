@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fracture_cli import detmath
 from fracture_cli.meshfix.rows import unique_rows
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, Regions
 
@@ -41,7 +42,7 @@ def _fault_edges(vertices: np.ndarray, faces: np.ndarray, fault: np.ndarray):
     P = vertices[faces]
     normal = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
     area2 = np.linalg.norm(normal, axis=1)
-    longest2 = np.max([np.sum((P[:, a] - P[:, b]) ** 2, axis=1) for a, b in ((0, 1), (1, 2), (2, 0))], axis=0)
+    longest2 = np.max([np.sum(np.square(P[:, a] - P[:, b]), axis=1) for a, b in ((0, 1), (1, 2), (2, 0))], axis=0)
     good = (area2 > 2 * _SLIVER * longest2) & (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])
     F, P, normal, area2, fault = F[good], P[good], normal[good], area2[good], fault[good]
     if len(F) == 0:
@@ -60,7 +61,7 @@ def _fault_edges(vertices: np.ndarray, faces: np.ndarray, fault: np.ndarray):
     run_len = np.bincount(run_id)
     first = np.flatnonzero(start[:-1] & same & (run_len[run_id[:-1]] == 2))
     cosine = np.clip(np.einsum("ij,ij->i", normal[face[first]], normal[face[first + 1]]), -1.0, 1.0)
-    return np.arccos(cosine), lengths[first], float(area2.sum() / 2.0)
+    return detmath.acos(cosine), lengths[first], float(area2.sum() / 2.0)
 
 
 def fault_roughness(vertices: np.ndarray, faces: np.ndarray, fault: np.ndarray) -> tuple[float, float]:

@@ -193,7 +193,8 @@ def _checked(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments, dict[st
     faults = fragment_faults(frags)  # the overlap check's fragment graph and the fault shape both read them
     checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written, faults=faults))
     require_volume(checks)
-    checks["input_volume"] = float(frags.input_volume * surface.normalization.scale**3)
+    scale = surface.normalization.scale
+    checks["input_volume"] = float(frags.input_volume * (scale * scale * scale))
     # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
     shape = fault_shape(*faults)
     checks["fault_mean_dihedral_degrees"] = round(shape["mean_dihedral_degrees"], 6)

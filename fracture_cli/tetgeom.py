@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from fracture_cli import detmath
 from fracture_cli.meshfix.rows import unique_rows
 
 # Faces of a positively oriented tet (a, b, c, d), each oriented outward (its
@@ -115,7 +116,7 @@ def barycentric_gradients(V: np.ndarray, T: np.ndarray) -> np.ndarray:
     """
     x0 = V[T[:, 0]]
     E = np.stack([V[T[:, 1]] - x0, V[T[:, 2]] - x0, V[T[:, 3]] - x0], axis=1)  # (t, 3, 3) rows = edges
-    scale = np.abs(E).max(axis=(1, 2)) ** 3
+    scale = detmath.cube(np.abs(E).max(axis=(1, 2)))
     flat = np.abs(np.linalg.det(E)) <= 1e-14 * scale
     if flat.any():
         E = E.copy()

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli import detmath
+
 # Separation below this (normalized units, unit bounding-box diagonal) counts
 # as touching, i.e. as an intersection.
 SEPARATION_EPS = 1e-12
@@ -87,7 +89,7 @@ def solid_angle_fraction(a: np.ndarray, b: np.ndarray, c: np.ndarray,
     det = np.einsum("...j,...j->...", a, np.cross(b, c))
     dot = (la * lb * lc + np.einsum("...j,...j->...", a, b) * lc + np.einsum("...j,...j->...", b, c) * la
            + np.einsum("...j,...j->...", c, a) * lb)
-    return np.arctan2(det, dot) / (2.0 * np.pi)
+    return detmath.atan2(det, dot) / (2.0 * np.pi)
 
 
 def triangle_winding(P: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:

@@ -7,6 +7,9 @@ import os
 
 import pytest
 
+# Before any test module imports numpy: the pinned numeric kernels every bake runs with (numeric_env.py).
+import fracture_cli  # noqa: F401, I001
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SAMPLE_ASSETS = os.path.join(REPO, "sample_assets")
 SAMPLE_FILES = ("pillar.glb", "chair.glb", "vase.obj")

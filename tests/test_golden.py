@@ -2,12 +2,15 @@
 
 Goldens live in tests/golden/<asset>.<recipe>.json. Regenerate after an intended
 change with `make goldens` (pytest --update-goldens) and review the diff.
-Comparisons use explicit tolerances; a failure names the asset, the quantity,
-the expected and the obtained value.
+The GLB and runtime file must be the same bytes (their SHA-256, the same on every
+machine: fracture_cli/numeric_env.py); the readable quantities before the hashes
+are compared with explicit tolerances first, so a failure names the asset, the
+quantity, the expected and the obtained value.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tomllib
@@ -38,9 +41,8 @@ def summarize(out_dir: str, stem: str) -> dict:
         report = json.load(fh)
     # Our own reader: node names exactly as written (trimesh adds random suffixes).
     meshes, _ = read_glb(os.path.join(out_dir, f"{stem}.glb"))
-    # Per mesh: vertex count and the mean and spread of its positions. Compared with a
-    # tolerance, not hashed: BLAS kernels differ between CPUs in the last bits, and a
-    # hash of rounded positions flips on any value near a rounding boundary.
+    # Per mesh: vertex count and the mean and spread of its positions (with a tolerance: what moved, when
+    # the bytes differ).
     shapes = {}
     for mesh in meshes:
         verts = np.concatenate([prim.positions for prim in mesh.primitives]).astype(np.float64)
@@ -60,7 +62,17 @@ def summarize(out_dir: str, stem: str) -> dict:
             for f in report["fragments"]
         ],
         "mesh_shapes": shapes,
+        "sha256": output_hashes(out_dir, stem),
     }
+
+
+def output_hashes(out_dir: str, stem: str) -> dict[str, str]:
+    """SHA-256 of the GLB and the runtime file (JSON and binary) of a bake."""
+    hashes = {}
+    for suffix in (".glb", ".fracture.json", ".fracture.bin"):
+        with open(os.path.join(out_dir, stem + suffix), "rb") as fh:
+            hashes[suffix.lstrip(".")] = hashlib.sha256(fh.read()).hexdigest()
+    return hashes
 
 
 def compare(expected: dict, got: dict, asset: str) -> list[str]:
@@ -97,6 +109,11 @@ def compare(expected: dict, got: dict, asset: str) -> list[str]:
                   and np.allclose(e["std"], g["std"], atol=SHAPE_ATOL_REL * asset_diag)):
             problems.append(f"{asset}: {name}: vertex mean/spread moved (expected {e['mean']}/{e['std']}, "
                             f"got {g['mean']}/{g['std']}); inspect and `make goldens` if intended")
+    if not problems:
+        for name, digest in expected.get("sha256", {}).items():
+            if got["sha256"].get(name) != digest:
+                problems.append(f"{asset}: {name}: other bytes (sha256 {got['sha256'].get(name)}, expected {digest}) "
+                                "with every summarized quantity within its tolerance")
     return problems
 
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli import detmath
 from fracture_cli.runtime.format import RuntimeData
 from fracture_cli.runtime.impact import project_impact
 from fracture_cli.tetgeom import triangle_areas
@@ -118,9 +119,10 @@ def asset_impacts(data: RuntimeData, vertices: np.ndarray, faces: np.ndarray, co
     """
     rng = np.random.default_rng(seed)
     points = surface_points(vertices, faces, count, rng)
-    directions = rng.normal(size=(count, 3))
-    directions /= np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), 1e-300)
-    factors = np.exp(rng.uniform(-math.log(SPREAD), math.log(SPREAD), count))
+    # No libm on the way (rng.normal and np.exp round by the CPU): the same dataset on every machine.
+    directions = detmath.uniform_directions(rng, count)
+    spread = detmath.log(SPREAD)
+    factors = np.asarray(detmath.exp(rng.uniform(-spread, spread, count)))
     threshold = float(data.default_threshold)
     impulses = np.empty((count, 3))
     breaking = np.empty(count)

@@ -29,10 +29,10 @@ _INT32_MAX = 2**31 - 1
 _FLOW_UNITS_64 = float(2**52)
 # Face capacity cap of the one-arc form: above every minimum cut's value (at most the source's total,
 # 2**52 plus rounding), so no capped face is in a minimum cut, as with the cap 2**62 of the two-arc form.
-_ONE_ARC_CAP = 2.0**53
+_ONE_ARC_CAP = float(2**53)
 # The one-arc form is used while its terminal capacities add up to less than this (OR-Tools reports a
 # possible overflow above 2**63 out of the source); else the two-arc form (huge, unbreakable faces).
-_ONE_ARC_TOTAL = 2.0**61
+_ONE_ARC_TOTAL = float(2**61)
 # What ``backend="auto"`` means, process-wide: "auto" (the compiled kernel, else OR-Tools if installed,
 # else scipy), "kernel", "ortools" or "scipy". For benchmarks and tests that compare them; the pipeline
 # leaves it alone.
@@ -157,7 +157,7 @@ class MinCut:
             return self._kernel_side(np.minimum(faces, _ONE_ARC_CAP).astype(np.int64), terminal.astype(np.int64))
         side = self._one_arc_side(np.minimum(faces, _ONE_ARC_CAP).astype(np.int64), terminal.astype(np.int64))
         if side is None:
-            side = self._two_arc_side(np.minimum(faces, 2.0**62).astype(np.int64), terminal.astype(np.int64))
+            side = self._two_arc_side(np.minimum(faces, float(2**62)).astype(np.int64), terminal.astype(np.int64))
         return side
 
     def _kernel_side(self, faces: np.ndarray, terminal: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ from fracture_cli.trigeom import BoxGrid, default_cell
 # A box of level k spans at most this many cells of its level's grid per axis (plus one for alignment);
 # the cells of level k are _RATIO ** k times the base cell.
 _SPAN = 4.0
-_RATIO = 4.0
+_RATIO = 4  # an int: _RATIO ** k is exact
 # Candidates (query, box sharing a cell) one BoxGrid.query may hold at once: its temporaries take ~100 bytes each.
 # A fan of slivers (a UV sphere's pole) puts ~1,500 boxes in one cell, and every one of their centres meets all.
 _CANDIDATES = 2_000_000
@@ -41,9 +41,12 @@ class LevelGrid:
         self.origin = self.boxes[:, 0].min(axis=0) - self.cell  # as BoxGrid's: its cells give the pair order
         self.lo_cells = np.floor((self.boxes[:, 0] - self.origin) / self.cell).astype(np.int64)
         extent = (self.boxes[:, 1] - self.boxes[:, 0]).max(axis=1)
+        # The smallest k with _SPAN * cell * _RATIO**k >= extent, by products (a log rounds by the CPU).
         level = np.zeros(len(self.boxes), dtype=np.int64)
-        big = extent > _SPAN * self.cell
-        level[big] = np.ceil(np.log(extent[big] / (_SPAN * self.cell)) / np.log(_RATIO)).astype(np.int64)
+        reach = _SPAN * self.cell
+        while np.any(grow := extent > reach):
+            level[grow] += 1
+            reach *= _RATIO
         self.levels = [(members, BoxGrid(self.boxes[members], self.cell * _RATIO ** int(k)))
                        for k in np.unique(level) for members in [np.flatnonzero(level == k)]]
 

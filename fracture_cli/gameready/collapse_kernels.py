@@ -269,7 +269,7 @@ def nearest(X: np.ndarray, grid: tuple, cell: float, Q: np.ndarray, k: int) -> n
                         c += step
             # A point in a cell r + 1 shells away is more than r cells away along some axis (the margin: rounding
             # in the cell of a point).
-            if found == k and best[k - 1] < (r * cell * (1.0 - 1e-9)) ** 2:
+            if found == k and best[k - 1] < (r * cell * (1.0 - 1e-9)) * (r * cell * (1.0 - 1e-9)):
                 break
         out[q] = ids
     return out
@@ -298,7 +298,7 @@ def warm_kernels() -> int:
 
     n = 6
     x, y = np.meshgrid(np.linspace(0.0, 1.0, n), np.linspace(0.0, 1.0, n), indexing="ij")
-    V = np.column_stack([x.ravel(), y.ravel(), 0.01 * np.sin(3.0 * x.ravel()) * np.cos(2.0 * y.ravel())])
+    V = np.column_stack([x.ravel(), y.ravel(), 0.01 * x.ravel() * (1.0 - x.ravel()) * y.ravel()])
     i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
     a = (i * n + j).ravel()
     faces = np.concatenate([np.column_stack([a, a + n, a + n + 1]), np.column_stack([a, a + n + 1, a + 1])])

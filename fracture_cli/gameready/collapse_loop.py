@@ -13,15 +13,13 @@ room for ``cap[x]``; a full list moves to the pool's end with twice the room.
 Orders inside such a list differ from Python's set orders; nothing that decides
 a collapse depends on them (sets compare as sorted arrays, candidates are sorted).
 
-Squares are ``math.pow(x, two)`` with ``two`` = 2.0 passed at run time: CPython's
+Squares are ``x * x`` with ``two`` = 2.0 passed at run time: CPython's
 ``x ** 2`` calls the C library's ``pow``, which rounds differently from ``x * x``
 about once in a thousand, and a constant 2.0 would let LLVM turn the call into a
 product.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -127,7 +125,7 @@ def _heap_pop(heap: tuple, size: int) -> tuple:  # pragma: no cover (compiled)
 
 
 @njit(cache=True)
-def turns_little(P: np.ndarray, old: np.ndarray, new: np.ndarray, limit: float, two: float,
+def turns_little(P: np.ndarray, old: np.ndarray, new: np.ndarray, limit: float,
                  min_shape: float) -> bool:  # pragma: no cover (compiled)
     """:func:`.decimate_faces.turns_little` on arrays: the same operations in the same order."""
     ax, ay, az = P[old[0], 0], P[old[0], 1], P[old[0], 2]
@@ -140,20 +138,20 @@ def turns_little(P: np.ndarray, old: np.ndarray, new: np.ndarray, limit: float, 
     cx, cy, cz = P[new[2], 0], P[new[2], 1], P[new[2], 2]
     ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
     nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    length2 = math.pow(nx, two) + math.pow(ny, two) + math.pow(nz, two)
-    e0 = math.pow(ax - bx, two) + math.pow(ay - by, two) + math.pow(az - bz, two)
-    e1 = math.pow(bx - cx, two) + math.pow(by - cy, two) + math.pow(bz - cz, two)
-    e2 = math.pow(cx - ax, two) + math.pow(cy - ay, two) + math.pow(cz - az, two)
+    length2 = nx * nx + ny * ny + nz * nz
+    e0 = (ax - bx) * (ax - bx) + (ay - by) * (ay - by) + (az - bz) * (az - bz)
+    e1 = (bx - cx) * (bx - cx) + (by - cy) * (by - cy) + (bz - cz) * (bz - cz)
+    e2 = (cx - ax) * (cx - ax) + (cy - ay) * (cy - ay) + (cz - az) * (cz - az)
     longest = e0
     if e1 > longest:
         longest = e1
     if e2 > longest:
         longest = e2
-    if length2 == 0.0 or length2 <= math.pow(min_shape * longest, two):
+    if length2 == 0.0 or length2 <= (min_shape * longest) * (min_shape * longest):
         return False
     dot = ox * nx + oy * ny + oz * nz
-    old2 = math.pow(ox, two) + math.pow(oy, two) + math.pow(oz, two)
-    return dot > 0 and dot * dot >= math.pow(limit, two) * old2 * length2
+    old2 = ox * ox + oy * oy + oz * oz
+    return dot > 0 and dot * dot >= limit * limit * old2 * length2
 
 
 @njit(cache=True)
@@ -291,7 +289,7 @@ def _try(geo: tuple, grid: tuple, F: np.ndarray, vf: tuple, vpool: np.ndarray, a
          u: int, v: int, bound: float, fan: np.ndarray, ctx: tuple) -> tuple:  # pragma: no cover (compiled)
     """:meth:`.SurfaceComplex._collapse` up to its apply: (allowed, removed, kept (ascending), points, nearest
     faces). Its tests in another order, cheapest first: a collapse is made only when all of them pass."""
-    P, groups, own, fault, two, min_shape = geo[0], geo[3], geo[4], geo[5], geo[10], geo[11]
+    P, groups, own, fault, min_shape = geo[0], geo[3], geo[4], geo[5], geo[10]
     polygons, fragments, single, limit, on_fault = ctx
     empty = fan[:0]
     v_fan = _fan_of(vf, vpool, v)
@@ -311,9 +309,9 @@ def _try(geo: tuple, grid: tuple, F: np.ndarray, vf: tuple, vpool: np.ndarray, a
         for j in range(3):
             x = F[kept[i], j]
             new[i, j] = v if x == u else x
-        if not turns_little(P, F[kept[i]], new[i], limit, two, min_shape):
+        if not turns_little(P, F[kept[i]], new[i], limit, min_shape):
             return False, empty, empty, empty, empty
-    if not _topology(F, own, fan, v_fan, removed, u, v, fragments, single, geo[12], geo[13]):
+    if not _topology(F, own, fan, v_fan, removed, u, v, fragments, single, geo[11], geo[12]):
         return False, empty, empty, empty, empty
     if not on_fault:
         return True, removed, kept, empty, empty
@@ -446,7 +444,7 @@ def collapse_loop(geo: tuple, grid: tuple, quadric: np.ndarray, F: np.ndarray, v
             if locked[w] or not vkey[w]:
                 continue
             stamp[w] += 1
-            targets = neighbours(F, _fan_of(vf, vpool, w), w, geo[12], geo[13])
+            targets = neighbours(F, _fan_of(vf, vpool, w), w, geo[11], geo[12])
             costs = quadric_costs(H, quadric, w, targets)
             qpool, qcost = grown(qpool, qtop, len(targets)), grown(qcost, qtop, len(targets))
             qpool[qtop:qtop + len(targets)] = targets
@@ -483,7 +481,7 @@ def collapse_loop(geo: tuple, grid: tuple, quadric: np.ndarray, F: np.ndarray, v
                                               apool, atop, u, v, removed, kept, points, nearest)
             log, ltop = logged(log, ltop, u, v, points, nearest, removed, kept)
             bounds.append(bound)
-            near = neighbours(F, _fan_of(vf, vpool, v), v, geo[12], geo[13])
+            near = neighbours(F, _fan_of(vf, vpool, v), v, geo[11], geo[12])
             pending = np.unique(np.append(near, v))
             done = True
             break

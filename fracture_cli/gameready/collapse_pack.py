@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 
 def static_arrays(complex_: SurfaceComplex) -> tuple:
     """What never changes in a complex, as the loop's ``geo`` tuple: (positions, positions, homogeneous,
-    groups, owners (m, 2; -1 pads), fault, locked, damp, min cos, min cos outer, 2.0, min shape); locked and
+    groups, owners (m, 2; -1 pads), fault, locked, damp, min cos, min cos outer, min shape); locked and
     damp (and two scratch arrays) are filled per call."""
     from fracture_cli.gameready import decimate as d
 
@@ -34,7 +34,7 @@ def static_arrays(complex_: SurfaceComplex) -> tuple:
                                 count=int(pairs.sum()))
     return (complex_._positions, complex_._positions, complex_._homogeneous,
             np.asarray(complex_.groups, dtype=np.int64), own, np.asarray(complex_.fault, dtype=np.bool_), None, None,
-            d.MIN_NORMAL_COS, d.MIN_NORMAL_COS_OUTER, 2.0, d.MIN_SHAPE, None, None)
+            d.MIN_NORMAL_COS, d.MIN_NORMAL_COS_OUTER, d.MIN_SHAPE, None, None)
 
 
 def _mask(n: int, items: object) -> np.ndarray:
@@ -95,7 +95,7 @@ def _packed(complex_: SurfaceComplex, tolerance: dict[int, float] | float) -> tu
     if complex_.damp:
         damp[np.fromiter(complex_.damp.keys(), dtype=np.int64)] = np.fromiter(complex_.damp.values(), dtype=float)
     geo[7] = damp
-    geo[12], geo[13] = np.zeros(n, dtype=np.int64), np.zeros(1, dtype=np.int64)  # scratch of the link checks
+    geo[11], geo[12] = np.zeros(n, dtype=np.int64), np.zeros(1, dtype=np.int64)  # scratch of the link checks
     per_fragment = isinstance(tolerance, dict)
     tol = (np.array([tolerance[k] for k in range(len(tolerance))], dtype=float) if isinstance(tolerance, dict)
            else np.zeros(1))

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
-from fracture_cli import parallel
+from fracture_cli import detmath, parallel
 from fracture_cli.gameready.boxlevels import LevelGrid
 from fracture_cli.gameready.mass import mass_properties
 from fracture_cli.meshfix.rows import unique_rows
@@ -102,7 +102,7 @@ def body_faces(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
         np.minimum.at(lo, patch, V[F[:, k]])
         np.maximum.at(hi, patch, V[F[:, k]])
     scale = max(float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))), 1e-300)
-    empty = np.abs(volume) <= _SHELL_VOLUME * scale ** 3
+    empty = np.abs(volume) <= _SHELL_VOLUME * scale * scale * scale
     positive = np.flatnonzero((volume > 0) & ~empty)
     members = {int(p): [int(p)] for p in positive}
     for cavity in np.flatnonzero((volume < 0) & ~empty).tolist():
@@ -305,7 +305,7 @@ def fragments_graph(fragments: Fragments) -> tuple[np.ndarray, np.ndarray]:
     interior = fragments.interior_slot
     meshes = [(f.vertices, f.faces) for f in fragments.fragments]
     fault = [f.material_ids == interior for f in fragments.fragments]
-    return fragment_graph(meshes, fault, min_area=_MIN_BOND_AREA * fragments.input_volume ** (2.0 / 3.0))
+    return fragment_graph(meshes, fault, min_area=_MIN_BOND_AREA * detmath.square(detmath.cbrt(fragments.input_volume)))
 
 
 def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> tuple[Fragments, SplitReport]:

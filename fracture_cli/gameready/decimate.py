@@ -433,12 +433,13 @@ class SurfaceComplex:
         """The corner (0-2) starting the long edge of face ``f`` if it is a cap needle, else -1."""
         (ax, ay, az), (bx, by, bz), (cx, cy, cz) = self.points[f[0]], self.points[f[1]], self.points[f[2]]
         # Written out (most faces are no needles): squared edge lengths as sum() adds them, and the normal.
-        lengths = ((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2, (cx - bx) ** 2 + (cy - by) ** 2 + (cz - bz) ** 2,
-                   (ax - cx) ** 2 + (ay - cy) ** 2 + (az - cz) ** 2)
+        lengths = ((bx - ax) * (bx - ax) + (by - ay) * (by - ay) + (bz - az) * (bz - az),
+                   (cx - bx) * (cx - bx) + (cy - by) * (cy - by) + (cz - bz) * (cz - bz),
+                   (ax - cx) * (ax - cx) + (ay - cy) * (ay - cy) + (az - cz) * (az - cz))
         i = 0 if lengths[0] >= lengths[1] and lengths[0] >= lengths[2] else 1 if lengths[1] >= lengths[2] else 2
         ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
         nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-        if nx**2 + ny**2 + nz**2 > (MIN_SHAPE * lengths[i]) ** 2:
+        if nx * nx + ny * ny + nz * nz > (MIN_SHAPE * lengths[i]) * (MIN_SHAPE * lengths[i]):
             return -1
         return i
 

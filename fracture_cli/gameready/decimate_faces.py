@@ -27,15 +27,16 @@ def turns_little(points: list, old: tuple, new: tuple, limit: float) -> bool:
     (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points[new[0]], points[new[1]], points[new[2]]
     ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
     nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    length2 = nx**2 + ny**2 + nz**2
+    length2 = nx * nx + ny * ny + nz * nz
     # Written out, in the order sum() adds them (0 + x is x exactly).
-    longest = max((ax - bx) ** 2 + (ay - by) ** 2 + (az - bz) ** 2, (bx - cx) ** 2 + (by - cy) ** 2 + (bz - cz) ** 2,
-                  (cx - ax) ** 2 + (cy - ay) ** 2 + (cz - az) ** 2)
-    if length2 == 0.0 or length2 <= (MIN_SHAPE * longest) ** 2:
+    longest = max((ax - bx) * (ax - bx) + (ay - by) * (ay - by) + (az - bz) * (az - bz),
+                  (bx - cx) * (bx - cx) + (by - cy) * (by - cy) + (bz - cz) * (bz - cz),
+                  (cx - ax) * (cx - ax) + (cy - ay) * (cy - ay) + (cz - az) * (cz - az))
+    if length2 == 0.0 or length2 <= (MIN_SHAPE * longest) * (MIN_SHAPE * longest):
         return False
     dot = ox * nx + oy * ny + oz * nz
-    old2 = ox**2 + oy**2 + oz**2
-    return dot > 0 and dot * dot >= limit**2 * old2 * length2
+    old2 = ox * ox + oy * oy + oz * oz
+    return dot > 0 and dot * dot >= limit * limit * old2 * length2
 
 
 def moved(f: tuple, u: int, v: int) -> tuple[int, int, int]:

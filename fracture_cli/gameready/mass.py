@@ -47,8 +47,8 @@ class MassProperties:
             The bake's map from normalized coordinates (a similarity: no rotation).
         """
         s = float(normalization.scale)
-        return MassProperties(self.volume * s ** 3, normalization.to_world(self.center[None, :])[0],
-                              self.inertia * s ** 5)
+        return MassProperties(self.volume * (s * s * s), normalization.to_world(self.center[None, :])[0],
+                              self.inertia * (s * s * s * s * s))
 
     def inertia6(self) -> np.ndarray:
         """The tensor's six distinct entries (6,) ``[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`` (entries, sign included)."""

@@ -43,7 +43,7 @@ def uv_scale(fragments: Fragments, interior: int) -> float:
             continue
         unit = _box_uvs(fragments.normalization.to_world(frag.vertices[used]), frag.normals[used], 1.0)
         num += float(np.sum(unit * frag.uvs[used]))
-        den += float(np.sum(frag.uvs[used] ** 2))
+        den += float(np.sum(np.square(frag.uvs[used])))
     return num / den if den > 0 and num > 0 else 1.0
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
-from fracture_cli import parallel
+from fracture_cli import detmath, parallel
 from fracture_cli.gameready.hulls import (
     MIN_PART_VOLUME,
     face_planes,
@@ -129,10 +129,10 @@ def _volume_beyond(material: _Material, normal: np.ndarray, offsets) -> np.ndarr
     positive[every] = mean[every]
     two = ~every & (x1 > 0)
     a0, a1, a2 = x0[two], x1[two], x2[two]
-    positive[two] = mean[two] + np.maximum(-a0, 0.0) ** 3 / (3.0 * (a1 - a0) * (a2 - a0))
+    positive[two] = mean[two] + detmath.cube(np.maximum(-a0, 0.0)) / (3.0 * (a1 - a0) * (a2 - a0))
     one = ~every & ~(x1 > 0) & (x2 > 0)
     a0, a1, a2 = x0[one], x1[one], x2[one]
-    positive[one] = a2 ** 3 / (3.0 * (a2 - a0) * (a2 - a1))
+    positive[one] = detmath.cube(a2) / (3.0 * (a2 - a0) * (a2 - a1))
     return result + positive @ weight[reach]
 
 
@@ -243,7 +243,7 @@ def separate_hulls(parts: list[np.ndarray], materials=None, groups=None, bodies=
         # contact, they overlap, and a part reaching beyond its side of the plane inside the ball needs its trim,
         # both known without reading the clipped corners back (a clip is only computed when they are).
         radius = _depth(shared, trims, (i, j), centre) - _MARGIN if clipped[i] or clipped[j] else 0.0
-        deep = radius > 0 and 4.0 / 3.0 * np.pi * radius ** 3 > 1e3 * _TOUCH * min(volumes[i], volumes[j])
+        deep = radius > 0 and 4.0 / 3.0 * np.pi * detmath.cube(radius) > 1e3 * _TOUCH * min(volumes[i], volumes[j])
         # Once a part was clipped by an earlier pair, this pair may be apart already: then it keeps its material.
         if (clipped[i] or clipped[j]) and not deep and not _overlapping(hulls[i], hulls[j], current(i), current(j),
                                                                         normal, offset):

@@ -43,6 +43,7 @@ import os
 
 import numpy as np
 
+from fracture_cli import detmath
 from fracture_cli.errors import InputError
 from fracture_cli.io.gltf import MaterialSource
 from fracture_cli.io.gltf_conventions import baked_material_prefix, is_collision_only, unprefixed
@@ -463,6 +464,6 @@ def _texture_transform(uv: np.ndarray, transform: dict) -> np.ndarray:
     ox, oy = (float(c) for c in transform.get("offset", (0.0, 0.0)))
     angle = float(transform.get("rotation", 0.0))
     sx, sy = (float(c) for c in transform.get("scale", (1.0, 1.0)))
-    c, s = math.cos(angle), math.sin(angle)
+    s, c = detmath.sin_cos(angle)
     u, v = uv[:, 0] * sx, uv[:, 1] * sy
     return np.stack([c * u - s * v + ox, s * u + c * v + oy], axis=1)

@@ -150,7 +150,7 @@ def double_sided_back_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 def _row_ids(rows: np.ndarray) -> np.ndarray:
     """Id (m,) of each row of ``rows`` (m, 3) of ints in [0, n) among the sorted distinct rows (as ``np.unique``)."""
     n = int(rows.max()) + 1
-    if n ** 3 < 2 ** 62:  # the three ids packed into one integer sort in the rows' order
+    if n * n * n < 2 ** 62:  # the three ids packed into one integer sort in the rows' order
         return unique_inverse((rows[:, 0] * n + rows[:, 1]) * n + rows[:, 2])[1]
     return unique_rows(rows, return_inverse=True)[1].reshape(-1)
 

@@ -187,7 +187,7 @@ def _ear_clip(loop: np.ndarray, P: np.ndarray, normal: np.ndarray) -> np.ndarray
         return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
     guard = 0
-    while len(ring) > 3 and guard < len(loop) ** 2:
+    while len(ring) > 3 and guard < len(loop) * len(loop):
         guard += 1
         for i in range(len(ring)):
             a, b, c = ring[i - 1], ring[i], ring[(i + 1) % len(ring)]

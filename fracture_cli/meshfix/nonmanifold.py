@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fracture_cli import detmath
 from fracture_cli.meshfix.edges import EdgeTable, corner_fans, edge_table, face_bodies, signed_volume
 from fracture_cli.meshfix.records import RepairRecord
 
@@ -88,7 +89,7 @@ def _edge_fan(V: np.ndarray, F: np.ndarray, table: EdgeTable, sides: np.ndarray)
     w = V[third] - V[a]
     w = w - np.outer(w @ axis, axis)
     u = w[0] / max(np.linalg.norm(w[0]), 1e-300)
-    angle = np.arctan2(w @ np.cross(axis, u), w @ u)
+    angle = detmath.atan2(w @ np.cross(axis, u), w @ u)
     angle = np.where(angle < 0, angle + 2 * np.pi, angle)
     angle = np.where(angle > 2 * np.pi - ANGLE_TIE, 0.0, angle)
     sign = np.where(table.forward[sides], 1, -1)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli import detmath
 from fracture_cli.errors import RecipeError
 from fracture_cli.options import option
 from fracture_cli.types import SurfaceMesh, TetMesh
@@ -97,7 +98,7 @@ def material(tet_mesh: TetMesh, surface: SurfaceMesh | None, options: MaterialOp
     eta = np.ones(len(faces))
     if options.grain_axis != "none" and options.grain_strength != 1.0:
         cos = tet_mesh.interior_face_normals[:, _AXES[options.grain_axis]]
-        eta *= 1.0 + (options.grain_strength - 1.0) * cos**2
+        eta *= 1.0 + (options.grain_strength - 1.0) * np.square(cos)
     centroids = tet_mesh.vertices[faces].mean(axis=1)
     if options.strength_channel != "none":
         if surface is None or surface.colors is None:
@@ -108,7 +109,7 @@ def material(tet_mesh: TetMesh, surface: SurfaceMesh | None, options: MaterialOp
 
         _, nearest = cKDTree(surface.vertices).query(centroids)
         c = np.clip(surface.colors[nearest, _CHANNELS[options.strength_channel]], 0.0, 1.0)
-        eta *= options.strength_min * (options.strength_max / options.strength_min) ** c
+        eta *= options.strength_min * detmath.power(options.strength_max / options.strength_min, c)
     if options.boxes:
         world = tet_mesh.normalization.to_world(centroids)
         for name, lo, hi, strength in _check_boxes(options.boxes):

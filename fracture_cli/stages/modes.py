@@ -245,7 +245,8 @@ def _scalar_start_vectors(tet_mesh: TetMesh, count: int, seed: int) -> np.ndarra
     want = min(count + 1, n - 1)
     # Below the spectrum by a margin far smaller than the first non-zero eigenvalue.
     shift = -1e-6 * float(K.diagonal().sum() / M.diagonal().sum())
-    v0 = np.random.default_rng(seed).standard_normal(n)
+    # Uniform, not normal: numpy's normal draws call libm's exp/log, which round by the CPU (numeric_env.py).
+    v0 = np.random.default_rng(seed).uniform(-1.0, 1.0, n)
     try:
         values, vectors = _lowest_eigenpairs(K, M, want, shift, v0)
     except Exception as error:  # ARPACK and LAPACK raise several types; report one message
@@ -451,7 +452,7 @@ def _axis_chain(_shared, task):
     with threadpool_limits(limits=1, user_api="blas"):
         found, stats = _iccm(lambda c, fixed, budget, first: solver.solve(
             c, fixed, max_flows=budget, stall_flows=_FIRST_ROUND_STALL if first else None), scalar_init[:, :, None],
-                             count, inner, opts, label, lambda n: rng.standard_normal((t, 1)), restricted=True)
+                             count, inner, opts, label, lambda n: rng.uniform(-1.0, 1.0, (t, 1)), restricted=True)
     return found, stats, solver.max_flow_backend
 
 
@@ -467,7 +468,7 @@ def _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
         starts.append(s)
     rng = np.random.default_rng(opts.seed + 1)
     found, per_mode = _iccm(lambda c, fixed, budget, first: solver.solve(c, fixed), starts, k, inner, opts, "",
-                            lambda n: rng.standard_normal((t, d)))
+                            lambda n: rng.uniform(-1.0, 1.0, (t, d)))
     return np.stack(found), _summary(per_mode)
 
 

@@ -14,6 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from fracture_cli import detmath
 from fracture_cli.errors import StageError
 from fracture_cli.options import option
 from fracture_cli.runtime.format import UNITS_NOTE, RuntimeData, check_runtime
@@ -117,7 +118,7 @@ def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOpt
         raise StageError("tet mesh has no volume", stage=STAGE)
     sites = tet_mesh.boundary_vertices
     scale = np.sqrt(total_volume)
-    B = _site_coefficients(tet_mesh, U, float(options.radius) ** 2)[sites] * scale
+    B = _site_coefficients(tet_mesh, U, detmath.square(float(options.radius)))[sites] * scale
 
     norm = tet_mesh.normalization
     data = RuntimeData(
@@ -125,7 +126,7 @@ def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOpt
         B=B.astype(np.float32),
         W=(W * scale).astype(np.float32),
         edges=edges.astype(np.int32),
-        edge_areas=(edge_areas * norm.scale ** 2).astype(np.float32),
+        edge_areas=(edge_areas * detmath.square(norm.scale)).astype(np.float32),
         fragment_names=fragment_names,
         transform=norm.matrix(),
         default_threshold=float(options.threshold),

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fracture_cli import tetgeom, trigeom
+from fracture_cli import detmath, tetgeom, trigeom
 from fracture_cli.errors import StageError
 from fracture_cli.options import option
 from fracture_cli.stages import _tetgen
@@ -148,7 +148,7 @@ def tetra(cage: Cage, options: TetraOptions = TetraOptions()) -> TetMesh:
 
 def _shape(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """Volume / longest edge^3 of every tet (0.118 for a regular tet, 0 for a flat one)."""
-    return tetgeom.tet_volumes(nodes, tets) / tetgeom.tet_edge_lengths(nodes, tets).max(axis=1) ** 3
+    return tetgeom.tet_volumes(nodes, tets) / detmath.cube(tetgeom.tet_edge_lengths(nodes, tets).max(axis=1))
 
 
 def _peel_flat_boundary_tets(nodes: np.ndarray, tets: np.ndarray):

@@ -19,18 +19,33 @@ from __future__ import annotations
 import functools
 import itertools
 import json
+import math
 import os
 import struct
 import sys
-
-import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.join(HERE, "realworld")
 sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
 
+# fracture_cli first: it pins the numeric kernels before numpy loads (fracture_cli/numeric_env.py).
+import fracture_cli  # noqa: E402, F401, I001
+
+import numpy as np  # noqa: E402
+
+from fracture_cli import detmath  # noqa: E402
 from fracture_cli.io.gltf import Primitive, glb_bytes  # noqa: E402  (after the sys.path line)
 from fracture_cli.types import Material  # noqa: E402
+
+def _sin(x):
+    """sin with the same bits on every CPU (libm's rounds by the CPU, and the corpus must regenerate exactly)."""
+    return detmath.sin_cos(x)[0]
+
+
+def _cos(x):
+    """cos with the same bits on every CPU (see :func:`_sin`)."""
+    return detmath.sin_cos(x)[1]
+
 
 # ----------------------------------------------------------------------------
 # Shapes (world units, outward winding unless said otherwise)
@@ -44,7 +59,7 @@ def icosphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
 
 @functools.cache
 def _icosphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
-    t = (1.0 + 5.0 ** 0.5) / 2.0
+    t = (1.0 + math.sqrt(5.0)) / 2.0
     V = [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t], [0, 1, -t],
          [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]
     F = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
@@ -78,7 +93,7 @@ def bumpy(V: np.ndarray, amplitude: float, seed: int) -> np.ndarray:
     r = np.ones(len(V))
     for _ in range(6):
         k = rng.normal(size=3) * 2.5
-        r += amplitude / 6.0 * np.sin(V @ k + rng.uniform(0, 2 * np.pi))
+        r += amplitude / 6.0 * _sin(V @ k + rng.uniform(0, 2 * np.pi))
     return V * r[:, None]
 
 
@@ -113,7 +128,7 @@ def revolve(profile: np.ndarray, segments: int) -> tuple[np.ndarray, np.ndarray]
             V.append(np.array([0.0, 0.0, z]))
             rings.append(np.full(segments, start))
         else:
-            V.extend(np.column_stack([r * np.cos(angles), r * np.sin(angles), np.full(segments, z)]))
+            V.extend(np.column_stack([r * _cos(angles), r * _sin(angles), np.full(segments, z)]))
             rings.append(start + np.arange(segments))
     F = []
     for lower, upper in itertools.pairwise(rings):
@@ -135,7 +150,7 @@ def tube(path: np.ndarray, radii: np.ndarray, segments: int) -> tuple[np.ndarray
         u = np.cross(t, helper)
         u /= np.linalg.norm(u)
         w = np.cross(t, u)
-        V.extend(p + r * (np.cos(angles)[:, None] * u + np.sin(angles)[:, None] * w))
+        V.extend(p + r * (_cos(angles)[:, None] * u + _sin(angles)[:, None] * w))
     F = []
     for a in range(len(path) - 1):
         for i in range(segments):
@@ -200,7 +215,7 @@ def glb(bodies: list[tuple[str, np.ndarray, np.ndarray]], materials: tuple[Mater
         UV = None
         if uvs:
             c = V - V.mean(axis=0)
-            UV = np.column_stack([np.arctan2(c[:, 1], c[:, 0]) / (2 * np.pi) + 0.5,
+            UV = np.column_stack([detmath.atan2(c[:, 1], c[:, 0]) / (2 * np.pi) + 0.5,
                                   c[:, 2] / max(np.ptp(c[:, 2]), 1e-9) + 0.5])
         meshes.append((name, [Primitive(positions=V, normals=N, uvs=UV, indices=F, material=0)]))
     return glb_bytes(meshes, materials)
@@ -268,13 +283,13 @@ def head_with_open_eyes():
 def gear_edge_contact(teeth: int = 8):
     """An octagonal hub prism and closed wedge teeth, each touching the hub only along a vertical hub edge."""
     angles = 2 * np.pi * (np.arange(teeth) + 0.5) / teeth
-    hub_poly = np.column_stack([np.cos(angles), np.sin(angles)])
+    hub_poly = np.column_stack([_cos(angles), _sin(angles)])
     bodies = [("hub", *prism(hub_poly, -0.2, 0.2))]
     half = np.radians(18)
     for i, a in enumerate(angles):
         apex = hub_poly[i]
-        left = apex + 0.45 * np.array([np.cos(a + half), np.sin(a + half)])
-        right = apex + 0.45 * np.array([np.cos(a - half), np.sin(a - half)])
+        left = apex + 0.45 * np.array([_cos(a + half), _sin(a + half)])
+        right = apex + 0.45 * np.array([_cos(a - half), _sin(a - half)])
         bodies.append((f"tooth_{i}", *prism(np.array([apex, right, left]), -0.2, 0.2)))
     return bodies
 
@@ -288,7 +303,7 @@ def gear_coplanar(teeth: int = 8):
     """
     sides = 2 * teeth
     angles = 2 * np.pi * np.arange(sides) / sides
-    hub_poly = np.column_stack([np.cos(angles), np.sin(angles)])
+    hub_poly = np.column_stack([_cos(angles), _sin(angles)])
     bodies = [("hub", *prism(hub_poly, -0.15, 0.15))]
     for i in range(0, sides, 2):
         a, b = hub_poly[i], hub_poly[i + 1]
@@ -329,8 +344,8 @@ def awning_sheet():
     theta = np.linspace(-np.pi / 2, np.pi / 2, 25)
     y = np.linspace(-1.0, 1.0, 17)
     T, Y = np.meshgrid(theta, y, indexing="ij")
-    R = 0.8 * (1 + 0.04 * np.sin(3 * Y) * np.cos(T))
-    V = np.column_stack([(R * np.sin(T)).ravel(), Y.ravel(), (R * np.cos(T)).ravel()])
+    R = 0.8 * (1 + 0.04 * _sin(3 * Y) * _cos(T))
+    V = np.column_stack([(R * _sin(T)).ravel(), Y.ravel(), (R * _cos(T)).ravel()])
     return V, grid_faces(*T.shape)
 
 
@@ -342,11 +357,11 @@ def teapot():
     body = revolve(body_profile, 24)
     lid = revolve(lid_profile, 24)
     s = np.linspace(0, 1, 9)[:, None]
-    spout_path = (1 - s) ** 2 * np.array([0.55, 0, 0.3]) + 2 * s * (1 - s) * np.array([1.05, 0, 0.35]) \
-        + s ** 2 * np.array([1.25, 0, 0.8])
+    spout_path = (1 - s) * (1 - s) * np.array([0.55, 0, 0.3]) + 2 * s * (1 - s) * np.array([1.05, 0, 0.35]) \
+        + s * s * np.array([1.25, 0, 0.8])
     spout = tube(spout_path, np.linspace(0.14, 0.06, 9), 10)
     u = np.linspace(0, np.pi, 11)
-    handle_path = np.column_stack([-0.55 - 0.55 * np.sin(u), np.zeros(11), 0.45 + 0.28 * np.cos(u)])
+    handle_path = np.column_stack([-0.55 - 0.55 * _sin(u), np.zeros(11), 0.45 + 0.28 * _cos(u)])
     handle = tube(handle_path, np.full(11, 0.06), 8)
     return [("body", *body), ("lid", *lid), ("spout", *spout), ("handle", *handle)]
 
@@ -354,8 +369,8 @@ def teapot():
 def two_prisms():
     """32 triangles: two pentagonal prisms touching along a side, the second raised by a third of its height."""
     a = 2 * np.pi * np.arange(5) / 5
-    pent = np.column_stack([np.cos(a), np.sin(a)])  # a vertex at +x: rotate so a side faces +x
-    pent = pent @ np.array([[np.cos(np.pi / 5), np.sin(np.pi / 5)], [-np.sin(np.pi / 5), np.cos(np.pi / 5)]])
+    pent = np.column_stack([_cos(a), _sin(a)])  # a vertex at +x: rotate so a side faces +x
+    pent = pent @ np.array([[_cos(np.pi / 5), _sin(np.pi / 5)], [-_sin(np.pi / 5), _cos(np.pi / 5)]])
     side_x = pent[:, 0].max()
     first = prism(pent, 0.0, 1.0)
     mirrored = pent * np.array([-1.0, 1.0])

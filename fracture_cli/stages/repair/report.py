@@ -65,7 +65,7 @@ def records_for_report(records: Sequence[RepairRecord], normalization: Normaliza
     for r in records:
         d = r.to_dict()
         if "area" in d:
-            d["area"] = float(f"{r.area * scale**2:.9g}")
+            d["area"] = float(f"{r.area * scale * scale:.9g}")
         if "where" in d:
             d["where"] = [float(f"{x:.9g}") for x in normalization.to_world(np.array([r.where], dtype=np.float64))[0]]
         for key in _LENGTHS:

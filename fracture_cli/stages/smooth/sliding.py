@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fracture_cli import trigeom
+from fracture_cli import detmath, trigeom
 from fracture_cli.edgelengths import longest_edges
 from fracture_cli.stages.smooth.pointgrid import PointGrid
 from fracture_cli.types import SurfaceMesh
@@ -42,7 +42,7 @@ class CageSurface:
         row, face = self.grid.query(np.stack([points - reach[:, None], points + reach[:, None]], axis=1))
         tri = self.V[self.F[face]]
         closest = trigeom.closest_points(points[row], tri[:, 0], tri[:, 1], tri[:, 2])
-        dist = np.sum((closest - points[row]) ** 2, axis=1)
+        dist = np.sum(np.square(closest - points[row]), axis=1)
         best = np.lexsort((face, dist, row))
         first = best[np.r_[True, row[best][1:] != row[best][:-1]]]
         return closest[first]
@@ -124,7 +124,7 @@ class Containment:
         # above the separating-axis test's own threshold for an axis, 1e-12 times its pairs' extent squared).
         extent = max(float(np.ptp(self.SV, axis=0).max(initial=0.0)) if len(self.SV) else 0.0,
                      float(np.ptp(V0, axis=0).max(initial=0.0)) if len(V0) else 0.0)
-        self.tiny = 1e-9 * (2.0 * extent) ** 2
+        self.tiny = 1e-9 * detmath.square(2.0 * extent)
         self.boxes, longest = _boxes_and_longest_edges(self.SV, self.SF)
         cell = _QUERY_CELL * trigeom.default_cell(trigeom.triangle_boxes(V0, self.F))
         # Short input triangles are found from their corners (every corner of a triangle meeting a box lies

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli import detmath
 from fracture_cli.stages.smooth.topology import SINGULAR_TOL, combinations
 
 # Pieces with at least this margin below the best guaranteed value are never
@@ -135,7 +136,7 @@ def fan(poly: np.ndarray, keys: np.ndarray, normals: np.ndarray, positions: np.n
     u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
     w = np.cross(nrm, u)
     d = P - centre[poly]
-    angle = np.arctan2(np.einsum("ij,ij->i", d, w[poly]), np.einsum("ij,ij->i", d, u[poly]))
+    angle = detmath.atan2(np.einsum("ij,ij->i", d, w[poly]), np.einsum("ij,ij->i", d, u[poly]))
     order = np.lexsort((keys, angle, poly))
     poly, keys = poly[order], keys[order]
     start = np.cumsum(count) - count

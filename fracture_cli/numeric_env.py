@@ -18,8 +18,8 @@ collapse, a bond) then turn those bits into other meshes:
   ``sin``, ``atan2`` ... by the CPU, in every process, and no variable a
   program can set after it started changes that. The library therefore calls
   no transcendental function where a result reaches an output: squares are
-  products, angles are compared through their cosines or through
-  :func:`pseudo_angle`, and tests/test_numerics.py fails on a new call.
+  products, and :mod:`fracture_cli.detmath` has the few functions needed, made
+  of IEEE operations only; tests/test_numerics.py fails on a new call.
 
 Both variables only act before numpy is first imported, so :mod:`fracture_cli`
 sets them when it is imported (the ``fracture`` command imports it first; a
@@ -32,7 +32,7 @@ nowhere measurable, and the bytes may then differ between machines).
 
 from __future__ import annotations
 
-import math
+import functools
 import os
 import platform
 import sys
@@ -48,6 +48,7 @@ NUMERIC_DISTRIBUTIONS = ("numpy", "scipy", "manifold3d", "trimesh", "open3d", "n
                          "ortools", "tetgen", "fast-simplification", "scikit-image")
 
 _PINNED: bool | None = None  # whether pin_environment() acted before numpy was loaded
+_UNPINNED_BECAUSE = ""  # why not, for the bake's warning
 
 
 def pin_environment() -> bool:
@@ -59,13 +60,16 @@ def pin_environment() -> bool:
         True when the pin is in effect (numpy not imported before, an x86-64 machine, no
         ``FRACTURE_NUMERICS=host``).
     """
-    global _PINNED
+    global _PINNED, _UNPINNED_BECAUSE
     if _PINNED is not None:
         return _PINNED
-    if os.environ.get(HOST_ENV) == "host" or platform.machine().lower() not in ("x86_64", "amd64"):
-        _PINNED = False
+    if os.environ.get(HOST_ENV) == "host":
+        _PINNED, _UNPINNED_BECAUSE = False, f"{HOST_ENV}=host"
+    elif platform.machine().lower() not in ("x86_64", "amd64"):
+        _PINNED, _UNPINNED_BECAUSE = False, f"no kernel set to pin on {platform.machine()}"
     elif "numpy" in sys.modules:
         _PINNED = _already_pinned()
+        _UNPINNED_BECAUSE = "" if _PINNED else "numpy was imported before fracture_cli"
     else:
         os.environ["OPENBLAS_CORETYPE"] = BLAS_CORE
         # numpy refuses both variables at once; the enable list is the stronger statement.
@@ -87,6 +91,12 @@ def pinned() -> bool:
     return bool(_PINNED)
 
 
+def unpinned_because() -> str:
+    """Why the kernels are not pinned ("" when they are)."""
+    return _UNPINNED_BECAUSE
+
+
+@functools.lru_cache(maxsize=1)
 def versions() -> dict[str, str]:
     """Installed versions of :data:`NUMERIC_DISTRIBUTIONS` (``"-"`` where one is missing), without importing them."""
     found = {}
@@ -103,61 +113,4 @@ def environment() -> dict[str, object]:
     return {"pinned": pinned(),
             "blas_core": BLAS_CORE if pinned() else os.environ.get("OPENBLAS_CORETYPE", "host"),
             "numpy_simd": NUMPY_FEATURES if pinned() else "host",
-            "versions": versions()}
-
-
-# ---------------------------------------------------------------------------
-# Arithmetic that is exact or correctly rounded everywhere (IEEE +, -, *, /, sqrt), in place of libm.
-
-def square(x):
-    """``x * x`` (not ``x ** 2``: on Python and numpy scalars that calls libm's ``pow``)."""
-    return x * x
-
-
-def cube(x):
-    """``x * x * x`` (not ``x ** 3``: libm's ``pow`` rounds by the CPU)."""
-    return x * x * x
-
-
-def pseudo_angle(y, x):
-    """A number in [0, 4) that increases with ``atan2(y, x)`` taken in [0, 2 pi).
-
-    Sorting by it orders directions as their angles do, with only additions and
-    one division (the same bits on every CPU, unlike ``atan2``); equal directions
-    get equal values. Works on floats and numpy arrays; ``(0, 0)`` gives 0.
-
-    Parameters
-    ----------
-    y, x : float or (n,) float array
-        Components of the directions.
-    """
-    import numpy as np
-
-    y = np.asarray(y, dtype=np.float64)
-    x = np.asarray(x, dtype=np.float64)
-    total = np.abs(x) + np.abs(y)
-    safe = np.where(total > 0.0, total, 1.0)
-    # The "diamond angle": the position along the unit L1 diamond, quadrant by quadrant.
-    ratio = np.where(total > 0.0, y / safe, 0.0)
-    value = np.where(x >= 0.0, np.where(y >= 0.0, ratio, 4.0 + ratio), 2.0 - ratio)
-    value = np.where(value >= 4.0, 0.0, value)
-    return value if value.ndim else float(value)
-
-
-def exact_log_ceil(value: float, ratio: float) -> int:
-    """The smallest integer ``k >= 0`` with ``ratio ** k >= value``, by repeated products (no ``log``).
-
-    Parameters
-    ----------
-    value : float
-        Must be finite.
-    ratio : float
-        Greater than 1.
-    """
-    if not math.isfinite(value):
-        raise ValueError(f"exact_log_ceil needs a finite value, got {value}")
-    k, power = 0, 1.0
-    while power < value:
-        power *= ratio
-        k += 1
-    return k
+            "versions": dict(versions())}
