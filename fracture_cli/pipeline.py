@@ -18,7 +18,7 @@ import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 from fracture_cli import parallel, progress
 from fracture_cli.errors import UsageError
@@ -57,7 +57,29 @@ class PipelineState:
     checks: dict[str, CheckValue] | None = None  # what the report says of the fragments
     runtime: RuntimeData | None = None
 
-    def need(self, name: str, stage: str) -> Any:
+    # One overload per field kind: a stage gets its input with its type (no Any on the spine).
+    @overload
+    def need(self, name: Literal["source", "source_sha256"], stage: str) -> str: ...
+    @overload
+    def need(self, name: Literal["loaded", "surface"], stage: str) -> SurfaceMesh: ...
+    @overload
+    def need(self, name: Literal["cage"], stage: str) -> Cage: ...
+    @overload
+    def need(self, name: Literal["tet_mesh"], stage: str) -> TetMesh: ...
+    @overload
+    def need(self, name: Literal["eta"], stage: str) -> np.ndarray: ...
+    @overload
+    def need(self, name: Literal["modes"], stage: str) -> Modes: ...
+    @overload
+    def need(self, name: Literal["pieces"], stage: str) -> Pieces: ...
+    @overload
+    def need(self, name: Literal["regions"], stage: str) -> Regions: ...
+    @overload
+    def need(self, name: Literal["fragments"], stage: str) -> Fragments: ...
+    @overload
+    def need(self, name: Literal["runtime"], stage: str) -> RuntimeData: ...
+
+    def need(self, name: str, stage: str) -> object:
         """The field ``name``, or a usage error naming the stage that produces it."""
         value = getattr(self, name)
         if value is None:

@@ -114,7 +114,7 @@ class CutSubproblemSolver:
         self._partition_version = 0
         self._fixed_count = -1
         self._fixed_cache: list[tuple[np.ndarray, np.ndarray]] = []
-        self._cell_cache = None
+        self._cell_cache: tuple[int, np.ndarray, np.ndarray, sp.csr_matrix] | None = None
         self._before_merge: np.ndarray | None = None
         self._budget_merge_rayleigh = np.inf
         # "stalls": pricing found a violated set that is already a union of cells, i.e. the

@@ -128,10 +128,11 @@ class MasterLP:
 
     def __init__(self, volumes: np.ndarray):
         self.vol = volumes
-        self._lp = None
-        self._lp_key = None
-        self._lp_G = None
-        self._lp_basis = None
+        self._lp: Any = None  # the HiGHS object of the last master (highspy has no type stubs)
+        self._lp_key: Any = None
+        self._lp_G: Any = None
+        # (cells, edges, m, column statuses, row statuses) of the last optimal basis
+        self._lp_basis: tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray] | None = None
         self._highs = None  # the Highs object of the master with default settings (see _highs_model)
         self.retries = 0
         # (partition version, (E,) bool): cell edges whose flow was basic (strictly inside its bounds)
