@@ -1,0 +1,113 @@
+"""Benchmark: the break atlas of every sample asset (issue 30): does breaking follow the hit?
+
+Each sample asset is baked with the recipe its manifest names (sample_assets/manifest.toml) in a
+temporary folder, in a fresh process (`python -m fracture_cli bake`), then swept by
+:func:`fracture_cli.atlas.run_atlas` (200 hits by farthest-point sampling, impulse towards the
+asset's centre; every figure is defined in fracture_cli/atlas/sweep.py). Targets (issue 30, for
+the stress criterion to come): hit fragment detached >= 95%, locality <= 0.3 at 2 x b0 and
+<= 0.5 at 8 x b0, first break splits >= 50%, everything / d1 >= 8.
+
+    python bench/bench_atlas.py [--quick] [--no-bake] [--default-recipe]
+
+--no-bake (and --quick) sweeps the manifest bakes committed under tests/data/runtime_conformance/
+instead of baking (minutes); --default-recipe adds a row per asset baked with the default recipe.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import fracture_cli  # noqa: E402, F401, I001  (first: pins the kernels before numpy loads)
+
+from fracture_cli.atlas import run_atlas  # noqa: E402
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFORMANCE = os.path.join(REPO, "tests", "data", "runtime_conformance")
+COLUMNS = ("hit_detached", "locality_2x", "locality_8x", "first_break_splits", "graded_median", "graded_p10",
+           "b0_median", "d1_median")
+
+
+def _manifest() -> dict[str, str]:
+    with open(os.path.join(REPO, "sample_assets", "manifest.toml"), "rb") as fh:
+        return dict(tomllib.load(fh)["assets"])
+
+
+def _bake(asset: str, recipe: str, out: str) -> str:
+    """Bake one sample asset in a fresh process; returns its runtime file."""
+    subprocess.run([sys.executable, "-m", "fracture_cli", "-q", "bake", os.path.join(REPO, "sample_assets", asset),
+                    "-o", out, "--recipe", recipe], check=True, cwd=REPO)
+    return os.path.join(out, os.path.splitext(asset)[0] + ".fracture.json")
+
+
+def _cell(figures: dict, key: str) -> str:
+    value = figures[key]
+    if value is None:
+        return "-"
+    if key in ("hit_detached", "first_break_splits"):
+        return f"{100 * value:.0f}%"
+    if key.startswith("locality"):
+        return f"{value:.2f} / {figures[key + '_median']:.2f} ({figures[key + '_hits']})"
+    return f"{value:.3g}"
+
+
+def _row(label: str, json_path: str) -> str:
+    t0 = time.perf_counter()
+    result = run_atlas(json_path)
+    seconds = time.perf_counter() - t0
+    summary = result.summary
+    figures = summary["figures"]
+    cells = [label, summary["criterion"], str(summary["counts"]["fragments"]), str(summary["counts"]["edges"]),
+             *(_cell(figures, key) for key in COLUMNS), f"{seconds:.2f}"]
+    return "| " + " | ".join(cells) + " |"
+
+
+def run(quick: bool = False, bake: bool = True, default_recipe: bool = False) -> str:
+    bake = bake and not quick
+    lines = [
+        "## Break atlas",
+        "",
+        ("Each sample asset " + ("baked with its manifest recipe in a fresh process" if bake else
+                                 "from its committed manifest bake (tests/data/runtime_conformance/)")
+         + ", then `run_atlas` (fracture_cli/atlas/): 200 hits spread over the contact sites by farthest-point "
+           "sampling, impulse towards the asset's centre of mass, the file's default threshold T. Exact per hit "
+           "(no magnitude sampling): b0 = first bond breaks, d1 = first detachment, everything = every bond "
+           "broken. Columns: hit fragment detached just above d1; locality (mean / median over the hits that "
+           "detach something (their number)) = mean distance hit-detached fragments over mean distance "
+           "hit-all fragments, at 2 x b0 and 8 x b0; share of first breaks that split (d1 = b0); median and "
+           "10th percentile of everything / d1; medians of b0 / T and d1 / T. Issue 30's targets (stress "
+           "criterion): hit detached >= 95%, locality <= 0.3 (2x) and <= 0.5 (8x), splits >= 50%, "
+           "everything / d1 >= 8."),
+        "",
+        "| asset (recipe) | criterion | fragments | bonds | hit detached | locality 2x | locality 8x "
+        "| first break splits | everything / d1 median | everything / d1 p10 | b0 / T | d1 / T | atlas (s) |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    recipes = [("manifest", None)] + ([("default", "default")] if default_recipe and bake else [])
+    with tempfile.TemporaryDirectory() as tmp:
+        for which, forced in recipes:
+            for asset, recipe in _manifest().items():
+                stem = os.path.splitext(asset)[0]
+                recipe = forced or recipe
+                if bake:
+                    json_path = _bake(asset, recipe, os.path.join(tmp, f"{stem}-{which}"))
+                else:
+                    json_path = os.path.join(CONFORMANCE, f"{stem}.fracture.json")
+                lines.append(_row(f"{asset} ({recipe})", json_path))
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--no-bake", action="store_true")
+    parser.add_argument("--default-recipe", action="store_true")
+    args = parser.parse_args()
+    print(run(quick=args.quick, bake=not args.no_bake, default_recipe=args.default_recipe))
