@@ -114,6 +114,7 @@ class Step:
     run: Processor
     reads: tuple[str, ...] = ()
     writes: tuple[str, ...] = ()
+    saves: str | None = None  # ``save PATH``: the surface file, and for an OBJ its material library
     loads: str | None = None  # ``load PATH``: the chain's source from here on
     exports: str | None = None  # ``export DIR``: the source's bake set is published into DIR
 
@@ -129,7 +130,7 @@ def guard_chain(processors: list[Processor | None]) -> None:
     from fracture_cli.io.write import surface_outputs
 
     steps = [p for p in processors if isinstance(p, Step)]
-    if not any(s.writes or s.exports for s in steps):
+    if not any(s.writes or s.saves or s.exports for s in steps):
         return
     reads: list[str] = []
     writes: list[str] = []
@@ -140,7 +141,7 @@ def guard_chain(processors: list[Processor | None]) -> None:
             source = step.loads
             reads += input_files(source)
         reads += step.reads
-        writes += [f for path in step.writes for f in surface_outputs(path)]
+        writes += list(step.writes) + (surface_outputs(step.saves) if step.saves is not None else [])
         if step.exports is not None and source is not None:
             sets.append((step.exports, stem_of(source)))
     guard_outputs(writes, reads, sets=sets)
@@ -344,7 +345,8 @@ def _file_command(name: str, doc: str, run: Callable[[Chain, str], None], access
     """Register a chained command taking one PATH argument; ``run(chain, path)`` works.
 
     ``access`` says what PATH is to the output guard: ``"reads"`` (a file read), ``"writes"`` (a file
-    written) or ``"exports"`` (the folder a bake set is published into).
+    written), ``"saves"`` (a surface written, with its companion files) or ``"exports"`` (the folder a
+    bake set is published into).
     """
     folder = access == "exports"
 
@@ -355,6 +357,8 @@ def _file_command(name: str, doc: str, run: Callable[[Chain, str], None], access
 
         if access == "exports":
             return Step(process, exports=path)
+        if access == "saves":
+            return Step(process, saves=path)
         return Step(process, reads=(path,)) if access == "reads" else Step(process, writes=(path,))
 
     cli.command(name, help=doc)(command)
@@ -396,7 +400,7 @@ def _export(chain: Chain, out_dir: str) -> None:
 
 
 _file_command("save", "Write the current surface (GLB, OBJ with its <stem>.mtl, PLY, STL, OFF) in the input's "
-              "units.", _save, "writes")
+              "units.", _save, "saves")
 _file_command("save-cage", "Write the cage surface (OBJ, PLY, STL, OFF) for inspection.", _save_cage, "writes")
 _file_command("save-tets", "Write the tet mesh as .npz (vertices, tets, normalization).", _save_tets, "writes")
 _file_command("load-tets", "Read a tet mesh saved by save-tets (to resume a chain from it).", _load_tets, "reads")
