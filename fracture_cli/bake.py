@@ -27,9 +27,10 @@ from typing import Any
 from fracture_cli import __version__, numeric_env, trigeom
 from fracture_cli.cache import file_sha256
 from fracture_cli.errors import FractureError, UsageError
+from fracture_cli.interrupts import caused_by_interrupt
 from fracture_cli.io.inputs import estimate_output_bytes, input_files
 from fracture_cli.io.outputs import output_set
-from fracture_cli.io.preflight import check_inputs_untouched, preflight, refuse_inputs_as_outputs
+from fracture_cli.io.preflight import check_inputs_untouched, guard_outputs, preflight
 from fracture_cli.io.write import fragment_name
 from fracture_cli.pipeline import STAGE_NAMES, STEPS, PipelineState, Runner
 from fracture_cli.recipe import Recipe
@@ -231,7 +232,11 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
 
 
 def check_batch(inputs: Sequence[str], out_dir: str) -> None:
-    """Refuse a batch in which two inputs would write the same outputs, or an output would replace an input."""
+    """Refuse a batch in which two inputs would write the same outputs, or an output would replace an input.
+
+    Also an output over a file of another published bake set in ``out_dir``
+    (:func:`~fracture_cli.io.preflight.guard_outputs`); each input's own set is republished.
+    """
     stems: dict[str, str] = {}
     for path in inputs:
         stem = stem_of(path)
@@ -239,7 +244,8 @@ def check_batch(inputs: Sequence[str], out_dir: str) -> None:
             raise UsageError(f"{stems[stem]} and {path} would both write {stem}.* into {out_dir}; "
                              "bake them into different folders")
         stems[stem] = path
-    refuse_inputs_as_outputs(out_dir, inputs)
+    if out_dir:  # preflight() says what is wrong with an empty one
+        guard_outputs(inputs=[f for p in inputs for f in input_files(p)], sets=[(out_dir, s) for s in stems])
 
 
 def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir: str | None = None,
@@ -276,7 +282,7 @@ def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir:
             result = bake(path, out_dir, recipe, cache_dir=cache_dir, jobs=jobs,
                           preview_size=preview_size if preview else None)
         except Exception as exc:
-            if not keep_going or len(inputs) == 1:
+            if not keep_going or len(inputs) == 1 or caused_by_interrupt(exc):  # Ctrl-C stops the whole batch
                 raise
             yield BatchItem(path, error=describe_error(exc, path), exception=exc)
             continue

@@ -1,288 +1,23 @@
-"""The ``fracture`` command line: a click chain of the pipeline's stages, plus ``bake`` and tools.
+"""The ``fracture`` console script: :func:`main`, which installs the Ctrl-C handling before the rest loads.
 
-Commands only parse options and call the library. The chained stage commands
-are generated from :data:`fracture_cli.pipeline.STAGES` (click's imagepipe
-pattern: each returns a processor, :func:`run_chain` threads one
-:class:`~fracture_cli.pipeline.PipelineState` through them with one
-:class:`~fracture_cli.pipeline.Runner`), and their flags from the stages'
-option dataclasses with the active recipe's values as defaults.
+The click group and its commands live in :mod:`fracture_cli.cli_group`; every
+name of it is reachable from here too (``from fracture_cli.cli import cli``),
+imported on first use. This module imports only the standard library and the
+package itself, so a Ctrl-C while the tool starts (imports take a tenth of a
+second, a bake's native libraries seconds more) is reported as an interrupt,
+exit code 130, and never as an internal error.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import logging
-import os
 import signal
-import traceback
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+import sys
 
-import click
+from fracture_cli import interrupts
 
-from fracture_cli import __version__
-from fracture_cli.cli_options import build_options, configure_output, hoist_global_flags, stage_options, toml_text
-from fracture_cli.errors import EXIT_FAILURE, FractureError, exit_code_for
-from fracture_cli.parallel import available_cores
-from fracture_cli.pipeline import STAGE_NAMES, PipelineState, Runner, stage
-
-log = logging.getLogger("fracture_cli")
-
-EXAMPLES = """
-\b
-Examples:
-  # bake an asset with a recipe (a reusable "destructible material")
-  fracture bake chair.glb -o build/chair --recipe wood
-\b
-  # the same, step by step (same bytes), saving the cage and tets for inspection
-  fracture -r wood load chair.glb repair cage save-cage build/cage.obj tetra \\
-      save-tets build/tets.npz material modes pieces smooth fragments simplify \\
-      runtime export build/chair
-\b
-  # every stage's flags, with the values the recipe gives them
-  fracture -r wood smooth --help
-\b
-  # try an impact on a baked asset
-  fracture impact build/chair/chair.fracture.json --point 0 1 0 --impulse 0 -5 0
-\b
-  # round-trip a mesh (geometry, UVs, normals, materials)
-  fracture load in.glb save out.glb
-\b
-Global options (-v, -q, --debug, -j N) may also follow any command.
-"""
-
-
-@dataclass
-class Chain:
-    """What the chained commands share: the runner and the state so far (and, through it, the recipe)."""
-
-    runner: Runner
-    state: PipelineState = dataclasses.field(default_factory=PipelineState)
-
-    @property
-    def recipe(self) -> Any:
-        """The recipe of the command line, looked up beside the loaded asset too."""
-        return active_recipe((self.state.source,) if self.state.source else ())
-
-
-Processor = Callable[[Chain], None]
-
-
-def _root_meta() -> dict[str, Any]:
-    ctx = click.get_current_context(silent=True)
-    return ctx.find_root().meta if ctx is not None else {}
-
-
-def active_recipe(assets: tuple[str, ...] = ()) -> Any:
-    """The recipe the command line chose (``-r``, ``--set``, ``--recipes``), loaded once."""
-    from fracture_cli.recipe import load_recipe, search_path
-
-    meta = _root_meta()
-    loaded = meta.setdefault("fracture.recipes", {})  # by asset folders searched
-    if assets not in loaded:
-        search = search_path(meta.get("fracture.recipes_dir"), assets)
-        loaded[assets] = load_recipe(meta.get("fracture.recipe_name", "default"), meta.get("fracture.overrides", ()),
-                                     search=search)
-    return loaded[assets]
-
-
-def _recipe_value(section: str, field_name: str) -> tuple[str, Any]:
-    recipe = active_recipe()
-    return f"recipe '{recipe.name}'", getattr(recipe[section], field_name)
-
-
-class FractureGroup(click.Group):
-    """The chain group: global flags anywhere, stage commands built on demand, errors as one line."""
-
-    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
-        return super().parse_args(ctx, hoist_global_flags(args))
-
-    def list_commands(self, ctx: click.Context) -> list[str]:
-        return list(STAGE_NAMES) + [n for n in super().list_commands(ctx) if n not in STAGE_NAMES]
-
-    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        if cmd_name in STAGE_NAMES and cmd_name not in self.commands:
-            self.add_command(_stage_command(cmd_name))
-        return super().get_command(ctx, cmd_name)
-
-    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
-        # Stage lines come from the table, so `fracture --help` does not import every stage.
-        rows = [(s, stage(s).help) for s in STAGE_NAMES]
-        rows += [(n, self.commands[n].get_short_help_str(60)) for n in super().list_commands(ctx)
-                 if n not in STAGE_NAMES]
-        with formatter.section("Commands"):
-            formatter.write_dl(rows)
-
-    def invoke(self, ctx: click.Context) -> Any:
-        from fracture_cli.io.outputs import forget_published, interrupt_message
-
-        forget_published()  # the Ctrl-C message lists only this run's outputs
-        try:
-            return super().invoke(ctx)
-        except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
-            raise
-        except KeyboardInterrupt:
-            click.echo(f"fracture: {interrupt_message()}", err=True)
-            ctx.exit(130)
-        except Exception as exc:  # FractureError: one line; anything else is a bug: one line unless --debug
-            from fracture_cli.bake import describe_error
-
-            if ctx.meta.get("fracture.debug"):
-                traceback.print_exc()
-            click.echo(f"error: {describe_error(exc)}", err=True)
-            ctx.exit(exit_code_for(exc) if isinstance(exc, FractureError) else EXIT_FAILURE)
-
-
-class TerminalCommand(click.Command):
-    """A command that ends the chain, so its options may follow its arguments.
-
-    In a chain group click parses subcommands with interspersed options off (an
-    argument would otherwise swallow the next command). Commands that take
-    everything after them (bake, impact, preview, recipes) turn it back on.
-    """
-
-    def make_context(self, info_name: str | None, args: list[str], parent: click.Context | None = None,
-                     **extra: Any) -> click.Context:
-        extra["allow_interspersed_args"] = True
-        return super().make_context(info_name, args, parent=parent, **extra)
-
-
-@click.group(cls=FractureGroup, chain=True, invoke_without_command=False, epilog=EXAMPLES,
-             context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
-@click.version_option(__version__, "--version", prog_name="fracture")
-@click.option("--debug", is_flag=True, help="Show tracebacks for errors.")
-@click.option("-q", "--quiet", is_flag=True, help="Print only errors (no progress).")
-@click.option("-v", "--verbose", count=True, help="Log every step (-vv for debug detail).")
-@click.option("-r", "--recipe", "recipe_name", default="default", show_default=True,
-              help="Recipe the chained stages take their options from (see 'fracture recipes').")
-@click.option("--set", "overrides", multiple=True, metavar="SECTION.KEY=VALUE",
-              help="Override one recipe parameter, e.g. --set modes.num_modes=16 (repeatable).")
-@click.option("--recipes", "recipes_dir", type=click.Path(file_okay=False, path_type=str), default=None,
-              help="Folder of your own recipes, searched first (then $FRACTURE_RECIPES, recipes/ beside the "
-                   "asset, ./recipes, the built-ins).")
-@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, metavar="N",
-              help="Processes a bake may use for independent work (default: every core, here "
-                   f"{available_cores()}); the outputs are the same bytes for any N.")
-@click.pass_context
-def cli(ctx: click.Context, debug: bool, quiet: bool, verbose: int, recipe_name: str, overrides: tuple[str, ...],
-        recipes_dir: str | None, jobs: int | None) -> None:
-    """Prefracture game assets with fracture modes (Sellan et al. 2023).
-
-    Run everything from a recipe with 'bake', or chain the stages left to
-    right; a chain of every stage writes the same files as 'bake'. Stage
-    flags default to the recipe's values (-r, default 'default').
-    """
-    ctx.meta.update({"fracture.debug": debug, "fracture.quiet": quiet, "fracture.recipe_name": recipe_name,
-                     "fracture.overrides": overrides, "fracture.recipes_dir": recipes_dir,
-                     "fracture.jobs": jobs})
-    configure_output(verbose, quiet)
-
-
-@cli.result_callback()
-def run_chain(processors: list[Processor | None], **_: Any) -> None:
-    """Thread one pipeline state through the chained commands' processors."""
-    if not any(processors):
-        return
-    chain = Chain(runner=Runner("fracture", jobs=_root_meta().get("fracture.jobs")))
-    for process in processors:
-        if process is not None:
-            process(chain)
-
-
-# ----------------------------------------------------------------------------
-# Chained commands: one per stage of the pipeline table, plus saving and loading intermediate results
-
-def _stage_command(name: str) -> click.Command:
-    """The chained command of stage ``name``: its flags from the options class, defaults from the recipe."""
-    row = stage(name)
-
-    @stage_options(row.options_class, name, _recipe_value, short=row.short)
-    def command(**kwargs: Any) -> Processor:
-        path = kwargs.pop("path", None)
-
-        def process(chain: Chain) -> None:
-            if path is not None:
-                chain.state = PipelineState(source=path)
-                chain.runner.label = os.path.splitext(os.path.basename(path))[0]
-            options = build_options(row.options_class, kwargs, chain.recipe[name])
-            chain.state = chain.runner.run(name, chain.state, options)
-
-        return process
-
-    if name == "load":
-        command = click.argument("path", type=click.Path(dir_okay=True, path_type=str))(command)
-    return click.command(name, help=row.help + _consumes(row.consumes))(command)
-
-
-def _consumes(fields: tuple[str, ...]) -> str:
-    needs = [f for f in fields if f != "source"]
-    return f"\n\nNeeds: {', '.join(needs)} (from earlier commands in the chain)." if needs else ""
-
-
-def _file_command(name: str, doc: str, run: Callable[[Chain, str], None], folder: bool = False) -> None:
-    """Register a chained command taking one PATH argument (a file, or a ``folder``); ``run(chain, path)`` works."""
-
-    @click.argument("path", type=click.Path(dir_okay=folder, file_okay=not folder, path_type=str))
-    def command(path: str) -> Processor:
-        return lambda chain: run(chain, path)
-
-    cli.command(name, help=doc)(command)
-
-
-def _save(chain: Chain, path: str) -> None:
-    from fracture_cli.io.inputs import input_files
-    from fracture_cli.io.preflight import refuse_replacing_inputs
-    from fracture_cli.io.write import save_surface
-
-    refuse_replacing_inputs([path], input_files(chain.state.source) if chain.state.source else [])
-    save_surface(path, chain.state.need("surface", "save"))
-    log.info("save: wrote %s", path)
-
-
-def _save_cage(chain: Chain, path: str) -> None:
-    from fracture_cli.io.cage_io import save_cage
-
-    save_cage(path, chain.state.need("cage", "save-cage"))
-
-
-def _save_tets(chain: Chain, path: str) -> None:
-    from fracture_cli.io.cage_io import save_tetmesh
-
-    save_tetmesh(path, chain.state.need("tet_mesh", "save-tets"))
-
-
-def _load_tets(chain: Chain, path: str) -> None:
-    from fracture_cli.io.cage_io import load_tetmesh
-
-    chain.state = dataclasses.replace(chain.state, tet_mesh=load_tetmesh(path))
-
-
-def _export(chain: Chain, out_dir: str) -> None:
-    from fracture_cli.bake import build_report, stem_of, write_outputs
-
-    state = chain.state
-    report = build_report(state, chain.recipe, chain.runner)
-    stem = stem_of(state.need("source", "export"))
-    write_outputs(out_dir, stem, state, report, chain.runner)
-    log.info("export: wrote %s/%s.glb, %s.fracture.json/.bin and %s.report.json", out_dir, stem, stem, stem)
-
-
-_file_command("save", "Write the current surface (GLB, OBJ, PLY, STL, OFF) in the input's units.", _save)
-_file_command("save-cage", "Write the cage surface (OBJ, PLY, STL, OFF) for inspection.", _save_cage)
-_file_command("save-tets", "Write the tet mesh as .npz (vertices, tets, normalization).", _save_tets)
-_file_command("load-tets", "Read a tet mesh saved by save-tets (to resume a chain from it).", _load_tets)
-_file_command("export", "Write <stem>.glb, the runtime file <stem>.fracture.json/.bin and <stem>.report.json "
-              "into the folder PATH, as bake does (needs runtime).", _export, folder=True)
-
-
-# ----------------------------------------------------------------------------
-# Terminal commands
-
-from fracture_cli import cli_tools  # noqa: E402  (registers bake, recipes, impact, preview, view on `cli`)
-from fracture_cli.batch.command import register as _register_batch  # noqa: E402
-
-_register_batch(cli, TerminalCommand)
+TYPE_CHECKING = False  # not typing's: importing typing costs start-up time before Ctrl-C is handled
+if TYPE_CHECKING:
+    from typing import Any
 
 
 def _terminated(signum: int, frame: Any) -> None:
@@ -292,22 +27,75 @@ def _terminated(signum: int, frame: Any) -> None:
     if callable(handler):
         handler(signal.SIGINT, frame)
     else:  # SIGINT ignored (started in the background) or not set from Python: SIGTERM still stops the bake
+        interrupts.record(signum)
         raise KeyboardInterrupt
 
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``fracture`` console script."""
+    interrupts.forget()
+    interrupts.install()
     if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _terminated)
     try:
-        cli.main(args=argv, prog_name="fracture")
+        try:
+            from fracture_cli.cli_group import cli
+        except BaseException as exc:  # noqa: BLE001  (an interrupt while the tool loads: any exception it became)
+            if isinstance(exc, SystemExit) or not interrupts.caused_by_interrupt(exc):
+                raise
+            sys.stderr.write(f"fracture: {interrupts.NOTHING_WRITTEN}\n")
+            raise SystemExit(interrupts.EXIT_INTERRUPTED) from None
+        raise SystemExit(_run(cli, argv))
     except SystemExit:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # exiting: a second Ctrl-C must not break the clean exit
         signal.signal(signal.SIGTERM, signal.SIG_DFL)  # and a SIGTERM now just ends the process
         raise
 
 
-__all__ = ["Chain", "EXAMPLES", "TerminalCommand", "active_recipe", "cli", "cli_tools", "main", "toml_text"]
+def _run(cli: Any, argv: list[str] | None) -> int:
+    """Run the click group (not in click's standalone mode, so every way it can end is decided here); the exit code.
+
+    Inside a command the group itself maps errors to one line and an exit code
+    (:class:`fracture_cli.cli_group.FractureGroup`); here are the rest: click's
+    usage errors, and a Ctrl-C or a closed stdout outside any command, which
+    click would report as "Aborted!" or a broken pipe with exit code 1.
+    """
+    import click
+
+    from fracture_cli.cli_group import quiet_broken_pipe, stdout_closed
+    from fracture_cli.io.outputs import interrupt_message
+
+    try:
+        code = cli.main(args=argv, prog_name="fracture", standalone_mode=False)
+    except (KeyboardInterrupt, click.exceptions.Abort) as exc:
+        if not interrupts.caused_by_interrupt(exc):  # click's own Abort (a prompt's end of input)
+            click.echo("Aborted!", err=True)
+            return 1
+        click.echo(f"fracture: {interrupt_message()}", err=True)
+        return interrupts.EXIT_INTERRUPTED
+    except click.ClickException as exc:
+        exc.show()
+        return exc.exit_code
+    except BrokenPipeError:
+        if not stdout_closed():
+            raise
+        return quiet_broken_pipe()
+    return code if isinstance(code, int) else 0
+
+
+def __getattr__(name: str) -> Any:
+    """The click group's names (``cli``, ``Chain``, ``EXAMPLES`` ...), from :mod:`fracture_cli.cli_group`."""
+    if name.startswith("__"):
+        raise AttributeError(name)
+    from fracture_cli import cli_group
+
+    try:
+        return getattr(cli_group, name)
+    except AttributeError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+
+
+__all__ = ["main"]
 
 if __name__ == "__main__":
     main()

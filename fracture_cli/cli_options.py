@@ -24,14 +24,18 @@ from fracture_cli.options import check_value, option_fields
 
 # Flags of the top-level group that may also follow a command (``fracture bake x.glb -o out -v``).
 GLOBAL_FLAGS = frozenset({"-v", "-vv", "-vvv", "--verbose", "-q", "--quiet", "--debug"})
-# ... and global options that take a value (``--jobs 2``, ``--jobs=2``, ``-j2``).
-GLOBAL_VALUED = ("-j", "--jobs")
+# ... and global options that take a value (``--jobs 2``, ``--jobs=2``, ``-j2``, ``--recipes DIR``).
+GLOBAL_VALUED = ("-j", "--jobs", "-r", "--recipe", "--set", "--recipes")
 
 
 def hoist_global_flags(args: Sequence[str]) -> list[str]:
     """``args`` with the global flags moved to the front, so they work before and after any command.
 
-    Nothing after a ``--`` moves.
+    Every option of the top-level group moves (:data:`GLOBAL_FLAGS`, and
+    :data:`GLOBAL_VALUED` with its value, as ``--opt VALUE`` or ``--opt=VALUE``),
+    in order. ``bake``, ``batch`` and ``recipes`` also have ``-r``/``--set`` of
+    their own; given after them, the global ones do the same. Nothing after a
+    ``--`` moves, nor ``--help`` or ``--version``.
     """
     args = list(args)
     end = args.index("--") if "--" in args else len(args)
@@ -44,7 +48,9 @@ def hoist_global_flags(args: Sequence[str]) -> list[str]:
         elif a in GLOBAL_VALUED and i + 1 < end:
             flags += [a, args[i + 1]]
             i += 1
-        elif a.startswith("--jobs=") or (a.startswith("-j") and a[2:].isdigit()):
+        elif a.startswith("--") and a.split("=", 1)[0] in GLOBAL_VALUED:
+            flags.append(a)
+        elif a.startswith("-j") and a[2:].isdigit():
             flags.append(a)
         else:
             rest.append(a)

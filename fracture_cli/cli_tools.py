@@ -13,7 +13,7 @@ from typing import Any
 
 import click
 
-from fracture_cli.cli import Chain, Processor, TerminalCommand, active_recipe, cli
+from fracture_cli.cli_group import Chain, Processor, TerminalCommand, active_recipe, cli
 from fracture_cli.cli_options import toml_text
 from fracture_cli.errors import FractureError, UsageError
 
@@ -107,7 +107,7 @@ def recipes_cmd(action: str, name: str | None, overrides: tuple[str, ...]) -> Pr
             return
         if not name:
             raise UsageError("'recipes show' needs a recipe name, e.g. 'fracture recipes show glass'")
-        recipe = load_recipe(name, overrides, search=search)
+        recipe = load_recipe(name, tuple(meta.get("fracture.overrides", ())) + overrides, search=search)
         click.echo(f"# {recipe.name}: {recipe.description}")
         if len(recipe.chain) > 1:
             click.echo(f"# extends: {' -> '.join(recipe.chain[1:])}")
@@ -149,6 +149,8 @@ def impact_cmd(runtime_file: str, point: tuple[float, float, float], impulse: tu
         from fracture_cli.runtime.format import load_runtime
         from fracture_cli.runtime.impact import project_impact
 
+        guard_beside(runtime_file, [p for p in (out_glb, out_png) if p], glb=bool(out_glb or out_png),
+                     report=bool(out_png))
         data = load_runtime(runtime_file)
         result = project_impact(data, point, impulse, threshold)
         sites = np.asarray(data.sites, dtype=np.float64)
@@ -197,10 +199,29 @@ def preview_cmd(runtime_file: str, out_png: str, size: tuple[int, int]) -> Proce
         from fracture_cli.preview import render_preview
 
         check_preview_size(size, "--size")
+        guard_beside(runtime_file, [out_png], glb=True, report=True)
         render_preview(runtime_file, out_png, width=size[0], height=size[1])
         log.info("preview: wrote %s", out_png)
 
     return process
+
+
+def guard_beside(runtime_file: str, outputs: list[str], *, glb: bool, report: bool) -> None:
+    """The output guard of a command reading a bake: the runtime file and its .bin, and the GLB and report beside.
+
+    Raises
+    ------
+    OutputError
+        An output would replace one of them, or a file of a published bake set.
+    """
+    from fracture_cli.io.preflight import guard_outputs
+    from fracture_cli.runtime.format import runtime_files
+
+    reads = runtime_files(runtime_file)
+    if runtime_file.endswith(".fracture.json"):
+        stem_path = runtime_file[: -len(".fracture.json")]
+        reads += [stem_path + ".glb"] * glb + [stem_path + ".report.json"] * report
+    guard_outputs(outputs, reads)
 
 
 def check_preview_size(size: tuple[int, int], flag: str) -> None:

@@ -36,7 +36,6 @@ import functools
 import os
 import platform
 import sys
-from importlib import metadata
 
 # What the variables are set to on x86-64 (elsewhere there is no kernel set shared by every CPU to pin).
 BLAS_CORE = "Prescott"
@@ -99,6 +98,8 @@ def unpinned_because() -> str:
 @functools.lru_cache(maxsize=1)
 def versions() -> dict[str, str]:
     """Installed versions of :data:`NUMERIC_DISTRIBUTIONS` (``"-"`` where one is missing), without importing them."""
+    from importlib import metadata  # here, not at the top: 40 ms of every start-up, before Ctrl-C is handled
+
     found = {}
     for name in NUMERIC_DISTRIBUTIONS:
         try:

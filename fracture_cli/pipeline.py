@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal, overload
 
-from fracture_cli import parallel, progress
+from fracture_cli import interrupts, parallel, progress
 from fracture_cli.errors import UsageError
 
 if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help` imports neither
@@ -378,6 +378,7 @@ class Runner:
 
 @contextlib.contextmanager
 def _timed_step(runner: Runner, name: str) -> Iterator[progress.Task]:
+    interrupts.check()  # a Ctrl-C that a library dropped still stops the run here
     runner._step += 1
     where = f"[{runner._step}/{runner.total}] " if runner.total else ""
     log.info("%s: %s%s ...", runner.label, where, name)

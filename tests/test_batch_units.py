@@ -16,7 +16,7 @@ from fracture_cli.batch.manifest import read_manifest, resolve_assets
 from fracture_cli.batch.plan import check_no_input_overwritten, plan_batch
 from fracture_cli.batch.report import BatchReport, asset_outcome, summary_text, to_markdown
 from fracture_cli.batch.state import asset_key, is_up_to_date, read_state, state_path, write_state
-from fracture_cli.errors import InputError
+from fracture_cli.errors import InputError, OutputError
 from fracture_cli.runtime.format import RuntimeData
 
 from conftest import SAMPLE_ASSETS
@@ -167,9 +167,9 @@ def test_outputs_that_would_overwrite_inputs_are_refused(tmp_path):
     fine = _assets(tmp_path, '[assets]\n"b.obj" = "stone"\n', out=".")  # b.glb beside b.obj: no input replaced
     check_no_input_overwritten(fine, (), manifest)
     clobber = _assets(tmp_path, '[assets]\n"a.glb" = "stone"\n', out=".")
-    with pytest.raises(InputError, match=r"output .*a\.glb of a\.glb would overwrite the input a\.glb"):
+    with pytest.raises(OutputError, match=r"a\.glb: the output would replace .*a\.glb, which this command reads"):
         check_no_input_overwritten(clobber, (), manifest)
-    with pytest.raises(InputError, match="batch output .*m.toml would overwrite the input"):
+    with pytest.raises(OutputError, match=r"m\.toml: the output would replace .*m\.toml, which this command reads"):
         check_no_input_overwritten(fine, (manifest,), manifest)
 
 

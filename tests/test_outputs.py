@@ -287,7 +287,7 @@ def test_an_input_is_never_an_output(asset, tmp_path, no_load):
     for args, name in cases:
         result = CliRunner().invoke(cli, ["bake", *args, *SMALL])
         assert result.exit_code == 1, args
-        assert_one_line(result, name, "is an input of this bake", "write into another folder")
+        assert_one_line(result, name, "which this command reads", "write the output elsewhere")
         assert glb.read_bytes() == original
     assert sorted(os.listdir(folder)) == ["prop.glb"]
 
@@ -303,7 +303,7 @@ def test_gltf_companion_file_is_never_an_output(tmp_path, no_load):
     (tmp_path / "x.fracture.bin").write_bytes(binary)
     result = CliRunner().invoke(cli, ["bake", str(tmp_path / "x.gltf"), "-o", str(tmp_path), *SMALL])
     assert result.exit_code == 1
-    assert_one_line(result, "x.fracture.bin", "is an input of this bake")
+    assert_one_line(result, "x.fracture.bin", "which this command reads")
     assert (tmp_path / "x.fracture.bin").read_bytes() == binary
 
 
@@ -636,11 +636,11 @@ def test_chain_save_and_export_never_replace_their_input(tmp_path):
     original = glb.read_bytes()
     result = CliRunner().invoke(cli, ["load", str(glb), "save", str(glb)])
     assert result.exit_code == 1
-    assert_one_line(result, "prop.glb", "is an input of this bake")
+    assert_one_line(result, "prop.glb", "which this command reads")
     from fracture_cli.bake import write_outputs
     from fracture_cli.pipeline import PipelineState, Runner
 
-    with pytest.raises(OutputError, match="is an input of this bake"):  # the chain's `export` step
+    with pytest.raises(OutputError, match="which this command reads"):  # the chain's `export` step
         write_outputs(str(tmp_path), "prop", PipelineState(source=str(glb)), {}, Runner("t"))
     assert glb.read_bytes() == original and os.listdir(tmp_path) == ["prop.glb"]
 

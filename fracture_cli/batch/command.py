@@ -1,7 +1,7 @@
 """The ``fracture batch`` command: parses options and calls :func:`~fracture_cli.batch.runner.run_batch`.
 
 Registered on the main group by :func:`register` (so this module does not
-import :mod:`fracture_cli.cli`, which imports it). The global flags (``-v``,
+import :mod:`fracture_cli.cli_group`, which imports it). The global flags (``-v``,
 ``-q``, ``--debug``, ``--recipes``, ``--set``) work before or after it.
 """
 

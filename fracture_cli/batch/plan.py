@@ -12,12 +12,11 @@ import os
 import time
 from dataclasses import dataclass
 
-from fracture_cli.batch.adapter import output_names
 from fracture_cli.batch.inputs import InputFile, dependency_files, hash_inputs
 from fracture_cli.batch.jobs import UP_TO_DATE, BakeJob, TaskResult
 from fracture_cli.batch.manifest import Asset
 from fracture_cli.batch.state import asset_key, content_seed, is_up_to_date, read_state, reusable_hashes, state_path
-from fracture_cli.errors import InputError
+from fracture_cli.io.preflight import guard_outputs
 
 log = logging.getLogger(__name__)
 
@@ -41,31 +40,19 @@ class Plan:
 def check_no_input_overwritten(assets: list[Asset], extra_outputs: tuple[str, ...], manifest: str) -> None:
     """Refuse a batch whose outputs (including its report files) would replace any input.
 
-    Paths are compared after resolving symbolic links, so a link to an asset
-    in the output folder is caught too.
+    The output guard of every command (:func:`~fracture_cli.io.preflight.guard_outputs`):
+    paths are compared resolved and existing files by inode, so a symlink or a hard
+    link to an asset in the output folder is caught too; each asset republishes its
+    own bake set, and any other published set's files are refused.
 
     Raises
     ------
-    InputError
-        Naming the output and the input.
+    OutputError
+        Naming the output and the input (or set) it would replace.
     """
-    inputs: dict[str, str] = {}
-    for asset in assets:
-        for path in [asset.path] + dependency_files(asset.path):
-            inputs.setdefault(os.path.realpath(path), asset.name)
-    inputs.setdefault(os.path.realpath(manifest), manifest)
-    for asset in assets:
-        names = output_names(asset.stem) + (os.path.basename(state_path(asset.out_dir, asset.stem)),)
-        for path in [os.path.join(asset.out_dir, n) for n in names]:
-            owner = inputs.get(os.path.realpath(path))
-            if owner is not None:
-                raise InputError(f"output {path} of {asset.name} would overwrite the input {owner}; "
-                                 "pick another output folder", path=manifest)
-    for path in extra_outputs:
-        owner = inputs.get(os.path.realpath(path))
-        if owner is not None:
-            raise InputError(f"batch output {path} would overwrite the input {owner}; pick another output folder",
-                             path=manifest)
+    inputs = [manifest] + [p for asset in assets for p in [asset.path] + dependency_files(asset.path)]
+    states = [state_path(asset.out_dir, asset.stem) for asset in assets]
+    guard_outputs(states + list(extra_outputs), inputs, sets=[(asset.out_dir, asset.stem) for asset in assets])
 
 
 def _report_on_disk(asset: Asset) -> dict | None:

@@ -11,9 +11,11 @@ set is replaced:
 1. **Preflight** (:mod:`.preflight`, before any long work): the output folder name is usable
    (not ``""``, the stem is UTF-8), the folder exists or can be created and
    accepts a new file, the output names are free or regular files, no output
-   path is an input of the batch (compared by real path, symlinks and hard
-   links included, via :func:`os.path.samefile`), and the free space covers
-   an estimate of the outputs. Each failure is one :class:`OutputError` line.
+   path is an input of the batch nor a file of another published set
+   (:func:`~fracture_cli.io.preflight.guard_outputs`, the guard of every
+   command that writes: resolved paths, symlinks and hard links included), and
+   the free space covers an estimate of the outputs. Each failure is one
+   :class:`OutputError` line.
 2. **Lock** (:mod:`.stemlock`). ``.<stem>.fracture-lock`` is created with ``O_CREAT | O_EXCL``
    (atomic on local disks and on NFSv3+ and SMB shares, unlike ``fcntl``
    locks, which NFS honours only with a working lock daemon). It holds the
@@ -72,7 +74,9 @@ import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from fracture_cli import interrupts
 from fracture_cli.errors import OutputError, StageError, printable
+from fracture_cli.interrupts import NOTHING_WRITTEN
 from fracture_cli.io.inputs import file_sha256
 from fracture_cli.io.stemlock import LOCK_TIMEOUT_SECONDS, StemLock
 
@@ -274,6 +278,7 @@ def output_set(out_dir: str, stem: str, *, lock_timeout: float = LOCK_TIMEOUT_SE
             try:
                 yield staging
                 _finish_files(staging)
+                interrupts.check()  # a Ctrl-C dropped while writing: the previous set stays
                 with _sigint_deferred():
                     publish(staging)  # raises OutputError itself once a rename has happened
                     _published.append(os.path.join(out_dir, stem))
@@ -429,7 +434,7 @@ def forget_published() -> None:
 def interrupt_message() -> str:
     """One truthful line for an interrupted run: which output sets are complete, and that nothing else changed."""
     if not _published:
-        return "interrupted; no output was written (previous outputs are unchanged)"
+        return NOTHING_WRITTEN
     names = ", ".join(printable(p) for p in _published)
     return f"interrupted; complete outputs were written for {names}; no other output was changed"
 

@@ -1,19 +1,24 @@
-"""Checks before a bake's long work: can its outputs be written, and would they spare every input?
+"""Checks before any long work: can the outputs be written, and would they spare every input?
 
-Each failure is one :class:`~fracture_cli.errors.OutputError` line naming the
-folder or file (docs/OUTPUTS.md, "What is refused before any work").
+:func:`preflight` checks a bake's output folder; :func:`guard_outputs` is the
+one output guard every command that writes calls first: no output may be, or
+lead to, a file the command reads, nor replace a file of a published bake set
+other than by republishing that set. Each failure is one
+:class:`~fracture_cli.errors.OutputError` line naming the paths (docs/OUTPUTS.md,
+"What is refused before any work").
 """
 
 from __future__ import annotations
 
-import contextlib
+import json
 import os
 import secrets
 import shutil
 from collections.abc import Iterable
+from dataclasses import dataclass
 
 from fracture_cli.errors import OutputError, printable
-from fracture_cli.io.outputs import all_names, recover, write_error
+from fracture_cli.io.outputs import REPORT_SUFFIX, all_names, recover, write_error
 from fracture_cli.io.stemlock import StemLock
 
 
@@ -122,55 +127,155 @@ def human_size(n: float) -> str:
 
 
 def check_inputs_untouched(out_dir: str, stems: Iterable[str], inputs: Iterable[str]) -> None:
-    """Refuse if an output path of any of ``stems`` in ``out_dir`` is one of ``inputs``.
+    """Refuse if an output of the bake sets ``stems`` in ``out_dir`` would replace one of ``inputs``.
 
     Raises
     ------
     OutputError
-        See :func:`refuse_replacing_inputs`.
+        See :func:`guard_outputs` (published bake sets are checked too).
     """
-    refuse_replacing_inputs([os.path.join(out_dir, name) for stem in stems for name in all_names(stem)], inputs)
+    guard_outputs(inputs=inputs, sets=[(out_dir, stem) for stem in stems])
 
 
-def refuse_replacing_inputs(targets: Iterable[str], inputs: Iterable[str]) -> None:
-    """Refuse if a file about to be written (``targets``) is one of ``inputs``.
+# ----------------------------------------------------------------------------
+# The output guard: every command that writes calls it before any work
 
-    Real paths are compared (:func:`os.path.samefile`: the same device and
-    inode), so an input reached through a symlink, a symlinked folder or a
-    hard link is found too. Targets that do not exist yet are fine.
 
-    Raises
-    ------
-    OutputError
-        Naming the input and the output that would replace it.
-    """
-    existing = []
-    for path in inputs:
-        with contextlib.suppress(OSError):
-            existing.append((path, os.stat(path)))
-    for target in targets:
+@dataclass(frozen=True)
+class _File:
+    """A path as the guard compares it: as given, resolved (symlinks followed), and its inode if it exists."""
+
+    path: str
+    real: str
+    inode: tuple[int, int] | None
+
+    @classmethod
+    def of(cls, path: str) -> _File:
         try:
-            st = os.stat(target)
-        except OSError:
+            st = os.stat(path)
+            inode: tuple[int, int] | None = (st.st_dev, st.st_ino)
+        except (OSError, ValueError):  # missing, dangling link, a name with NUL
+            inode = None
+        return cls(path, os.path.realpath(path), inode)
+
+    def same(self, other: _File) -> bool:
+        """Whether writing one replaces the other: the same resolved path, or the same existing file (a hard link)."""
+        return self.real == other.real or (self.inode is not None and self.inode == other.inode)
+
+    def relation(self, other: _File) -> str:
+        """How ``self`` reaches ``other``, for the message ("" when they are the same path)."""
+        if os.path.normpath(os.path.abspath(self.path)) == os.path.normpath(os.path.abspath(other.path)):
+            return ""
+        if self.real == other.real:
+            return f" ({printable(self.path)} leads to it through a symbolic link)"
+        return f" ({printable(self.path)} is a hard link to it)"
+
+
+@dataclass(frozen=True)
+class PublishedSet:
+    """A bake set published in a folder: its report (the manifest) and every file the report lists."""
+
+    report: str
+    folder: str  # resolved
+    stem: str
+    members: tuple[_File, ...]
+
+
+def published_sets(folder: str) -> tuple[PublishedSet, ...]:
+    """The bake sets published in ``folder``: each ``<stem>.report.json`` with a ``"files"`` table.
+
+    A set's members are its report and the files its ``"files"`` lists
+    (docs/OUTPUTS.md); reports that are not JSON objects with that table are
+    not sets. A folder that cannot be listed has none.
+    """
+    try:
+        names = sorted(n for n in os.listdir(folder or ".") if n.endswith(REPORT_SUFFIX) and n != REPORT_SUFFIX)
+    except OSError:
+        return ()
+    found = []
+    for name in names:
+        report = os.path.join(folder, name)
+        files = _report_files(report)
+        if files is None:
             continue
-        for path, ist in existing:
-            if (st.st_dev, st.st_ino) == (ist.st_dev, ist.st_ino):
-                raise OutputError(f"is an input of this bake and the output {printable(target)} would replace "
-                                  "it; write into another folder", path=printable(path))
+        listed = [n for n in files if isinstance(n, str) and n and "\0" not in n]
+        members = (_File.of(report),) + tuple(_File.of(os.path.join(folder, n)) for n in listed)
+        found.append(PublishedSet(report, os.path.realpath(folder), name[: -len(REPORT_SUFFIX)], members))
+    return tuple(found)
 
 
-def refuse_inputs_as_outputs(out_dir: str, inputs: Iterable[str]) -> None:
-    """Refuse a batch in which an output path of one input is another input (or a companion file of one).
+def _report_files(path: str) -> dict | None:
+    """The ``"files"`` table of a report, or None when ``path`` is not a bake report (or is huge, or unreadable)."""
+    try:
+        if not os.path.isfile(path) or os.path.getsize(path) > _MAX_REPORT_BYTES:
+            return None
+        with open(path, encoding="utf-8") as fh:
+            files = json.load(fh).get("files")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return files if isinstance(files, dict) else None
+
+
+_MAX_REPORT_BYTES = 64 << 20  # a bake's report is tens of KiB; a bigger *.report.json is something else
+
+
+def guard_outputs(outputs: Iterable[str] = (), inputs: Iterable[str] = (), *,
+                  sets: Iterable[tuple[str, str]] = ()) -> None:
+    """Refuse, before any work, to write a file the command reads or a file of a published bake set.
+
+    The one guard of every command that writes (bake, batch, the chain's
+    ``save``, ``save-cage``, ``save-tets`` and ``export``, ``impact -o`` and
+    ``--png``, ``preview -o``). An output may not be, or lead to, an input:
+    paths are compared resolved (symlinks, symlinked folders) and existing files
+    by device and inode (hard links). Nor may it replace a file of a bake set
+    published in its folder (the report and every file its ``"files"`` lists)
+    unless it is that set's own file being republished: a bake of that stem
+    into that folder (``sets``).
+
+    Parameters
+    ----------
+    outputs : iterable of str
+        Files the command writes on their own.
+    inputs : iterable of str
+        Every file the command reads: the assets and their companion files
+        (:func:`~fracture_cli.io.inputs.input_files`), a runtime file and its
+        ``.bin``, the GLB and report read beside it.
+    sets : iterable of (str, str)
+        ``(folder, stem)`` of every bake set the command publishes; each name
+        of :func:`~fracture_cli.io.outputs.all_names` in ``folder`` is an output.
 
     Raises
     ------
     OutputError
-        See :func:`check_inputs_untouched`.
+        One line naming the output and the file it would replace; nothing is written.
     """
-    from fracture_cli.io.inputs import input_files
-
-    if not out_dir:
-        return  # preflight() says what is wrong with it
-    inputs = list(inputs)
-    stems = [os.path.splitext(os.path.basename(p))[0] for p in inputs]
-    check_inputs_untouched(out_dir, stems, [f for p in inputs for f in input_files(p)])
+    targets: list[tuple[str, tuple[str, str] | None]] = [(path, None) for path in outputs]
+    for folder, stem in sets:
+        targets += [(os.path.join(folder, name), (os.path.realpath(folder), stem)) for name in all_names(stem)]
+    read = [_File.of(path) for path in dict.fromkeys(inputs)]
+    seen: list[_File] = []
+    folders: dict[str, tuple[PublishedSet, ...]] = {}
+    for path, republishes in targets:
+        target = _File.of(path)
+        for other in read:
+            if target.same(other):
+                raise OutputError(f"the output would replace {printable(other.path)}, which this command reads"
+                                  f"{target.relation(other)}; write the output elsewhere", path=printable(path))
+        for other in seen:
+            if target.same(other):
+                raise OutputError(f"two outputs of this command are the same file ({printable(other.path)}); give "
+                                  "each its own name", path=printable(path))
+        seen.append(target)
+        for folder in dict.fromkeys((os.path.dirname(os.path.abspath(path)), os.path.dirname(target.real))):
+            if folder not in folders:
+                folders[folder] = published_sets(folder)
+            for published in folders[folder]:
+                if republishes == (published.folder, published.stem):
+                    continue
+                for member in published.members:
+                    if target.same(member):
+                        raise OutputError(
+                            f"the output would replace {printable(member.path)}, a file of the bake set "
+                            f"{printable(published.report)} lists{target.relation(member)}; only a bake of "
+                            f"{printable(published.stem)} into that folder replaces it: write the output elsewhere",
+                            path=printable(path))

@@ -92,10 +92,50 @@ def save_surface(path: str | os.PathLike, surface: SurfaceMesh) -> None:
     mesh = trimesh.Trimesh(
         vertices=surface.world_vertices(), faces=surface.faces, vertex_normals=normals, process=False
     )
-    if surface.uvs is not None and ext == ".obj":
-        mesh.visual = trimesh.visual.TextureVisuals(uv=surface.uvs)
+    if ext == ".obj":
+        _save_obj(path, mesh, surface.uvs)
+        return
     with atomic_path(path) as tmp:
         mesh.export(tmp, file_type=ext[1:])
+
+
+def surface_outputs(path: str) -> list[str]:
+    """Every file :func:`save_surface` may write for ``path``: the file, and for an OBJ its ``<stem>.mtl``.
+
+    The output guard checks all of them before any work.
+    """
+    if os.path.splitext(path)[1].lower() != ".obj":
+        return [path]
+    return [path, os.path.join(os.path.dirname(path), _mtl_name(path))]
+
+
+def _mtl_name(path: str) -> str:
+    """The material library of an OBJ output: named after it (no spaces: ``mtllib`` splits on them)."""
+    stem = os.path.splitext(os.path.basename(path))[0]
+    return "_".join(stem.split()) + ".mtl" if stem.strip() else "material.mtl"
+
+
+def _save_obj(path: str, mesh, uvs) -> None:
+    """Write an OBJ (with UVs: and its ``<stem>.mtl``), each file atomically, nothing else beside it.
+
+    trimesh's own file export would also write ``material.mtl`` and a texture
+    under fixed names next to the output, over whatever has those names; here the
+    material has no image and the library is named after the output.
+    """
+    import trimesh
+    from trimesh.exchange.obj import export_obj
+
+    mtl = _mtl_name(path)
+    if uvs is not None:
+        material = trimesh.visual.material.SimpleMaterial(name=mtl[: -len(".mtl")])
+        mesh.visual = trimesh.visual.TextureVisuals(uv=uvs, material=material)
+    text, companions = export_obj(mesh, return_texture=True, mtl_name=mtl)
+    folder = os.path.dirname(path)
+    for name, data in companions.items():
+        if name != mtl:  # only the library surface_outputs() names is written
+            continue
+        write_bytes_atomic(os.path.join(folder, name), data)
+    write_bytes_atomic(path, text.encode("utf-8"))
 
 
 def fragment_name(index: int, stem: str | None = None) -> str:

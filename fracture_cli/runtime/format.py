@@ -480,5 +480,23 @@ def load_runtime(path: str | os.PathLike) -> RuntimeData:
     return decode(header_bytes, binary, str(path))
 
 
+def runtime_files(path: str | os.PathLike) -> list[str]:
+    """The files :func:`load_runtime` reads for ``path``: the header and the binary file it names.
+
+    The binary file is the header's ``buffer.uri`` when the header can be read
+    and names a plain file, else :func:`bin_path_for` (what a bake writes). Never
+    raises: the reader reports a bad header. Commands that write next to a
+    runtime file give these to their output guard.
+    """
+    path = Path(path)
+    try:
+        uri = parse_header(path.read_bytes())["buffer"]["uri"]
+    except Exception:
+        uri = None
+    ok = isinstance(uri, str) and uri and os.path.basename(uri) == uri and uri not in (".", "..") and "\0" not in uri
+    binary = path.with_name(uri) if ok else bin_path_for(path)
+    return [str(path), str(binary)]
+
+
 def _raise_bad_uri(uri, path):
     raise _fail(f"buffer.uri must be a plain file name next to the header, got {uri!r}", path)
