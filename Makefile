@@ -111,6 +111,18 @@ demo: install $(DEMO)
 $(DEMO): $(DEMO_INPUTS) | $(STAMP)
 	$(FRACTURE) -v bake sample_assets/chair.glb -o build/demo --recipe wood --preview
 
+# The README's two pictures, from the demo bake: its --preview image, and `fracture view` hit on the chair's
+# back in headless Chromium (web/screenshot.py, as tests/test_view_e2e.py drives it; needs `make web` and
+# Debian's chromium). Again only when the demo was re-baked.
+docs-images: docs/preview_chair.png docs/view_chair.png
+
+docs/preview_chair.png: $(DEMO)
+	cp build/demo/chair.preview.png $@
+
+docs/view_chair.png: $(DEMO) web/screenshot.py web/e2e.cjs | $(WEB_VENDOR)/BUILD.json
+	@command -v chromium >/dev/null 2>&1 || { echo "the screenshot needs Debian's chromium (apt-get install chromium)"; exit 1; }
+	$(PY) web/screenshot.py build/demo chair $@
+
 bench: install
 	$(PY) bench/run.py --out bench/RESULTS.md
 
