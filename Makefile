@@ -7,21 +7,47 @@ VENV       := .venv
 PY         := $(VENV)/bin/python
 FRACTURE   := $(VENV)/bin/fracture
 STAMP      := $(VENV)/.installed
+LOCK       := requirements.lock
 PYTEST_ARGS ?=
 
 .SECONDEXPANSION:
-.PHONY: install web test lint demo bench goldens assets asset-reports gltf-validator check clean
+.PHONY: install lock web test lint demo bench goldens assets asset-reports gltf-validator check clean docs-images
 
 PACKAGE_SOURCES := $(shell find fracture_cli -name '*.py' -not -path '*/__pycache__/*' | sort)
 
 install: $(STAMP) $(VENV)/.kernels
 	@$(MAKE) --no-print-directory web || echo "note: 'fracture view' needs its web files: run 'make web' (needs npm)"
 
-$(STAMP): pyproject.toml
+# The venv holds exactly what requirements.lock lists (every version and its hashes, for Python 3.11 on
+# Linux x86-64, with the test and batch extras): pip refuses anything else (--require-hashes, --no-deps),
+# scripts/venv_lock.py sync removes what an older lock left, and the project itself goes on top, editable,
+# without dependencies or build isolation (its build backend, setuptools, is in the lock).
+$(STAMP): pyproject.toml $(LOCK)
 	@test -x $(PY) || $(PYTHON_SYS) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,batch]'
+	@$(PY) -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' || \
+	  { echo "$(LOCK) is for Python 3.11; $(PY) is $$($(PY) -V): rm -rf $(VENV) and set PYTHON_SYS"; exit 1; }
+	$(PY) -m pip install --quiet --require-hashes --no-deps -r $(LOCK)
+	$(PY) -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(PY) scripts/venv_lock.py sync $(LOCK)
 	@touch $(STAMP)
+
+# Refresh the lock after changing a requirement in pyproject.toml: versions already in the lock are kept
+# where they still fit; `make lock LOCK_ARGS=--upgrade` takes the newest of everything, `LOCK_ARGS='-P numpy'`
+# of one package. uv (pinned, in its own venv under build/) resolves against PyPI. Any version change can
+# change the bytes of a bake: after a refresh re-run `make goldens` (review the diff) and `make bench`.
+# pip comes in on stdin (`-`): it is no dependency, but the installer is locked too.
+UV_VERSION := 0.13.9
+UV         := build/uv/bin/uv
+LOCK_ARGS  ?=
+
+$(UV):
+	$(PYTHON_SYS) -m venv build/uv
+	build/uv/bin/python -m pip install --quiet uv==$(UV_VERSION)
+
+lock: $(UV)
+	printf 'pip\n' | $(UV) pip compile pyproject.toml - --extra test --extra batch --generate-hashes \
+	  --python-version 3.11 --python-platform x86_64-manylinux_2_35 --custom-compile-command 'make lock' \
+	  --quiet -o $(LOCK) $(LOCK_ARGS)
 
 # The numba kernels (the simplify stage's collapses, the triangle-pair test, the cut solver's partitions and
 # max-flow), compiled once into numba's cache (~30-40 s) so that the first bake does not pay for it; again when
@@ -73,17 +99,39 @@ gltf-validator:
 	  || echo "note: could not install gltf-validator; its test will be skipped"; \
 	else echo "note: npm not found; the Khronos glTF validator test will be skipped"; fi
 
-# Bakes one sample asset end to end into build/demo/.
-demo: install
-	$(FRACTURE) -v bake sample_assets/chair.glb -o build/demo --recipe wood --preview
+# Bakes one sample asset end to end into build/demo/, again only when its input, its recipe (wood, which
+# extends default), the package sources or the locked dependency versions changed. The bake publishes its
+# files as a set (chair.glb among them), so a failed bake leaves the old, older-than-its-inputs set behind.
+DEMO := build/demo/chair.glb
+DEMO_INPUTS := sample_assets/chair.glb recipes/wood.toml recipes/default.toml $(PACKAGE_SOURCES) $(LOCK)
+
+demo: install $(DEMO)
 	@echo "demo output: $(CURDIR)/build/demo/ (chair.glb, chair.fracture.json/.bin, chair.report.json, chair.preview.png)"
+
+$(DEMO): $(DEMO_INPUTS) | $(STAMP)
+	$(FRACTURE) -v bake sample_assets/chair.glb -o build/demo --recipe wood --preview
+
+# The README's two pictures, from the demo bake: its --preview image, and `fracture view` hit on the chair's
+# back in headless Chromium (web/screenshot.py, as tests/test_view_e2e.py drives it; needs `make web` and
+# Debian's chromium). Again only when the demo was re-baked.
+docs-images: docs/preview_chair.png docs/view_chair.png
+
+docs/preview_chair.png: $(DEMO)
+	cp build/demo/chair.preview.png $@
+
+docs/view_chair.png: $(DEMO) web/screenshot.py web/e2e.cjs | $(WEB_VENDOR)/BUILD.json
+	@command -v chromium >/dev/null 2>&1 || { echo "the screenshot needs Debian's chromium (apt-get install chromium)"; exit 1; }
+	$(PY) web/screenshot.py build/demo chair $@
 
 bench: install
 	$(PY) bench/run.py --out bench/RESULTS.md
 
-# Validate the demo output with the Khronos glTF validator.
-check: demo gltf-validator
-	node scripts/validate_gltf.cjs build/node/node_modules build/demo/*.glb
+# Validate the demo output with the Khronos glTF validator (again only when the demo was re-baked).
+check: demo gltf-validator build/demo/.validated
+
+build/demo/.validated: $(DEMO)
+	node scripts/validate_gltf.cjs build/node/node_modules $(DEMO)
+	@touch $@
 
 goldens: install
 	$(PY) -m pytest -q tests/test_golden.py --update-goldens

@@ -219,8 +219,9 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
         if preview_size is not None:
             from fracture_cli.preview import render_preview
 
+            # The report is not in the staging folder yet (it is written last, with the others' hashes).
             render_preview(staging.file(f"{stem}.fracture.json"), staging.file(f"{stem}.preview.png"),
-                           width=preview_size[0], height=preview_size[1])
+                           width=preview_size[0], height=preview_size[1], report=report)
             report["outputs"] = [*report["outputs"][:-1], f"{stem}.preview.png", report["outputs"][-1]]
         report["seconds"] = dict(runner.seconds)
         if runner.cache is not None:

@@ -207,7 +207,7 @@ def pick_example_impact(data, center: np.ndarray):
 
 
 def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: int = 1000,
-                   impact: tuple | None = None, max_modes: int = 6) -> dict:
+                   impact: tuple | None = None, max_modes: int = 6, report: dict | None = None) -> dict:
     """Render the preview PNG of a bake.
 
     Parameters
@@ -223,11 +223,16 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
         The impact to show; default: :func:`pick_example_impact`.
     max_modes : int, optional (default 6)
         How many modes to draw in the grid.
+    report : dict, optional
+        The bake report (recipe name, tet and cage counts for the title); by
+        default ``<stem>.report.json`` beside the runtime file, if present. A
+        bake passes its own: it renders the preview in its staging folder,
+        before the report is written there.
 
     Returns
     -------
     dict
-        What was drawn: fragments, modes, groups of the example impact.
+        What was drawn: fragments, modes, groups of the example impact, the title.
     """
     import matplotlib
 
@@ -245,10 +250,11 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
         raise InputError(f"cannot find the fragments file {os.path.basename(glb_path)} next to it", path=json_path)
     data = load_runtime(json_path)
     frags = load_fragments(glb_path)
-    report = {}
-    if os.path.exists(stem_path + ".report.json"):
-        with open(stem_path + ".report.json") as fh:
-            report = json.load(fh)
+    if report is None:
+        report = {}
+        if os.path.exists(stem_path + ".report.json"):
+            with open(stem_path + ".report.json") as fh:
+                report = json.load(fh)
 
     all_pts = np.concatenate([np.concatenate([f.outer, f.inner]).reshape(-1, 3) for f in frags])
     lo, hi = all_pts.min(axis=0), all_pts.max(axis=0)
@@ -274,9 +280,10 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
              f"radius {data.radius:g}, threshold {data.default_threshold:g}")
     fig.suptitle(title, fontsize=13)
     with atomic_path(png_path) as tmp:
-        fig.savefig(tmp, format="png", dpi=100, metadata={"Software": None})
+        # The title also as the PNG's Title text, so it can be read back without looking at pixels.
+        fig.savefig(tmp, format="png", dpi=100, metadata={"Software": None, "Title": title})
     plt.close(fig)
-    return {"fragments": len(frags), "modes_drawn": k, "impact_groups": groups}
+    return {"fragments": len(frags), "modes_drawn": k, "impact_groups": groups, "title": title}
 
 
 @dataclass(frozen=True)

@@ -76,3 +76,22 @@ def test_preview_of_missing_file_is_one_line(tmp_path):
     assert result.exit_code == 1
     assert "x.fracture.json" in result.output and "Traceback" not in result.output
     assert not (tmp_path / "p.png").exists()
+
+
+def test_bake_preview_title_names_recipe_tets_and_cage(baked, tmp_path):
+    """The title a bake's preview is given (the PNG's Title text) fills in what the report says, as
+    `fracture preview` does: a bake renders it before its report is written, so it passes the report along."""
+    import json
+
+    out, stem = baked
+    report = json.loads((out / f"{stem}.report.json").read_text())
+    counts = report["counts"]
+    title = Image.open(out / f"{stem}.preview.png").text["Title"]
+    assert "?" not in title, title
+    assert f"recipe: {report['recipe']['name']}" in title
+    assert f"{counts['fragments']} fragments, {counts['modes']} modes, {counts['tets']} tets, " \
+           f"cage {counts['cage_faces']} faces" in title
+    again = tmp_path / "again.png"
+    result = CliRunner().invoke(cli, ["preview", str(out / f"{stem}.fracture.json"), "-o", str(again)])
+    assert result.exit_code == 0, result.output
+    assert Image.open(again).text["Title"] == title
