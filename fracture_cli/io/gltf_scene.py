@@ -71,9 +71,9 @@ def index(doc: dict, kind: str, value, what: str, path: str) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value or int(value) != value:
         raise InputError(f"{what} is {value!r}, not an index into '{kind}'", path=path)
     if not 0 <= int(value) < len(items):
-        raise InputError(f"{what} is {int(value)}, but the file has {len(items)} {kind} (indices 0.."
-                         f"{len(items) - 1})" if items else f"{what} is {int(value)}, but the file has no {kind}",
-                         path=path)
+        n = len(items)
+        raise InputError(f"{what} is {int(value)}, but the file's '{kind}' has {n} entr{'y' if n == 1 else 'ies'}"
+                         + (f" (indices 0..{n - 1})" if n else ""), path=path)
     return int(value)
 
 

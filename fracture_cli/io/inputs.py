@@ -181,6 +181,18 @@ def read_input(path: str) -> bytes:
     return data
 
 
+def read_regular(path: str) -> bytes:
+    """The bytes of a regular file, opened without blocking (not recorded: for files that are not inputs).
+
+    Raises
+    ------
+    OSError
+        As ``open`` does; :class:`NotRegularFile` for anything but a regular file.
+    """
+    with _open_regular(path) as fh:
+        return fh.read()
+
+
 def hash_file(path: str) -> FileRead:
     """A file hashed from disk now (``missing`` / ``not-a-file`` without reading what is not a regular file)."""
     started = time.time_ns()
