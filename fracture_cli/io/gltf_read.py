@@ -55,7 +55,7 @@ from fracture_cli import detmath
 from fracture_cli.errors import InputError
 from fracture_cli.io.gltf import MaterialSource
 from fracture_cli.io.gltf_conventions import baked_material_prefix, unprefixed
-from fracture_cli.io.gltf_scene import Instance, Scene, cofactor3, determinant3, index
+from fracture_cli.io.gltf_scene import Instance, Scene, index, morphed, placed, skinned
 from fracture_cli.io.inputs import (
     EscapingReference,
     NotRegularFile,
@@ -357,82 +357,18 @@ class _Document:
         raw = self.attribute(attributes, "POSITION", what)
         # VEC4 normals (a padded int8 layout some quantizers write) are read as their first three components.
         normals = self.attribute(attributes, "NORMAL", what, (3, 4))[:, :3] if "NORMAL" in attributes else None
-        positions, normals = self._morphed(prim, raw, normals, instance.weights, what)
+        positions, normals = morphed(self, prim, raw, normals, instance.weights, what)
         if not np.all(np.isfinite(positions)):
             raise self.fail("has non-finite vertex coordinates (NaN or inf)")
         faces = _triangles(self._indices(prim, len(positions), what), mode)
         material = (self.index("materials", prim["material"], f"{what}'s material") if "material" in prim else -1)
         if instance.skin is not None:
-            vertices, normals, faces = self._skinned(attributes, instance.skin, positions, normals, faces, what)
+            vertices, normals, faces = skinned(self, attributes, instance.skin, positions, normals, faces, what)
         else:
-            vertices, normals, faces = _placed(instance.world, positions, normals, faces)
+            vertices, normals, faces = placed(instance.world, positions, normals, faces)
         return MeshPart(vertices=vertices, faces=faces, uvs=self._uvs(attributes, material), normals=normals,
                         colors=self._colors(attributes), material=self.material(material),
                         material_key=("gltf", material), raw_vertices=raw)
-
-    def _morphed(self, prim: dict, positions: np.ndarray, normals: np.ndarray | None, weights: np.ndarray,
-                 what: str) -> tuple[np.ndarray, np.ndarray | None]:
-        """Positions and normals with the morph targets added at ``weights`` (spec 3.7.2.2), in target order."""
-        targets = prim.get("targets") or []
-        if not len(targets) or not np.any(weights != 0):
-            return positions, normals
-        positions = positions.copy()
-        normals = normals.copy() if normals is not None else None
-        for t, (target, weight) in enumerate(zip(targets, weights)):
-            if weight == 0:
-                continue
-            for name, values in (("POSITION", positions), ("NORMAL", normals)):
-                if name not in target or values is None:
-                    continue
-                delta = self.attribute(target, name, f"{what} morph target {t}", (3, 4))[:, :3]
-                if delta.shape != values.shape:
-                    raise self.fail(f"{what} morph target {t}'s {name} has {len(delta)} values for "
-                                    f"{len(values)} vertices")
-                values += weight * delta
-        return positions, normals
-
-    def _skinned(self, attributes: dict, skin: int, positions: np.ndarray, normals: np.ndarray | None,
-                 faces: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        """Vertices placed by their joints (spec 3.7.3): ``sum_k w_k * joint matrix_k``, per vertex."""
-        spec = self.doc["skins"][skin]
-        inverse_bind = None
-        if "inverseBindMatrices" in spec:
-            acc = self.index("accessors", spec["inverseBindMatrices"], f"skin {skin}'s inverseBindMatrices")
-            if self.doc["accessors"][acc].get("type") != "MAT4":
-                raise self.fail(f"skin {skin}'s inverseBindMatrices (accessor {acc}) are not MAT4")
-            inverse_bind = self.accessor(acc).reshape(-1, 4, 4).transpose(0, 2, 1)  # column-major
-        joints = self.scene.skin_matrices(skin, inverse_bind)
-        sets = sorted(int(k[7:]) for k in attributes if k.startswith("JOINTS_") and k[7:].isdigit())
-        if not sets:
-            raise self.fail(f"{what} is skinned (skin {skin}) but has no JOINTS_0 / WEIGHTS_0 attributes")
-        blend = np.zeros((len(positions), 4, 4))
-        total = np.zeros(len(positions))
-        for k in sets:
-            if f"WEIGHTS_{k}" not in attributes:
-                raise self.fail(f"{what} has JOINTS_{k} but no WEIGHTS_{k}")
-            ids = self.accessor(self.index("accessors", attributes[f"JOINTS_{k}"], f"{what}'s JOINTS_{k}"),
-                                as_float=False)
-            w = self.attribute(attributes, f"WEIGHTS_{k}", what, widths=(4,))
-            if len(ids) != len(positions) or len(w) != len(positions) or ids.shape[1] != 4:
-                raise self.fail(f"{what}'s JOINTS_{k} / WEIGHTS_{k} do not give four joints per vertex")
-            if ids.size and (ids.min() < 0 or ids.max() >= len(joints)):
-                raise self.fail(f"{what}'s JOINTS_{k} names joint {int(ids.max())}; skin {skin} has {len(joints)}")
-            for c in range(4):
-                blend += w[:, c, None, None] * joints[ids[:, c]]
-                total += w[:, c]
-        if np.any(~(total > 0)):
-            raise self.fail(f"{what} has {int(np.sum(~(total > 0)))} skinned vertices whose joint weights are all 0")
-        blend /= total[:, None, None]  # weights sum to 1 by the spec; exporters round them
-        linear = blend[:, :3, :3]
-        vertices = np.einsum("vij,vj->vi", linear, positions) + blend[:, :3, 3]
-        det = determinant3(linear)
-        mirrored = det[faces] < 0
-        faces = np.where(mirrored.all(axis=1)[:, None], faces[:, ::-1], faces)
-        if normals is not None:
-            # Inverse transpose = cofactor / det: the cofactor keeps singular joints finite (their normals are 0).
-            n = np.einsum("vij,vj->vi", cofactor3(linear), normals) * np.where(det < 0, -1.0, 1.0)[:, None]
-            normals = _unit(n)
-        return vertices, normals, faces
 
     def _uvs(self, attributes: dict, material: int) -> np.ndarray | None:
         texture: dict = {}
@@ -527,23 +463,6 @@ class _Document:
             return read_input(file)
         except NotRegularFile as exc:
             raise self.fail(_not_regular("image", source, uri, exc)) from None
-
-
-def _unit(n: np.ndarray) -> np.ndarray:
-    """Rows of ``n`` (k, 3) scaled to unit length; zero rows stay zero (never NaN)."""
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
-
-
-def _placed(world: np.ndarray, positions: np.ndarray, normals: np.ndarray | None,
-            faces: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-    """Positions, normals and faces of a primitive placed by its node's (non-degenerate) world matrix (4, 4)."""
-    linear = world[:3, :3]
-    if determinant3(linear) < 0:  # a mirroring transform turns triangles inside out
-        faces = faces[:, ::-1]
-    if normals is not None:
-        normals = _unit(normals @ np.linalg.inv(linear))  # the inverse transpose, as rows
-    return positions @ linear.T + world[:3, 3], normals, faces
 
 
 def _triangles(indices: np.ndarray, mode: int) -> np.ndarray:

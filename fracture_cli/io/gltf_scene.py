@@ -22,6 +22,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -29,9 +30,13 @@ from fracture_cli.errors import InputError
 from fracture_cli.io.gltf_conventions import is_collision_only
 
 log = logging.getLogger(__name__)
+# The glTF document reader (fracture_cli.io.gltf_read._Document): index, accessor, attribute, fail, doc, scene.
+_Reader = Any
 
 # |det| of a node's linear part at or below this fraction of the product of its column lengths: degenerate.
 _DEGENERATE = 1e-12
+# Vertices skinned at a time (the per-vertex 4 x 4 blends of one chunk: 8 MB).
+_SKIN_CHUNK = 65536
 
 
 @dataclass(frozen=True)
@@ -235,3 +240,101 @@ class Scene:
             node = index(self.doc, "nodes", joint, f"skin {skin}'s joint {k}", self.path)
             out[k] = self.world(node) @ (inverse_bind[k] if inverse_bind is not None else np.eye(4))
         return out
+
+
+def morphed(reader: _Reader, prim: dict, positions: np.ndarray, normals: np.ndarray | None, weights: np.ndarray,
+            what: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """Positions and normals with the morph targets added at ``weights`` (spec 3.7.2.2), in target order."""
+    targets = prim.get("targets") or []
+    if not len(targets) or not np.any(weights != 0):
+        return positions, normals
+    positions = positions.copy()
+    normals = normals.copy() if normals is not None else None
+    for t, (target, weight) in enumerate(zip(targets, weights)):
+        if weight == 0:
+            continue
+        for name, values in (("POSITION", positions), ("NORMAL", normals)):
+            if name not in target or values is None:
+                continue
+            delta = reader.attribute(target, name, f"{what} morph target {t}", (3, 4))[:, :3]
+            if delta.shape != values.shape:
+                raise reader.fail(f"{what} morph target {t}'s {name} has {len(delta)} values for "
+                                  f"{len(values)} vertices")
+            values += weight * delta
+    return positions, normals
+
+
+def _apply(linear: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``linear[v] @ rows[v]`` for every v: (v, 3, 3) times (v, 3), as products in a fixed order."""
+    return linear[:, :, 0] * rows[:, 0, None] + linear[:, :, 1] * rows[:, 1, None] + linear[:, :, 2] * rows[:, 2, None]
+
+
+def skinned(reader: _Reader, attributes: dict, skin: int, positions: np.ndarray, normals: np.ndarray | None,
+            faces: np.ndarray, what: str) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Vertices placed by their joints (spec 3.7.3): ``sum_k w_k * joint matrix_k``, per vertex."""
+    spec = reader.doc["skins"][skin]
+    inverse_bind = None
+    if "inverseBindMatrices" in spec:
+        acc = reader.index("accessors", spec["inverseBindMatrices"], f"skin {skin}'s inverseBindMatrices")
+        if reader.doc["accessors"][acc].get("type") != "MAT4":
+            raise reader.fail(f"skin {skin}'s inverseBindMatrices (accessor {acc}) are not MAT4")
+        inverse_bind = reader.accessor(acc).reshape(-1, 4, 4).transpose(0, 2, 1)  # column-major
+    joints = reader.scene.skin_matrices(skin, inverse_bind)
+    sets = sorted(int(k[7:]) for k in attributes if k.startswith("JOINTS_") and k[7:].isdigit())
+    if not sets:
+        raise reader.fail(f"{what} is skinned (skin {skin}) but has no JOINTS_0 / WEIGHTS_0 attributes")
+    influences = []
+    for k in sets:
+        if f"WEIGHTS_{k}" not in attributes:
+            raise reader.fail(f"{what} has JOINTS_{k} but no WEIGHTS_{k}")
+        ids = reader.accessor(reader.index("accessors", attributes[f"JOINTS_{k}"], f"{what}'s JOINTS_{k}"),
+                              as_float=False)
+        w = reader.attribute(attributes, f"WEIGHTS_{k}", what, widths=(4,))
+        if len(ids) != len(positions) or len(w) != len(positions) or ids.shape[1] != 4:
+            raise reader.fail(f"{what}'s JOINTS_{k} / WEIGHTS_{k} do not give four joints per vertex")
+        if ids.size and (ids.min() < 0 or ids.max() >= len(joints)):
+            raise reader.fail(f"{what}'s JOINTS_{k} names joint {int(ids.max())}; skin {skin} has {len(joints)}")
+        influences.append((ids, w))
+    total = np.zeros(len(positions))
+    for _, w in influences:
+        for c in range(4):
+            total += w[:, c]
+    if np.any(~(total > 0)):
+        raise reader.fail(f"{what} has {int(np.sum(~(total > 0)))} skinned vertices whose joint weights are all 0")
+    vertices = np.empty_like(positions)
+    det = np.empty(len(positions))
+    out_normals = np.empty_like(normals) if normals is not None else None
+    for start in range(0, len(positions), _SKIN_CHUNK):  # (chunk, 4, 4) blends, not one per vertex at once
+        rows = slice(start, start + _SKIN_CHUNK)
+        blend = np.zeros((len(total[rows]), 4, 4))
+        for ids, w in influences:
+            for c in range(4):
+                blend += w[rows, c, None, None] * joints[ids[rows, c]]
+        blend /= total[rows, None, None]  # weights sum to 1 by the spec; exporters round them
+        linear = blend[:, :3, :3]
+        vertices[rows] = _apply(linear, positions[rows]) + blend[:, :3, 3]
+        det[rows] = determinant3(linear)
+        if normals is not None and out_normals is not None:
+            # Inverse transpose = cofactor / det: the cofactor keeps singular joints finite (their normals are 0).
+            n = _apply(cofactor3(linear), normals[rows]) * np.where(det[rows] < 0, -1.0, 1.0)[:, None]
+            out_normals[rows] = unit_rows(n)
+    mirrored = det[faces] < 0  # a triangle whose three corners are mirrored is turned back outwards
+    faces = np.where(mirrored.all(axis=1)[:, None], faces[:, ::-1], faces)
+    return vertices, out_normals, faces
+
+
+def unit_rows(n: np.ndarray) -> np.ndarray:
+    """Rows of ``n`` (k, 3) scaled to unit length; zero rows stay zero (never NaN)."""
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+def placed(world: np.ndarray, positions: np.ndarray, normals: np.ndarray | None,
+           faces: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Positions, normals and faces of a primitive placed by its node's (non-degenerate) world matrix (4, 4)."""
+    linear = world[:3, :3]
+    if determinant3(linear) < 0:  # a mirroring transform turns triangles inside out
+        faces = faces[:, ::-1]
+    if normals is not None:
+        normals = unit_rows(normals @ np.linalg.inv(linear))  # the inverse transpose, as rows
+    return positions @ linear.T + world[:3, 3], normals, faces

@@ -127,8 +127,10 @@ def _folder_resolver_class() -> type:
     trimesh asks it for ``mtllib`` files and their textures. Names that escape
     the folder are refused by name; only regular files are read, without
     blocking, and every read is recorded for the input's key
-    (:func:`fracture_cli.io.inputs.read_input`). Defined on first use so that
-    importing this module does not import trimesh.
+    (:func:`fracture_cli.io.inputs.read_input`). trimesh treats any error of
+    a resolver as "material not found", so the refusal is also kept in
+    ``refused`` for the caller to raise. Defined on first use so that importing
+    this module does not import trimesh.
     """
     import trimesh
 
@@ -136,6 +138,7 @@ def _folder_resolver_class() -> type:
         def __init__(self, path: str):
             self.path = path
             self.folder = os.path.dirname(os.path.abspath(path))
+            self.refused: InputError | None = None
 
         def get(self, name: str) -> bytes:
             from fracture_cli.io.inputs import EscapingReference, NotRegularFile, companion_path, read_input
@@ -143,11 +146,13 @@ def _folder_resolver_class() -> type:
             try:
                 return read_input(companion_path(self.folder, str(name)))
             except EscapingReference as exc:
-                raise InputError(f"references '{name}' ({exc}); only files in the asset's folder or below it are "
-                                 "read (copy the file beside the asset)", path=self.path) from None
+                self.refused = self.refused or InputError(
+                    f"references '{name}' ({exc}); only files in the asset's folder or below it are read (copy the "
+                    "file beside the asset)", path=self.path)
             except NotRegularFile as exc:
-                raise InputError(f"references '{name}', which is {exc.strerror}; only regular files are read",
-                                 path=self.path) from None
+                self.refused = self.refused or InputError(
+                    f"references '{name}', which is {exc.strerror}; only regular files are read", path=self.path)
+            raise self.refused
 
         def keys(self):
             return iter(())
@@ -182,9 +187,9 @@ def _trimesh_parts(path: str, file_type: str) -> list[MeshPart]:
     import trimesh
 
     data = _trimesh_source(path, file_type)
+    resolver = _folder_resolver_class()(path)
     try:
-        scene = trimesh.load_scene(io.BytesIO(data), file_type=file_type, process=False,
-                                   resolver=_folder_resolver_class()(path))
+        scene = trimesh.load_scene(io.BytesIO(data), file_type=file_type, process=False, resolver=resolver)
     except InputError:
         raise
     except Exception as exc:  # trimesh raises many types; all mean "unreadable"
@@ -192,6 +197,8 @@ def _trimesh_parts(path: str, file_type: str) -> list[MeshPart]:
         if isinstance(exc, IndexError):
             raise InputError(f"has faces that reference missing vertices ({reason[:200]})", path=path) from exc
         raise InputError(f"could not be read as {file_type.upper()}: {reason[:200]}", path=path) from exc
+    if resolver.refused is not None:
+        raise resolver.refused
     parts = []
     for node in sorted(scene.graph.nodes_geometry):
         transform, geom_name = scene.graph[node]

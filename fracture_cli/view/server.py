@@ -167,7 +167,8 @@ def make_handler(source: ViewSource) -> type[http.server.BaseHTTPRequestHandler]
             self._route(send_body=True)
 
         def _route(self, send_body: bool) -> None:
-            bound, port = self.server.server_address[:2]
+            address = self.server.server_address
+            bound, port = (address[0], address[1]) if isinstance(address, tuple) else (str(address), 0)
             if not host_allowed(self.headers.get("Host"), str(bound), int(port)):
                 self._send_error(403, "the Host header does not name this server (refused: DNS rebinding "
                                       f"protection); open http://{_shown(str(bound))}:{port}/")
