@@ -381,7 +381,7 @@ class _Document:
             key = "TEXCOORD_0" if "TEXCOORD_0" in attributes else None
         if key is None:
             return None
-        uv = self.accessor(int(attributes[key]))[:, :2]
+        uv = self.accessor(self.index("accessors", attributes[key], key))[:, :2]
         if transform:
             uv = _texture_transform(uv, transform)
         uv = uv.copy()
@@ -391,7 +391,7 @@ class _Document:
     def _colors(self, attributes: dict) -> np.ndarray | None:
         if "COLOR_0" not in attributes:
             return None
-        c = self.accessor(int(attributes["COLOR_0"]))
+        c = self.accessor(self.index("accessors", attributes["COLOR_0"], "COLOR_0"))
         if c.shape[1] == 3:
             c = np.concatenate([c, np.ones((len(c), 1))], axis=1)
         return c[:, :4]
