@@ -84,6 +84,9 @@ def _open_regular(path: str) -> Iterator:
         yield fh
 
 
+open_regular = _open_regular  # public name: for readers that read part of a file (headers, probes)
+
+
 @dataclass(frozen=True)
 class FileRead:
     """One file as a reader saw it.

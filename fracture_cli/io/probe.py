@@ -15,7 +15,7 @@ import struct
 
 from fracture_cli.errors import InputError
 from fracture_cli.io.gltf_read import buffer_file, check_required_extensions
-from fracture_cli.io.inputs import external_uri, file_kind
+from fracture_cli.io.inputs import external_uri, file_kind, open_regular
 
 _GLB_MAGIC = b"glTF"
 _GLB_JSON = 0x4E4F534A
@@ -86,7 +86,7 @@ def _gltf_triangles(doc: dict) -> int:
 
 def _probe_glb(path: str) -> int:
     size = os.path.getsize(path)
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         head = fh.read(20)
         if len(head) < 12 or head[:4] != _GLB_MAGIC:
             raise InputError("could not be read as GLB: it does not start with 'glTF' (not a binary glTF file)",
@@ -118,7 +118,7 @@ def _probe_glb(path: str) -> int:
 
 def _probe_gltf(path: str) -> int:
     try:
-        with open(path, "rb") as fh:
+        with open_regular(path) as fh:
             doc = json.loads(fh.read())
     except (ValueError, UnicodeDecodeError) as exc:
         raise InputError(f"is not valid glTF JSON ({str(exc)[:120]})", path=path) from exc
@@ -145,7 +145,7 @@ def _probe_stl(path: str) -> int:
     from fracture_cli.io.stl import HEADER, RECORD, header_count, not_stl, size_count
 
     size = os.path.getsize(path)
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         head = fh.read(HEADER)
     declared = header_count(head)
     if declared is not None and size == HEADER + RECORD * declared:
@@ -166,7 +166,7 @@ def _count_bytes(path: str, needle: bytes, line_start: bool = False, lower: bool
     total = 0
     pattern = b"\n" + needle if line_start else needle
     carry = b"\n" if line_start else b""
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         while True:
             block = fh.read(_CHUNK)
             if not block:
@@ -183,7 +183,7 @@ def _probe_obj(path: str) -> int:
 
 
 def _header_lines(path: str, limit: int = 64 * 1024) -> list[str]:
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         head = fh.read(limit)
     return head.decode("latin-1").splitlines()
 
