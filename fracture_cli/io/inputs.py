@@ -47,7 +47,7 @@ _KINDS = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISDIR, "a directory"), (stat.S_ISCH
 def file_sha256(path: str) -> str:
     """Hex SHA-256 of a file's bytes (a regular file, opened without blocking: see :func:`read_input`)."""
     h = hashlib.sha256()
-    with _open_regular(path) as fh:
+    with open_regular(path) as fh:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
@@ -63,7 +63,7 @@ def file_kind(mode: int) -> str:
 
 
 @contextlib.contextmanager
-def _open_regular(path: str) -> Iterator:
+def open_regular(path: str) -> Iterator:
     """A binary file object of ``path``, opened with O_NONBLOCK and refused unless it is a regular file.
 
     A FIFO opened for reading without O_NONBLOCK waits for a writer forever; with
@@ -82,9 +82,6 @@ def _open_regular(path: str) -> Iterator:
         raise
     with fh:
         yield fh
-
-
-open_regular = _open_regular  # public name: for readers that read part of a file (headers, probes)
 
 
 @dataclass(frozen=True)
@@ -171,7 +168,7 @@ def read_input(path: str) -> bytes:
         or folder (never blocks on one).
     """
     started = time.time_ns()
-    with _open_regular(path) as fh:
+    with open_regular(path) as fh:
         before = os.fstat(fh.fileno())
         data = fh.read()
         after = os.fstat(fh.fileno())
@@ -192,7 +189,7 @@ def read_regular(path: str) -> bytes:
     OSError
         As ``open`` does; :class:`NotRegularFile` for anything but a regular file.
     """
-    with _open_regular(path) as fh:
+    with open_regular(path) as fh:
         return fh.read()
 
 
@@ -200,7 +197,7 @@ def hash_file(path: str) -> FileRead:
     """A file hashed from disk now (``missing`` / ``not-a-file`` without reading what is not a regular file)."""
     started = time.time_ns()
     try:
-        with _open_regular(path) as fh:
+        with open_regular(path) as fh:
             before = os.fstat(fh.fileno())
             h = hashlib.sha256()
             for chunk in iter(lambda: fh.read(1 << 20), b""):
@@ -318,7 +315,7 @@ def gltf_document(path: str, ext: str, raw: bytes | None = None) -> dict:
     is read here (regular files only, without blocking).
     """
     if raw is None:
-        with _open_regular(path) as fh:
+        with open_regular(path) as fh:
             raw = fh.read(20) if ext == ".glb" else fh.read()
             if ext == ".glb" and len(raw) == 20 and raw[:4] == b"glTF":
                 raw += fh.read(struct.unpack_from("<I", raw, 12)[0])
@@ -370,7 +367,7 @@ def mtl_texture_names(text: str, mtl_name: str) -> list[str]:
 def _obj_companions(path: str) -> list[str]:
     folder = os.path.dirname(path)
     names: list[str] = []
-    with _open_regular(path) as fh:
+    with open_regular(path) as fh:
         for raw in fh:
             words = obj_words(raw) if b"mtllib" in raw else []
             if words and words[0] == "mtllib":
@@ -381,7 +378,7 @@ def _obj_companions(path: str) -> list[str]:
         if file is None or not _is_regular(file):
             continue
         try:
-            with _open_regular(file) as fh:
+            with open_regular(file) as fh:
                 text = fh.read().decode("utf-8", "replace")
         except OSError:
             continue
@@ -398,7 +395,7 @@ def _is_regular(path: str) -> bool:
 
 
 def _ply_companions(path: str) -> list[str]:
-    with _open_regular(path) as fh:
+    with open_regular(path) as fh:
         head = fh.read(64 * 1024)
     names = []
     for line in head.split(b"end_header")[0].splitlines():

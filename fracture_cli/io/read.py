@@ -128,9 +128,10 @@ def check_representable(points: np.ndarray, path: str) -> None:
     smallest, largest = size_limits()
     if reach > _FLOAT32_MAX / _MARGIN or diagonal > largest:
         raise InputError(f"is too large for the outputs: it is {diagonal:.3g} units across (coordinates up to "
-                         f"{float(np.abs(points).max()):.3g}), and its mass properties (volume, inertia in units^5) "
-                         f"and positions must fit 32-bit floats, which holds up to about {largest:.2g} units across; "
-                         "export it in larger units (e.g. metres instead of millimetres) or scale it down", path=path)
+                         f"{float(np.abs(points).max()):.3g}), and its inertia (units^5) and positions must fit the "
+                         f"32-bit floats of the GLB and runtime file, which hold assets up to about {largest:.2g} "
+                         "units across; export it in larger units (e.g. metres instead of millimetres) or scale it "
+                         "down", path=path)
     if 0.0 < diagonal < smallest:
         raise InputError(f"is too small for the outputs: it is {diagonal:.3g} units across, and its inertia "
                          f"(units^5) would underflow 32-bit floats below about {smallest:.2g} units across; export "
