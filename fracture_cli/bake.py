@@ -47,10 +47,17 @@ STAGES = STEPS
 
 @dataclass(frozen=True)
 class BakeResult:
-    """What a bake produced: the report and the paths of the files written."""
+    """What a bake produced: the report, the paths of the files written and the input files as read.
+
+    ``inputs`` holds one :class:`~fracture_cli.io.inputs.FileRead` per file the
+    outputs depend on (the asset first), hashed from the bytes the load read,
+    so a caller that records "these inputs give these outputs" (an incremental
+    batch) records what was baked, not what was on disk before or after.
+    """
 
     report: dict[str, Any]
     outputs: tuple[str, ...]
+    inputs: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -136,7 +143,7 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
         state = run_pipeline(input_path, recipe, runner)
         report = build_report(state, recipe, runner)
         outputs = write_outputs(out_dir, stem, state, report, runner, preview_size)
-        return BakeResult(report=report, outputs=outputs)
+        return BakeResult(report=report, outputs=outputs, inputs=state.source_files)
     except FractureError as exc:
         if exc.path is None:
             exc.path = input_path

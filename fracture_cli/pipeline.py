@@ -42,7 +42,8 @@ class PipelineState:
     """What the pipeline has produced so far; each stage fills its fields (see :data:`STAGES`)."""
 
     source: str | None = None  # the input file
-    source_sha256: str | None = None
+    source_sha256: str | None = None  # digest of the bytes the load read (the asset and its companions)
+    source_files: tuple = ()  # (io.inputs.FileRead, ...): each file as the load read it, the asset first
     loaded: SurfaceMesh | None = None  # as read, before repair
     surface: SurfaceMesh | None = None  # the solid every later stage uses
     repairs: tuple[RepairRecord, ...] = ()  # what the repair stage did (report.json ``repairs``)
@@ -137,12 +138,17 @@ class Stage:
 # What each stage calls. Imports are local so `fracture --help` does not load the geometry stack.
 
 def _load(state: PipelineState, options: Any) -> PipelineState:
-    from fracture_cli.cache import input_key
+    from fracture_cli.io.inputs import digest_of, input_files, recording_reads
     from fracture_cli.io.read import load_surface
 
     path = state.need("source", "load")
-    surface = load_surface(path, options)
-    return dataclasses.replace(state, loaded=surface, surface=surface, source_sha256=input_key(path))
+    # The key of the input is the hash of the bytes the readers used (an edit during the bake, undone
+    # later, must not leave these outputs vouched for by the other bytes' hash).
+    with recording_reads() as reads:
+        surface = load_surface(path, options)
+    files = reads.as_read(input_files(path))
+    return dataclasses.replace(state, loaded=surface, surface=surface, source_sha256=digest_of(files),
+                               source_files=files)
 
 
 def _repair(state: PipelineState, options: Any) -> PipelineState:
@@ -267,7 +273,7 @@ def _runtime(state: PipelineState, options: Any) -> PipelineState:
 
 STAGES: tuple[Stage, ...] = (
     Stage("load", "Read a mesh (OBJ, PLY, STL, OFF, GLB, glTF).", "fracture_cli.io.read:LoadOptions",
-          _load, consumes=("source",), produces=("loaded", "surface", "source_sha256")),
+          _load, consumes=("source",), produces=("loaded", "surface", "source_sha256", "source_files")),
     Stage("repair", "Make the surface a closed solid: weld, fix winding, close holes or thicken open sheets.",
           "fracture_cli.stages.repair:RepairOptions", _repair, consumes=("surface",), produces=("surface", "repairs")),
     Stage("cage", "Build the nested cage: a coarse closed surface around the input.",
@@ -357,6 +363,11 @@ class Runner:
                     result = row.run(state, options)
                 if cache and key:
                     cache.put(name, key, result)
+        if row.name == "load" and self.cache is not None:
+            # The chain of keys starts from the bytes the load read, not from a hash taken before it.
+            from fracture_cli.cache import cache_key
+
+            self._key = cache_key("load", result.source_sha256, options)
         self.options[name] = options
         return result
 
@@ -367,10 +378,10 @@ class Runner:
     def _cache_key(self, row: Stage, state: PipelineState, options: Any) -> str | None:
         if self.cache is None:
             return None
-        from fracture_cli.cache import cache_key, input_key
+        from fracture_cli.cache import cache_key
 
         if row.name == "load":
-            self._key = cache_key("load", input_key(state.need("source", "load")), options)
+            self._key = None  # set from the bytes read, once the load has run (see run)
         elif self._key is not None:
             self._key = cache_key(row.name, self._key, options)
         return self._key

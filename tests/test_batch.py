@@ -172,28 +172,33 @@ def test_a_bake_that_raises_or_hangs_fails_alone(tmp_path):
     root = tmp_path / "assets"
     _write_box(str(root / "good.obj"))
     (root / "broken.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
-    # A material file that is a FIFO nobody writes: reading it blocks forever (like a hung network mount).
-    _write_box(str(root / "hang.obj"), extents=(0.8, 0.8, 0.3))
-    (root / "hang.obj").write_text("mtllib hang.mtl\n" + (root / "hang.obj").read_text())
-    os.mkfifo(root / "hang.mtl")
-    # Only the hanging asset gets a short timeout: the others may be slow on a busy machine.
-    (root / "m.toml").write_text('[assets]\n"*.obj" = "stone"\n"hang.obj" = { recipe = "stone", timeout = 10 }\n')
+    # A material file that is a FIFO nobody writes: reading it would block forever (like a hung network
+    # mount); the reader refuses it by name instead of opening it in a way that waits.
+    _write_box(str(root / "fifo.obj"), extents=(0.8, 0.8, 0.3))
+    (root / "fifo.obj").write_text("mtllib fifo.mtl\n" + (root / "fifo.obj").read_text())
+    os.mkfifo(root / "fifo.mtl")
+    # A bake that cannot finish in its time (1 s: less than the bake process takes to start) is killed.
+    _write_box(str(root / "slow.obj"), sphere=True)
+    # Only the slow asset gets a short timeout: the others may be slow on a busy machine.
+    (root / "m.toml").write_text('[assets]\n"*.obj" = "stone"\n"slow.obj" = { recipe = "stone", timeout = 1 }\n')
     out = tmp_path / "out"
     result = CliRunner().invoke(cli, ["batch", str(root / "m.toml"), "-o", str(out), "--workers", "2",
                                       *_set_args(TINY)])
     assert result.exit_code == 1
-    assert "error: 2 of 3 asset(s) failed" in result.output
+    assert "error: 3 of 4 asset(s) failed" in result.output
     assert "Traceback" not in result.output
     report = json.loads((out / "m.batch.json").read_text())
     by_name = {a["name"]: a for a in report["assets"]}
     assert by_name["good.obj"]["status"] == BAKED
     assert by_name["broken.obj"]["status"] == FAILED and "broken.obj" in by_name["broken.obj"]["error"]
-    assert "timed out after 10 s" in by_name["hang.obj"]["error"]
+    assert "fifo.obj: references 'fifo.mtl', which is a FIFO" in by_name["fifo.obj"]["error"]
+    assert "timed out after 1 s" in by_name["slow.obj"]["error"]
     _complete_set(str(out), "good")
-    assert not any(os.path.exists(out / f"hang{s}") for s in DATA_SUFFIXES)
-    # The hung bake was killed: nobody reads the FIFO any more.
+    for stem in ("fifo", "slow"):
+        assert not any(os.path.exists(out / f"{stem}{s}") for s in DATA_SUFFIXES)
+    # Nobody ever opened the FIFO for reading (a writer would find a reader).
     with pytest.raises(OSError) as exc:
-        os.open(root / "hang.mtl", os.O_WRONLY | os.O_NONBLOCK)
+        os.open(root / "fifo.mtl", os.O_WRONLY | os.O_NONBLOCK)
     assert exc.value.errno == errno.ENXIO
 
 

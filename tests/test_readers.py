@@ -152,7 +152,7 @@ def test_data_uri_buffer_and_gltf_without_scenes(tmp_path):
     (lambda d: d["accessors"][0].update(count=400), "reads past the end"),
     (lambda d: d["bufferViews"][0].update(byteLength=10**6), "lies outside its buffer"),
     (lambda d: d["accessors"][0].update(count=4), "missing vertices"),
-    (lambda d: d["buffers"][0].update(uri="https://example.com/box.bin"), "only file names relative"),
+    (lambda d: d["buffers"][0].update(uri="https://example.com/box.bin"), "a URL, not a file name"),
     (lambda d: d.update(extensionsRequired=["EXT_meshopt_compression"]), "EXT_meshopt_compression"),
 ])
 def test_malformed_gltf_is_one_line(tmp_path, edit, message):

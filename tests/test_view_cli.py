@@ -218,3 +218,66 @@ def test_static_page_imports_only_local_modules():
         for spec in re.findall(r"^import .* from '([^']+)';", text, re.MULTILINE):
             assert spec.startswith(("./", "three/addons/")) or spec == "three", (name, spec)
         assert "http://" not in text and "https://" not in text, name
+
+
+def _get_with_host(srv, path: str, host: str | None) -> int:
+    import http.client
+
+    bound, port = srv.httpd.server_address[:2]
+    conn = http.client.HTTPConnection(bound, port, timeout=10)
+    try:
+        conn.putrequest("GET", path, skip_host=True)
+        if host is not None:
+            conn.putheader("Host", host)
+        conn.endheaders()
+        response = conn.getresponse()
+        response.read()
+        return response.status
+    finally:
+        conn.close()
+
+
+def test_host_header_must_name_the_server(tmp_path, monkeypatch):
+    """DNS rebinding: a page of another site re-pointed at 127.0.0.1 sends its own name and is refused."""
+    _row_of_boxes(tmp_path)
+    monkeypatch.setattr(view_server, "check_vendor", lambda: None)
+    with view_server.ViewServer(ViewSource(folder=str(tmp_path)), view_server.ViewOptions(port=0)) as srv:
+        port = srv.httpd.server_address[1]
+        for host in (f"127.0.0.1:{port}", f"localhost:{port}", f"LOCALHOST.:{port}"):
+            assert _get_with_host(srv, "/files/row.glb", host) == 200, host
+        for host in (f"evil.example:{port}", f"127.0.0.1.nip.io:{port}", f"127.0.0.1:{port + 1}", "127.0.0.1",
+                     f"192.168.1.4:{port}", "", None, f"localhost:{port}:1"):
+            assert _get_with_host(srv, "/files/row.glb", host) == 403, host
+            assert _get_with_host(srv, "/api/state", host) == 403, host
+
+
+def test_host_allowed_for_other_interfaces():
+    assert view_server.host_allowed("192.168.1.4:8765", "0.0.0.0", 8765)
+    assert view_server.host_allowed("[::1]:8765", "::", 8765) and view_server.host_allowed("[::1]:80", "::1", 80)
+    assert not view_server.host_allowed("attacker.example:8765", "0.0.0.0", 8765)
+    assert view_server.host_allowed("box.lan:8765", "box.lan", 8765)
+    assert not view_server.host_allowed("[::1:8765", "::1", 8765)
+
+
+def test_symlinks_out_of_the_folder_are_not_served(tmp_path, monkeypatch):
+    folder = tmp_path / "bake"
+    folder.mkdir()
+    _row_of_boxes(folder)
+    (tmp_path / "secret.glb").write_bytes(b"secret")
+    os.symlink(tmp_path / "secret.glb", folder / "leak.glb")
+    os.symlink(folder / "row.glb", folder / "alias.glb")  # a link that stays inside is fine
+    source = ViewSource(folder=str(folder))
+    assert served_file(source, "leak.glb") is None
+    assert served_file(source, "alias.glb") == str(folder / "alias.glb")
+    monkeypatch.setattr(view_server, "check_vendor", lambda: None)
+    static = tmp_path / "static"
+    static.mkdir()
+    (static / "app.js").write_text("// page")
+    os.symlink(tmp_path / "secret.glb", static / "leak.js")
+    monkeypatch.setattr(view_server, "STATIC_DIR", str(static))
+    with view_server.ViewServer(source, view_server.ViewOptions(port=0)) as srv:
+        assert _get(srv.url + "files/leak.glb")[0] == 404
+        assert _get(srv.url + "static/leak.js")[0] == 404
+        assert _get(srv.url + "static/app.js")[0] == 200
+        status, body, _ = _get(srv.url + "files/alias.glb")
+        assert status == 200 and body == (folder / "row.glb").read_bytes()

@@ -22,10 +22,14 @@ class BakeOutcome:
         The bake report (as written to ``<stem>.report.json``).
     outputs : tuple of str
         Absolute paths of every file published, the report last.
+    inputs : tuple of FileRead
+        Every file the outputs depend on, hashed from the bytes the bake read
+        (:class:`fracture_cli.io.inputs.FileRead`, the asset first).
     """
 
     report: dict
     outputs: tuple[str, ...]
+    inputs: tuple = ()
 
 
 def output_names(stem: str) -> tuple[str, ...]:
@@ -48,4 +52,4 @@ def bake_asset(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | N
     # One process per asset: the batch's parallelism is across assets (one Dask worker per core),
     # a bake's own --jobs workers on top would oversubscribe the cores.
     result = bake(input_path, out_dir, recipe, cache_dir=cache_dir, jobs=1)
-    return BakeOutcome(report=result.report, outputs=tuple(result.outputs))
+    return BakeOutcome(report=result.report, outputs=tuple(result.outputs), inputs=tuple(result.inputs))

@@ -24,9 +24,10 @@ import traceback
 
 from fracture_cli.bake import describe_error
 from fracture_cli.batch.adapter import bake_asset
+from fracture_cli.batch.inputs import InputFile, as_read
 from fracture_cli.batch.jobs import BAKED, FAILED, UP_TO_DATE, BakeJob, TaskResult
-from fracture_cli.batch.state import state_path, write_state
-from fracture_cli.errors import FractureError
+from fracture_cli.batch.state import asset_key, content_seed, state_path, write_state
+from fracture_cli.errors import FractureError, InputError
 from fracture_cli.io.atomic import write_bytes_atomic
 
 log = logging.getLogger("fracture_cli")
@@ -56,14 +57,23 @@ class _Collect(logging.Handler):
         self.messages.append(record.getMessage())
 
 
-def _impacts(job: BakeJob):
+def _impacts(job: BakeJob, inputs: tuple[InputFile, ...], seed: int):
+    """The dataset rows of an asset, from the input read again: refused if it is not the input baked."""
     from fracture_cli.batch.impacts import asset_impacts
+    from fracture_cli.io.inputs import input_files, recording_reads
     from fracture_cli.io.read import load_surface
     from fracture_cli.runtime.format import load_runtime
 
     data = load_runtime(os.path.join(job.out_dir, f"{job.stem}.fracture.json"))
-    surface = load_surface(job.input_path, job.recipe["load"])
-    return asset_impacts(data, surface.world_vertices(), surface.faces, job.impacts, job.seed)
+    with recording_reads() as reads:
+        surface = load_surface(job.input_path, job.recipe["load"])
+    now = {f.name: f.sha256 for f in as_read(job.input_path, reads.as_read(input_files(job.input_path)))}
+    baked = {f.name: f.sha256 for f in inputs}
+    # Files on one side only mean another listing, hence another asset file: its own hash differs then.
+    if any(now[name] != baked[name] for name in now.keys() & baked.keys()):
+        raise InputError("changed while the batch ran (its bytes now are not the ones its outputs were baked "
+                         "from); run the batch again", path=job.input_path)
+    return asset_impacts(data, surface.world_vertices(), surface.faces, job.impacts, seed)
 
 
 def _read_report(job: BakeJob) -> dict:
@@ -74,16 +84,27 @@ def _read_report(job: BakeJob) -> dict:
 
 
 def run(job: BakeJob) -> TaskResult:
-    """Bake (unless up to date), record the state, and compute the impacts asked for."""
+    """Bake (unless up to date), record the state, and compute the impacts asked for.
+
+    The state is keyed on the hashes the bake took of the bytes it read (not
+    the planner's, taken earlier): an input edited after planning is recorded
+    as the bytes baked, so undoing the edit later makes the asset stale again.
+    """
+    inputs, seed = job.inputs, job.seed
     if job.bake:
         outcome = bake_asset(job.input_path, job.out_dir, job.recipe, job.cache_dir)
-        write_state(state_path(job.out_dir, job.stem), job.key, job.inputs, outcome.outputs, job.hashed_at_ns,
-                    outcome.report)
-        report, status = outcome.report, BAKED
+        inputs = as_read(job.input_path, outcome.inputs)
+        key = asset_key(inputs, job.recipe)
+        if key != job.key:
+            log.warning("%s: changed after the batch was planned; the outputs and the state are of the bytes the "
+                        "bake read", job.input_path)
+        hashed_at = min(r.started_ns for r in outcome.inputs)
+        write_state(state_path(job.out_dir, job.stem), key, inputs, outcome.outputs, hashed_at, outcome.report)
+        report, status, seed = outcome.report, BAKED, content_seed(inputs)
     else:
         report, status = _read_report(job), UP_TO_DATE
-    rows = _impacts(job) if job.impacts else None
-    return TaskResult(index=job.index, status=status, report=report, impacts=rows)
+    rows = _impacts(job, inputs, seed) if job.impacts else None
+    return TaskResult(index=job.index, status=status, report=report, impacts=rows, inputs=inputs)
 
 
 def main(argv: list[str]) -> int:

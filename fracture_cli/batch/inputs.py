@@ -8,6 +8,11 @@ state when a file's size and modification time are unchanged (as git does), so
 a re-run reads only what changed (the state module offers only hashes taken
 well after the file's modification time, so an edit within one timestamp tick
 is never missed).
+
+The planner's hashes decide what to bake; the state records the hashes the
+bake took of the bytes it read (:func:`as_read`), so an input edited between
+planning and baking (and the edit undone later) is never reported up to date
+with outputs baked from other bytes.
 """
 
 from __future__ import annotations
@@ -69,8 +74,39 @@ def hash_input(path: str, name: str, previous: dict[str, InputFile] | None = Non
     return InputFile(name=name, size=st.st_size, mtime_ns=st.st_mtime_ns, sha256=file_sha256(path))
 
 
-def hash_inputs(path: str, previous: dict[str, InputFile] | None = None) -> tuple[InputFile, ...]:
-    """The asset itself (first) and every file it depends on, hashed."""
+def _name(path: str, folder: str) -> str:
+    return os.path.relpath(path, folder).replace(os.sep, "/")
+
+
+def hash_inputs(path: str, previous: dict[str, InputFile] | None = None,
+                also: tuple[str, ...] = ()) -> tuple[InputFile, ...]:
+    """The asset itself (first) and every file it depends on (sorted by path), hashed.
+
+    ``also`` adds names (relative to the asset's folder) a previous bake read
+    besides the listed companions (a texture trimesh found by another path),
+    so the key is taken over the same files the last bake's key was.
+    """
+    from fracture_cli.io.inputs import companion_or_none
+
     folder = os.path.dirname(os.path.abspath(path))
-    files = [os.path.abspath(path)] + dependency_files(path)
-    return tuple(hash_input(p, os.path.relpath(p, folder).replace(os.sep, "/"), previous) for p in files)
+    extra = {os.path.normpath(p) for p in (companion_or_none(folder, n) for n in also) if p is not None}
+    deps = sorted((set(dependency_files(path)) | extra) - {os.path.abspath(path)})
+    files = [os.path.abspath(path)] + deps
+    return tuple(hash_input(p, _name(p, folder), previous) for p in files)
+
+
+def as_read(path: str, reads: tuple) -> tuple[InputFile, ...]:
+    """The files a bake read (:class:`fracture_cli.io.inputs.FileRead`, from its result) as :class:`InputFile`.
+
+    The same order and names as :func:`hash_inputs` (the asset first, then by
+    path), so the key of the bytes the bake read is comparable with the key
+    the next run's planner takes from disk.
+    """
+    folder = os.path.dirname(os.path.abspath(path))
+    asset = os.path.normpath(os.path.abspath(path))
+    by_path = {r.path: r for r in reads}
+    order = [asset] + sorted(set(by_path) - {asset})
+    if asset not in by_path:  # every bake reads its asset; without it the result is not from a bake
+        raise ValueError(f"the bake's result does not list its input {path}")
+    return tuple(InputFile(name=_name(p, folder), size=by_path[p].size, mtime_ns=by_path[p].mtime_ns,
+                           sha256=by_path[p].sha256) for p in order)

@@ -93,6 +93,8 @@ class TaskResult:
         Warnings the bake logged.
     worker : str
         Dask worker address (empty when nothing ran).
+    inputs : tuple of InputFile
+        The asset's files as the bake read them (the planner's for an up-to-date asset).
     """
 
     index: int
@@ -104,3 +106,4 @@ class TaskResult:
     impacts: ImpactRows | None = None
     warnings: tuple[str, ...] = field(default_factory=tuple)
     worker: str = ""
+    inputs: tuple[InputFile, ...] = ()

@@ -86,7 +86,9 @@ def plan_batch(assets: list[Asset], *, impacts: int, cache_dir: str | None, time
     for index, asset in enumerate(assets):
         state = read_state(state_path(asset.out_dir, asset.stem))
         hashed_at = time.time_ns()
-        inputs: tuple[InputFile, ...] = hash_inputs(asset.path, reusable_hashes(state))
+        # Over the files the last bake read too (its state's names), so its key is comparable with this one.
+        read_before = tuple((state or {}).get("inputs") or ()) if isinstance((state or {}).get("inputs"), dict) else ()
+        inputs: tuple[InputFile, ...] = hash_inputs(asset.path, reusable_hashes(state), also=read_before)
         key = asset_key(inputs, asset.recipe)
         fresh = not force and is_up_to_date(state, key, asset.out_dir)
         report = _report_on_disk(asset) if fresh else None

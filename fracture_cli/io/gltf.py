@@ -243,11 +243,14 @@ def read_glb_chunks(path: str) -> tuple[dict, bytes | None]:
     InputError
         Missing file, not a GLB, unsupported version, truncated, no JSON chunk.
     """
+    from fracture_cli.io.inputs import read_input
+
     try:
-        with open(path, "rb") as handle:
-            raw = handle.read()
+        raw = read_input(path)
     except FileNotFoundError:
         raise InputError("no such file", path=path) from None
+    except OSError as exc:
+        raise InputError(f"cannot be read ({exc.strerror})", path=path) from None
     if len(raw) < 20 or raw[:4] != _GLB_MAGIC:
         raise InputError("not a binary glTF (.glb) file", path=path)
     _, version, total = struct.unpack_from("<4sII", raw, 0)

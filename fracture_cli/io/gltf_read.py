@@ -15,8 +15,15 @@ extensions' own specifications):
   triangles' winding, normals use the inverse transpose;
 * primitive modes 4, 5, 6 (triangles, strips, fans); points and lines are
   skipped;
-* buffers in the GLB binary chunk, in ``data:`` URIs or in files named by a
-  percent-encoded relative ``uri``;
+* morph targets at their default ``weights`` (the node's, else the mesh's):
+  POSITION and NORMAL deltas, sparse or not; skinned meshes placed by their
+  joints in the scene's pose, their node transform ignored, as the
+  specification says (:mod:`fracture_cli.io.gltf_scene`);
+* buffers and images in the GLB binary chunk, in ``data:`` URIs or in files
+  named by a percent-encoded relative ``uri`` inside the file's folder (an
+  absolute path, a URL or a ``..`` that climbs out is refused by name; only
+  regular files are opened, without blocking:
+  :func:`fracture_cli.io.inputs.read_input`);
 * one material slot per glTF material (two materials that share a name stay
   two), with base colour, metallic, roughness and the base-colour texture;
 * engines' collision-only nodes (Unreal ``UCX_``, Godot ``-convcolonly``, ...)
@@ -25,9 +32,11 @@ extensions' own specifications):
 
 ``extensionsRequired`` lists extensions a reader must understand: any not in
 :data:`SUPPORTED_EXTENSIONS` is refused by name (Draco and meshopt
-compression among them: decompress the file first). Skins, morph targets and
-``EXT_mesh_gpu_instancing`` (when not required) are not applied: the bind-pose
-mesh is read, once.
+compression among them: decompress the file first). ``EXT_mesh_gpu_instancing``
+(when not required) is not applied: each instanced mesh is read once. Indices of
+every kind are checked (``"mesh": -1`` is refused, not read as the last mesh),
+and so are the accessor types the specification allows (float indices are
+refused).
 
 Every problem is one :class:`~fracture_cli.errors.InputError` line.
 """
@@ -38,7 +47,6 @@ import base64
 import binascii
 import io
 import logging
-import math
 import os
 
 import numpy as np
@@ -46,8 +54,16 @@ import numpy as np
 from fracture_cli import detmath
 from fracture_cli.errors import InputError
 from fracture_cli.io.gltf import MaterialSource
-from fracture_cli.io.gltf_conventions import baked_material_prefix, is_collision_only, unprefixed
-from fracture_cli.io.inputs import external_uri, gltf_document
+from fracture_cli.io.gltf_conventions import baked_material_prefix, unprefixed
+from fracture_cli.io.gltf_scene import Instance, Scene, index, morphed, placed, skinned
+from fracture_cli.io.inputs import (
+    EscapingReference,
+    NotRegularFile,
+    companion_path,
+    external_uri,
+    gltf_document,
+    read_input,
+)
 from fracture_cli.io.parts import MeshPart
 from fracture_cli.types import Material
 
@@ -63,7 +79,10 @@ _HINTS = {
 }
 _COMPONENTS: dict[int, np.dtype] = {5120: np.dtype("i1"), 5121: np.dtype("u1"), 5122: np.dtype("<i2"),
                                     5123: np.dtype("<u2"), 5125: np.dtype("<u4"), 5126: np.dtype("<f4")}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_INDEX_TYPES = {5121: "unsigned byte", 5123: "unsigned short", 5125: "unsigned int"}
+_TYPE_NAMES = {5120: "byte", 5121: "unsigned byte", 5122: "short", 5123: "unsigned short", 5125: "unsigned int",
+               5126: "float"}
 # normalized integer -> float (glTF 2.0, section 3.11 "Animations" table / KHR_mesh_quantization)
 _NORMALIZE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
 
@@ -97,9 +116,11 @@ def read_gltf(path: str) -> list[MeshPart]:
         doc, binary = read_glb_chunks(path)
     else:
         try:
-            doc = gltf_document(path, ext)
+            doc = gltf_document(path, ext, raw=read_input(path))
         except (ValueError, UnicodeDecodeError) as exc:
             raise InputError(f"is not valid glTF JSON ({str(exc)[:120]})", path=path) from None
+        except OSError as exc:
+            raise InputError(f"cannot be read ({exc.strerror})", path=path) from None
         binary = None
     reader = _Document(path, doc, binary)
     try:
@@ -126,20 +147,25 @@ def check_required_extensions(doc: dict, path: str) -> None:
             raise InputError(f"requires the glTF extension {name} ({hint})", path=path)
 
 
-def buffer_file(folder: str, uri: str, index: int, path: str) -> str:
-    """The file a buffer's (percent-encoded) ``uri`` names, in ``folder``; URLs and absolute paths are refused.
+def buffer_file(folder: str, uri: str, index: int, path: str, what: str = "buffer") -> str:
+    """The file a buffer's or image's (percent-encoded) ``uri`` names, inside ``folder``.
 
     Raises
     ------
     InputError
-        The uri is a URL or an absolute path (a build must not depend on the network or on another machine's
-        folders).
+        The uri is a URL, an absolute path or climbs out of ``folder`` with
+        ``..`` (a build must not depend on the network or on files outside the
+        asset's folder: a downloaded asset could embed any file of the machine).
     """
-    name = external_uri(uri) or ""
-    if "://" in uri or os.path.isabs(name):
-        raise InputError(f"buffer {index} has the uri '{uri}'; only file names relative to the file are read",
-                         path=path)
-    return os.path.join(folder, name)
+    try:
+        return companion_path(folder, external_uri(uri) or "")
+    except EscapingReference as exc:
+        raise InputError(f"{what} {index} has the uri '{uri}' ({exc}); only files in the asset's folder or below "
+                         "it are read (copy the file beside the asset)", path=path) from None
+
+
+def _not_regular(kind: str, index: int, uri: str, exc: OSError) -> str:
+    return f"{kind} {index}'s uri '{uri}' names {exc.strerror}; only regular files are read"
 
 
 class _Document:
@@ -153,6 +179,7 @@ class _Document:
         self._buffers: dict[int, bytes] = {}
         self._materials: dict[int, Material] = {}
         check_required_extensions(doc, path)
+        self.scene = Scene(doc, path)
         self.material_prefix = baked_material_prefix(doc)
         used = set(doc.get("extensionsUsed", []) or []) - SUPPORTED_EXTENSIONS
         if "EXT_mesh_gpu_instancing" in used:
@@ -160,6 +187,10 @@ class _Document:
 
     def fail(self, message: str) -> InputError:
         return InputError(message, path=self.path)
+
+    def index(self, kind: str, value, what: str) -> int:
+        """``value`` checked as an index into ``doc[kind]`` (:func:`~fracture_cli.io.gltf_scene.index`)."""
+        return index(self.doc, kind, value, what, self.path)
 
     # -- buffers and accessors -------------------------------------------------
 
@@ -178,11 +209,12 @@ class _Document:
         else:
             file = buffer_file(self.folder, uri, index, self.path)
             try:
-                with open(file, "rb") as fh:
-                    data = fh.read()
+                data = read_input(file)
             except FileNotFoundError:
                 raise self.fail(f"references the buffer file '{uri}', which is missing (keep it beside the "
                                 "file, or export a single .glb)") from None
+            except NotRegularFile as exc:
+                raise self.fail(_not_regular("buffer", index, uri, exc)) from None
             except OSError as exc:
                 raise self.fail(f"cannot read the buffer file '{uri}' ({exc.strerror})") from None
             where = f"the buffer file '{uri}'"
@@ -204,7 +236,7 @@ class _Document:
     def view_bytes(self, index: int) -> tuple[memoryview, int | None]:
         """(bytes of buffer view ``index``, its byteStride or None)."""
         view = self.doc["bufferViews"][index]
-        data = self.buffer(int(view["buffer"]))
+        data = self.buffer(self.index("buffers", view["buffer"], f"bufferView {index}'s buffer"))
         offset, length = int(view.get("byteOffset", 0)), int(view["byteLength"])
         if offset < 0 or length < 0 or offset + length > len(data):
             raise self.fail(f"bufferView {index} (bytes {offset:,}..{offset + length:,}) lies outside its buffer "
@@ -214,6 +246,7 @@ class _Document:
 
     def _strided(self, view_index: int, byte_offset: int, dtype: np.dtype, width: int, count: int,
                  what: str) -> np.ndarray:
+        view_index = self.index("bufferViews", view_index, f"{what}'s bufferView")
         data, stride = self.view_bytes(view_index)
         element = dtype.itemsize * width
         stride = stride or element
@@ -237,8 +270,10 @@ class _Document:
         if component not in _COMPONENTS or spec.get("type") not in _WIDTH:
             raise self.fail(f"{what} has an unsupported layout ({spec.get('type')}, componentType {component})")
         dtype, width, count = _COMPONENTS[component], _WIDTH[spec["type"]], int(spec["count"])
+        if count < 0:
+            raise self.fail(f"{what} has a negative count ({count})")
         if "bufferView" in spec:
-            values = self._strided(int(spec["bufferView"]), int(spec.get("byteOffset", 0)), dtype, width, count, what)
+            values = self._strided(spec["bufferView"], int(spec.get("byteOffset", 0)), dtype, width, count, what)
         else:
             values = np.zeros((count, width), dtype=dtype)
         sparse = spec.get("sparse")
@@ -259,9 +294,9 @@ class _Document:
         idx_type = int(idx_spec["componentType"])
         if idx_type not in (5121, 5123, 5125):
             raise self.fail(f"{what}: sparse indices have componentType {idx_type}")
-        indices = self._strided(int(idx_spec["bufferView"]), int(idx_spec.get("byteOffset", 0)),
+        indices = self._strided(idx_spec["bufferView"], int(idx_spec.get("byteOffset", 0)),
                                 _COMPONENTS[idx_type], 1, n, f"{what} (sparse indices)")[:, 0].astype(np.int64)
-        replacement = self._strided(int(val_spec["bufferView"]), int(val_spec.get("byteOffset", 0)), dtype, width, n,
+        replacement = self._strided(val_spec["bufferView"], int(val_spec.get("byteOffset", 0)), dtype, width, n,
                                     f"{what} (sparse values)")
         if n and (indices.min() < 0 or indices.max() >= len(values) or np.any(np.diff(indices) <= 0)):
             raise self.fail(f"{what}: sparse indices must increase strictly and stay below its count {len(values)}")
@@ -271,82 +306,69 @@ class _Document:
 
     # -- scene ----------------------------------------------------------------
 
-    def instances(self) -> list[tuple[int, np.ndarray]]:
-        """(mesh index, (4, 4) world matrix) for every node with a mesh in the scene, depth first."""
-        nodes = self.doc.get("nodes", []) or []
-        scenes = self.doc.get("scenes", []) or []
-        if scenes:
-            roots = scenes[int(self.doc.get("scene", 0))].get("nodes", [])
-        elif nodes:
-            children = {c for n in nodes for c in n.get("children", [])}
-            roots = [i for i in range(len(nodes)) if i not in children]
-        else:
-            return [(m, np.eye(4)) for m in range(len(self.doc.get("meshes", []) or []))]
-        out: list[tuple[int, np.ndarray]] = []
-        skipped: list[str] = []
-        stack: list[tuple[int, np.ndarray, tuple[int, ...]]] = [(int(r), np.eye(4), ()) for r in reversed(roots)]
-        while stack:
-            index, parent, ancestors = stack.pop()
-            if index in ancestors:
-                raise self.fail(f"node {index} is its own ancestor (the node hierarchy has a cycle)")
-            node = nodes[index]
-            world = parent @ _local_matrix(node)
-            if "mesh" in node and is_collision_only(node.get("name")):
-                skipped.append(str(node["name"]))
-            elif "mesh" in node:
-                out.append((int(node["mesh"]), world))
-            for child in reversed(node.get("children", [])):
-                stack.append((int(child), world, ancestors + (index,)))
-        if skipped:
-            log.warning("load: %s: %d collision-only node(s) skipped (%s%s): engines import them as collision, "
-                        "not as the visible asset", self.path, len(skipped),
-                        ", ".join(skipped[:3]), ", ..." if len(skipped) > 3 else "")
-        return out
+    def attribute(self, attributes: dict, name: str, what: str, widths: tuple[int, ...] = (3,)) -> np.ndarray:
+        """Attribute ``name`` of a primitive or morph target as float64 (count, width), its type checked."""
+        acc = self.index("accessors", attributes[name], f"{what}'s {name}")
+        kind = self.doc["accessors"][acc].get("type")
+        if _WIDTH.get(kind) not in widths:
+            raise self.fail(f"{what}'s {name} (accessor {acc}) is {kind}; glTF requires "
+                            f"{' or '.join(k for k, w in _WIDTH.items() if w in widths)}")
+        return self.accessor(acc)
 
     def parts(self) -> list[MeshPart]:
         meshes = self.doc.get("meshes", []) or []
         parts = []
-        for mesh_index, world in self.instances():
-            for p, prim in enumerate(meshes[mesh_index].get("primitives", [])):
-                part = self._primitive(prim, world, f"mesh {mesh_index} primitive {p}")
+        for instance in self.scene.instances():
+            for p, prim in enumerate(meshes[instance.mesh].get("primitives", []) or []):
+                part = self._primitive(prim, instance, f"mesh {instance.mesh} primitive {p}")
                 if part is not None:
                     parts.append(part)
         return parts
 
-    def _primitive(self, prim: dict, world: np.ndarray, what: str) -> MeshPart | None:
+    def _indices(self, prim: dict, count: int, what: str) -> np.ndarray:
+        if "indices" not in prim:
+            return np.arange(count, dtype=np.int64)
+        acc = self.index("accessors", prim["indices"], f"{what}'s indices")
+        spec = self.doc["accessors"][acc]
+        component = spec.get("componentType")
+        if component not in _INDEX_TYPES or spec.get("type") != "SCALAR" or spec.get("normalized"):
+            kind = _TYPE_NAMES.get(component, f"componentType {component}")
+            raise self.fail(f"{what}'s indices (accessor {acc}) are {spec.get('type')} {kind}"
+                            f"{' normalized' if spec.get('normalized') else ''}; glTF indices are SCALAR unsigned "
+                            "byte, short or int")
+        indices = self.accessor(acc, as_float=False)[:, 0]
+        if len(indices) and indices.max() >= count:
+            raise self.fail(f"has faces that reference missing vertices ({what}: index {int(indices.max())} of "
+                            f"{count} vertices)")
+        return indices
+
+    def _primitive(self, prim: dict, instance: Instance, what: str) -> MeshPart | None:
         mode = int(prim.get("mode", 4))
         if mode not in (4, 5, 6):
             return None  # points and lines have no inside
         attributes = prim["attributes"]
         if "POSITION" not in attributes:
             return None
+        position_index = self.index("accessors", attributes["POSITION"], f"{what}'s POSITION")
         draco = "KHR_draco_mesh_compression" in (prim.get("extensions") or {})
-        if draco and "bufferView" not in self.doc["accessors"][int(attributes["POSITION"])]:
+        if draco and "bufferView" not in self.doc["accessors"][position_index]:
             raise self.fail(f"{what} is Draco-compressed without an uncompressed fallback ("
                             f"{_HINTS['KHR_draco_mesh_compression']})")
-        positions = self.accessor(int(attributes["POSITION"]))[:, :3]
+        raw = self.attribute(attributes, "POSITION", what)
+        # VEC4 normals (a padded int8 layout some quantizers write) are read as their first three components.
+        normals = self.attribute(attributes, "NORMAL", what, (3, 4))[:, :3] if "NORMAL" in attributes else None
+        positions, normals = morphed(self, prim, raw, normals, instance.weights, what)
         if not np.all(np.isfinite(positions)):
             raise self.fail("has non-finite vertex coordinates (NaN or inf)")
-        if "indices" in prim:
-            indices = self.accessor(int(prim["indices"]), as_float=False)[:, 0]
+        faces = _triangles(self._indices(prim, len(positions), what), mode)
+        material = (self.index("materials", prim["material"], f"{what}'s material") if "material" in prim else -1)
+        if instance.skin is not None:
+            vertices, normals, faces = skinned(self, attributes, instance.skin, positions, normals, faces, what)
         else:
-            indices = np.arange(len(positions), dtype=np.int64)
-        if len(indices) and (indices.min() < 0 or indices.max() >= len(positions)):
-            raise self.fail(f"has faces that reference missing vertices ({what}: index {int(indices.max())} of "
-                            f"{len(positions)} vertices)")
-        faces = _triangles(indices, mode)
-        material = int(prim["material"]) if "material" in prim else -1
-        linear = world[:3, :3]
-        if np.linalg.det(linear) < 0:  # a mirroring transform turns triangles inside out
-            faces = faces[:, ::-1]
-        normals = None
-        if "NORMAL" in attributes:
-            n = self.accessor(int(attributes["NORMAL"]))[:, :3] @ np.linalg.inv(linear)
-            length = np.linalg.norm(n, axis=1, keepdims=True)
-            normals = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
-        return MeshPart(vertices=positions @ linear.T + world[:3, 3], faces=faces,
-                        uvs=self._uvs(attributes, material), normals=normals, colors=self._colors(attributes),
-                        material=self.material(material), material_key=("gltf", material), raw_vertices=positions)
+            vertices, normals, faces = placed(instance.world, positions, normals, faces)
+        return MeshPart(vertices=vertices, faces=faces, uvs=self._uvs(attributes, material), normals=normals,
+                        colors=self._colors(attributes), material=self.material(material),
+                        material_key=("gltf", material), raw_vertices=raw)
 
     def _uvs(self, attributes: dict, material: int) -> np.ndarray | None:
         texture: dict = {}
@@ -359,7 +381,7 @@ class _Document:
             key = "TEXCOORD_0" if "TEXCOORD_0" in attributes else None
         if key is None:
             return None
-        uv = self.accessor(int(attributes[key]))[:, :2]
+        uv = self.accessor(self.index("accessors", attributes[key], key))[:, :2]
         if transform:
             uv = _texture_transform(uv, transform)
         uv = uv.copy()
@@ -369,7 +391,7 @@ class _Document:
     def _colors(self, attributes: dict) -> np.ndarray | None:
         if "COLOR_0" not in attributes:
             return None
-        c = self.accessor(int(attributes["COLOR_0"]))
+        c = self.accessor(self.index("accessors", attributes["COLOR_0"], "COLOR_0"))
         if c.shape[1] == 3:
             c = np.concatenate([c, np.ones((len(c), 1))], axis=1)
         return c[:, :4]
@@ -383,7 +405,7 @@ class _Document:
                 self._materials[index] = Material(name="default", base_color=(1.0, 1.0, 1.0, 1.0),
                                                   source=MaterialSource())
             else:
-                self._materials[index] = self._material(index, self.doc["materials"][index])
+                self._materials[index] = self._material(index, self.doc["materials"][index])  # index checked
         return self._materials[index]
 
     def _material(self, index: int, spec: dict) -> Material:
@@ -392,7 +414,7 @@ class _Document:
         image = None
         texture = pbr.get("baseColorTexture")
         if texture is not None:
-            image = self._image(int(texture["index"]))
+            image = self._image(self.index("textures", texture["index"], f"material {index}'s baseColorTexture"))
         source = MaterialSource(baseColorTexture=image, metallicFactor=float(pbr.get("metallicFactor", 1.0)),
                                     roughnessFactor=float(pbr.get("roughnessFactor", 1.0)))
         return Material(name=unprefixed(str(spec.get("name") or f"material_{index}"), self.material_prefix),
@@ -407,15 +429,22 @@ class _Document:
                 source = ext["source"]
         if source is None:
             return None
-        spec = self.doc["images"][int(source)]
+        source = self.index("images", source, f"texture {texture_index}'s source")
+        spec = self.doc["images"][source]
+        uri = spec.get("uri")
+        file = None
+        if "bufferView" not in spec and isinstance(uri, str) and uri and not uri.startswith("data:"):
+            file = buffer_file(self.folder, uri, source, self.path, what="image")  # refuses what escapes the folder
         try:
             if "bufferView" in spec:
-                raw = bytes(self.view_bytes(int(spec["bufferView"]))[0])
-            elif str(spec.get("uri", "")).startswith("data:"):
-                raw = base64.b64decode(spec["uri"].partition(",")[2])
+                raw = bytes(self.view_bytes(self.index("bufferViews", spec["bufferView"],
+                                                       f"image {source}'s bufferView"))[0])
+            elif isinstance(uri, str) and uri.startswith("data:"):
+                raw = base64.b64decode(uri.partition(",")[2])
+            elif file is not None:
+                raw = self._image_file(file, source, uri)
             else:
-                with open(os.path.join(self.folder, external_uri(spec.get("uri")) or ""), "rb") as fh:
-                    raw = fh.read()
+                raise ValueError("it has neither a uri nor a bufferView")
             from PIL import Image
 
             image = Image.open(io.BytesIO(raw))
@@ -428,23 +457,12 @@ class _Document:
                         source, str(exc)[:120] or type(exc).__name__)
             return None
 
-
-def _local_matrix(node: dict) -> np.ndarray:
-    """A node's local (4, 4) matrix: ``matrix`` (column-major) or T * R * S."""
-    if "matrix" in node:
-        return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T
-    m = np.eye(4)
-    x, y, z, w = (float(c) for c in node.get("rotation", (0.0, 0.0, 0.0, 1.0)))
-    norm = math.sqrt(x * x + y * y + z * z + w * w) or 1.0
-    x, y, z, w = x / norm, y / norm, z / norm, w / norm
-    rotation = np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-    m[:3, :3] = rotation * np.asarray(node.get("scale", (1.0, 1.0, 1.0)), dtype=np.float64)
-    m[:3, 3] = np.asarray(node.get("translation", (0.0, 0.0, 0.0)), dtype=np.float64)
-    return m
+    def _image_file(self, file: str, source: int, uri: str) -> bytes:
+        """An image file's bytes; a FIFO or device is refused (it would block or never end), not waited on."""
+        try:
+            return read_input(file)
+        except NotRegularFile as exc:
+            raise self.fail(_not_regular("image", source, uri, exc)) from None
 
 
 def _triangles(indices: np.ndarray, mode: int) -> np.ndarray:

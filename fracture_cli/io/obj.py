@@ -7,6 +7,11 @@ specification, "Referencing groups of vertices"). Index 0 does not exist.
 trimesh resolves negative indices against the whole file's list, so a file
 that defines a second object's vertices after the first object's faces would
 be scrambled; :func:`absolute_indices` rewrites them first.
+
+Words are separated by any white space, tabs included, and a statement may be
+indented; trimesh's parser only knows single spaces at the start of a line, so
+:func:`plain_whitespace` rewrites tabs and indentation first (a valid file
+exported with tabs would otherwise read as empty).
 """
 
 from __future__ import annotations
@@ -18,6 +23,15 @@ from fracture_cli.errors import InputError
 # A face line with a negative or a zero index somewhere (only such files are rewritten).
 _NEEDS_REWRITE = re.compile(rb"(?m)^[ \t]*f[ \t][^\n]*?(?:(?<=[ \t/])-|(?<=[ \t/])0+(?=[ \t/\r\n]|$))")
 _KINDS = {b"v": 0, b"vt": 1, b"vn": 2}
+_ODD_WHITESPACE = re.compile(rb"(?m)\t|^[ ]+(?=\S)")
+_INDENT = re.compile(rb"(?m)^[ \t]+")
+
+
+def plain_whitespace(data: bytes) -> bytes:
+    """``data`` with tabs made spaces and lines unindented (the same statements), or ``data`` itself if none."""
+    if not _ODD_WHITESPACE.search(data):
+        return data
+    return _INDENT.sub(b"", data.replace(b"\t", b" "))
 
 
 def absolute_indices(data: bytes, path: str) -> bytes | None:

@@ -8,6 +8,7 @@ trimesh for OBJ (after :mod:`.obj` made relative indices absolute) and OFF.
 
 from __future__ import annotations
 
+import functools
 import io
 import logging
 import os
@@ -96,33 +97,99 @@ def _ply_parts(path: str) -> list[MeshPart]:
 
 
 def _open_image(file: str, path: str):
-    """A texture decoded with Pillow, or None with a warning (a missing texture costs colour, not geometry)."""
+    """A texture decoded with Pillow, or None with a warning (a missing texture costs colour, not geometry).
+
+    Raises
+    ------
+    InputError
+        The name is a FIFO, a device or a folder (never opened in a way that could block).
+    """
+    from fracture_cli.io.inputs import NotRegularFile, read_input
+
     try:
         from PIL import Image
 
-        image = Image.open(file)
+        image = Image.open(io.BytesIO(read_input(file)))
         image.load()
         return image
+    except NotRegularFile as exc:
+        raise InputError(f"the texture '{os.path.basename(file)}' is {exc.strerror}; only regular files are read",
+                         path=path) from None
     except Exception as exc:  # noqa: BLE001 (Pillow raises many types)
         log.warning("load: %s: texture %s not read (%s)", path, os.path.basename(file), str(exc)[:120])
         return None
 
 
+@functools.cache
+def _folder_resolver_class() -> type:
+    """A ``trimesh.resolvers.Resolver`` that reads what trimesh asks for besides an OBJ from the OBJ's folder only.
+
+    trimesh asks it for ``mtllib`` files and their textures. Names that escape
+    the folder are refused by name; only regular files are read, without
+    blocking, and every read is recorded for the input's key
+    (:func:`fracture_cli.io.inputs.read_input`). trimesh treats any error of
+    a resolver as "material not found", so the refusal is also kept in
+    ``refused`` for the caller to raise. Defined on first use so that importing
+    this module does not import trimesh.
+    """
+    import trimesh
+
+    class FolderResolver(trimesh.resolvers.Resolver):
+        def __init__(self, path: str):
+            self.path = path
+            self.folder = os.path.dirname(os.path.abspath(path))
+            self.refused: InputError | None = None
+
+        def get(self, name: str) -> bytes:
+            from fracture_cli.io.inputs import EscapingReference, NotRegularFile, companion_path, read_input
+
+            try:
+                return read_input(companion_path(self.folder, str(name)))
+            except EscapingReference as exc:
+                self.refused = self.refused or InputError(
+                    f"references '{name}' ({exc}); only files in the asset's folder or below it are read (copy the "
+                    "file beside the asset)", path=self.path)
+            except NotRegularFile as exc:
+                self.refused = self.refused or InputError(
+                    f"references '{name}', which is {exc.strerror}; only regular files are read", path=self.path)
+            raise self.refused
+
+        def keys(self):
+            return iter(())
+
+        def namespaced(self, namespace: str):
+            return self
+
+        def write(self, name: str, data) -> None:
+            raise OSError(f"read-only resolver: cannot write {name}")
+
+    return FolderResolver
+
+
+def _trimesh_source(path: str, file_type: str) -> bytes:
+    """The bytes trimesh parses: the file as read (recorded), an OBJ with its whitespace and indices made plain."""
+    from fracture_cli.io.inputs import NotRegularFile, read_input
+    from fracture_cli.io.obj import absolute_indices, plain_whitespace
+
+    try:
+        data = read_input(path)
+    except NotRegularFile as exc:
+        raise InputError(f"is {exc.strerror}", path=path) from None
+    except OSError as exc:
+        raise InputError(f"cannot be read ({exc.strerror})", path=path) from None
+    if file_type == "obj":
+        data = plain_whitespace(data)
+        data = absolute_indices(data, path) or data
+    return data
+
+
 def _trimesh_parts(path: str, file_type: str) -> list[MeshPart]:
     import trimesh
 
-    from fracture_cli.io.obj import absolute_indices
-
+    data = _trimesh_source(path, file_type)
+    resolver = _folder_resolver_class()(path)
     try:
-        rewritten = None
-        if file_type == "obj":
-            with open(path, "rb") as fh:
-                rewritten = absolute_indices(fh.read(), path)
-        if rewritten is not None:
-            scene = trimesh.load_scene(io.BytesIO(rewritten), file_type="obj", process=False,
-                                       resolver=trimesh.resolvers.FilePathResolver(path))
-        else:
-            scene = trimesh.load_scene(path, file_type=file_type, process=False)
+        scene = trimesh.load_scene(io.BytesIO(data), file_type=file_type, process=False, resolver=resolver)
     except InputError:
         raise
     except Exception as exc:  # trimesh raises many types; all mean "unreadable"
@@ -130,6 +197,8 @@ def _trimesh_parts(path: str, file_type: str) -> list[MeshPart]:
         if isinstance(exc, IndexError):
             raise InputError(f"has faces that reference missing vertices ({reason[:200]})", path=path) from exc
         raise InputError(f"could not be read as {file_type.upper()}: {reason[:200]}", path=path) from exc
+    if resolver.refused is not None:
+        raise resolver.refused
     parts = []
     for node in sorted(scene.graph.nodes_geometry):
         transform, geom_name = scene.graph[node]

@@ -71,8 +71,9 @@ def read_ply(path: str) -> PlyMesh:
         Not a PLY file, an unknown format or property type, data shorter than
         the header promises, or an index past the vertices.
     """
-    with open(path, "rb") as fh:
-        raw = fh.read()
+    from fracture_cli.io.inputs import read_input
+
+    raw = read_input(path)
     end = raw.find(b"end_header")
     if not raw.startswith(b"ply") or end < 0:
         raise InputError("is not a PLY file: it does not start with 'ply' or has no 'end_header'", path=path)
@@ -321,5 +322,19 @@ def _strip_triangles(strips) -> np.ndarray:
 
 
 def texture_path(path: str, mesh: PlyMesh) -> str | None:
-    """The texture file a PLY names, beside it."""
-    return os.path.join(os.path.dirname(path), mesh.texture) if mesh.texture else None
+    """The texture file a PLY names, in its folder or below.
+
+    Raises
+    ------
+    InputError
+        The name is absolute, a URL or climbs out of the PLY's folder.
+    """
+    from fracture_cli.io.inputs import EscapingReference, companion_path
+
+    if not mesh.texture:
+        return None
+    try:
+        return companion_path(os.path.dirname(path), mesh.texture)
+    except EscapingReference as exc:
+        raise InputError(f"names the texture '{mesh.texture}' ({exc}); only files in the asset's folder or below "
+                         "it are read (copy the file beside the asset)", path=path) from None

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import struct
 
 from fracture_cli.errors import InputError
 from fracture_cli.io.gltf_read import buffer_file, check_required_extensions
-from fracture_cli.io.inputs import external_uri
+from fracture_cli.io.inputs import external_uri, file_kind, open_regular
 
 _GLB_MAGIC = b"glTF"
 _GLB_JSON = 0x4E4F534A
@@ -85,7 +86,7 @@ def _gltf_triangles(doc: dict) -> int:
 
 def _probe_glb(path: str) -> int:
     size = os.path.getsize(path)
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         head = fh.read(20)
         if len(head) < 12 or head[:4] != _GLB_MAGIC:
             raise InputError("could not be read as GLB: it does not start with 'glTF' (not a binary glTF file)",
@@ -117,7 +118,7 @@ def _probe_glb(path: str) -> int:
 
 def _probe_gltf(path: str) -> int:
     try:
-        with open(path, "rb") as fh:
+        with open_regular(path) as fh:
             doc = json.loads(fh.read())
     except (ValueError, UnicodeDecodeError) as exc:
         raise InputError(f"is not valid glTF JSON ({str(exc)[:120]})", path=path) from exc
@@ -128,9 +129,14 @@ def _probe_gltf(path: str) -> int:
     for index, buffer in enumerate(doc.get("buffers", [])):
         if isinstance(buffer, dict) and external_uri(buffer.get("uri")) is not None:
             uri = buffer["uri"]
-            if not os.path.isfile(buffer_file(folder, uri, index, path)):
+            try:
+                mode = os.stat(buffer_file(folder, uri, index, path)).st_mode
+            except OSError:
                 raise InputError(f"references the buffer file '{uri}', which is missing (keep it beside the .gltf, "
-                                 "or export a single .glb)", path=path)
+                                 "or export a single .glb)", path=path) from None
+            if not stat.S_ISREG(mode):
+                raise InputError(f"buffer {index}'s uri '{uri}' names {file_kind(mode)}, not a regular file; only "
+                                 "regular files are read", path=path)
     return _gltf_triangles(doc)
 
 
@@ -139,13 +145,13 @@ def _probe_stl(path: str) -> int:
     from fracture_cli.io.stl import HEADER, RECORD, header_count, not_stl, size_count
 
     size = os.path.getsize(path)
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         head = fh.read(HEADER)
     declared = header_count(head)
     if declared is not None and size == HEADER + RECORD * declared:
         return declared
     if head.lstrip()[:5].lower() == b"solid":
-        facets = _count_bytes(path, b"endfacet")
+        facets = _count_bytes(path, b"endfacet", lower=True)  # keywords are case-insensitive (SOLID, ENDFACET)
         if facets:
             return facets
     fitted = size_count(size)
@@ -154,16 +160,18 @@ def _probe_stl(path: str) -> int:
     raise not_stl(path, size, declared)
 
 
-def _count_bytes(path: str, needle: bytes, line_start: bool = False) -> int:
-    """Occurrences of ``needle`` in the file (at line starts only if ``line_start``), read in 16 MB chunks."""
+def _count_bytes(path: str, needle: bytes, line_start: bool = False, lower: bool = False) -> int:
+    """Occurrences of ``needle`` in the file (at line starts only if ``line_start``; in any case if ``lower``,
+    for a lowercase ``needle``), read in 16 MB chunks."""
     total = 0
     pattern = b"\n" + needle if line_start else needle
     carry = b"\n" if line_start else b""
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         while True:
             block = fh.read(_CHUNK)
             if not block:
                 break
+            block = block.lower() if lower else block
             data = carry + block
             total += data.count(pattern)
             carry = data[-(len(pattern) - 1):] if len(pattern) > 1 else b""
@@ -171,11 +179,11 @@ def _count_bytes(path: str, needle: bytes, line_start: bool = False) -> int:
 
 
 def _probe_obj(path: str) -> int:
-    return _count_bytes(path, b"f ", line_start=True)
+    return _count_bytes(path, b"f ", line_start=True) + _count_bytes(path, b"f\t", line_start=True)
 
 
 def _header_lines(path: str, limit: int = 64 * 1024) -> list[str]:
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         head = fh.read(limit)
     return head.decode("latin-1").splitlines()
 

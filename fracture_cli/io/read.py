@@ -12,11 +12,13 @@ from __future__ import annotations
 
 import logging
 import os
+import stat
 from dataclasses import dataclass
 
 import numpy as np
 
 from fracture_cli.errors import InputError
+from fracture_cli.io.inputs import file_kind
 from fracture_cli.io.parts import read_parts
 from fracture_cli.io.probe import probe_triangles
 from fracture_cli.meshfix.rows import group_rows, unique_inverse, unique_rows, used_vertices
@@ -63,6 +65,77 @@ def _float32_precision(v: np.ndarray) -> tuple[float, float, float]:
     step = float(np.spacing(np.float32(largest)))
     diagonal = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
     return (step / diagonal if diagonal > 0 else np.inf, step, largest)
+
+
+# The outputs hold float32 (GLB positions, the runtime file): sizes whose mass properties or coordinates
+# cannot be stored there are refused before any work. Inertia (units^5) of a body in a box of diagonal D
+# is at most D^5 / (3 sqrt 3); the margin covers the cage and a thickened shell reaching past the input.
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+_FLOAT32_TINY = float(np.finfo(np.float32).tiny)
+_MARGIN = 4.0
+
+
+def _diagonal(lo: np.ndarray, hi: np.ndarray) -> float:
+    """Length of ``hi - lo`` (3,) without overflow (scaled by its largest component first)."""
+    extent = np.abs(np.asarray(hi, dtype=np.float64) - np.asarray(lo, dtype=np.float64))
+    largest = float(extent.max())
+    if not 0.0 < largest < np.inf:
+        return largest
+    unit = extent / largest
+    return largest * float(np.sqrt(np.dot(unit, unit)))
+
+
+def _fifth(d: float) -> float:
+    return d * d * d * d * d
+
+
+def size_limits() -> tuple[float, float]:
+    """(smallest, largest) bounding-box diagonal whose outputs float32 holds: about (4e-8, 5e7) units."""
+    # Solve D^5 * k = limit by bisection on IEEE products only (no libm: the same bounds on every CPU).
+    def solve(target: float) -> float:
+        lo, hi = 1e-30, 1e30
+        for _ in range(400):
+            mid = float(np.sqrt(lo * hi))
+            if _fifth(mid) < target:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+    return solve(_FLOAT32_TINY * _MARGIN * 5.2), solve(_FLOAT32_MAX * 5.2 / _MARGIN)
+
+
+def check_representable(points: np.ndarray, path: str) -> None:
+    """Refuse an input whose outputs cannot be written as float32, before any work is done on it.
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+        The used vertices, in file units.
+    path : str
+
+    Raises
+    ------
+    InputError
+        The bounding-box diagonal is so large that the fragments' inertia
+        (units^5) overflows float32 (above about 5e7 units: a 1e9-unit sphere),
+        so small that it underflows (below about 4e-8 units), or a coordinate
+        is beyond float32's range.
+    """
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    diagonal = _diagonal(lo, hi)
+    reach = float(np.abs(points).max()) + diagonal
+    smallest, largest = size_limits()
+    if reach > _FLOAT32_MAX / _MARGIN or diagonal > largest:
+        raise InputError(f"is too large for the outputs: it is {diagonal:.3g} units across (coordinates up to "
+                         f"{float(np.abs(points).max()):.3g}), and its inertia (units^5) and positions must fit the "
+                         f"32-bit floats of the GLB and runtime file, which hold assets up to about {largest:.2g} "
+                         "units across; export it in larger units (e.g. metres instead of millimetres) or scale it "
+                         "down", path=path)
+    if 0.0 < diagonal < smallest:
+        raise InputError(f"is too small for the outputs: it is {diagonal:.3g} units across, and its inertia "
+                         f"(units^5) would underflow 32-bit floats below about {smallest:.2g} units across; export "
+                         "it in smaller units or scale it up", path=path)
 
 
 def smooth_normals_welded(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -188,6 +261,9 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
         raise InputError("no such file", path=path)
     if os.path.isdir(path):
         raise InputError("is a directory, not a mesh file", path=path)
+    mode = os.stat(path).st_mode
+    if not stat.S_ISREG(mode):  # a FIFO would block the first read; a device never ends
+        raise InputError(f"is {file_kind(mode)}, not a regular mesh file", path=path)
     if os.path.getsize(path) == 0:
         raise InputError("file is empty (0 bytes)", path=path)
 
@@ -260,6 +336,7 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
     used = used_vertices(F, len(V))
     if not np.all(np.isfinite(V[used])):
         raise InputError("has non-finite vertex coordinates (NaN or inf)", path=path)
+    check_representable(V[used], path)
     normalization = Normalization.from_points(V[used])
     if normalization.scale <= 0 or not np.isfinite(normalization.scale):
         raise InputError("has no extent (all vertices at one point)", path=path)

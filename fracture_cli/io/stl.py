@@ -6,7 +6,7 @@ so its size is ``84 + 50 * n``. Many exporters start the free-form header
 with ``solid``, and some write a wrong count. The rules, in order:
 
 1. size is ``84 + 50 * count``: binary;
-2. the file starts with ``solid`` and has ``vertex`` lines: ASCII;
+2. the file starts with ``solid`` and has ``vertex`` lines (either in any case): ASCII;
 3. size is ``84 + 50 * n`` for some ``n >= 1``: binary with a wrong count in
    its header; ``n`` triangles are read and a warning says so;
 4. otherwise it is not an STL file.
@@ -15,7 +15,6 @@ with ``solid``, and some write a wrong count. The rules, in order:
 from __future__ import annotations
 
 import logging
-import os
 import re
 
 import numpy as np
@@ -27,7 +26,8 @@ log = logging.getLogger(__name__)
 HEADER = 84
 RECORD = 50
 _RECORD_DTYPE = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
-_VERTEX = re.compile(rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)")
+# Keywords are case-insensitive in practice (exporters write SOLID / FACET / VERTEX too).
+_VERTEX = re.compile(rb"\bvertex\s+(\S+)\s+(\S+)\s+(\S+)", re.IGNORECASE)
 
 
 def read_stl(path: str) -> tuple[np.ndarray, np.ndarray]:
@@ -46,9 +46,10 @@ def read_stl(path: str) -> tuple[np.ndarray, np.ndarray]:
         Not an STL file (see the module docstring), or an ASCII facet
         without three corners.
     """
-    size = os.path.getsize(path)
-    with open(path, "rb") as fh:
-        raw = fh.read()
+    from fracture_cli.io.inputs import read_input
+
+    raw = read_input(path)
+    size = len(raw)
     count = header_count(raw)
     if count is not None and size == HEADER + RECORD * count:
         return _binary(raw, count)

@@ -118,11 +118,16 @@ def list_assets(source: ViewSource) -> list[dict]:
 
 
 def served_file(source: ViewSource, name: str) -> str | None:
-    """Absolute path of a bake file the page may fetch, or None (unknown, hidden or outside the folder)."""
+    """Absolute path of a bake file the page may fetch, or None (unknown, hidden or outside the folder, also
+    through a symbolic link)."""
     if not name or "/" in name or "\\" in name or name.startswith(".") or "\0" in name:
         return None
     stem = _strip_suffix(name)
     if not stem or (source.stem is not None and stem != source.stem):
         return None
     path = os.path.join(source.folder, name)
+    # A symbolic link in the folder is followed only to a file that is in the folder too.
+    real, root = os.path.realpath(path), os.path.realpath(source.folder)
+    if os.path.commonpath([real, root]) != root:
+        return None
     return path if os.path.isfile(path) else None

@@ -10,7 +10,14 @@ Routes (GET and HEAD only):
   ``.fracture.bin``, ``.report.json``) of the folder, nothing else.
 
 The server binds to the loopback interface unless told otherwise; it only
-reads files.
+reads files. Two checks keep those files local:
+
+* the ``Host`` header must name this server (:func:`host_allowed`): a page on
+  another site whose name an attacker re-points at 127.0.0.1 (DNS rebinding)
+  sends its own name and gets 403, so it cannot read the served files;
+* a file is served only if its real path (symbolic links resolved) is inside
+  the folder served (``static/`` or the bake folder), and only if it is a
+  regular file (a FIFO is never opened in a way that could block a thread).
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from dataclasses import dataclass
 from typing import Self
 
 from fracture_cli.errors import FractureError, UsageError
+from fracture_cli.io.inputs import NotRegularFile, read_regular
 from fracture_cli.view.assets import ViewSource, list_assets, served_file
 
 log = logging.getLogger(__name__)
@@ -78,6 +86,65 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+def _split_host(header: str) -> tuple[str, int | None] | None:
+    """(name, port or None) of a ``Host`` header value, or None if it is malformed."""
+    header = header.strip()
+    if header.startswith("["):  # [IPv6]:port
+        name, sep, rest = header[1:].partition("]")
+        if not sep or (rest and not rest.startswith(":")):
+            return None
+        port_text = rest[1:] if rest else None
+    elif header.count(":") == 1:
+        name, port_text = header.split(":")
+    elif ":" in header:
+        return None
+    else:
+        name, port_text = header, None
+    if port_text is not None and not port_text.isdigit():
+        return None
+    return name.lower().rstrip("."), int(port_text) if port_text is not None else None
+
+
+def _is_ip_literal(name: str) -> bool:
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return True
+
+
+def host_allowed(header: str | None, bound_host: str, port: int) -> bool:
+    """Whether a request's ``Host`` header names the server bound to ``bound_host:port``.
+
+    A DNS-rebinding page reaches the server under its own domain name, so the
+    rule is about names: an IP address literal (it cannot be re-pointed) that
+    is loopback when the server is, ``localhost``, or, for a server bound to
+    another interface, the machine's own host name or the name it was bound to.
+    The port must be the server's (80 when the header has none).
+    """
+    if not header:
+        return False
+    split = _split_host(header)
+    if split is None:
+        return False
+    name, given_port = split
+    if (given_port if given_port is not None else 80) != port:
+        return False
+    if name == "localhost" or name == bound_host.lower():
+        return True
+    if _is_ip_literal(name):
+        return is_loopback(name) or not is_loopback(bound_host)
+    if is_loopback(bound_host):
+        return False
+    return name in {socket.gethostname().lower(), socket.getfqdn().lower()}
+
+
+def _inside(path: str, folder: str) -> bool:
+    """Whether ``path``'s real location (symbolic links resolved) is inside ``folder``'s."""
+    real, root = os.path.realpath(path), os.path.realpath(folder)
+    return os.path.commonpath([real, root]) == root
+
+
 def _content_type(path: str) -> str:
     ext = os.path.splitext(path)[1].lower()
     return _TYPES.get(ext) or mimetypes.guess_type(path)[0] or "application/octet-stream"
@@ -100,6 +167,12 @@ def make_handler(source: ViewSource) -> type[http.server.BaseHTTPRequestHandler]
             self._route(send_body=True)
 
         def _route(self, send_body: bool) -> None:
+            address = self.server.server_address
+            bound, port = (address[0], address[1]) if isinstance(address, tuple) else (str(address), 0)
+            if not host_allowed(self.headers.get("Host"), str(bound), int(port)):
+                self._send_error(403, "the Host header does not name this server (refused: DNS rebinding "
+                                      f"protection); open http://{_shown(str(bound))}:{port}/")
+                return
             path = urllib.parse.urlsplit(self.path).path
             path = urllib.parse.unquote(path)
             if path in ("/", "/index.html"):
@@ -123,8 +196,10 @@ def make_handler(source: ViewSource) -> type[http.server.BaseHTTPRequestHandler]
                 self._send_error(404, "not found")
                 return
             try:
-                with open(file_path, "rb") as fh:
-                    payload = fh.read()
+                payload = read_regular(file_path)
+            except NotRegularFile:
+                self._send_error(404, "not found")
+                return
             except OSError as exc:
                 self._send_error(500, f"cannot read file ({exc.strerror})")
                 return
@@ -153,7 +228,11 @@ def _static_path(relative: str) -> str | None:
     if not clean or clean.startswith("..") or "\0" in clean:
         return None
     path = os.path.join(STATIC_DIR, *clean.split("/"))
-    return path if os.path.commonpath([path, STATIC_DIR]) == STATIC_DIR else None
+    return path if os.path.commonpath([path, STATIC_DIR]) == STATIC_DIR and _inside(path, STATIC_DIR) else None
+
+
+def _shown(host: str) -> str:
+    return f"[{host}]" if ":" in host else host
 
 
 class ViewServer:
@@ -179,8 +258,7 @@ class ViewServer:
     @property
     def url(self) -> str:
         host, port = self.httpd.server_address[:2]
-        shown = f"[{host}]" if ":" in str(host) else host
-        return f"http://{shown}:{port}/"
+        return f"http://{_shown(str(host))}:{port}/"
 
     def start(self) -> Self:
         self._thread = threading.Thread(target=self.httpd.serve_forever, name="fracture-view", daemon=True)

@@ -418,6 +418,9 @@ def build() -> None:
          outcome="ok", volume=float(trimesh.Trimesh(TV, TF, process=False).volume),
          why="one mesh, two primitives with two materials (the primitives' vertices are split)")
     reader_cases(V, F, SV, SF, sphere_volume)
+    from bad_corpus_round3 import add_cases
+
+    add_cases(sys.modules[__name__])  # issue 38: hostile and odd-but-valid inputs, round 3
 
 
 def reader_cases(V, F, SV, SF, sphere_volume) -> None:
