@@ -43,10 +43,10 @@ WRITES = {
                                                                    "build/assets/manifest.batch.json"],
     "fracture batch sample_assets/manifest.toml -o build/assets --impacts 100": [
         "build/assets/manifest.impacts.parquet"],
-    "fracture load sample_assets/chair.glb save chair_copy.glb": ["chair_copy.glb"],
-    "fracture impact build/chair/chair.fracture.json --point 0.45 0.85 -0.45 --impulse 0 -5 0 -o broken.glb": [
-        "broken.glb"],
-    "fracture preview build/chair/chair.fracture.json -o chair.png": ["chair.png"],
+    "fracture load sample_assets/chair.glb save build/chair_copy.glb": ["build/chair_copy.glb"],
+    "fracture impact build/chair/chair.fracture.json --point 0.45 0.85 -0.45 --impulse 0 -5 0 -o build/broken.glb": [
+        "build/broken.glb"],
+    "fracture preview build/chair/chair.fracture.json -o build/chair.png": ["build/chair.png"],
 }
 
 LEFT_OUT = {
