@@ -27,7 +27,7 @@ $(STAMP): pyproject.toml
 # cut solver's partitions and max-flow), compiled once into numba's cache (~30-40 s) so that the first bake does
 # not pay for it; again when their source changes.
 KERNELS := fracture_cli/jit.py fracture_cli/trigeom_kernels.py fracture_cli/trigeom_grid.py fracture_cli/trigeom_topology.py \
-           fracture_cli/surface_query.py \
+           fracture_cli/surface_query.py fracture_cli/surface_kernels.py \
            fracture_cli/discontinuity/partition_kernels.py fracture_cli/discontinuity/maxflow_kernel.py \
            $(wildcard fracture_cli/gameready/collapse_*.py)
 $(VENV)/.kernels: $(STAMP) $(KERNELS)

@@ -153,6 +153,11 @@ def test_rays_match_brute_force(seed):
     got = sq.first_hits(query, origins, directions)
     assert np.allclose(got, t.min(axis=1), rtol=1e-12, atol=1e-12)
     assert np.array_equal(sq.hit_counts(query, origins, directions), np.isfinite(t).sum(axis=1))
+    # Many rays along one direction go through the grid: the same counts as the hierarchy's.
+    one = directions[100]
+    grid = sq.hit_counts(query, origins, one)
+    assert np.array_equal(grid, sq.hit_counts(query, origins, np.broadcast_to(one, origins.shape).copy()))
+    assert np.array_equal(grid, np.isfinite(brute_hits(origins, np.broadcast_to(one, origins.shape), tris)).sum(axis=1))
 
 
 def cube(subdivisions: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -173,8 +178,10 @@ def test_rays_through_edges_and_corners_keep_the_parity(subdivisions):
     points = points[np.abs(points).max(axis=1) != 1.0]  # not on the surface
     inner = np.abs(points).max(axis=1) < 1.0
     for direction in ([1.0, 0, 0], [0, -1.0, 0], [1.0, 1, 0], [1.0, 1, 1], [-1.0, 1, 0.5], [0, 0.5, -1.0]):
-        parity = sq.hit_counts(query, points, direction) % 2 == 1
-        assert np.array_equal(parity, inner), direction
+        counts = sq.hit_counts(query, points, direction)  # through the grid
+        assert np.array_equal(counts % 2 == 1, inner), direction
+        each = np.ascontiguousarray(np.broadcast_to(direction, points.shape))  # through the hierarchy
+        assert np.array_equal(sq.hit_counts(query, points, each), counts), direction
     assert np.array_equal(sq.inside(query, points), inner)
     # First hits from the centre: through a face centre, an edge and a corner.
     centre = np.zeros((3, 3))
