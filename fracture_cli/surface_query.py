@@ -89,6 +89,8 @@ class SurfaceQuery:
         Each leaf's first triangle (in ``corners``) and how many.
     depth : int
         The number of levels (the traversal stack's size).
+    scale : float
+        The larger of the mesh's extent and its largest coordinate (what the margins are fractions of).
     """
 
     corners: np.ndarray
@@ -97,6 +99,7 @@ class SurfaceQuery:
     start: np.ndarray
     count: np.ndarray
     depth: int
+    scale: float
 
 
 def build(vertices: np.ndarray, faces: np.ndarray) -> SurfaceQuery:
@@ -108,12 +111,12 @@ def build(vertices: np.ndarray, faces: np.ndarray) -> SurfaceQuery:
     corners = corners.reshape(-1, 3, 3)
     if len(corners) == 0:
         empty = np.zeros(0, dtype=np.int64)
-        return SurfaceQuery(corners, np.zeros((0, 2, 3)), empty, empty, empty, 0)
+        return SurfaceQuery(corners, np.zeros((0, 2, 3)), empty, empty, empty, 0, 0.0)
     order, right, start, count, depth = sah_tree(corners, LEAF_SIZE, _BINS, _SAH_LEVELS)
     corners = np.ascontiguousarray(corners[order])
     scale = max(float(np.abs(corners).max()), float((corners.max(axis=(0, 1)) - corners.min(axis=(0, 1))).max()))
     box = node_boxes(corners, right, start, count, BOX_MARGIN * scale)
-    return SurfaceQuery(corners, box, right, start, count, int(depth))
+    return SurfaceQuery(corners, box, right, start, count, int(depth), scale)
 
 
 def distances(query: SurfaceQuery, points: np.ndarray, upper: float | np.ndarray | None = None) -> np.ndarray:
@@ -169,19 +172,18 @@ def hit_counts(query: SurfaceQuery, origins: np.ndarray, directions: np.ndarray)
     """How many triangles (k,) int64 each ray crosses at ``t > 0`` (``origins`` (k, 3), ``directions`` (k, 3) or
     (3,)); a ray through a shared edge or corner counts by the rule of the module docstring.
 
-    Many rays along one direction (at least an eighth as many as triangles) go through a grid across the
-    direction instead of the hierarchy (:func:`~fracture_cli.surface_kernels.count_parallel`; the same
+    Many rays along one direction (at least as many as triangles) go through a grid across the direction
+    instead of the hierarchy (:func:`~fracture_cli.surface_kernels.count_parallel`; the same
     triangle test, so the same counts, several times faster).
     """
     direction = np.asarray(directions, dtype=np.float64)
     origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
-    if direction.shape != (3,) or len(origins) < len(query.corners) // 8 or len(query.corners) == 0:
+    if direction.shape != (3,) or len(origins) < len(query.corners) or len(query.corners) == 0:
         return _rays(query, origins, directions, False).astype(np.int64)
     if not np.any(direction != 0.0):
         raise ValueError("a ray direction is zero")
     # As BOX_MARGIN: far above the rounding of the shear, here of origins too.
-    scale = max(float(np.abs(query.corners).max()), float(np.abs(origins).max()) if len(origins) else 0.0,
-                float((query.box[0, 1] - query.box[0, 0]).max()))
+    scale = max(query.scale, float(np.abs(origins).max()))
     cells = min(max(_GRID_CELLS_PER_TRIANGLE * len(query.corners), len(origins) // _GRID_RAYS_PER_CELL), _GRID_CELLS)
     return count_parallel(query.corners, origins, direction, BOX_MARGIN * scale, cells)
 
