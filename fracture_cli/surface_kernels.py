@@ -28,7 +28,7 @@ def sah_tree(corners: np.ndarray, leaf_size: int, bins: int, max_level: int):  #
 
     A node of more than ``leaf_size`` triangles is split along the longest axis of its triangles' box
     centres, into ``bins`` equal bins, between the two bins that minimize the surface-area cost (the
-    first such place); all centres equal, or below ``max_level``, it is split in the middle of its range.
+    first such place); with all centres equal, or from level ``max_level`` on, in the middle of its range.
     """
     m = corners.shape[0]
     tlo = np.empty((m, 3))

@@ -216,10 +216,10 @@ class _ContainmentCheck:
 
     Passes when (1) every input vertex is at least :data:`MIN_CLEARANCE` from
     the cage surface, (2) every input vertex is inside the cage by a ray-parity
-    vote (:func:`fracture_cli.surface_query.inside`), and (3) no input triangle intersects or touches a cage triangle
-    (exact separating-axis tests in float64, after a broad phase). (1)+(3) mean
-    no part of the input surface meets the cage; with (2) every connected part
-    of the input is inside.
+    vote (:func:`fracture_cli.surface_query.inside`), and (3) no input triangle
+    intersects or touches a cage triangle (exact separating-axis tests in
+    float64, after a broad phase). (1)+(3) mean no part of the input surface
+    meets the cage; with (2) every connected part of the input is inside.
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, query: SurfaceQuery, cell: float):
