@@ -49,10 +49,11 @@ lock: $(UV)
 	  --python-version 3.11 --python-platform x86_64-manylinux_2_35 --custom-compile-command 'make lock' \
 	  --quiet -o $(LOCK) $(LOCK_ARGS)
 
-# The numba kernels (the simplify stage's collapses, the triangle-pair test, the cut solver's partitions and
-# max-flow), compiled once into numba's cache (~30-40 s) so that the first bake does not pay for it; again when
-# their source changes.
+# The numba kernels (the simplify stage's collapses, the triangle-pair test, the distance and ray queries, the
+# cut solver's partitions and max-flow), compiled once into numba's cache (~30-40 s) so that the first bake does
+# not pay for it; again when their source changes.
 KERNELS := fracture_cli/jit.py fracture_cli/trigeom_kernels.py fracture_cli/trigeom_grid.py fracture_cli/trigeom_topology.py \
+           fracture_cli/surface_query.py fracture_cli/surface_kernels.py \
            fracture_cli/discontinuity/partition_kernels.py fracture_cli/discontinuity/maxflow_kernel.py \
            $(wildcard fracture_cli/gameready/collapse_*.py)
 $(VENV)/.kernels: $(STAMP) $(KERNELS)
@@ -60,6 +61,7 @@ $(VENV)/.kernels: $(STAMP) $(KERNELS)
 	$(PY) -c "from fracture_cli.trigeom_kernels import warm_kernels; warm_kernels()"
 	$(PY) -c "from fracture_cli.trigeom_grid import warm_kernels; warm_kernels()"
 	$(PY) -c "from fracture_cli.trigeom_topology import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.surface_query import warm_kernels; warm_kernels()"
 	$(PY) -c "from fracture_cli.discontinuity.partition_kernels import warm_kernels; warm_kernels()"
 	$(PY) -c "from fracture_cli.discontinuity.maxflow_kernel import warm_kernels; warm_kernels()"
 	@touch $@

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import logging
 import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -237,6 +239,25 @@ def test_cage_open3d_decimator_also_works():
     surface = primitive("sphere")
     result = cage(surface, CageOptions(target_faces=300, decimator="open3d"))
     assert_valid_cage(surface, result, 300)
+
+
+def test_default_bake_never_imports_open3d(tmp_path):
+    """open3d (1.4 s to import, float32 and CPU-dependent) is only for the optional decimator: a bake of the
+    default recipe runs with a stand-in that refuses to load, in every process, and never has it loaded."""
+    blocker = tmp_path / "blocker" / "open3d"
+    blocker.mkdir(parents=True)
+    (blocker / "__init__.py").write_text("raise ImportError('open3d imported by a default bake')\n")
+    repo = os.path.dirname(SAMPLE_ASSETS)
+    code = ("import sys\nfrom fracture_cli.cli import main\n"
+            "try:\n    main(sys.argv[1:])\nexcept SystemExit as stop:\n    assert not stop.code, stop.code\n"
+            "print('loaded' if 'open3d' in sys.modules else 'never')\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(blocker.parent), repo]))
+    out = subprocess.run([sys.executable, "-c", code, "bake", os.path.join(SAMPLE_ASSETS, "chair.glb"), "-o",
+                          str(tmp_path / "out"), "--quiet", "--set", "cage.target_faces=600", "--set",
+                          "modes.num_modes=4"], capture_output=True, text=True, env=env, cwd=repo)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "never"
+    assert (tmp_path / "out" / "chair.glb").exists()
 
 
 def test_cage_reports_when_nothing_works():

@@ -1,4 +1,4 @@
-"""fracture_cli.scenes: one open3d scene per surface, kept while its arrays live."""
+"""fracture_cli.scenes: one surface query (hierarchy) per surface, kept while its arrays live."""
 
 from __future__ import annotations
 
@@ -27,13 +27,11 @@ def test_same_arrays_same_scene_and_forgotten_with_them():
 def test_scene_answers_like_a_new_one():
     mesh = trimesh.creation.icosphere(2)
     V, F = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
-    from fracture_cli._open3d import open3d
+    from fracture_cli import surface_query
 
-    o3d = open3d()
-    points = o3d.core.Tensor(np.random.default_rng(0).normal(size=(200, 3)).astype(np.float32))
+    points = np.random.default_rng(0).normal(size=(200, 3))
     shared = scenes.surface_scene(V, F)
-    shared.compute_distance(points)
-    fresh = o3d.t.geometry.RaycastingScene()
-    fresh.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
-    assert np.array_equal(scenes.surface_scene(V, F).compute_occupancy(points).numpy(),
-                          fresh.compute_occupancy(points).numpy())
+    surface_query.distances(shared, points)
+    fresh = surface_query.build(V, F)
+    assert np.array_equal(surface_query.inside(scenes.surface_scene(V, F), points), surface_query.inside(fresh, points))
+    assert np.array_equal(surface_query.distances(shared, points), surface_query.distances(fresh, points))

@@ -33,8 +33,8 @@ from fracture_cli.tetgeom import triangle_areas
 
 # Rounds of halving the offset where an offset face flips.
 _FLIP_ROUNDS = 12
-# Rays start this far behind the sheet (relative to its bounding-box diagonal; the ray scene is float32, whose
-# rounding is ~6e-8 of the coordinates), so they do not hit their own faces.
+# Rays start this far behind the sheet (relative to its bounding-box diagonal), so they do not hit their own
+# faces: far above the rounding of the float64 ray test, and what the open3d (float32) scene needed.
 _RAY_START = 1e-5
 
 
@@ -68,14 +68,9 @@ class ThickenedSheet:
 
 def free_distance(V: np.ndarray, F: np.ndarray, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """Distance (k,) along each ray (origins (k, 3), unit directions (k, 3)) to the first face hit (inf if none)."""
-    from fracture_cli._open3d import open3d
+    from fracture_cli.surface_query import build, first_hits  # compiled (numba): imported when first needed
 
-    o3d = open3d()
-    centre = V.mean(axis=0)  # float32 scene: stay near the origin
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor((V - centre).astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
-    rays = np.hstack([origins - centre, directions]).astype(np.float32)
-    return scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(np.float64)
+    return first_hits(build(V, F), origins, directions)
 
 
 def _back_positions(V: np.ndarray, F: np.ndarray, normal: np.ndarray, thickness: float, box: np.ndarray | None,

@@ -11,7 +11,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,26 +24,24 @@ from fracture_cli.scenes import surface_scene
 from fracture_cli.stages import _tetgen
 from fracture_cli.types import Cage, SurfaceMesh
 
+if TYPE_CHECKING:
+    from fracture_cli.surface_query import SurfaceQuery
+
 log = logging.getLogger(__name__)
 
 STAGE = "cage"
 
-# Input vertices must be at least this far from the cage (normalized units):
-# open3d works in float32, whose rounding near the unit cube is about 6e-8.
+# Input vertices must be at least this far from the cage (normalized units): a clearance that any later
+# rounding (TetGen, the tetra stage) keeps positive. (Distances are exact float64; the value dates from
+# open3d's float32 distances, whose rounding near the unit cube was about 6e-8.)
 MIN_CLEARANCE = 1e-6
 
 # Input triangles whose distance to a cage, bounded below from their corners' clearance, exceeds this
-# cannot touch it: float32 distances near the unit cube are good to about 1e-7.
+# cannot touch it (the bound is exact up to float64 rounding; the margin dates from float32 distances).
 _REACH_MARGIN = 1e-5
 
 # Accepted deviation of the decimated face count from the target.
 FACE_COUNT_TOLERANCE = 0.10
-
-# Ray directions for the inside test (parity vote); irrational-looking on
-# purpose so rays do not run along grid-aligned cage edges.
-_RAY_DIRECTIONS = np.array(
-    [[0.5773, 0.6123, 0.5402], [-0.7071, 0.3162, 0.6325], [0.2673, -0.8018, 0.5345]], dtype=np.float64
-)
 
 # PLC, keep the boundary (without Y tet counts explode), no mesh optimization
 # (-O0: it only improves tet quality, which the tetra stage does once, and it
@@ -84,17 +82,19 @@ def auto_grid_resolution(target_faces: int) -> int:
 class _DistanceField:
     """Unsigned distance to the input on a regular grid, computed lazily in narrow bands.
 
-    Exact distances (open3d) are expensive far from the surface and only needed
-    near the level set being extracted. A cheap bracket ``lower <= D <= upper``
-    for every grid point comes from a Euclidean distance transform of surface
-    samples rasterized onto the grid; exact values are computed only where the
-    bracket overlaps ``[d - h, d + h]``, and cached across offsets.
+    Exact distances (:func:`fracture_cli.surface_query.distances`) are expensive
+    far from the surface and only needed near the level set being extracted. A
+    cheap bracket ``lower <= D <= upper`` for every grid point comes from a
+    Euclidean distance transform of surface samples rasterized onto the grid;
+    exact values are computed only where the bracket overlaps ``[d - h, d + h]``
+    (each search bounded by the point's ``upper``), and cached across offsets.
     """
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, scene, spacing: float, max_offset: float):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, query: SurfaceQuery, spacing: float,
+                 max_offset: float):
         from scipy import ndimage
 
-        self.scene = scene
+        self.query = query
         self.spacing = h = float(spacing)
         self.max_offset = float(max_offset)
         pad = self.max_offset + 3.0 * h
@@ -122,16 +122,19 @@ class _DistanceField:
 
     def values(self, d: float) -> np.ndarray:
         """Grid values whose level set ``d`` equals that of the true distance (cells straddling it are exact)."""
-        from fracture_cli._open3d import open3d as _import_open3d
-        o3d = _import_open3d()
+        from fracture_cli.surface_query import distances  # compiled (numba): imported when first needed
 
         h = self.spacing
         need = (self.lower <= d + h) & (self.upper >= d - h) & np.isnan(self.exact)
         idx = np.flatnonzero(need)
         if len(idx):
             ijk = np.stack(np.unravel_index(idx, self.shape), axis=1)
-            points = (self.origin + ijk * h).astype(np.float32)
-            dist = self.scene.compute_distance(o3d.core.Tensor(points)).numpy().astype(np.float64)
+            points = self.origin + ijk * h
+            # `upper` bounds the distance (up to the rounding of the samples): it only prunes the search.
+            dist = distances(self.query, points, self.upper.flat[idx])
+            beyond = np.flatnonzero(np.isinf(dist))
+            if len(beyond):
+                dist[beyond] = distances(self.query, points[beyond])
             self.exact.flat[idx] = dist
             self.exact_count += len(idx)
         known = ~np.isnan(self.exact)
@@ -213,16 +216,16 @@ class _ContainmentCheck:
 
     Passes when (1) every input vertex is at least :data:`MIN_CLEARANCE` from
     the cage surface, (2) every input vertex is inside the cage by a ray-parity
-    vote, and (3) no input triangle intersects or touches a cage triangle
-    (exact separating-axis tests in float64, after a broad phase). (1)+(3) mean
-    no part of the input surface meets the cage; with (2) every connected part
-    of the input is inside.
+    vote (:func:`fracture_cli.surface_query.inside`), and (3) no input triangle
+    intersects or touches a cage triangle (exact separating-axis tests in
+    float64, after a broad phase). (1)+(3) mean no part of the input surface
+    meets the cage; with (2) every connected part of the input is inside.
     """
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, scene, cell: float):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, query: SurfaceQuery, cell: float):
         self.vertices = vertices
         self.faces = faces
-        self.scene = scene
+        self.query = query
         self.cell = cell
         # Only vertices of triangles count; loaders may leave unreferenced ones.
         used = used_vertices(faces, len(vertices))
@@ -234,38 +237,41 @@ class _ContainmentCheck:
         self.query_vertices = vertices[used][first]
         # Query point of every corner, and every triangle's longest edge: no point of a triangle is farther
         # than that from any of its corners.
-        query = np.zeros(len(vertices), dtype=np.int64)
-        query[used] = inverse
-        self.corner_query = query[faces]
+        position = np.zeros(len(vertices), dtype=np.int64)
+        position[used] = inverse
+        self.corner_query = position[faces]
         self.longest_edge = longest_edges(vertices, faces)
+        # A position's clearance matters only up to its triangles' longest edge plus the margin (beyond it none
+        # of them can reach the cage, see __call__): the distance searches stop there.
+        self.reach_bound = np.zeros(len(self.query_vertices))
+        np.maximum.at(self.reach_bound, self.corner_query.reshape(-1), np.repeat(self.longest_edge, 3))
+        self.reach_bound += _REACH_MARGIN
 
     def __call__(self, cage_vertices: np.ndarray, cage_faces: np.ndarray) -> str | None:
         """Return why the cage does not strictly contain the input, or None if it does."""
-        from fracture_cli._open3d import open3d as _import_open3d
-        o3d = _import_open3d()
+        from fracture_cli.surface_query import build, distances, inside  # compiled: imported when first needed
 
-        cage_scene = o3d.t.geometry.RaycastingScene()
-        cage_scene.add_triangles(o3d.core.Tensor(cage_vertices.astype(np.float32)),
-                                 o3d.core.Tensor(cage_faces.astype(np.uint32)))
-        points = self.query_vertices.astype(np.float32)
-        clearance = cage_scene.compute_distance(o3d.core.Tensor(points)).numpy()
+        cage_query = build(cage_vertices, cage_faces)
+        points = self.query_vertices
+        # Exact up to reach_bound (inf beyond: such a position is far enough for both tests below).
+        clearance = distances(cage_query, points, self.reach_bound)
         too_close = int(np.sum(clearance < MIN_CLEARANCE))
         if too_close:
             return f"{too_close} input vertices touch the cage"
-        outside = _outside_by_vote(cage_scene, points)
+        outside = int(np.sum(~inside(cage_query, points)))
         if outside:
             return f"{outside} input vertices outside"
         # Only cage triangles whose bounding sphere reaches the input can cross it.
         corners = cage_vertices[cage_faces]
         centre = corners.mean(axis=1)
         radius = np.linalg.norm(corners - centre[:, None, :], axis=2).max(axis=1)
-        gap = self.scene.compute_distance(o3d.core.Tensor(centre.astype(np.float32))).numpy()
-        near = np.flatnonzero(gap <= radius + MIN_CLEARANCE)
+        reach = radius + MIN_CLEARANCE
+        near = np.flatnonzero(distances(self.query, centre, reach) <= reach)
         # Likewise only input triangles that may reach the cage: a triangle is at least its farthest corner's
         # clearance minus its longest edge away from it (most of a million-triangle input is not, and
         # testing it against the cage triangles took most of the stage). The triangles left out do not touch
         # the cage; the separating-axis test could have reported them only through a degenerate axis.
-        reach = clearance.astype(np.float64)[self.corner_query].max(axis=1) - self.longest_edge
+        reach = clearance[self.corner_query].max(axis=1) - self.longest_edge
         close = np.flatnonzero(reach <= _REACH_MARGIN)
         if len(close) == 0 or len(near) == 0:
             return None
@@ -277,26 +283,6 @@ class _ContainmentCheck:
         if len(pairs):
             return f"{len(np.unique(pairs[:, 0]))} cage triangles cross the input"
         return None
-
-
-def _outside_by_vote(scene: Any, points: np.ndarray) -> int:
-    """How many ``points`` (k, 3) float32 fewer than two of the :data:`_RAY_DIRECTIONS` rays find inside ``scene``.
-
-    A ray from an inside point crosses the closed cage an odd number of times. The third ray is cast only
-    from the points on which the first two disagree: the others' vote is decided.
-    """
-    from fracture_cli._open3d import open3d as _import_open3d
-    o3d = _import_open3d()
-
-    def odd(direction: np.ndarray, at: np.ndarray) -> np.ndarray:
-        unit = (direction / np.linalg.norm(direction)).astype(np.float32)
-        rays = np.concatenate([at, np.broadcast_to(unit, at.shape)], axis=1)
-        return scene.count_intersections(o3d.core.Tensor(rays)).numpy() % 2 == 1
-
-    first, second = odd(_RAY_DIRECTIONS[0], points), odd(_RAY_DIRECTIONS[1], points)
-    undecided = np.flatnonzero(first != second)
-    third = odd(_RAY_DIRECTIONS[2], points[undecided]) if len(undecided) else np.zeros(0, dtype=bool)
-    return int(np.sum(~first & ~second)) + int(np.sum(~third))
 
 
 def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
@@ -334,7 +320,11 @@ def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
     paper's "self-union" step; decimation sometimes folds the surface and
     manifold3d does not repair a single self-intersecting mesh), a strict
     containment check independent of the construction, and a boundary-preserving
-    TetGen run (``pYO0Q``) in a crash-safe child process. Containment is not
+    TetGen run (``pYO0Q``) in a crash-safe child process. Distances and the
+    inside vote are :mod:`fracture_cli.surface_query`'s (exact float64, the same
+    bits on every machine; open3d is loaded only for ``decimator = "open3d"``),
+    on one hierarchy of the input that the pieces stage and the report's checks
+    reuse (:func:`fracture_cli.scenes.surface_scene`). Containment is not
     monotone in ``d``, so the search brackets upward from ``initial_offset``
     (doubling), then bisects, keeping the tightest success seen.
     """
@@ -352,13 +342,13 @@ def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
     _tetgen.prestart()  # its start-up runs beside the first try's distance field and marching cubes
     resolution = options.grid_resolution or auto_grid_resolution(options.target_faces)
     spacing = diagonal / resolution
-    scene = surface_scene(surface.vertices, surface.faces)  # the pieces stage queries it again
+    query = surface_scene(surface.vertices, surface.faces)  # the pieces stage and the checks query it again
     # About the edge length of the target cage on a unit-area surface: the broad-phase cell.
     cage_edge = diagonal * math.sqrt(4.0 / (math.sqrt(3.0) * options.target_faces))
-    check = _ContainmentCheck(vertices, faces, scene, 0.5 * cage_edge)
+    check = _ContainmentCheck(vertices, faces, query, 0.5 * cage_edge)
     log.info("cage: %d input triangles, grid spacing %.4g (resolution %d), target %d faces",
              len(faces), spacing / diagonal, resolution, options.target_faces)
-    search = _Search(vertices, faces, scene, spacing, diagonal, options, check)
+    search = _Search(vertices, faces, query, spacing, diagonal, options, check)
     d, cage_vertices, cage_faces = search.run()
     log.info("cage: offset %.4f, %d faces, %d tries, %.2f s (%d exact distances)", d / diagonal,
              len(cage_faces), len(search.entries), time.perf_counter() - started,
@@ -370,9 +360,9 @@ def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
 class _Search:
     """The offset search of :func:`cage`: bracket upward from the initial offset, then bisect."""
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, scene: Any, spacing: float, diagonal: float,
-                 options: CageOptions, check: _ContainmentCheck):
-        self.vertices, self.faces, self.scene = vertices, faces, scene
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, query: SurfaceQuery, spacing: float,
+                 diagonal: float, options: CageOptions, check: _ContainmentCheck):
+        self.vertices, self.faces, self.query = vertices, faces, query
         self.spacing, self.diagonal, self.options, self.check = spacing, diagonal, options, check
         self.field: _DistanceField | None = None
         self.entries: list[dict] = []
@@ -388,7 +378,7 @@ class _Search:
             # Large offsets give smooth surfaces: a coarser grid (at most d / 4)
             # keeps the padded grid's memory bounded.
             field_spacing = self.spacing if self.field is None else max(self.spacing, 0.25 * d)
-            self.field = _DistanceField(self.vertices, self.faces, self.scene, field_spacing,
+            self.field = _DistanceField(self.vertices, self.faces, self.query, field_spacing,
                                         max(4.0 * d, 8.0 * field_spacing))
         values = self.field.values(d)
         seconds["distance"] = time.perf_counter() - tick

@@ -52,22 +52,23 @@ def tet_material_fraction(tet_mesh: TetMesh, surface: SurfaceMesh) -> np.ndarray
     """Share (t,) of each tet inside the closed ``surface``, from a lattice of interior sample points.
 
     The points are the barycentric lattice of order 3 (20 per tet), moved
-    inside (``(i, j, k, l) + 1/4) / 4``); each is tested with open3d's
-    occupancy query against the surface. Tets of the cage around a thin shell
-    or an empty inside get 0.
+    inside (``(i, j, k, l) + 1/4) / 4``); each is inside when a ray from it
+    crosses the surface an odd number of times
+    (:func:`fracture_cli.surface_query.hit_counts` along the first of its
+    :data:`~fracture_cli.surface_query.VOTE_DIRECTIONS`). Tets of the cage
+    around a thin shell or an empty inside get 0.
     """
-    from fracture_cli._open3d import open3d
     from fracture_cli.scenes import surface_scene
+    from fracture_cli.surface_query import VOTE_DIRECTIONS, hit_counts  # compiled: imported when first needed
 
-    o3d = open3d()
     n = _SAMPLE_ORDER
     lattice = np.array([(i, j, k, n - i - j - k) for i in range(n + 1) for j in range(n + 1 - i)
                         for k in range(n + 1 - i - j)], dtype=np.float64)
     weights = (lattice + 0.25) / (n + 1)  # (s, 4), rows sum to 1
     corners = tet_mesh.vertices[tet_mesh.tets]  # (t, 4, 3)
     points = np.einsum("sc,tcd->tsd", weights, corners).reshape(-1, 3)
-    scene = surface_scene(surface.vertices, surface.faces)  # the cage stage's, when it ran on this surface
-    inside = scene.compute_occupancy(o3d.core.Tensor(points.astype(np.float32))).numpy()
+    query = surface_scene(surface.vertices, surface.faces)  # the cage stage's, when it ran on this surface
+    inside = hit_counts(query, points, VOTE_DIRECTIONS[0]) % 2 == 1
     return inside.reshape(len(corners), len(weights)).mean(axis=1)
 
 
