@@ -52,18 +52,18 @@ lock: $(UV)
 # The numba kernels (the simplify stage's collapses, the triangle-pair test, the distance and ray queries, the
 # cut solver's partitions and max-flow), compiled once into numba's cache (~30-40 s) so that the first bake does
 # not pay for it; again when their source changes.
-KERNELS := fracture_cli/jit.py fracture_cli/trigeom_kernels.py fracture_cli/trigeom_grid.py fracture_cli/trigeom_topology.py \
-           fracture_cli/surface_query.py fracture_cli/surface_kernels.py \
-           fracture_cli/discontinuity/partition_kernels.py fracture_cli/discontinuity/maxflow_kernel.py \
-           $(wildcard fracture_cli/gameready/collapse_*.py)
+KERNELS := fracture_cli/system/jit.py fracture_cli/geometry/trigeom_kernels.py fracture_cli/geometry/trigeom_grid.py fracture_cli/geometry/trigeom_topology.py \
+           fracture_cli/geometry/surface_query.py fracture_cli/geometry/surface_kernels.py \
+           fracture_cli/stages/modes/solver/partition_kernels.py fracture_cli/stages/modes/solver/maxflow_kernel.py \
+           $(wildcard fracture_cli/stages/simplify/collapse_*.py)
 $(VENV)/.kernels: $(STAMP) $(KERNELS)
-	$(PY) -c "from fracture_cli.gameready.collapse_kernels import warm_kernels; warm_kernels()"
-	$(PY) -c "from fracture_cli.trigeom_kernels import warm_kernels; warm_kernels()"
-	$(PY) -c "from fracture_cli.trigeom_grid import warm_kernels; warm_kernels()"
-	$(PY) -c "from fracture_cli.trigeom_topology import warm_kernels; warm_kernels()"
-	$(PY) -c "from fracture_cli.surface_query import warm_kernels; warm_kernels()"
-	$(PY) -c "from fracture_cli.discontinuity.partition_kernels import warm_kernels; warm_kernels()"
-	$(PY) -c "from fracture_cli.discontinuity.maxflow_kernel import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.stages.simplify.warm import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.geometry.trigeom_kernels import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.geometry.trigeom_grid import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.geometry.trigeom_topology import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.geometry.surface_query import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.stages.modes.solver.partition_kernels import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.stages.modes.solver.maxflow_kernel import warm_kernels; warm_kernels()"
 	@touch $@
 
 # `fracture view`'s browser files: three.js (npm, pinned by web/package-lock.json) and the

@@ -5,7 +5,7 @@
 Runs ``make assets`` twice from scratch (it removes build/assets/ first): once
 serially, once with ``-j2``. Serially each bake uses every core for its own
 independent work (``--jobs`` default); under ``-j2`` a bake starts worker
-processes only for job slots make's jobserver has free (fracture_cli/jobserver.py),
+processes only for job slots make's jobserver has free (fracture_cli/system/jobserver.py),
 so two bakes at once run on one core each and the last one gets both. BLAS is
 limited to one thread either way. Target (issue #16): ``make -j2 assets`` at
 most 0.6x the serial time.

@@ -44,7 +44,7 @@ def bumpy_torus(major_sections: int = 250, minor_sections: int = 100) -> Surface
 
 
 def _inputs():
-    from fracture_cli.io.read import load_surface
+    from fracture_cli.stages.load import load_surface
 
     for name in SAMPLE_FILES:
         path = os.path.join(SAMPLE_ASSETS, name)
@@ -60,11 +60,11 @@ def run(quick: bool = False) -> str:
     # costs per process (about 1.5 s together); keep them out of the timings.
     import fast_simplification  # noqa: F401
 
-    from fracture_cli._open3d import open3d as _o3d
+    from fracture_cli.geometry.open3d_bridge import open3d as _o3d
     _o3d()
     import skimage.measure  # noqa: F401
 
-    from fracture_cli.stages import _tetgen
+    from fracture_cli.stages.tetra import tetgen as _tetgen
     from fracture_cli.testing import grid_tetmesh
 
     box = grid_tetmesh((1, 1, 1))

@@ -8,7 +8,7 @@ modes), so the timings isolate these three stages from the cage and modes
 stages. (2) Sample assets through their manifest recipes (repair, cage, tetra,
 modes, pieces), smoothed with lambda = 0 and with the recipe's lambda by both
 methods.
-Fault shape is :func:`fracture_cli.faultshape.fragment_fault_shape`: the
+Fault shape is :func:`fracture_cli.checks.faultshape.fragment_fault_shape`: the
 mean dihedral angle of bent edges inside each fault (degrees) and the crease
 density (edges bending more than 30 degrees per unit fault area, 1/diagonal);
 lower is smoother.
@@ -26,12 +26,12 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 from fracture_cli.checks import fragment_invariants  # noqa: E402
-from fracture_cli.faultshape import fragment_fault_shape  # noqa: E402
+from fracture_cli.checks.faultshape import fragment_fault_shape  # noqa: E402
+from fracture_cli.geometry.tetgeom import tet_edge_lengths  # noqa: E402
 from fracture_cli.stages.fragments import fragments  # noqa: E402
 from fracture_cli.stages.pieces import pieces  # noqa: E402
 from fracture_cli.stages.smooth import SmoothOptions, smooth  # noqa: E402
 from fracture_cli.testing import grid_tetmesh  # noqa: E402
-from fracture_cli.tetgeom import tet_edge_lengths  # noqa: E402
 from fracture_cli.types import Material, Modes, Normalization, SurfaceMesh, TetMesh  # noqa: E402
 
 SAMPLE_ASSETS = os.path.join(os.path.dirname(HERE), "sample_assets")
@@ -134,7 +134,7 @@ def _smoothing_table(load_surface) -> list[str]:
     lambda by both methods (the recipe's own first)."""
     import dataclasses
 
-    from fracture_cli.recipe import load_recipe
+    from fracture_cli.pipeline.recipe import load_recipe
     from fracture_cli.stages.cage import cage
     from fracture_cli.stages.material import material
     from fracture_cli.stages.modes import modes
@@ -203,7 +203,7 @@ def run(quick: bool = False) -> str:
         lines += _row("bumpy sphere", bumpy_sphere(40, 60), 1500, 12, quick)
         return "\n".join(lines) + "\n"
     lines += _row("bumpy sphere", bumpy_sphere(), 5000, 30, quick)
-    from fracture_cli.io.read import load_surface
+    from fracture_cli.stages.load import load_surface
     from fracture_cli.stages.repair import repair
 
     for name in SAMPLE_FILES:

@@ -43,11 +43,11 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
-from fracture_cli import parallel  # noqa: E402
-from fracture_cli.gameready.collision import _solid, collision_shapes, hull_corners, max_overlap_fraction  # noqa: E402
-from fracture_cli.gameready.components import body_faces, split_fragments  # noqa: E402
-from fracture_cli.gameready.mass import mass_properties  # noqa: E402
+from fracture_cli.geometry.mass import mass_properties  # noqa: E402
 from fracture_cli.io.gltf import read_glb  # noqa: E402
+from fracture_cli.stages.collision.convex import _solid, collision_shapes, hull_corners, max_overlap_fraction  # noqa: E402
+from fracture_cli.stages.fragments.bodies import body_faces, split_fragments  # noqa: E402
+from fracture_cli.system import parallel  # noqa: E402
 from fracture_cli.types import Fragment, Fragments, Material, Normalization  # noqa: E402
 
 
@@ -108,7 +108,7 @@ def _lean(asset: str, recipe_name: str, tmp: str) -> tuple[Fragments, tuple]:
     """The pipeline up to ``simplify`` on one sample asset; its fragments and the lean-mesh row's figures."""
     from fracture_cli.io.write import write_fragments_glb
     from fracture_cli.pipeline import STAGE_NAMES, PipelineState, Runner
-    from fracture_cli.recipe import load_recipe
+    from fracture_cli.pipeline.recipe import load_recipe
     from fracture_cli.stages.simplify import triangle_budget
 
     recipe = load_recipe(recipe_name)
@@ -139,8 +139,8 @@ def _rest_in_godot(fragments: Fragments, shapes) -> tuple[float, float]:
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from bench_recipes import rest_in_godot
 
-    from fracture_cli.gameready.export_shapes import FragmentPhysics, physics_extender
     from fracture_cli.io.gltf import glb_bytes
+    from fracture_cli.io.physics import FragmentPhysics, physics_extender
     from fracture_cli.io.write import fragment_name, split_by_material
 
     norm = fragments.normalization

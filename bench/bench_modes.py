@@ -18,9 +18,9 @@ import time
 
 import numpy as np
 
-from fracture_cli import tetgeom
-from fracture_cli.parallel import using
+from fracture_cli.geometry import tetgeom
 from fracture_cli.stages.modes import ModesOptions, modes
+from fracture_cli.system.parallel import using
 from fracture_cli.types import Normalization, TetMesh
 
 # The paper's Table (4-core laptop, commercial solver): tets -> seconds per mode.
@@ -60,7 +60,7 @@ def bench_tetmesh(target_tets: int) -> TetMesh:
 
 
 def _time_modes(mesh: TetMesh, solver: str, num_modes: int, max_flow: str = "auto"):
-    from fracture_cli.discontinuity import mincut as discontinuity
+    from fracture_cli.stages.modes.solver import mincut as discontinuity
 
     saved = discontinuity.MAX_FLOW_BACKEND
     discontinuity.MAX_FLOW_BACKEND = max_flow
@@ -93,9 +93,9 @@ def _asset_glass(asset: str):
     """The tet mesh and modes options of the ``glass`` recipe on ``sample_assets/<asset>``."""
     import os
 
-    from fracture_cli.io.read import load_surface
-    from fracture_cli.recipe import load_recipe
+    from fracture_cli.pipeline.recipe import load_recipe
     from fracture_cli.stages.cage import cage
+    from fracture_cli.stages.load import load_surface
     from fracture_cli.stages.repair import repair
     from fracture_cli.stages.tetra import tetra
 

@@ -7,7 +7,7 @@ alternately with the pinned kernels (the default: OpenBLAS's ``Prescott`` set,
 numpy at its ``X86_V2`` baseline) and with ``FRACTURE_NUMERICS=host`` (the
 kernels this CPU would pick), ``-j 1`` so the cores do not compete; the table
 gives the median wall seconds of every stage from the reports. The second
-table times the libm replacements of :mod:`fracture_cli.detmath` against
+table times the libm replacements of :mod:`fracture_cli.system.detmath` against
 numpy's own functions on a million values (the only bake path that calls one
 per element in bulk is the smoothing's solid-angle test).
 """
@@ -31,7 +31,7 @@ import fracture_cli  # noqa: E402, F401, I001  (first: pins the kernels before n
 
 import numpy as np  # noqa: E402
 
-from fracture_cli import detmath  # noqa: E402
+from fracture_cli.system import detmath  # noqa: E402
 from fracture_cli.pipeline import STEPS  # noqa: E402
 
 

@@ -23,9 +23,9 @@ def _bumpy_sphere(subdivisions: int):
 
 
 def run(quick: bool = False) -> str:
-    from fracture_cli.bake import bake
-    from fracture_cli.preview import render_preview
-    from fracture_cli.recipe import load_recipe
+    from fracture_cli.pipeline.bake import bake
+    from fracture_cli.pipeline.recipe import load_recipe
+    from fracture_cli.view.preview import render_preview
 
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

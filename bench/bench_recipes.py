@@ -37,8 +37,8 @@ _BAKE_CHILD = r"""
 import json, os, resource, sys, time
 t0 = time.perf_counter()
 from fracture_cli import pipeline
-from fracture_cli.bake import bake
-from fracture_cli.recipe import load_recipe
+from fracture_cli.pipeline.bake import bake
+from fracture_cli.pipeline.recipe import load_recipe
 
 
 def cpu():
@@ -194,9 +194,9 @@ def _watertight(path: str) -> bool:
 
 def _shelled(path: str, out: str) -> None:
     sys.path.insert(0, REPO)
-    from fracture_cli.io.read import load_surface
     from fracture_cli.io.write import save_surface
-    from fracture_cli.recipe import load_recipe
+    from fracture_cli.pipeline.recipe import load_recipe
+    from fracture_cli.stages.load import load_surface
     from fracture_cli.stages.repair import repair
 
     recipe = load_recipe("ceramic")

@@ -106,9 +106,9 @@ def _sample_assets(hits: int, rng, bake: bool = True) -> str:
     """Rows for the sample assets: bake each (or take the committed file), then time the same hits in every reader."""
     import tomllib
 
-    from fracture_cli.bake import bake as bake_asset
-    from fracture_cli.io.read import load_surface
-    from fracture_cli.recipe import load_recipe
+    from fracture_cli.pipeline.bake import bake as bake_asset
+    from fracture_cli.pipeline.recipe import load_recipe
+    from fracture_cli.stages.load import load_surface
 
     with open(os.path.join(REPO, "sample_assets", "manifest.toml"), "rb") as fh:
         assets = sorted(tomllib.load(fh)["assets"].items())

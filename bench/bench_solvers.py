@@ -29,7 +29,7 @@ def chair_system():
     import scipy.sparse as sp
 
     from fracture_cli.pipeline import PipelineState, Runner
-    from fracture_cli.recipe import load_recipe
+    from fracture_cli.pipeline.recipe import load_recipe
     from fracture_cli.stages.smooth.field import _MIN_TET_WEIGHT, refined
 
     recipe = load_recipe("wood")
@@ -83,8 +83,8 @@ def _pcg(A, B, apply_preconditioner, tol: float = 1e-10, max_iter: int = 5000):
 def run(quick: bool = False) -> str:
     import scipy.sparse.linalg as spla
 
-    from fracture_cli.parallel import blas_threads
     from fracture_cli.stages.smooth.field import _spd_factor
+    from fracture_cli.system.parallel import blas_threads
 
     A, B = chair_system()
     n, p = B.shape

@@ -25,7 +25,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 sys.path.insert(0, HERE)
 
-# Before any benchmark imports numpy: the pinned kernels every bake runs with (fracture_cli/numeric_env.py).
+# Before any benchmark imports numpy: the pinned kernels every bake runs with (fracture_cli/system/numeric_env.py).
 import fracture_cli  # noqa: E402, F401, I001
 
 

@@ -10,7 +10,7 @@ only parses options) are generated from.
 __version__ = "0.1.0"
 
 # Before anything imports numpy: the numeric kernels that give the same bits on every CPU (numeric_env.py).
-from fracture_cli.numeric_env import pin_environment  # noqa: E402
+from fracture_cli.system.numeric_env import pin_environment  # noqa: E402
 
 pin_environment()
 

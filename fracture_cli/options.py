@@ -2,7 +2,7 @@
 
 Every stage has a frozen dataclass of options whose fields are declared with
 :func:`option`. The metadata (help text, allowed range or choices) is read by
-the CLI to build its flags and by :mod:`fracture_cli.recipe` to validate
+the CLI to build its flags and by :mod:`fracture_cli.pipeline.recipe` to validate
 recipes and ``--set`` overrides, so the three can never disagree on a default
 or a range.
 """

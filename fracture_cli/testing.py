@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli import tetgeom
+from fracture_cli.geometry import tetgeom
 from fracture_cli.types import Normalization, TetMesh
 
 # Kuhn subdivision of a cube into 6 tets sharing the main diagonal (0 -> 7);

@@ -197,13 +197,13 @@ class TetMesh:
     @cached_property
     def tet_volumes(self) -> np.ndarray:
         """(t,) float64 signed volumes; positive for a valid mesh."""
-        from fracture_cli import tetgeom
+        from fracture_cli.geometry import tetgeom
 
         return tetgeom.tet_volumes(self.vertices, self.tets)
 
     @cached_property
     def _faces(self):
-        from fracture_cli import tetgeom
+        from fracture_cli.geometry import tetgeom
 
         return tetgeom.tet_faces(self.tets)
 
@@ -230,14 +230,14 @@ class TetMesh:
     @cached_property
     def interior_face_areas(self) -> np.ndarray:
         """(f,) float64 areas of the interior faces."""
-        from fracture_cli import tetgeom
+        from fracture_cli.geometry import tetgeom
 
         return tetgeom.triangle_areas(self.vertices, self.interior_faces)
 
     @cached_property
     def interior_face_normals(self) -> np.ndarray:
         """(f, 3) float64 unit normals of interior faces, pointing from tet 0 to tet 1."""
-        from fracture_cli import tetgeom
+        from fracture_cli.geometry import tetgeom
 
         return tetgeom.interior_face_normals(self.vertices, self.tets, self.interior_faces, self.interior_face_tets)
 
@@ -249,21 +249,21 @@ class TetMesh:
     @cached_property
     def stiffness(self) -> sp.csr_matrix:
         """(n, n) positive semi-definite cotangent stiffness matrix ``K``."""
-        from fracture_cli import tetgeom
+        from fracture_cli.geometry import tetgeom
 
         return tetgeom.stiffness_matrix(self.vertices, self.tets)
 
     @cached_property
     def vertex_mass(self) -> sp.dia_matrix:
         """(n, n) lumped (diagonal) vertex mass matrix ``M_V``."""
-        from fracture_cli import tetgeom
+        from fracture_cli.geometry import tetgeom
 
         return tetgeom.lumped_mass(self.vertices, self.tets)
 
     @cached_property
     def tet_from_vertex(self) -> sp.csr_matrix:
         """(t, n) averaging operator ``C``: each tet takes the mean of its 4 vertices."""
-        from fracture_cli import tetgeom
+        from fracture_cli.geometry import tetgeom
 
         return tetgeom.tet_from_vertex(self.tets, self.num_vertices)
 

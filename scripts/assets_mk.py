@@ -9,7 +9,7 @@ rules keep the manifest's order, which is the order `make -j` starts the bakes
 in: the manifest lists the longest first, so the short ones fill the gaps.
 
 Under ``make -jN`` the bakes share make's N job slots through its jobserver
-(fracture_cli/jobserver.py): a bake starts a worker process only for a slot
+(fracture_cli/system/jobserver.py): a bake starts a worker process only for a slot
 that is free, so two bakes of ``make -j2`` run on one core each and the last
 one gets the second core once the other ends. make 4.3 passes its jobserver
 pipe only to recipe lines it treats as recursive, marked ``+``; a ``+`` line

@@ -17,8 +17,8 @@ SAMPLE_FILES = ("pillar.glb", "chair.glb", "vase.obj")
 
 def pytest_configure(config):
     # Before any test touches manifold3d: its TBB pool without worker threads, so the tests' forked workers
-    # (fracture_cli.parallel) never inherit a TBB lock (what a bake's parallel.using() does first).
-    from fracture_cli import parallel
+    # (fracture_cli.system.parallel) never inherit a TBB lock (what a bake's parallel.using() does first).
+    from fracture_cli.system import parallel
 
     parallel.single_threaded_tbb()
 
@@ -56,7 +56,7 @@ def _pristine_fracture_logger():
 def outside_make(monkeypatch):
     """The test runs as outside make (the suite itself may run under `make -j2 test`, whose MAKEFLAGS would
     change the default jobs), with no jobserver client kept from another test."""
-    from fracture_cli import jobserver
+    from fracture_cli.system import jobserver
 
     monkeypatch.delenv("MAKEFLAGS", raising=False)
     jobserver.forget()

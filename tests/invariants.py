@@ -2,7 +2,7 @@
 
 Test code only: it reads the GLB bytes with its own minimal reader and uses
 numpy/scipy, never ``fracture_cli``'s geometry, so a bug in the library's own
-checks (``fracture_cli.meshfix.weld_check``, the report's ``watertight``)
+checks (``fracture_cli.geometry.weld_check``, the report's ``watertight``)
 cannot hide the same bug here.
 
 Every fragment (a node with a mesh; all its primitives together) is welded by

@@ -53,7 +53,7 @@ def raw_triangles(path: str) -> np.ndarray:
 
 
 def distance_to_triangles(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    from fracture_cli._open3d import open3d
+    from fracture_cli.geometry.open3d_bridge import open3d
 
     o3d = open3d()
     origin = tris.reshape(-1, 3).mean(axis=0)  # float32 ray scene: stay near the origin
@@ -92,7 +92,7 @@ def signed_volume_and_bbox(V: np.ndarray, F: np.ndarray) -> tuple[float, np.ndar
 
 def check_loaded(entry):
     """A reader case: the loaded triangles have the known volume and bounding box (no bake: milliseconds)."""
-    from fracture_cli.io.read import load_surface
+    from fracture_cli.stages.load import load_surface
 
     surface = load_surface(os.path.join(CORPUS, entry["file"]))
     volume, lo, hi = signed_volume_and_bbox(surface.world_vertices(), surface.faces)
@@ -103,8 +103,8 @@ def check_loaded(entry):
 
 def check_bonds_are_shared_faces(out: str, stem: str, meshes, interior: int, diagonal: float) -> None:
     """The runtime file bonds exactly the written fragments that share fault faces, so every group is connected."""
-    from fracture_cli.gameready.components import fragment_graph
     from fracture_cli.runtime.format import load_runtime
+    from fracture_cli.stages.fragments.bodies import fragment_graph
 
     data = load_runtime(os.path.join(out, stem + ".fracture.json"))
     assert list(data.fragment_names) == [m.name for m in meshes]

@@ -114,7 +114,7 @@ def test_failed_bake_leaves_previous_outputs_untouched(chair_bake, tmp_path, mon
         shutil.copy(out / name, tmp_path / name)
     before = {name: (tmp_path / name).read_bytes() for name in os.listdir(tmp_path)}
 
-    import fracture_cli.stages.precompute as runtime_stage
+    import fracture_cli.stages.runtime as runtime_stage
 
     def explode(*args, **kwargs):
         raise RuntimeError("injected failure")

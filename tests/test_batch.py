@@ -157,8 +157,8 @@ def _check_rows_recomputed(rows, out_dir, stem, asset) -> None:
     from fracture_cli.batch.impacts import asset_impacts
     from fracture_cli.batch.inputs import hash_inputs
     from fracture_cli.batch.state import content_seed
-    from fracture_cli.io.read import load_surface
     from fracture_cli.runtime.format import load_runtime
+    from fracture_cli.stages.load import load_surface
 
     surface = load_surface(str(asset))
     data = load_runtime(str(out_dir / f"{stem}.fracture.json"))

@@ -103,7 +103,7 @@ def test_gltf_and_obj_dependencies_are_part_of_the_key(tmp_path):
     assert dependency_files(str(tmp_path / "m.gltf")) == [str(tmp_path / "geo data.bin"),
                                                            str(tmp_path / "tex" / "albedo.png")]
     assert dependency_files(str(tmp_path / "v.obj")) == [str(tmp_path / "v.mtl"), str(tmp_path / "wood.png")]
-    from fracture_cli.recipe import load_recipe
+    from fracture_cli.pipeline.recipe import load_recipe
 
     recipe = load_recipe("stone")
     before = asset_key(hash_inputs(str(tmp_path / "m.gltf")), recipe)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli.gameready.boxlevels import LevelGrid
-from fracture_cli.trigeom import BoxGrid, default_cell
+from fracture_cli.geometry.boxlevels import LevelGrid
+from fracture_cli.geometry.trigeom import BoxGrid, default_cell
 
 
 def _mixed_boxes(rng, m):
@@ -39,7 +39,7 @@ def test_large_boxes_take_few_entries():
 
 def test_queries_in_chunks_give_the_same_pairs(monkeypatch):
     # A dense cell (a fan of slivers) splits the queries into many small BoxGrid queries: same result.
-    import fracture_cli.gameready.boxlevels as boxlevels
+    import fracture_cli.geometry.boxlevels as boxlevels
 
     rng = np.random.default_rng(3)
     boxes = _mixed_boxes(rng, 800)

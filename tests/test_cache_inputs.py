@@ -10,9 +10,9 @@ import sys
 import pytest
 from click.testing import CliRunner
 
-from fracture_cli.cache import input_digest
 from fracture_cli.cli import cli
 from fracture_cli.io.inputs import input_files
+from fracture_cli.pipeline.cache import input_digest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "data"))
 from make_bad_corpus import Gltf, box, box_primitive, obj_text

@@ -1,6 +1,6 @@
 """Tests of the cage stage: the cage is closed, manifold and strictly contains the input.
 
-Containment is checked here independently of fracture_cli.trigeom and of the
+Containment is checked here independently of fracture_cli.geometry.trigeom and of the
 stage's own check: generalized winding numbers (solid angles) for the input
 vertices, point-to-triangle distances, and segment-triangle crossing tests by
 signed volumes in both directions.
@@ -18,10 +18,10 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-from fracture_cli import trigeom
 from fracture_cli.errors import StageError
-from fracture_cli.stages import _tetgen
+from fracture_cli.geometry import trigeom
 from fracture_cli.stages.cage import CageOptions, cage
+from fracture_cli.stages.tetra import tetgen as _tetgen
 from fracture_cli.types import Material, Normalization, SurfaceMesh
 
 SAMPLE_ASSETS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "sample_assets")
@@ -74,7 +74,7 @@ def sample(name) -> SurfaceMesh:
     path = os.path.join(SAMPLE_ASSETS, name)
     if not os.path.exists(path):
         pytest.skip(f"{name} not generated yet")
-    from fracture_cli.io.read import load_surface
+    from fracture_cli.stages.load import load_surface
 
     return load_surface(path)
 

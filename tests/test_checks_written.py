@@ -23,7 +23,7 @@ from fracture_cli.checks import (
     written_fragments,
 )
 from fracture_cli.errors import StageError
-from fracture_cli.trigeom import edge_manifold_closed
+from fracture_cli.geometry.trigeom import edge_manifold_closed
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Normalization, SurfaceMesh
 
 

@@ -2,7 +2,7 @@
 
 An interrupt while the tool starts or a native library initialises used to
 surface as ``internal error (ImportError: initialization failed)``; the CLI
-now asks :func:`fracture_cli.interrupts.caused_by_interrupt`, the SIGINT
+now asks :func:`fracture_cli.system.interrupts.caused_by_interrupt`, the SIGINT
 handler defers the interrupt out of imports and JIT compiles, and a handful
 of real Ctrl-C moments over a bake's first seconds are checked here
 (scripts/sigint_sweep.py sweeps every 0.1 s).
@@ -21,8 +21,8 @@ import threading
 import pytest
 from click.testing import CliRunner
 
-from fracture_cli import interrupts
 from fracture_cli.cli import cli, main
+from fracture_cli.system import interrupts
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
@@ -100,18 +100,18 @@ def test_ctrl_c_while_parsing_is_an_interrupt(monkeypatch):
     def hoist(args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("fracture_cli.cli_group.hoist_global_flags", hoist)
+    monkeypatch.setattr("fracture_cli.cli.group.hoist_global_flags", hoist)
     assert_interrupted(CliRunner().invoke(cli, ["recipes"]))
 
 
 def test_ctrl_c_while_the_tool_loads_is_an_interrupt(monkeypatch, capsys):
     class Interrupting(importlib.abc.MetaPathFinder):
         def find_spec(self, name, path=None, target=None):
-            if name == "fracture_cli.cli_group":
+            if name == "fracture_cli.cli.group":
                 raise KeyboardInterrupt
             return None
 
-    monkeypatch.delitem(sys.modules, "fracture_cli.cli_group")
+    monkeypatch.delitem(sys.modules, "fracture_cli.cli.group")
     monkeypatch.setattr(sys, "meta_path", [Interrupting(), *sys.meta_path])
     with pytest.raises(SystemExit) as stopped:
         main(["recipes"])

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from fracture_cli import __version__
 from fracture_cli.cli import cli
-from fracture_cli.io.read import load_surface
+from fracture_cli.stages.load import load_surface
 
 from conftest import SAMPLE_ASSETS
 
@@ -133,7 +133,7 @@ def test_normalization_is_unit_diagonal():
     ("material.boxes=[{name = \"a\", min = [0, 0, -inf], max = [1, 1, 1], strength = 2.0}]", "material.boxes"),
 ])
 def test_non_finite_options_are_refused_before_any_work(tmp_path, monkeypatch, override, key):
-    monkeypatch.setattr("fracture_cli.io.read.load_surface", lambda *a: pytest.fail("loaded before the check"))
+    monkeypatch.setattr("fracture_cli.stages.load.load_surface", lambda *a: pytest.fail("loaded before the check"))
     out = tmp_path / "out"
     result = CliRunner().invoke(cli, ["bake", os.path.join(SAMPLE_ASSETS, "vase.obj"), "-o", str(out),
                                       "--set", override])
@@ -154,7 +154,7 @@ def test_impact_threshold_must_be_a_number_at_least_zero(tmp_path, threshold):
     from test_runtime import slab_bar
 
     from fracture_cli.runtime.format import write_runtime
-    from fracture_cli.stages.precompute import RuntimeOptions, runtime
+    from fracture_cli.stages.runtime import RuntimeOptions, runtime
 
     path, _ = write_runtime(runtime(*slab_bar(k=3), RuntimeOptions()), tmp_path / "bar.fracture.json")
     result = CliRunner().invoke(cli, ["impact", str(path), "--point", "0", "0", "0", "--impulse", "1", "0", "0",

@@ -16,7 +16,7 @@ import pytest
 from click.testing import CliRunner
 
 from fracture_cli.cli import EXAMPLES, cli, full_chain, wrapped_command
-from fracture_cli.cli_options import hoist_global_flags
+from fracture_cli.cli.options import hoist_global_flags
 from fracture_cli.pipeline import STAGE_NAMES
 
 HERE = os.path.dirname(os.path.abspath(__file__))

@@ -1,10 +1,10 @@
-"""fracture_cli.edgelengths: the longest edges, bit for bit what np.linalg.norm gives."""
+"""fracture_cli.geometry.edgelengths: the longest edges, bit for bit what np.linalg.norm gives."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli.edgelengths import longest_edges
+from fracture_cli.geometry.edgelengths import longest_edges
 
 
 def test_same_bits_as_norm():

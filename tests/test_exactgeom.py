@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli import trigeom
-from fracture_cli.exactgeom import real_pairs
+from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.exactgeom import real_pairs
 
 
 def _corner_pair(z: float) -> tuple[np.ndarray, np.ndarray]:

@@ -267,22 +267,22 @@ def test_deterministic_and_ordered():
 
 
 def test_box_uv_axis_ties_do_not_depend_on_rounding():
-    from fracture_cli.stages.fragments import _box_uvs
+    from fracture_cli.geometry.uvs import box_uvs
 
     s = np.sqrt(0.5)
     # A 45-degree face whose normal carries rounding noise either way projects the same way.
     normals = np.array([[s, s + 1e-15, 0.0], [s + 1e-15, s, 0.0], [s, s, 0.0]])
     world = np.array([[0.3, 0.7, 0.2]] * 3)
-    uvs = _box_uvs(world, normals, 1.0)
+    uvs = box_uvs(world, normals, 1.0)
     np.testing.assert_array_equal(uvs, np.repeat(uvs[:1], 3, axis=0))
     # A clear winner still wins.
-    assert not np.array_equal(_box_uvs(world, np.array([[0.1, 0.99, 0.0]]), 1.0), uvs[:1])
+    assert not np.array_equal(box_uvs(world, np.array([[0.1, 0.99, 0.0]]), 1.0), uvs[:1])
 
 
 def test_one_body_cuts_give_what_split_fragments_gives():
     """The stage skips split_fragments when the workers found one body per cut: the same fragments and report."""
-    from fracture_cli.gameready.components import split_fragments
     from fracture_cli.stages.fragments import fragments_with_split
+    from fracture_cli.stages.fragments.bodies import split_fragments
 
     surf = uv_sphere()
     tm = cage_tets(4)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli.gameready.collision import (
+from fracture_cli.geometry.mass import mass_properties
+from fracture_cli.stages.collision.convex import (
     CollisionOptions,
     collision_shapes,
     hull_mesh,
@@ -16,7 +17,6 @@ from fracture_cli.gameready.collision import (
     simplify_hull,
     volume_beyond,
 )
-from fracture_cli.gameready.mass import mass_properties
 
 
 def _mesh(solid: manifold3d.Manifold):
@@ -72,7 +72,7 @@ def test_vertex_cap_keeps_a_subset_that_covers_the_part():
 
 def test_neighbours_with_a_curved_fault_do_not_overlap():
     left, right = _ridge_pair()
-    from fracture_cli.gameready.collision import hull_corners
+    from fracture_cli.stages.collision.convex import hull_corners
     hulls = [hull_corners(manifold3d.Manifold(manifold3d.Mesh64(vert_properties=V, tri_verts=F.astype(np.uint64))))
              for V, F in (left, right)]
     assert max_overlap_fraction([hulls[0]], [hulls[1]]) > 0.15  # plain hulls collide
@@ -135,7 +135,7 @@ def test_max_overlap_fraction_matches_booleans_on_many_pairs():
 
 
 def test_collision_shapes_are_the_same_with_one_job_and_two():
-    from fracture_cli import parallel
+    from fracture_cli.system import parallel
 
     meshes = [_l_shape(), *_ridge_pair()]
     with parallel.using(1):
@@ -150,7 +150,7 @@ def test_collision_shapes_are_the_same_with_one_job_and_two():
 def test_bounded_cut_search_chooses_as_trying_every_cut(monkeypatch):
     """Parts with many vertices rank candidate cuts by lower bounds (thinned hulls) first: same pieces as
     computing every candidate's cost."""
-    from fracture_cli.gameready import decompose
+    from fracture_cli.stages.collision import decompose
 
     # A bumpy torus of ~5,000 vertices: concave, dense, above the bound threshold.
     torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.35, major_sections=96, minor_sections=48)

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli.gameready.components import body_faces, fragment_graph, interface_areas, split_fragments
-from fracture_cli.gameready.mass import mass_properties
-from fracture_cli.trigeom import edge_manifold_closed, vertex_manifold
+from fracture_cli.geometry.mass import mass_properties
+from fracture_cli.geometry.trigeom import edge_manifold_closed, vertex_manifold
+from fracture_cli.stages.fragments.bodies import body_faces, fragment_graph, interface_areas, split_fragments
 from fracture_cli.types import Fragment, Fragments, Material, Normalization
 
 OUTER, INTERIOR = 0, 1
@@ -147,7 +147,7 @@ def test_isolated_tiny_body_is_kept():
 def test_runtime_repeats_a_split_piece_and_takes_bonds_from_the_meshes():
     """Two fragments of one piece get its column of W; bonds come from the fragment graph, not the piece graph."""
     from fracture_cli.errors import StageError
-    from fracture_cli.stages.precompute import _restrict_to_fragments
+    from fracture_cli.stages.runtime import _restrict_to_fragments
     from fracture_cli.types import Pieces
 
     W = np.arange(6, dtype=np.float64).reshape(2, 3, 1)

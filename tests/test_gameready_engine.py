@@ -12,12 +12,12 @@ import manifold3d
 import numpy as np
 import pytest
 
-from fracture_cli.gameready.collision import collision_shapes
-from fracture_cli.gameready.export_shapes import FragmentPhysics, physics_extender
-from fracture_cli.gameready.mass import mass_properties
+from fracture_cli.geometry.mass import mass_properties
+from fracture_cli.geometry.trigeom import vertex_normals
 from fracture_cli.io.gltf import glb_bytes
+from fracture_cli.io.physics import FragmentPhysics, physics_extender
 from fracture_cli.io.write import fragment_name, split_by_material
-from fracture_cli.trigeom import vertex_normals
+from fracture_cli.stages.collision.convex import collision_shapes
 from fracture_cli.types import Material, Normalization
 
 REST_SCRIPT = """extends SceneTree

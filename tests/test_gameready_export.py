@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli.gameready.collision import collision_shapes
-from fracture_cli.gameready.export_shapes import COLLISION_FORMATS, FragmentPhysics, physics_extender, runtime_arrays
-from fracture_cli.gameready.mass import mass_properties
+from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.io.gltf import Primitive, glb_bytes, read_glb_chunks
+from fracture_cli.io.physics import COLLISION_FORMATS, FragmentPhysics, physics_extender, runtime_arrays
+from fracture_cli.stages.collision.convex import collision_shapes
 from fracture_cli.types import Material
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli.gameready.mass import mass_properties, principal_axes, quaternion_xyzw
+from fracture_cli.geometry.mass import mass_properties, principal_axes, quaternion_xyzw
 
 
 def _box(extents, center=(0.0, 0.0, 0.0)):

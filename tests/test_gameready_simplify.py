@@ -9,13 +9,13 @@ import manifold3d
 import numpy as np
 import pytest
 
-from fracture_cli.gameready.budget import Limits, shares
-from fracture_cli.gameready.mass import mass_properties
-from fracture_cli.gameready.simplify import simplify_faults, valid
+from fracture_cli.geometry.mass import mass_properties
+from fracture_cli.geometry.trigeom import point_triangle_distance
 from fracture_cli.pipeline import STAGE_NAMES
-from fracture_cli.recipe import load_recipe
+from fracture_cli.pipeline.recipe import load_recipe
 from fracture_cli.stages.simplify import SimplifyOptions, triangle_budget
-from fracture_cli.trigeom import point_triangle_distance
+from fracture_cli.stages.simplify.budget import Limits, shares
+from fracture_cli.stages.simplify.faults import simplify_faults, valid
 from fracture_cli.types import Fragment, Fragments, Material, Normalization, SurfaceMesh
 
 from conftest import SAMPLE_ASSETS
@@ -179,7 +179,7 @@ def test_stage_runs_after_fragments_with_recipe_keys():
 
 def test_chair_bake_within_the_triangle_budget(tmp_path):
     """Issue 20: at default settings, at most twice the input's triangles plus 64 per fragment."""
-    from fracture_cli.bake import bake
+    from fracture_cli.pipeline.bake import bake
 
     bake(os.path.join(SAMPLE_ASSETS, "chair.glb"), str(tmp_path), load_recipe("wood"))
     with open(tmp_path / "chair.report.json") as fh:
@@ -194,7 +194,7 @@ def test_chair_bake_within_the_triangle_budget(tmp_path):
 
 def test_self_intersections_among_matches_the_full_check():
     # Random triangles, many crossing: the pairs involving the chosen faces are the full check's.
-    from fracture_cli.trigeom import self_intersections, self_intersections_among
+    from fracture_cli.geometry.trigeom import self_intersections, self_intersections_among
 
     rng = np.random.default_rng(3)
     V = rng.random((60, 3))
@@ -208,7 +208,7 @@ def test_self_intersections_among_matches_the_full_check():
 
 
 def test_nearest_input_triangle_by_grid_is_the_brute_force_one():
-    from fracture_cli.gameready.faultmatch import _nearest_within
+    from fracture_cli.stages.simplify.faultmatch import _nearest_within
 
     rng = np.random.default_rng(5)
     S = rng.random((300, 3, 3)) * 0.2 + rng.random((300, 1, 3))
@@ -225,7 +225,7 @@ def test_nearest_input_triangle_by_grid_is_the_brute_force_one():
 
 def test_cap_needles_are_flipped_away_without_moving_the_surface():
     """A needle (apex 1e-12 off its long edge) and the face across that edge become two well-shaped faces."""
-    from fracture_cli.gameready.decimate import MIN_SHAPE, SurfaceComplex
+    from fracture_cli.stages.simplify.decimate import MIN_SHAPE, SurfaceComplex
 
     b, c, d, a, e = range(5)
     V = np.array([[0, 0, 0], [1, 0, 0], [0.5, -1, 0], [0.5, 1e-12, 0], [0.5, 1, 0]], dtype=float)

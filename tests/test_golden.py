@@ -3,7 +3,7 @@
 Goldens live in tests/golden/<asset>.<recipe>.json. Regenerate after an intended
 change with `make goldens` (pytest --update-goldens) and review the diff.
 The GLB and runtime file must be the same bytes (their SHA-256, the same on every
-machine: fracture_cli/numeric_env.py); the readable quantities before the hashes
+machine: fracture_cli/system/numeric_env.py); the readable quantities before the hashes
 are compared with explicit tolerances first, so a failure names the asset, the
 quantity, the expected and the obtained value.
 """
@@ -18,9 +18,9 @@ import tomllib
 import numpy as np
 import pytest
 
-from fracture_cli.bake import bake
 from fracture_cli.io.gltf import read_glb
-from fracture_cli.recipe import load_recipe
+from fracture_cli.pipeline.bake import bake
+from fracture_cli.pipeline.recipe import load_recipe
 
 from conftest import REPO, SAMPLE_ASSETS
 

@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from fracture_cli.cli import cli
 from fracture_cli.errors import InputError
 from fracture_cli.io.inputs import input_files, read_input, recording_reads
-from fracture_cli.io.read import load_surface, size_limits
+from fracture_cli.stages.load import load_surface, size_limits
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "data"))
 from make_bad_corpus import Gltf, box, box_primitive, icosphere, obj_text  # noqa: E402
@@ -189,7 +189,7 @@ def test_a_refused_input_keeps_the_old_outputs_and_itself(tmp_path):
 
 
 def test_mass_properties_at_the_size_limit_fit_float32():
-    from fracture_cli.gameready.mass import mass_properties
+    from fracture_cli.geometry.mass import mass_properties
     from fracture_cli.types import Normalization
 
     smallest, largest = size_limits()

@@ -11,8 +11,8 @@ import termios
 
 import pytest
 
-from fracture_cli import jobserver, parallel
 from fracture_cli.errors import StageError
+from fracture_cli.system import jobserver, parallel
 
 from conftest import REPO
 

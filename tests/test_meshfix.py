@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from fracture_cli.errors import StageError
-from fracture_cli.meshfix.faces import orient_consistently, unique_faces
-from fracture_cli.meshfix.holes import FillOptions, boundary_loops, fill_holes, plan_fill
-from fracture_cli.meshfix.nonmanifold import split_nonmanifold
-from fracture_cli.meshfix.thicken import thicken_inward
-from fracture_cli.meshfix.weld_check import as_written, check_mesh
-from fracture_cli.trigeom import winding_numbers
+from fracture_cli.geometry.trigeom import winding_numbers
+from fracture_cli.geometry.weld_check import as_written, check_mesh
+from fracture_cli.stages.repair.faces import orient_consistently, unique_faces
+from fracture_cli.stages.repair.holes import FillOptions, boundary_loops, fill_holes, plan_fill
+from fracture_cli.stages.repair.nonmanifold import split_nonmanifold
+from fracture_cli.stages.repair.thicken import thicken_inward
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "data"))
 from make_realworld_corpus import grid_faces

@@ -18,13 +18,13 @@ import manifold3d
 import numpy as np
 import pytest
 
-from fracture_cli.io.read import LoadOptions, load_surface
-from fracture_cli.meshfix.edges import edge_table, face_bodies, signed_volume, weld_by_position
-from fracture_cli.meshfix.faces import orient_consistently, unique_faces
-from fracture_cli.meshfix.holes import fill_holes, plan_fill
-from fracture_cli.meshfix.nonmanifold import split_nonmanifold
-from fracture_cli.meshfix.thicken import thicken_inward
-from fracture_cli.meshfix.weld_check import check_mesh
+from fracture_cli.geometry.edges import edge_table, face_bodies, signed_volume, weld_by_position
+from fracture_cli.geometry.weld_check import check_mesh
+from fracture_cli.stages.load import LoadOptions, load_surface
+from fracture_cli.stages.repair.faces import orient_consistently, unique_faces
+from fracture_cli.stages.repair.holes import fill_holes, plan_fill
+from fracture_cli.stages.repair.nonmanifold import split_nonmanifold
+from fracture_cli.stages.repair.thicken import thicken_inward
 
 CORPUS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "realworld")
 with open(os.path.join(CORPUS, "expected.toml"), "rb") as _fh:

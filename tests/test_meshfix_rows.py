@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fracture_cli.meshfix.rows import unique_inverse, unique_rows, used_vertices
+from fracture_cli.geometry.rows import unique_inverse, unique_rows, used_vertices
 
 
 @pytest.mark.parametrize("rows", [

@@ -1,7 +1,7 @@
-"""The exact min-cut of the modes' pricing (fracture_cli.discontinuity.mincut) against brute force.
+"""The exact min-cut of the modes' pricing (fracture_cli.stages.modes.solver.mincut) against brute force.
 
 ``MinCut.source_side`` returns the minimal set S minimising ``w(boundary of S) - supply(S)``.
-The compiled kernel (fracture_cli.discontinuity.maxflow_kernel) solves it in the two-arc form;
+The compiled kernel (fracture_cli.stages.modes.solver.maxflow_kernel) solves it in the two-arc form;
 OR-Tools in a one-arc form (each face one arc of twice its weight, its weight shifted onto the
 terminal arcs: every cut changes by the same constant) or, when those shifted capacities could
 overflow, in the two-arc form; scipy in the two-arc form. All must give the brute-force answer:
@@ -15,8 +15,8 @@ import itertools
 import numpy as np
 import pytest
 
-from fracture_cli.discontinuity import maxflow_kernel
-from fracture_cli.discontinuity.mincut import MinCut
+from fracture_cli.stages.modes.solver import maxflow_kernel
+from fracture_cli.stages.modes.solver.mincut import MinCut
 
 pytest.importorskip("ortools", reason="OR-Tools is not installed: only the scipy max-flow can be checked")
 

@@ -7,15 +7,15 @@ import logging
 import numpy as np
 import pytest
 
-from fracture_cli.discontinuity import (
+from fracture_cli.errors import StageError
+from fracture_cli.stages.modes import ModesOptions, mode_pieces, modes
+from fracture_cli.stages.modes.solver import (
     ConicSubproblemSolver,
     CutSubproblemSolver,
     discontinuity_energy,
     face_weights,
 )
-from fracture_cli.errors import StageError
-from fracture_cli.parallel import using
-from fracture_cli.stages.modes import ModesOptions, mode_pieces, modes
+from fracture_cli.system.parallel import using
 from fracture_cli.testing import grid_tetmesh, two_boxes_with_neck
 
 
@@ -286,7 +286,7 @@ def test_parallel_chains_are_byte_identical_to_serial():
 
 def test_merging_cells_keeps_the_optimum(monkeypatch):
     """Merging equal-valued cells (always, here) and undoing a merge after an LP failure leave the optimum as is."""
-    from fracture_cli.discontinuity.master import MasterLP
+    from fracture_cli.stages.modes.solver.master import MasterLP
 
     ft, w, vol, c, fixed = asymmetric_subproblem()
     plain = CutSubproblemSolver(ft, w, vol, merge_cells=10**9).solve(c, fixed)
@@ -335,7 +335,7 @@ def test_round_on_a_max_flow_budget_is_feasible_and_descends():
 def test_master_with_dependent_fixed_rows_solves_on_their_row_space(monkeypatch):
     """When every LP solver fails on a master whose fixed rows are dependent, it is solved with an
     orthonormal basis of their row space instead: same optimum, certified, multipliers mapped back."""
-    from fracture_cli.discontinuity.master import MasterLP
+    from fracture_cli.stages.modes.solver.master import MasterLP
 
     ft, w, vol, c, (y0,) = asymmetric_subproblem()
     expected = CutSubproblemSolver(ft, w, vol).solve(c, [y0])
@@ -356,7 +356,7 @@ def test_master_with_dependent_fixed_rows_solves_on_their_row_space(monkeypatch)
 
 def test_master_without_highspy_solves_with_linprog(monkeypatch):
     """scipy's linprog (imported only for this fallback) reaches the warm-started HiGHS master's optimum."""
-    from fracture_cli.discontinuity import master
+    from fracture_cli.stages.modes.solver import master
 
     ft, w, vol, c, fixed = asymmetric_subproblem()
     warm = CutSubproblemSolver(ft, w, vol).solve(c, fixed)

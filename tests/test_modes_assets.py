@@ -13,8 +13,8 @@ import os
 import pytest
 from test_modes import _record_subproblems, compare_with_baseline
 
-from fracture_cli.io.read import load_surface
 from fracture_cli.stages.cage import CageOptions, cage
+from fracture_cli.stages.load import load_surface
 from fracture_cli.stages.repair import RepairOptions, repair
 from fracture_cli.stages.tetra import TetraOptions, tetra
 

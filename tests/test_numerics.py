@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from test_golden import GOLDEN_DIR, MANIFEST, output_hashes
 
-from fracture_cli import detmath, numeric_env
-from fracture_cli.cache import cache_key
+from fracture_cli.pipeline.cache import cache_key
+from fracture_cli.system import detmath, numeric_env
 
 from conftest import REPO, SAMPLE_ASSETS
 
@@ -32,8 +32,8 @@ LIBM = {"exp", "exp2", "expm1", "log", "log2", "log10", "log1p", "sin", "cos", "
         "arctan2", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "arcsinh", "arccosh", "arctanh", "pow",
         "power", "float_power", "cbrt", "hypot", "degrees_to_radians", "logaddexp", "erf", "gamma", "lgamma"}
 # `**` whose operands are ints (exact integer arithmetic), by file and expression.
-INT_POWERS = {"detmath.py": {"(-1) ** i"}, "gameready/boxlevels.py": {"_RATIO ** int(k)"},
-              "gameready/simplify.py": {"2 ** _BUDGET_ROUNDS"}}
+INT_POWERS = {"system/detmath.py": {"(-1) ** i"}, "geometry/boxlevels.py": {"_RATIO ** int(k)"},
+              "stages/simplify/faults.py": {"2 ** _BUDGET_ROUNDS"}}
 
 # Kernel choices any x86-64 machine with AVX2 can force (and, with the pin, must not change a byte).
 FORCED = {
@@ -69,8 +69,8 @@ def _libm_uses(path: pathlib.Path) -> list[str]:
 def test_the_library_calls_no_libm_function():
     """No transcendental call and no power of floats anywhere in the package (detmath is made of products)."""
     found = [use for path in sorted(PACKAGE.rglob("*.py")) for use in _libm_uses(path)]
-    assert not found, ("libm calls round by the CPU (fracture_cli/numeric_env.py); use fracture_cli.detmath or "
-                       "products instead:\n" + "\n".join(found))
+    assert not found, ("libm calls round by the CPU (fracture_cli/system/numeric_env.py); use "
+                       "fracture_cli.system.detmath or products instead:\n" + "\n".join(found))
 
 
 def test_this_process_runs_pinned():

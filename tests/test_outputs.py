@@ -180,7 +180,7 @@ def test_report_path_taken_by_a_folder_is_refused_before_work(asset, cache, old_
     os.remove(os.path.join(out, "box.report.json"))
     os.mkdir(os.path.join(out, "box.report.json"))
     before = snapshot(out)
-    monkeypatch.setattr("fracture_cli.io.read.load_surface", lambda *a: pytest.fail("loaded before the check"))
+    monkeypatch.setattr("fracture_cli.stages.load.load_surface", lambda *a: pytest.fail("loaded before the check"))
     result = rebake(asset, out, cache)
     assert result.exit_code == 1
     assert_one_line(result, "box.report.json", "is in the way of an output")
@@ -193,7 +193,7 @@ def test_report_path_taken_by_a_folder_is_refused_before_work(asset, cache, old_
 @pytest.fixture
 def no_load(monkeypatch):
     """Fail the test if a bake gets past its preflight."""
-    monkeypatch.setattr("fracture_cli.io.read.load_surface", lambda *a: pytest.fail("loaded before the check"))
+    monkeypatch.setattr("fracture_cli.stages.load.load_surface", lambda *a: pytest.fail("loaded before the check"))
 
 
 def test_too_little_free_space_is_refused_before_work(asset, tmp_path, monkeypatch, no_load):
@@ -331,7 +331,7 @@ def test_published_files_get_0666_minus_umask(tmp_path):
 
 def test_runtime_file_written_alone_is_0644(tmp_path):
     from fracture_cli.runtime.format import write_runtime
-    from fracture_cli.stages.precompute import RuntimeOptions, runtime
+    from fracture_cli.stages.runtime import RuntimeOptions, runtime
 
     sys.path.insert(0, HERE)
     from test_runtime import slab_bar
@@ -542,7 +542,7 @@ def _wait_for_worker(pid: int, timeout: float = 120.0) -> None:
     """Until the bake's TetGen worker (a child of ``pid``) runs."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        found = subprocess.run(["pgrep", "-P", str(pid), "-f", "_tetgen"], capture_output=True)
+        found = subprocess.run(["pgrep", "-P", str(pid), "-f", "stages.tetra.tetgen"], capture_output=True)
         if found.stdout.strip():
             return
         time.sleep(0.05)
@@ -603,14 +603,14 @@ def test_sigkill_then_a_new_bake_cleans_up(asset, cache, tmp_path):
     assert verify_output_set(out, "box") is None
     assert sorted(os.listdir(out)) == sorted(output_names("box"))
     # The worker folder is cleaned when the next bake starts its worker (not with --cache hits: that skips TetGen).
-    from fracture_cli.stages._tetgen import clean_stale_workdirs
+    from fracture_cli.stages.tetra.tetgen import clean_stale_workdirs
 
     clean_stale_workdirs()
     assert _worker_dirs(killed.pid) == []
 
 
 def test_worker_folders_of_live_processes_are_kept(tmp_path):
-    from fracture_cli.stages._tetgen import clean_stale_workdirs
+    from fracture_cli.stages.tetra.tetgen import clean_stale_workdirs
 
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     stale = tmp_path / f"fracture-tetgen-{int(dead.stdout)}-x1y2z3"
@@ -637,8 +637,8 @@ def test_chain_save_and_export_never_replace_their_input(tmp_path):
     result = CliRunner().invoke(cli, ["load", str(glb), "save", str(glb)])
     assert result.exit_code == 1
     assert_one_line(result, "prop.glb", "which this command reads")
-    from fracture_cli.bake import write_outputs
     from fracture_cli.pipeline import PipelineState, Runner
+    from fracture_cli.pipeline.bake import write_outputs
 
     with pytest.raises(OutputError, match="which this command reads"):  # the chain's `export` step
         write_outputs(str(tmp_path), "prop", PipelineState(source=str(glb)), {}, Runner("t"))

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from fracture_cli import parallel
 from fracture_cli.cli import cli
-from fracture_cli.cli_options import hoist_global_flags
+from fracture_cli.cli.options import hoist_global_flags
 from fracture_cli.errors import StageError
+from fracture_cli.system import parallel
 
 from conftest import SAMPLE_ASSETS
 
@@ -108,8 +108,8 @@ def test_large_input_crop_gives_the_same_fragments(monkeypatch):
     from test_fragments import cage_tets, octant_pieces, uv_sphere
 
     import fracture_cli.stages.fragments as fr
+    from fracture_cli.geometry.trigeom import signed_volume
     from fracture_cli.stages.smooth import SmoothOptions, smooth
-    from fracture_cli.trigeom import signed_volume
 
     surf = uv_sphere()
     tm = cage_tets()

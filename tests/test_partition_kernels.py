@@ -5,7 +5,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from fracture_cli.discontinuity import partition_kernels
+from fracture_cli.stages.modes.solver import partition_kernels
 
 
 def _graph(rng, t, f):

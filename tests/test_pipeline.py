@@ -12,12 +12,12 @@ import time
 import pytest
 from click.testing import CliRunner
 
-from fracture_cli import progress
 from fracture_cli.cli import cli
 from fracture_cli.errors import RecipeError
 from fracture_cli.options import option_fields
 from fracture_cli.pipeline import STAGE_NAMES, STAGES, PipelineState
-from fracture_cli.recipe import SECTIONS, load_recipe, search_path
+from fracture_cli.pipeline.recipe import SECTIONS, load_recipe, search_path
+from fracture_cli.system import progress
 
 from conftest import SAMPLE_ASSETS
 

@@ -17,8 +17,8 @@ import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from fracture_cli.bake import bake
-from fracture_cli.recipe import load_recipe
+from fracture_cli.pipeline.bake import bake
+from fracture_cli.pipeline.recipe import load_recipe
 
 primitive = st.tuples(
     st.sampled_from(["box", "sphere"]),

@@ -9,7 +9,7 @@ from click.testing import CliRunner
 
 from fracture_cli.cli import cli
 from fracture_cli.errors import RecipeError
-from fracture_cli.recipe import SECTIONS, list_recipes, load_recipe
+from fracture_cli.pipeline.recipe import SECTIONS, list_recipes, load_recipe
 
 
 def test_builtin_recipes_exist_and_resolve():
@@ -123,7 +123,7 @@ def test_keys_of_older_recipes_still_load(tmp_path, caplog):
     """A retired key is ignored and a renamed one read under its new name, each with a warning saying why."""
     old = tmp_path / "old.toml"
     old.write_text('extends = "default"\n[repair]\nmax_fill_ratio = 0.02\n[pieces]\nmin_volume_fraction = 0.004\n')
-    with caplog.at_level(logging.WARNING, logger="fracture_cli.recipe"):
+    with caplog.at_level(logging.WARNING, logger="fracture_cli.pipeline.recipe"):
         recipe = load_recipe(str(old))
     assert recipe["pieces"].min_fragment_fraction == 0.004
     messages = " ".join(r.message for r in caplog.records)

@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from fracture_cli.errors import StageError
-from fracture_cli.io.read import load_surface
+from fracture_cli.stages.load import load_surface
 from fracture_cli.stages.repair import RepairOptions, repair, repair_surface
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Material, Normalization, SurfaceMesh
 
@@ -211,8 +211,8 @@ def test_closed_input_is_returned_unchanged():
 
 
 def test_bake_of_open_vase_keeps_its_volume(tmp_path):
-    from fracture_cli.bake import bake
-    from fracture_cli.recipe import load_recipe
+    from fracture_cli.pipeline.bake import bake
+    from fracture_cli.pipeline.recipe import load_recipe
 
     result = bake(VASE, str(tmp_path), load_recipe("default", ["cage.target_faces=600", "modes.num_modes=4"]))
     checks = result.report["checks"]
@@ -269,7 +269,7 @@ def test_two_bodies_one_hollow():
 def test_bodies_a_rounding_step_apart_are_snapped_and_united():
     """Two boxes sharing a face, one moved by 1e-9 of the diagonal (a baked GLB's fragments read back): snapped
     and united into one closed body, no hairline gap."""
-    from fracture_cli.meshfix.weld_check import check_mesh
+    from fracture_cli.geometry.weld_check import check_mesh
 
     a = trimesh.creation.box(extents=(1, 1, 1))
     b = trimesh.creation.box(extents=(1, 1, 1))

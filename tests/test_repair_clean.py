@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli.io.read import surface_from_trimesh
 from fracture_cli.stages import repair as repair_module
+from fracture_cli.stages.load import surface_from_trimesh
 from fracture_cli.stages.repair import repair_surface
 from fracture_cli.stages.repair.clean import closed_as_given
 
@@ -116,7 +116,7 @@ def _topology_cases():
 
 @pytest.mark.parametrize("name", list(_topology_cases()))
 def test_compiled_checks_give_the_numpy_verdicts(name):
-    from fracture_cli import trigeom
+    from fracture_cli.geometry import trigeom
 
     F, closed, fans, one_body = _topology_cases()[name]
     F = np.asarray(F, dtype=np.int64)

@@ -16,7 +16,7 @@ import pytest
 from fracture_cli.errors import ImpactArgumentError, InputError, RuntimeFileError
 from fracture_cli.runtime.format import RuntimeData, encode, load_runtime, write_runtime
 from fracture_cli.runtime.impact import _SpanningForest, components, project_impact
-from fracture_cli.stages.precompute import RuntimeOptions, runtime
+from fracture_cli.stages.runtime import RuntimeOptions, runtime
 from fracture_cli.testing import grid_tetmesh
 from fracture_cli.types import Modes, Normalization, Pieces, TetMesh
 

@@ -5,7 +5,7 @@ then it is smoothed with lambda = 0 (tet-aligned faults) and with the recipe's
 lambda, cut into fragments, and checked with the independent invariant checks
 of ``test_fragments.check_invariants`` (trimesh, manifold3d, open3d). With
 smoothing on, the faults must look smoother: their mean dihedral angle and
-their crease density (:func:`fracture_cli.faultshape.fault_shape`) drop.
+their crease density (:func:`fracture_cli.checks.faultshape.fault_shape`) drop.
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ import tomllib
 import pytest
 from test_fragments import check_invariants
 
-from fracture_cli.faultshape import fragment_fault_shape
-from fracture_cli.io.read import load_surface
-from fracture_cli.recipe import load_recipe
+from fracture_cli.checks.faultshape import fragment_fault_shape
+from fracture_cli.pipeline.recipe import load_recipe
 from fracture_cli.stages.cage import cage
 from fracture_cli.stages.fragments import fragments
+from fracture_cli.stages.load import load_surface
 from fracture_cli.stages.material import material
 from fracture_cli.stages.modes import modes
 from fracture_cli.stages.pieces import pieces

@@ -1,4 +1,4 @@
-"""fracture_cli.scenes: one surface query (hierarchy) per surface, kept while its arrays live."""
+"""fracture_cli.geometry.scenes: one surface query (hierarchy) per surface, kept while its arrays live."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import gc
 import numpy as np
 import trimesh
 
-from fracture_cli import scenes
+from fracture_cli.geometry import scenes
 
 
 def test_same_arrays_same_scene_and_forgotten_with_them():
@@ -27,7 +27,7 @@ def test_same_arrays_same_scene_and_forgotten_with_them():
 def test_scene_answers_like_a_new_one():
     mesh = trimesh.creation.icosphere(2)
     V, F = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
-    from fracture_cli import surface_query
+    from fracture_cli.geometry import surface_query
 
     points = np.random.default_rng(0).normal(size=(200, 3))
     shared = scenes.surface_scene(V, F)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fracture_cli.gameready import collapse_kernels as kernels
-from fracture_cli.trigeom import point_triangle_distance
+from fracture_cli.geometry.trigeom import point_triangle_distance
+from fracture_cli.stages.simplify import collapse_kernels as kernels
 
 
 def _cases(seed: int, n: int = 3000) -> tuple[np.ndarray, np.ndarray]:
@@ -99,7 +99,7 @@ def test_within_tolerance_as_the_numpy_bound():
 
 def test_warm_kernels_simplifies_its_patch():
     """What ``make install`` runs to compile the kernels does collapses (so it reaches every kernel)."""
-    from fracture_cli.gameready.collapse_kernels import warm_kernels
+    from fracture_cli.stages.simplify.warm import warm_kernels
 
     assert warm_kernels() > 0
 
@@ -107,7 +107,7 @@ def test_warm_kernels_simplifies_its_patch():
 def _patch_complex(n: int = 14):
     """A wavy grid: its left half a fault between fragments 0 and 1, its right half outer faces of fragment 0
     on one input polygon; the border locked."""
-    from fracture_cli.gameready.decimate import SurfaceComplex
+    from fracture_cli.stages.simplify.decimate import SurfaceComplex
 
     x, y = np.meshgrid(np.linspace(0.0, 1.0, n), np.linspace(0.0, 1.0, n), indexing="ij")
     V = np.column_stack([x.ravel(), y.ravel(), 0.02 * np.sin(4.0 * x.ravel()) * np.cos(3.0 * y.ravel())])

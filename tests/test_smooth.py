@@ -8,8 +8,9 @@ import manifold3d
 import numpy as np
 import pytest
 
-from fracture_cli import tetgeom
-from fracture_cli.faultshape import fault_roughness, region_fault_roughness
+from fracture_cli.checks.faultshape import fault_roughness, region_fault_roughness
+from fracture_cli.geometry import tetgeom
+from fracture_cli.geometry.trigeom import point_triangle_distance
 from fracture_cli.stages.pieces import pieces
 from fracture_cli.stages.smooth import SmoothOptions, smooth
 from fracture_cli.stages.smooth.cells import union_regions as _union_regions
@@ -18,7 +19,6 @@ from fracture_cli.stages.smooth.field import winning_field as _winning_field
 from fracture_cli.stages.smooth.geometric import smoothed_vertices as _smoothed_vertices
 from fracture_cli.stages.smooth.topology import Topology as _Topology
 from fracture_cli.testing import grid_tetmesh, jittered_grid_tetmesh
-from fracture_cli.trigeom import point_triangle_distance
 from fracture_cli.types import Modes, Regions, TetMesh
 
 # The field method at the strength it was tuned for (the stage's default is the geometric method), on the cage
@@ -353,8 +353,8 @@ def test_geometric_deterministic():
 @pytest.fixture(scope="module")
 def chair_case():
     """The chair sample asset (repaired), a 600-face cage's tet mesh and its atomic pieces."""
-    from fracture_cli.io.read import load_surface
     from fracture_cli.stages.cage import CageOptions, cage
+    from fracture_cli.stages.load import load_surface
     from fracture_cli.stages.modes import ModesOptions, modes
     from fracture_cli.stages.repair import repair
     from fracture_cli.stages.tetra import tetra
@@ -469,7 +469,7 @@ def test_sliding_deterministic():
 
 def test_sliding_on_a_sample_asset(chair_case):
     from fracture_cli.checks import fragment_invariants
-    from fracture_cli.recipe import load_recipe
+    from fracture_cli.pipeline.recipe import load_recipe
     from fracture_cli.stages.fragments import fragments
 
     surface, tm, P = chair_case
@@ -515,7 +515,7 @@ def test_red_refinement_is_a_conforming_positive_split():
 
 
 def test_refined_field_partitions_the_cage_and_flattens_creases():
-    from fracture_cli.faultshape import fault_shape, region_faults
+    from fracture_cli.checks.faultshape import fault_shape, region_faults
 
     tm = jittered_grid(5, seed=2)
     P = plane_pieces(tm)
@@ -542,7 +542,7 @@ def test_refinement_respects_the_tet_budget(caplog):
 
 
 def test_fault_shape_counts_creases_not_fans():
-    from fracture_cli.faultshape import fault_shape
+    from fracture_cli.checks.faultshape import fault_shape
 
     # A flat square fanned into 4 triangles: no dihedral, no crease.
     V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0]], float)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli import trigeom
-from fracture_cli.io.read import surface_from_trimesh
+from fracture_cli.geometry import trigeom
+from fracture_cli.stages.load import surface_from_trimesh
 from fracture_cli.stages.smooth import sliding
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fracture_cli import trigeom
+from fracture_cli.geometry import trigeom
 from fracture_cli.stages.smooth.pointgrid import PointGrid
 
 

@@ -1,4 +1,4 @@
-"""fracture_cli.surface_query: distances and ray casts against brute force, ties by rule, the same bits every run."""
+"""geometry.surface_query: distances and ray casts against brute force, ties by rule, the same bits every run."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli import surface_query as sq
+from fracture_cli.geometry import surface_query as sq
 
 
 def brute_distances(points: np.ndarray, tris: np.ndarray) -> np.ndarray:

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli import tetgeom
 from fracture_cli.errors import InputError, StageError
+from fracture_cli.geometry import tetgeom
 from fracture_cli.io.cage_io import load_tetmesh, save_cage, save_tetmesh
 from fracture_cli.stages.cage import CageOptions, cage
 from fracture_cli.stages.tetra import TetraOptions, tetra
@@ -36,7 +36,7 @@ def chair_cage() -> Cage:
     path = os.path.join(SAMPLE_ASSETS, "chair.glb")
     if not os.path.exists(path):
         pytest.skip("chair.glb not generated yet")
-    from fracture_cli.io.read import load_surface
+    from fracture_cli.stages.load import load_surface
 
     return cage(load_surface(path), CageOptions(target_faces=500))
 
@@ -152,8 +152,8 @@ def test_cage_with_a_needle_face_still_tetrahedralizes(caplog):
 
     import trimesh
 
-    from fracture_cli.io.read import surface_from_trimesh
     from fracture_cli.stages.cage import CageOptions, cage
+    from fracture_cli.stages.load import surface_from_trimesh
     from fracture_cli.stages.tetra import TetraOptions, tetra
 
     box = trimesh.creation.box(extents=(0.5773, 0.3, 0.3))
@@ -175,7 +175,7 @@ def test_cage_with_a_needle_face_still_tetrahedralizes(caplog):
 def test_flat_tets_on_the_cage_surface_are_removed(caplog):
     import logging
 
-    from fracture_cli.io.read import load_surface
+    from fracture_cli.stages.load import load_surface
     from fracture_cli.stages.repair import repair
 
     # A cube's 800-face cage: TetGen joins four coplanar points of a flat side into a flat tet.

@@ -1,11 +1,11 @@
-"""The shared triangle-mesh helpers (fracture_cli.trigeom), against trimesh and analytic values."""
+"""The shared triangle-mesh helpers (fracture_cli.geometry.trigeom), against trimesh and analytic values."""
 
 from __future__ import annotations
 
 import numpy as np
 import trimesh
 
-from fracture_cli import trigeom
+from fracture_cli.geometry import trigeom
 
 
 def _sphere():

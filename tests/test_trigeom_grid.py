@@ -1,9 +1,9 @@
-"""The compiled box search (fracture_cli.trigeom_grid) gives BoxGrid's pairs, in its order."""
+"""The compiled box search (fracture_cli.geometry.trigeom_grid) gives BoxGrid's pairs, in its order."""
 
 import numpy as np
 import pytest
 
-from fracture_cli import trigeom, trigeom_grid
+from fracture_cli.geometry import trigeom, trigeom_grid
 
 
 def _mesh(seed):

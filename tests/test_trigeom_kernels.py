@@ -1,4 +1,4 @@
-"""The compiled separating-axis test (fracture_cli.trigeom_kernels) against its vectorised numpy statement.
+"""The compiled separating-axis test (fracture_cli.geometry.trigeom_kernels) against its vectorised numpy statement.
 
 The numpy reference below is the test as it was written before it was compiled:
 every axis of every pair at once. The kernel must give the same verdicts on
@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli import trigeom
-from fracture_cli.trigeom_kernels import PAIR_CHUNK, intersect_pairs, warm_kernels
+from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.trigeom_kernels import PAIR_CHUNK, intersect_pairs, warm_kernels
 
 
 def _separated(axes, a, b, scale, eps):

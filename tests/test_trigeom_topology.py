@@ -5,8 +5,8 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from fracture_cli import trigeom
-from fracture_cli.trigeom_topology import single_fans, warm_kernels
+from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.trigeom_topology import single_fans, warm_kernels
 
 
 def _reference(F):

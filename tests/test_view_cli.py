@@ -86,7 +86,7 @@ class _FakeBake:
         self.previews = []
 
     def bake(self, path, out_dir, recipe, cache_dir=None, jobs=None, preview_size=None):
-        from fracture_cli.bake import BakeResult
+        from fracture_cli.pipeline.bake import BakeResult
 
         self.previews.append(preview_size)
         report = {"counts": {"fragments": 1, "modes": 1, "tets": 1}, "checks": {"volume_error": 0.0},
@@ -96,10 +96,10 @@ class _FakeBake:
 
 @pytest.fixture
 def fake_bake(monkeypatch):
-    import fracture_cli.bake
+    import fracture_cli.pipeline.bake
 
     fake = _FakeBake()
-    monkeypatch.setattr(fracture_cli.bake, "bake", fake.bake)
+    monkeypatch.setattr(fracture_cli.pipeline.bake, "bake", fake.bake)
     return fake
 
 

@@ -9,7 +9,7 @@ in this order of preference:
    bake writes;
 2. ``glb``: the fragments GLB beside the runtime file (``<stem>.glb``): volume and
    centre of mass of each fragment node's closed mesh (divergence theorem,
-   :func:`fracture_cli.gameready.mass.mass_properties`), the same quantities
+   :func:`fracture_cli.geometry.mass.mass_properties`), the same quantities
    from the geometry, for files baked before the game-ready arrays;
 3. ``none``: no positions (a synthetic file); every fragment weighs the same and
    the figures that need positions (hit fragment, locality) are undefined.
@@ -87,7 +87,7 @@ def fragment_layout(data: RuntimeData, glb_path: str | os.PathLike | None = None
 def _layout_from_glb(data: RuntimeData, glb_path: str) -> FragmentLayout | None:
     """Mass properties of the GLB's fragment nodes, matched by name; None if a fragment is missing."""
     # Function-level imports: the GLB reader and the mass integrals are only needed for old files.
-    from fracture_cli.gameready.mass import mass_properties
+    from fracture_cli.geometry.mass import mass_properties
     from fracture_cli.io.gltf import glb_meshes, read_glb_chunks
 
     doc, binary = read_glb_chunks(glb_path)

@@ -6,7 +6,7 @@ nothing ever detaches), or the contact sites themselves as dots without a GLB.
 Bottom row: the hits with the lowest, median and highest ``d1`` of the sweep, at
 ``2 x b0``, seen from the hit's side: the main group grey, every detached group
 in its own colour, pushed away from the centre, the hit as a red arrow. Rendering reuses
-:mod:`fracture_cli.preview` (matplotlib Agg, flat shading, painter's order); each
+:mod:`fracture_cli.view.preview` (matplotlib Agg, flat shading, painter's order); each
 view rotates the scene into the preview's camera. Deterministic: the same inputs
 give the same bytes; written atomically.
 """
@@ -20,9 +20,9 @@ import numpy as np
 
 from fracture_cli.atlas.hits import HitAnalysis, detached, groups_at, rest_groups
 from fracture_cli.atlas.layout import FragmentLayout
-from fracture_cli.preview import UP, VIEW_DIR, FragmentGeometry, draw_triangles, palette, project
 from fracture_cli.runtime.format import RuntimeData
 from fracture_cli.types import INTERIOR_MATERIAL_NAME
+from fracture_cli.view.preview import UP, VIEW_DIR, FragmentGeometry, draw_triangles, palette, project
 
 # (title, direction from the asset towards the camera); +Y up as in glTF.
 VIEWS = (("front right", (1.0, 0.8, 1.4)), ("back left", (-1.0, 0.8, -1.4)), ("from below", (0.7, -1.1, 0.9)))
@@ -53,7 +53,7 @@ def fragment_triangles(glb_path: str, names: tuple[str, ...]) -> list[FragmentGe
 
 
 def _basis(view_dir) -> np.ndarray:
-    """Rows right, up, forward (3, 3) of a camera looking along ``-view_dir`` (as :mod:`fracture_cli.preview`)."""
+    """Rows right, up, forward (3, 3) of a camera looking along ``-view_dir`` (as :mod:`fracture_cli.view.preview`)."""
     d = np.asarray(view_dir, dtype=np.float64)
     forward = -d / np.linalg.norm(d)
     right = np.cross(forward, UP)

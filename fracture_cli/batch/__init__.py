@@ -1,6 +1,6 @@
 """Batch baking on Dask: a manifest of assets, one task per asset, incremental.
 
-``fracture batch MANIFEST -o OUTDIR`` (see :mod:`fracture_cli.batch.command`)
+``fracture batch MANIFEST -o OUTDIR`` (see :mod:`fracture_cli.cli.batch`)
 calls :func:`~fracture_cli.batch.runner.run_batch`. One concern per module:
 
 * :mod:`~fracture_cli.batch.manifest`: the TOML manifest, globs, recipes per entry;
@@ -13,7 +13,7 @@ calls :func:`~fracture_cli.batch.runner.run_batch`. One concern per module:
 * :mod:`~fracture_cli.batch.adapter`: the only caller of the bake API;
 * :mod:`~fracture_cli.batch.impacts`, :mod:`~fracture_cli.batch.dataset`: ``--impacts`` (Parquet);
 * :mod:`~fracture_cli.batch.report`: what the user reads (progress goes through
-  :mod:`fracture_cli.progress`, like a bake's).
+  :mod:`fracture_cli.system.progress`, like a bake's).
 
 Dask and pyarrow come from the ``batch`` extra (``pip install 'fracture-cli[batch]'``)
 and are imported only when a batch runs.

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from fracture_cli.recipe import Recipe
+from fracture_cli.pipeline.recipe import Recipe
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,7 @@ def bake_asset(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | N
     FractureError
         Bad input or a stage that could not finish; nothing is published then.
     """
-    from fracture_cli.bake import bake
+    from fracture_cli.pipeline.bake import bake
 
     # One process per asset: the batch's parallelism is across assets (one Dask worker per core),
     # a bake's own --jobs workers on top would oversubscribe the cores.

@@ -22,13 +22,13 @@ import signal
 import sys
 import traceback
 
-from fracture_cli.bake import describe_error
 from fracture_cli.batch.adapter import bake_asset
 from fracture_cli.batch.inputs import InputFile, as_read
 from fracture_cli.batch.jobs import BAKED, FAILED, UP_TO_DATE, BakeJob, TaskResult
 from fracture_cli.batch.state import asset_key, content_seed, state_path, write_state
 from fracture_cli.errors import FractureError, InputError
 from fracture_cli.io.atomic import write_bytes_atomic
+from fracture_cli.pipeline.bake import describe_error
 
 log = logging.getLogger("fracture_cli")
 
@@ -61,8 +61,8 @@ def _impacts(job: BakeJob, inputs: tuple[InputFile, ...], seed: int):
     """The dataset rows of an asset, from the input read again: refused if it is not the input baked."""
     from fracture_cli.batch.impacts import asset_impacts
     from fracture_cli.io.inputs import input_files, recording_reads
-    from fracture_cli.io.read import load_surface
     from fracture_cli.runtime.format import load_runtime
+    from fracture_cli.stages.load import load_surface
 
     data = load_runtime(os.path.join(job.out_dir, f"{job.stem}.fracture.json"))
     with recording_reads() as reads:

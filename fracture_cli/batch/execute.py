@@ -16,10 +16,10 @@ import uuid
 from collections.abc import Callable
 from typing import Any
 
-from fracture_cli import progress
 from fracture_cli.batch.cluster import require_distributed
 from fracture_cli.batch.jobs import FAILED, BakeJob, TaskResult
 from fracture_cli.batch.task import run_job
+from fracture_cli.system import progress
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +48,7 @@ def execute(client: Any, jobs: tuple[BakeJob, ...], on_result: Callable[[TaskRes
     jobs : tuple of BakeJob
     on_result : callable
         Called with each result as it arrives. Progress goes to
-        :mod:`fracture_cli.progress`, a failure's line to the log at once.
+        :mod:`fracture_cli.system.progress`, a failure's line to the log at once.
     task : callable, optional (default :func:`~fracture_cli.batch.task.run_job`)
         The function run on a worker for each job.
 

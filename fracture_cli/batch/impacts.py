@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fracture_cli import detmath
+from fracture_cli.geometry.tetgeom import triangle_areas
 from fracture_cli.runtime.format import RuntimeData
 from fracture_cli.runtime.impact import project_impact
-from fracture_cli.tetgeom import triangle_areas
+from fracture_cli.system import detmath
 
 SPREAD = 4.0
 

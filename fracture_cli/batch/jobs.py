@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 from fracture_cli.batch.impacts import ImpactRows
 from fracture_cli.batch.inputs import InputFile
-from fracture_cli.recipe import Recipe
+from fracture_cli.pipeline.recipe import Recipe
 
 BAKED = "baked"
 UP_TO_DATE = "up to date"

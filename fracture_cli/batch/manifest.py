@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from fracture_cli.errors import FractureError, InputError
-from fracture_cli.recipe import Recipe, load_recipe, search_path
+from fracture_cli.pipeline.recipe import Recipe, load_recipe, search_path
 
 TOP_LEVEL_KEYS = ("assets", "batch")
 ENTRY_KEYS = ("file", "glob", "recipe", "set", "timeout")
@@ -282,7 +282,7 @@ def resolve_assets(manifest: Manifest, out_root: str, overrides: tuple[str, ...]
         mesh, an unknown recipe or bad override, an asset outside the
         manifest's folder, or two assets that would write the same outputs.
     """
-    from fracture_cli.io.read import READERS
+    from fracture_cli.stages.load import READERS
 
     out_root = os.path.abspath(out_root)
     selected = _selected(manifest, frozenset(READERS))

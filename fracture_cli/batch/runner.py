@@ -128,7 +128,7 @@ def run_batch(manifest_path: str, options: BatchOptions,
     -------
     BatchReport
         Also written as ``<manifest stem>.batch.json`` / ``.batch.md`` in OUTDIR.
-        Progress goes to :mod:`fracture_cli.progress` (one item per task), a
+        Progress goes to :mod:`fracture_cli.system.progress` (one item per task), a
         failed asset's line to the log as it happens.
 
     Raises

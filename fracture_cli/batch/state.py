@@ -19,9 +19,9 @@ import os
 import time
 
 from fracture_cli.batch.inputs import InputFile
-from fracture_cli.cache import cache_key
 from fracture_cli.io.atomic import write_bytes_atomic
-from fracture_cli.recipe import Recipe
+from fracture_cli.pipeline.cache import cache_key
+from fracture_cli.pipeline.recipe import Recipe
 
 log = logging.getLogger(__name__)
 

@@ -51,7 +51,6 @@ import os
 
 import numpy as np
 
-from fracture_cli import detmath
 from fracture_cli.errors import InputError
 from fracture_cli.io.gltf import MaterialSource
 from fracture_cli.io.gltf_conventions import baked_material_prefix, unprefixed
@@ -64,7 +63,8 @@ from fracture_cli.io.inputs import (
     gltf_document,
     read_input,
 )
-from fracture_cli.io.parts import MeshPart
+from fracture_cli.io.meshpart import MeshPart
+from fracture_cli.system import detmath
 from fracture_cli.types import Material
 
 log = logging.getLogger(__name__)

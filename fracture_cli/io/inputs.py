@@ -3,7 +3,7 @@
 A ``.gltf`` keeps its buffers and images in other files (``uri``), a ``.glb``
 may too, an OBJ names ``.mtl`` material libraries that name texture maps, and
 a PLY may name a texture in a ``comment TextureFile`` line. The cache key
-hashes all of them (:func:`fracture_cli.cache.input_digest`), and the output
+hashes all of them (:func:`fracture_cli.pipeline.cache.input_digest`), and the output
 preflight refuses to replace any of them.
 
 A companion is read only from the asset's folder or below it
@@ -213,7 +213,7 @@ def hash_file(path: str) -> FileRead:
 
 
 def digest_of(reads: tuple[FileRead, ...]) -> str:
-    """Hex SHA-256 of an input as read: as :func:`fracture_cli.cache.input_digest` of the same bytes."""
+    """Hex SHA-256 of an input as read: as :func:`fracture_cli.pipeline.cache.input_digest` of the same bytes."""
     if len(reads) == 1:
         return reads[0].sha256
     folder = os.path.dirname(reads[0].path)

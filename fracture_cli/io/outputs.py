@@ -74,11 +74,11 @@ import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from fracture_cli import interrupts
 from fracture_cli.errors import OutputError, StageError, printable
-from fracture_cli.interrupts import NOTHING_WRITTEN
 from fracture_cli.io.inputs import file_sha256
 from fracture_cli.io.stemlock import LOCK_TIMEOUT_SECONDS, StemLock
+from fracture_cli.system import interrupts
+from fracture_cli.system.interrupts import NOTHING_WRITTEN
 
 log = logging.getLogger(__name__)
 
@@ -290,7 +290,7 @@ def output_set(out_dir: str, stem: str, *, lock_timeout: float = LOCK_TIMEOUT_SE
 
 def write_error(exc: OSError, out_dir: str) -> OutputError:
     """One line for an OSError while writing into ``out_dir`` (nothing of the previous set was replaced)."""
-    from fracture_cli.io.preflight import free_bytes, human_size
+    from fracture_cli.io.diskspace import free_bytes, human_size
 
     where = printable(out_dir)
     if exc.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)):

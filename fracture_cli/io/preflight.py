@@ -13,11 +13,11 @@ from __future__ import annotations
 import json
 import os
 import secrets
-import shutil
 from collections.abc import Iterable
 from dataclasses import dataclass
 
 from fracture_cli.errors import OutputError, printable
+from fracture_cli.io.diskspace import free_bytes, human_size
 from fracture_cli.io.outputs import REPORT_SUFFIX, all_names, recover, write_error
 from fracture_cli.io.stemlock import StemLock
 
@@ -106,24 +106,11 @@ def _check_writable(folder: str, *, for_new_folder: bool = False) -> None:
         raise OutputError(f"{what} ({exc.strerror})", path=printable(folder)) from None
 
 
-def free_bytes(out_dir: str) -> int:
-    """Bytes available to this user in ``out_dir``'s file system."""
-    return shutil.disk_usage(out_dir).free
-
-
 def _check_free_space(folder: str, stem: str, estimate_bytes: int, out_dir: str) -> None:
     free = free_bytes(folder)
     if estimate_bytes > free:
         raise OutputError(f"only {human_size(free)} free in the output folder; the outputs of {printable(stem)} need "
                           f"about {human_size(estimate_bytes)}", path=printable(out_dir))
-
-
-def human_size(n: float) -> str:
-    for unit in ("bytes", "KiB", "MiB", "GiB"):
-        if n < 1024 or unit == "GiB":
-            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
-        n /= 1024
-    return f"{n:.1f} TiB"  # pragma: no cover
 
 
 def check_inputs_untouched(out_dir: str, stems: Iterable[str], inputs: Iterable[str]) -> None:

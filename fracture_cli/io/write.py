@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Sequence
 
 import numpy as np
 
 from fracture_cli.errors import InputError
 from fracture_cli.io.atomic import atomic_path, write_bytes_atomic
 from fracture_cli.io.gltf import Primitive, glb_bytes
+from fracture_cli.io.physics import FragmentPhysics, node_origin
 from fracture_cli.types import Fragments, Normalization, SurfaceMesh
 
 log = logging.getLogger(__name__)
@@ -167,18 +169,11 @@ def _compact(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     return used, local[faces]
 
 
-def node_origin(world_points: np.ndarray) -> np.ndarray:
-    """A node's pivot: the bounding-box centre of its points (3,), in input units.
-
-    Game engines rotate a rigid body about its node's origin, so each fragment
-    gets its own centre as pivot; positions are stored relative to it, which
-    also keeps float32 precision for assets far from the origin.
-    """
-    return (world_points.min(axis=0) + world_points.max(axis=0)) / 2.0
 
 
 def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: str = "center_of_mass",
-                        parts=None, collision: str = "none", stem: str | None = None) -> None:
+                        parts=None, collision: str = "none", stem: str | None = None,
+                        physics: Sequence[FragmentPhysics] | None = None) -> None:
     """Write all fragments to one GLB: one node and mesh per fragment, named ``<stem>_fragment_###``.
 
     Each mesh has one primitive per material it uses (the input's materials and
@@ -186,7 +181,7 @@ def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: st
     the positions are relative to it, so the fragments sit in the input's units
     and placement. Each node's ``extras.fracture`` holds the fragment's
     unit-density volume, centre of mass and inertia tensor (asset units; see
-    :func:`fracture_cli.gameready.export_shapes.node_extras`).
+    :func:`fracture_cli.io.physics.node_extras`).
 
     Parameters
     ----------
@@ -197,15 +192,19 @@ def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: st
         Convex collision parts of every fragment (corners, model space), from
         the ``collision`` stage.
     collision : {"omi", "godot", "unreal", "none"}, optional (default "none")
-        How the parts are written (:mod:`fracture_cli.gameready.export_shapes`).
+        How the parts are written (:mod:`fracture_cli.io.physics`).
     stem : str, optional
         The asset's stem: prefix of node, mesh and material names (``chair_fragment_000``,
         ``chair_interior``); without it the names are unprefixed.
+    physics : sequence of FragmentPhysics, optional
+        Mass properties, pivots and parts of every fragment as the pipeline computed them
+        (:func:`fracture_cli.io.physics.fragment_physics`); computed here from ``pivot`` and
+        ``parts`` when not given.
     """
-    from fracture_cli.gameready.export_shapes import physics_extender
-    from fracture_cli.gameready.stage import fragment_physics
+    from fracture_cli.io.physics import fragment_physics, physics_extender
 
-    physics = fragment_physics(fragments, parts, pivot)
+    if physics is None:
+        physics = fragment_physics(fragments, parts, pivot)
     meshes = []
     for i, (frag, body) in enumerate(zip(fragments.fragments, physics)):
         prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids,

@@ -15,17 +15,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fracture_cli import trigeom
-from fracture_cli.edgelengths import longest_edges
 from fracture_cli.errors import StageError
-from fracture_cli.meshfix.rows import group_rows, used_vertices
+from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.edgelengths import longest_edges
+from fracture_cli.geometry.rows import group_rows, used_vertices
+from fracture_cli.geometry.scenes import surface_scene
 from fracture_cli.options import option
-from fracture_cli.scenes import surface_scene
-from fracture_cli.stages import _tetgen
+from fracture_cli.stages.tetra import tetgen as _tetgen
 from fracture_cli.types import Cage, SurfaceMesh
 
 if TYPE_CHECKING:
-    from fracture_cli.surface_query import SurfaceQuery
+    from fracture_cli.geometry.surface_query import SurfaceQuery
 
 log = logging.getLogger(__name__)
 
@@ -82,7 +82,7 @@ def auto_grid_resolution(target_faces: int) -> int:
 class _DistanceField:
     """Unsigned distance to the input on a regular grid, computed lazily in narrow bands.
 
-    Exact distances (:func:`fracture_cli.surface_query.distances`) are expensive
+    Exact distances (:func:`fracture_cli.geometry.surface_query.distances`) are expensive
     far from the surface and only needed near the level set being extracted. A
     cheap bracket ``lower <= D <= upper`` for every grid point comes from a
     Euclidean distance transform of surface samples rasterized onto the grid;
@@ -122,7 +122,7 @@ class _DistanceField:
 
     def values(self, d: float) -> np.ndarray:
         """Grid values whose level set ``d`` equals that of the true distance (cells straddling it are exact)."""
-        from fracture_cli.surface_query import distances  # compiled (numba): imported when first needed
+        from fracture_cli.geometry.surface_query import distances  # compiled (numba): imported when first needed
 
         h = self.spacing
         need = (self.lower <= d + h) & (self.upper >= d - h) & np.isnan(self.exact)
@@ -198,7 +198,7 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, target: int, decimator: s
                 if len(faces) <= (1.0 + FACE_COUNT_TOLERANCE) * target:
                     break
         else:
-            from fracture_cli._open3d import open3d as _import_open3d
+            from fracture_cli.geometry.open3d_bridge import open3d as _import_open3d
             o3d = _import_open3d()
 
             mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices),
@@ -216,7 +216,7 @@ class _ContainmentCheck:
 
     Passes when (1) every input vertex is at least :data:`MIN_CLEARANCE` from
     the cage surface, (2) every input vertex is inside the cage by a ray-parity
-    vote (:func:`fracture_cli.surface_query.inside`), and (3) no input triangle
+    vote (:func:`fracture_cli.geometry.surface_query.inside`), and (3) no input triangle
     intersects or touches a cage triangle (exact separating-axis tests in
     float64, after a broad phase). (1)+(3) mean no part of the input surface
     meets the cage; with (2) every connected part of the input is inside.
@@ -249,7 +249,7 @@ class _ContainmentCheck:
 
     def __call__(self, cage_vertices: np.ndarray, cage_faces: np.ndarray) -> str | None:
         """Return why the cage does not strictly contain the input, or None if it does."""
-        from fracture_cli.surface_query import build, distances, inside  # compiled: imported when first needed
+        from fracture_cli.geometry.surface_query import build, distances, inside  # compiled: imported when first needed
 
         cage_query = build(cage_vertices, cage_faces)
         points = self.query_vertices
@@ -321,10 +321,10 @@ def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
     manifold3d does not repair a single self-intersecting mesh), a strict
     containment check independent of the construction, and a boundary-preserving
     TetGen run (``pYO0Q``) in a crash-safe child process. Distances and the
-    inside vote are :mod:`fracture_cli.surface_query`'s (exact float64, the same
+    inside vote are :mod:`fracture_cli.geometry.surface_query`'s (exact float64, the same
     bits on every machine; open3d is loaded only for ``decimator = "open3d"``),
     on one hierarchy of the input that the pieces stage and the report's checks
-    reuse (:func:`fracture_cli.scenes.surface_scene`). Containment is not
+    reuse (:func:`fracture_cli.geometry.scenes.surface_scene`). Containment is not
     monotone in ``d``, so the search brackets upward from ``initial_offset``
     (doubling), then bisects, keeping the tightest success seen.
     """

@@ -22,9 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fracture_cli import detmath
 from fracture_cli.errors import RecipeError
 from fracture_cli.options import option
+from fracture_cli.system import detmath
 from fracture_cli.types import SurfaceMesh, TetMesh
 
 log = logging.getLogger(__name__)

@@ -9,8 +9,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from fracture_cli.errors import StageError
-from fracture_cli.meshfix.edges import components, renumber_by_first
-from fracture_cli.meshfix.rows import unique_rows
+from fracture_cli.geometry.edges import components, renumber_by_first
+from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.options import option
 from fracture_cli.types import Modes, Pieces, SurfaceMesh, TetMesh
 
@@ -37,7 +37,7 @@ class PiecesOptions:
         min=0.0,
     )
 
-    # Keys of older recipes (see fracture_cli.recipe): old name -> (new name, what changed).
+    # Keys of older recipes (see fracture_cli.pipeline.recipe): old name -> (new name, what changed).
     RENAMED = {"min_volume_fraction": ("min_fragment_fraction", "a fraction of the asset's volume now, not of the "
                                        "cage's")}
 
@@ -54,12 +54,12 @@ def tet_material_fraction(tet_mesh: TetMesh, surface: SurfaceMesh) -> np.ndarray
     The points are the barycentric lattice of order 3 (20 per tet), moved
     inside (``(i, j, k, l) + 1/4) / 4``); each is inside when a ray from it
     crosses the surface an odd number of times
-    (:func:`fracture_cli.surface_query.hit_counts` along the first of its
-    :data:`~fracture_cli.surface_query.VOTE_DIRECTIONS`). Tets of the cage
+    (:func:`fracture_cli.geometry.surface_query.hit_counts` along the first of its
+    :data:`~fracture_cli.geometry.surface_query.VOTE_DIRECTIONS`). Tets of the cage
     around a thin shell or an empty inside get 0.
     """
-    from fracture_cli.scenes import surface_scene
-    from fracture_cli.surface_query import VOTE_DIRECTIONS, hit_counts  # compiled: imported when first needed
+    from fracture_cli.geometry.scenes import surface_scene
+    from fracture_cli.geometry.surface_query import VOTE_DIRECTIONS, hit_counts  # compiled: imported when first needed
 
     n = _SAMPLE_ORDER
     lattice = np.array([(i, j, k, n - i - j - k) for i in range(n + 1) for j in range(n + 1 - i)

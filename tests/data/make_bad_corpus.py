@@ -21,7 +21,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.join(HERE, "bad")
 sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
 
-# fracture_cli first: it pins the numeric kernels before numpy loads (fracture_cli/numeric_env.py).
+# fracture_cli first: it pins the numeric kernels before numpy loads (fracture_cli/system/numeric_env.py).
 import fracture_cli  # noqa: E402, F401, I001
 
 import numpy as np  # noqa: E402

@@ -28,12 +28,12 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.join(HERE, "realworld")
 sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
 
-# fracture_cli first: it pins the numeric kernels before numpy loads (fracture_cli/numeric_env.py).
+# fracture_cli first: it pins the numeric kernels before numpy loads (fracture_cli/system/numeric_env.py).
 import fracture_cli  # noqa: E402, F401, I001
 
 import numpy as np  # noqa: E402
 
-from fracture_cli import detmath  # noqa: E402
+from fracture_cli.system import detmath  # noqa: E402
 from fracture_cli.io.gltf import Primitive, glb_bytes  # noqa: E402  (after the sys.path line)
 from fracture_cli.types import Material  # noqa: E402
 

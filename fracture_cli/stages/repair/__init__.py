@@ -11,7 +11,7 @@ The policy (README, "Accepted inputs"): solid or shell is decided from the mesh.
 Holes are filled when they close into a solid; anything else open is a sheet,
 thickened behind its visible side inside the input's bounding box; edges and
 vertices shared by several bodies are split; only what has no inside is
-refused. Every repair is a :class:`~fracture_cli.meshfix.records.RepairRecord`
+refused. Every repair is a :class:`~fracture_cli.stages.repair.records.RepairRecord`
 (report.json ``repairs``), and the ones that change the shape are logged as
 warnings with the per-asset override.
 """
@@ -25,18 +25,12 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
-from fracture_cli import trigeom
 from fracture_cli.errors import StageError
-from fracture_cli.meshfix.edges import edge_table
-from fracture_cli.meshfix.faces import orient_consistently, unique_faces
-from fracture_cli.meshfix.holes import FillOptions, boundary_loops
-from fracture_cli.meshfix.nonmanifold import NonManifoldSplit, split_nonmanifold
-from fracture_cli.meshfix.records import RepairRecord
-from fracture_cli.meshfix.rows import used_vertices
-from fracture_cli.meshfix.weld_check import collapsed
-from fracture_cli.meshtopo import components
-from fracture_cli.options import option
-from fracture_cli.stages._solids import (
+from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.edges import edge_table
+from fracture_cli.geometry.meshtopo import components
+from fracture_cli.geometry.rows import used_vertices
+from fracture_cli.geometry.solids import (
     COLOR,
     NORMAL,
     NUM_COLUMNS,
@@ -49,16 +43,22 @@ from fracture_cli.stages._solids import (
     vertex_properties,
     weld_map,
 )
+from fracture_cli.geometry.weld_check import collapsed
+from fracture_cli.options import option
 from fracture_cli.stages.repair.carry import after_split
 from fracture_cli.stages.repair.clean import closed_as_given
 from fracture_cli.stages.repair.cleanup import is_flat, snap_between_bodies
 from fracture_cli.stages.repair.closing import fill_where_planned, interior_slot, open_bodies, thicken_sheets
+from fracture_cli.stages.repair.faces import orient_consistently, unique_faces
+from fracture_cli.stages.repair.holes import FillOptions, boundary_loops
+from fracture_cli.stages.repair.nonmanifold import NonManifoldSplit, split_nonmanifold
 from fracture_cli.stages.repair.orient import (
     closed_patches_outward,
     component_orientation,
     fix_shading_normals,
     internal_open_faces,
 )
+from fracture_cli.stages.repair.records import RepairRecord
 from fracture_cli.stages.repair.report import describe, warn_significant
 from fracture_cli.types import Material, Normalization, SurfaceMesh
 
@@ -117,7 +117,7 @@ class RepairOptions:
         max=1.0,
     )
 
-    # Keys of older recipes: read with a warning and ignored (see fracture_cli.recipe).
+    # Keys of older recipes: read with a warning and ignored (see fracture_cli.pipeline.recipe).
     RETIRED = {"max_fill_ratio": "holes are now filled when they close into a solid, whatever their share of "
                                  "the area (see repair.max_fill_share, repair.hole_planarity, repair.small_hole)"}
 

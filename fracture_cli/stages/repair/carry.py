@@ -2,7 +2,7 @@
 
 The meshfix modules work on welded meshes: one vertex per position. The
 repair stage keeps vertices split where their attributes differ (UV seams),
-as a :class:`~fracture_cli.stages._solids.SplitMesh` whose welded ids are the
+as a :class:`~fracture_cli.geometry.solids.SplitMesh` whose welded ids are the
 representative split vertices. Each function here takes a meshfix result
 computed on ``(mesh.props[:, POS], mesh.welded)`` and returns the split mesh it
 describes: faces the input had keep their split vertices; copies of welded
@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli import trigeom
-from fracture_cli.meshfix.holes import FilledMesh, HoleLoop
-from fracture_cli.meshfix.nonmanifold import NonManifoldSplit
-from fracture_cli.meshfix.rows import unique_rows
-from fracture_cli.meshfix.thicken import ThickenedSheet
-from fracture_cli.stages._solids import COLOR, NORMAL, POS, UV, SplitMesh
+from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.rows import unique_rows
+from fracture_cli.geometry.solids import COLOR, NORMAL, POS, UV, SplitMesh
+from fracture_cli.stages.repair.holes import FilledMesh, HoleLoop
+from fracture_cli.stages.repair.nonmanifold import NonManifoldSplit
+from fracture_cli.stages.repair.thicken import ThickenedSheet
 
 
 def _first_of_each(labels: np.ndarray, ids: np.ndarray) -> np.ndarray:
@@ -30,7 +30,7 @@ def _first_of_each(labels: np.ndarray, ids: np.ndarray) -> np.ndarray:
 
 
 def after_split(mesh: SplitMesh, split: NonManifoldSplit) -> SplitMesh:
-    """The split mesh of :func:`~fracture_cli.meshfix.nonmanifold.split_nonmanifold` run on ``mesh.welded``.
+    """The split mesh of :func:`~fracture_cli.stages.repair.nonmanifold.split_nonmanifold` run on ``mesh.welded``.
 
     A corner whose welded vertex was copied (one copy per fan) gets a copy of
     its split vertex; copies of one welded vertex weld to the first of them.
@@ -81,7 +81,7 @@ def _appended(mesh: SplitMesh, faces: np.ndarray, flipped: np.ndarray, new_props
 
 
 def after_fill(mesh: SplitMesh, filled: FilledMesh, loops: list[HoleLoop], interior_material: int) -> SplitMesh:
-    """The split mesh of :func:`~fracture_cli.meshfix.holes.fill_holes` run on ``mesh.welded``.
+    """The split mesh of :func:`~fracture_cli.stages.repair.holes.fill_holes` run on ``mesh.welded``.
 
     ``loops`` are the plan's loops to fill, in order (their patches follow the
     mesh's faces in ``filled.faces``). Every patch gets its own vertices: the
@@ -117,7 +117,7 @@ def after_fill(mesh: SplitMesh, filled: FilledMesh, loops: list[HoleLoop], inter
 
 
 def after_thicken(mesh: SplitMesh, body: np.ndarray, sheet: ThickenedSheet, interior_material: int) -> SplitMesh:
-    """The split mesh of :func:`~fracture_cli.meshfix.thicken.thicken_inward` run on ``mesh.welded[body]``.
+    """The split mesh of :func:`~fracture_cli.stages.repair.thicken.thicken_inward` run on ``mesh.welded[body]``.
 
     The sheet's faces are unchanged. The back side copies every split vertex
     of the sheet (same UVs and colour, reversed normal); the rim has one

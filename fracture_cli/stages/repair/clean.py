@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli import trigeom
-from fracture_cli.meshfix.rows import group_rows
+from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.rows import group_rows
 from fracture_cli.types import SurfaceMesh
 
 # Smallest volume (of a unit-diagonal box) accepted as "clearly positive"; repair refuses at or below 1e-9.

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fracture_cli.meshfix.edges import components
-from fracture_cli.meshfix.rows import used_vertices
-from fracture_cli.stages._solids import POS
+from fracture_cli.geometry.edges import components
+from fracture_cli.geometry.rows import used_vertices
+from fracture_cli.geometry.solids import POS
 
 # Smallest / largest singular value of the centred positions below which they are coplanar.
 _FLAT = 1e-9

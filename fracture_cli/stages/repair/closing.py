@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli.meshfix.edges import edge_table, face_bodies
-from fracture_cli.meshfix.holes import FillOptions, FillPlan, fill_holes, plan_fill
-from fracture_cli.meshfix.records import RepairRecord
-from fracture_cli.meshfix.thicken import thicken_inward
-from fracture_cli.stages._solids import POS, SplitMesh
+from fracture_cli.geometry.edges import edge_table, face_bodies
+from fracture_cli.geometry.solids import POS, SplitMesh
 from fracture_cli.stages.repair.carry import after_fill, after_thicken
+from fracture_cli.stages.repair.holes import FillOptions, FillPlan, fill_holes, plan_fill
 from fracture_cli.stages.repair.orient import sheet_faces_away
+from fracture_cli.stages.repair.records import RepairRecord
+from fracture_cli.stages.repair.thicken import thicken_inward
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Material
 
 _INTERIOR_COLOR = (0.55, 0.5, 0.45, 1.0)
@@ -37,7 +37,7 @@ def open_bodies(mesh: SplitMesh) -> list[np.ndarray]:
 
 def fill_where_planned(mesh: SplitMesh, options: FillOptions,
                        interior_material: int) -> tuple[SplitMesh, FillPlan, list[RepairRecord]]:
-    """Decide per open body whether its holes close into a solid (:func:`~fracture_cli.meshfix.holes.plan_fill`)
+    """Decide per open body whether its holes close into a solid (:func:`~fracture_cli.stages.repair.holes.plan_fill`)
     and fill those; the bodies decided ``thicken`` are left open."""
     V = mesh.props[:, POS]
     plan = plan_fill(V, mesh.welded, options)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli import trigeom
-from fracture_cli.meshfix.edges import edge_table, face_bodies
-from fracture_cli.meshtopo import components, undirected_edges
-from fracture_cli.stages._solids import NORMAL, POS
+from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.edges import edge_table, face_bodies
+from fracture_cli.geometry.meshtopo import components, undirected_edges
+from fracture_cli.geometry.solids import NORMAL, POS
 
 # Closed components compared for nesting (cavities) only when their bounding boxes nest;
 # at most this many sample vertices per component.

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fracture_cli.meshfix.records import RepairRecord
+from fracture_cli.stages.repair.records import RepairRecord
 from fracture_cli.types import Normalization
 
 log = logging.getLogger("fracture_cli.stages.repair")

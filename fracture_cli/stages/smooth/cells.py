@@ -10,10 +10,10 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from fracture_cli import tetgeom, trigeom
 from fracture_cli.errors import StageError
-from fracture_cli.meshfix.rows import group_rows
-from fracture_cli.stages._solids import SHELL_VOLUME, shell_mask
+from fracture_cli.geometry import tetgeom, trigeom
+from fracture_cli.geometry.rows import group_rows
+from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask
 from fracture_cli.stages.smooth.field import forced_field
 from fracture_cli.stages.smooth.topology import SINGULAR_TOL, STAGE, combinations
 

@@ -8,8 +8,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from fracture_cli import tetgeom, trigeom
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tetgeom, trigeom
 from fracture_cli.stages.smooth.marching import direct_regions
 from fracture_cli.stages.smooth.topology import STAGE, Topology
 from fracture_cli.types import Pieces, TetMesh

@@ -10,8 +10,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
-from fracture_cli import tetgeom
-from fracture_cli.meshfix.rows import unique_rows
+from fracture_cli.geometry import tetgeom
+from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.stages.smooth.sliding import CageSurface, Containment
 from fracture_cli.stages.smooth.topology import FACE_EDGE_PAIRS, STAGE, Topology
 from fracture_cli.types import SurfaceMesh, TetMesh

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fracture_cli import tetgeom
-from fracture_cli.meshfix.rows import group_rows
+from fracture_cli.geometry import tetgeom
+from fracture_cli.geometry.rows import group_rows
 from fracture_cli.stages.smooth.pinches import aligned_pinches, notches, spindle_faces
 from fracture_cli.stages.smooth.ties import fan, tie_points
 from fracture_cli.stages.smooth.topology import Topology, join

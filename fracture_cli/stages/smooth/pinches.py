@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli import tetgeom
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tetgeom
 from fracture_cli.stages.smooth.topology import FACE_EDGE_PAIRS, STAGE, Topology
 
 # Relative width of the spindle carved around an edge where a tet-aligned region

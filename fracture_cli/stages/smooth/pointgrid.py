@@ -1,6 +1,6 @@
 """A uniform grid over points, queried with boxes: the broad phase of the sliding containment check.
 
-:class:`fracture_cli.trigeom.BoxGrid` indexes boxes and reports each pair once
+:class:`fracture_cli.geometry.trigeom.BoxGrid` indexes boxes and reports each pair once
 through per-cell bookkeeping; points need none of it. Here the points are
 sorted by cell, the cells of one (x, y) column are one run of that order, so
 a query box costs one pair of binary searches per column it covers (not per

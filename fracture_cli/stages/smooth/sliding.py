@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fracture_cli import detmath, trigeom
-from fracture_cli.edgelengths import longest_edges
+from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.edgelengths import longest_edges
 from fracture_cli.stages.smooth.pointgrid import PointGrid
+from fracture_cli.system import detmath
 from fracture_cli.types import SurfaceMesh
 
 # Sliding: a cage triangle next to a slid vertex must stay this far (unit bbox diagonal) from the input; the
@@ -57,7 +58,7 @@ def _prism_winding(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarr
     and their walls cancel exactly in a sum.
 
     The eight triangles share six corners: their vectors from ``P`` and lengths are computed once (the
-    values :func:`fracture_cli.trigeom.triangle_winding` computes for each, bit for bit).
+    values :func:`fracture_cli.geometry.trigeom.triangle_winding` computes for each, bit for bit).
     """
     old = [_Corner(V0[faces[:, k]] - P) for k in range(3)]
     new = [_Corner(X[faces[:, k]] - P) for k in range(3)]
@@ -86,7 +87,7 @@ class _Corner:
 
 
 def _solid_angle_fraction(a: _Corner, b: _Corner, c: _Corner) -> np.ndarray:
-    """:func:`fracture_cli.trigeom.solid_angle_fraction` of corners whose lengths are known."""
+    """:func:`fracture_cli.geometry.trigeom.solid_angle_fraction` of corners whose lengths are known."""
     return trigeom.solid_angle_fraction(a.vector, b.vector, c.vector, (a.length, b.length, c.length))
 
 
@@ -276,7 +277,7 @@ def _boxes_and_longest_edges(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, 
     """Bounding boxes (m, 2, 3) and longest edge lengths (m,) of triangles ``F`` (m, 3) over ``V`` (n, 3).
 
     The values of ``trigeom.triangle_boxes`` (minima and maxima of the corners) and
-    :func:`fracture_cli.edgelengths.longest_edges`, from the three corner arrays rather than reductions over a
+    :func:`fracture_cli.geometry.edgelengths.longest_edges`, from the three corner arrays rather than reductions over a
     (m, 3, 3) array, which took several times longer on a million triangles.
     """
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]

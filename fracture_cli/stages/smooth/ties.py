@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture_cli import detmath
 from fracture_cli.stages.smooth.topology import SINGULAR_TOL, combinations
+from fracture_cli.system import detmath
 
 # Pieces with at least this margin below the best guaranteed value are never
 # candidates in a simplex (field values are O(1)).

@@ -6,7 +6,7 @@ import itertools
 
 import numpy as np
 
-from fracture_cli import tetgeom
+from fracture_cli.geometry import tetgeom
 
 STAGE = "smooth"
 # Below this |det| (rows are O(1)) three planes are treated as not meeting in a point.

@@ -19,9 +19,9 @@ import time
 
 import numpy as np
 
-from fracture_cli.io.read import load_surface
-from fracture_cli.recipe import load_recipe
+from fracture_cli.pipeline.recipe import load_recipe
 from fracture_cli.stages.cage import cage
+from fracture_cli.stages.load import load_surface
 from fracture_cli.stages.material import material
 from fracture_cli.stages.modes import modes as solve_modes
 from fracture_cli.stages.pieces import PiecesOptions, tet_material_fraction

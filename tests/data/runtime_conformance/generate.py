@@ -32,7 +32,7 @@ REPO = os.path.dirname(os.path.dirname(os.path.dirname(HERE)))
 sys.path.insert(0, HERE)
 sys.path.insert(0, REPO)
 
-# fracture_cli first: it pins the numeric kernels before numpy loads (fracture_cli/numeric_env.py).
+# fracture_cli first: it pins the numeric kernels before numpy loads (fracture_cli/system/numeric_env.py).
 import fracture_cli  # noqa: E402, F401, I001
 
 import numpy as np  # noqa: E402

@@ -1,0 +1,13 @@
+"""Every command of ``fracture``: importing this module registers them all on the group.
+
+The group and the chain's stage commands are in :mod:`fracture_cli.cli.group`; each
+module below adds its commands to that group when it is imported (``@cli.command``),
+so a new command is one new module and one line here.
+"""
+
+from fracture_cli.cli import batch, tools
+from fracture_cli.cli.group import cli
+
+COMMAND_MODULES = (tools, batch)  # what registered the terminal commands (bake, recipes, impact, view, batch, ...)
+
+__all__ = ["COMMAND_MODULES", "cli"]

@@ -1,0 +1,412 @@
+"""The one table of pipeline stages and the runner that executes them.
+
+:data:`STAGES` says, for every stage, its name (the recipe section, the CLI
+command and the report's key), its options class, what it consumes from the
+:class:`PipelineState` and what it produces. ``bake``, the recipe sections,
+the CLI chain, its ``--help`` and the report's stage list are all generated
+from it, so they cannot disagree. :class:`Runner` runs one stage at a time:
+it logs, times, caches (``--cache``) and reports progress for each.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import importlib
+import logging
+import os
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal, overload
+
+from fracture_cli.errors import UsageError
+from fracture_cli.system import interrupts, parallel, progress
+
+if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help` imports neither
+    import numpy as np
+
+    from fracture_cli.pipeline.cache import StageCache
+    from fracture_cli.runtime.format import RuntimeData
+    from fracture_cli.stages.repair.records import RepairRecord
+    from fracture_cli.types import Cage, Fragments, Modes, Pieces, Regions, SurfaceMesh, TetMesh
+
+log = logging.getLogger(__name__)
+
+# Report values of the fragment checks: numbers and flags.
+CheckValue = float | int | bool
+
+
+@dataclass(frozen=True)
+class PipelineState:
+    """What the pipeline has produced so far; each stage fills its fields (see :data:`STAGES`)."""
+
+    source: str | None = None  # the input file
+    source_sha256: str | None = None  # digest of the bytes the load read (the asset and its companions)
+    source_files: tuple = ()  # (io.inputs.FileRead, ...): each file as the load read it, the asset first
+    loaded: SurfaceMesh | None = None  # as read, before repair
+    surface: SurfaceMesh | None = None  # the solid every later stage uses
+    repairs: tuple[RepairRecord, ...] = ()  # what the repair stage did (report.json ``repairs``)
+    cage: Cage | None = None
+    tet_mesh: TetMesh | None = None
+    eta: np.ndarray | None = None  # (f,) or (f, d) material weights of the interior faces
+    modes: Modes | None = None
+    pieces: Pieces | None = None
+    regions: Regions | None = None
+    fragments: Fragments | None = None
+    collision: tuple | None = None  # convex parts of every fragment, model space (stages.collision.Parts)
+    physics: tuple | None = None  # (io.physics.FragmentPhysics, ...): mass, pivot and parts of every fragment
+    checks: dict[str, CheckValue] | None = None  # what the report says of the fragments
+    runtime: RuntimeData | None = None
+
+    # One overload per field kind: a stage gets its input with its type (no Any on the spine).
+    @overload
+    def need(self, name: Literal["source", "source_sha256"], stage: str) -> str: ...
+    @overload
+    def need(self, name: Literal["loaded", "surface"], stage: str) -> SurfaceMesh: ...
+    @overload
+    def need(self, name: Literal["cage"], stage: str) -> Cage: ...
+    @overload
+    def need(self, name: Literal["tet_mesh"], stage: str) -> TetMesh: ...
+    @overload
+    def need(self, name: Literal["eta"], stage: str) -> np.ndarray: ...
+    @overload
+    def need(self, name: Literal["modes"], stage: str) -> Modes: ...
+    @overload
+    def need(self, name: Literal["pieces"], stage: str) -> Pieces: ...
+    @overload
+    def need(self, name: Literal["regions"], stage: str) -> Regions: ...
+    @overload
+    def need(self, name: Literal["fragments"], stage: str) -> Fragments: ...
+    @overload
+    def need(self, name: Literal["runtime"], stage: str) -> RuntimeData: ...
+
+    def need(self, name: str, stage: str) -> object:
+        """The field ``name``, or a usage error naming the stage that produces it."""
+        value = getattr(self, name)
+        if value is None:
+            producer = next(s.name for s in STAGES if name in s.produces)
+            what = "load PATH" if producer == "load" else producer
+            raise UsageError(f"'{stage}' needs {_NOUNS.get(name, name)}: put '{what}' before it in the chain")
+        return value
+
+
+_NOUNS = {"surface": "a surface", "cage": "a cage", "tet_mesh": "a tet mesh", "modes": "modes",
+          "pieces": "pieces", "regions": "piece regions", "fragments": "fragments", "runtime": "runtime data"}
+
+StageFunction = Callable[[PipelineState, Any], PipelineState]
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One row of the pipeline table.
+
+    Attributes
+    ----------
+    name : str
+        Recipe section, CLI command and report key.
+    help : str
+        One line for ``--help``.
+    options : str
+        ``module:Class`` of the options dataclass (imported on demand, so the CLI starts fast).
+    run : callable
+        ``run(state, options) -> state``: calls the stage function with what it consumes.
+    consumes, uses, produces : tuple of str
+        :class:`PipelineState` fields it needs, reads when present, and fills.
+    cached : bool
+        Whether ``--cache`` stores its result (the expensive geometry: cage, tets, modes).
+    short : dict of str -> str
+        Short CLI flags for option fields.
+    """
+
+    name: str
+    help: str
+    options: str
+    run: StageFunction
+    consumes: tuple[str, ...]
+    produces: tuple[str, ...]
+    uses: tuple[str, ...] = ()
+    cached: bool = False
+    short: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def options_class(self) -> type:
+        module, name = self.options.split(":")
+        return getattr(importlib.import_module(module), name)
+
+
+# ---------------------------------------------------------------------------
+# What each stage calls. Imports are local so `fracture --help` does not load the geometry stack.
+
+def _load(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.io.inputs import digest_of, input_files, recording_reads
+    from fracture_cli.stages.load import load_surface
+
+    path = state.need("source", "load")
+    # The key of the input is the hash of the bytes the readers used (an edit during the bake, undone
+    # later, must not leave these outputs vouched for by the other bytes' hash).
+    with recording_reads() as reads:
+        surface = load_surface(path, options)
+    files = reads.as_read(input_files(path))
+    return dataclasses.replace(state, loaded=surface, surface=surface, source_sha256=digest_of(files),
+                               source_files=files)
+
+
+def _repair(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.repair import repair_surface
+
+    # Cage and fragments both use the repaired solid, so they agree on what is inside.
+    result = repair_surface(state.need("surface", "repair"), options)
+    return dataclasses.replace(state, surface=result.surface, repairs=result.records)
+
+
+def _cage(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.cage import cage
+
+    return dataclasses.replace(state, cage=cage(state.need("surface", "cage"), options))
+
+
+def _tetra(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.tetra import tetra
+
+    return dataclasses.replace(state, tet_mesh=tetra(state.need("cage", "tetra"), options))
+
+
+def _material(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.material import material
+
+    return dataclasses.replace(state, eta=material(state.need("tet_mesh", "material"), state.surface, options))
+
+
+def _modes(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.modes import modes
+
+    return dataclasses.replace(state, modes=modes(state.need("tet_mesh", "modes"), options, eta=state.eta))
+
+
+def _pieces(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.pieces import pieces
+
+    # Piece sizes are measured in asset volume: the repaired surface says what is material.
+    result = pieces(state.need("tet_mesh", "pieces"), state.need("modes", "pieces"), options, surface=state.surface)
+    return dataclasses.replace(state, pieces=result)
+
+
+def _smooth(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.smooth import smooth
+
+    regions = smooth(state.need("tet_mesh", "smooth"), state.need("pieces", "smooth"), options, surface=state.surface)
+    return dataclasses.replace(state, regions=regions)
+
+
+def _fragments(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.fragments import fragments_with_split
+
+    surface = state.need("surface", "fragments")
+    frags, split = fragments_with_split(surface, state.need("regions", "fragments"), options)
+    frags, checks = _checked(surface, dataclasses.replace(frags, pivot=options.pivot))
+    # Cuts that fell apart: bodies that became fragments of their own, and tiny ones glued to a neighbour.
+    checks["split_bodies"] = sum(split.bodies) - len(split.bodies) - split.merged
+    checks["merged_bodies"] = split.merged
+    return dataclasses.replace(state, fragments=frags, checks=checks)
+
+
+def _checked(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments, dict[str, CheckValue]]:
+    """The fragments as they will be written and the report's checks; a broken fragment stops the bake here."""
+    from fracture_cli.checks import fragment_invariants, require_sound, require_volume, written_fragments
+    from fracture_cli.checks.faultshape import fault_shape, fragment_faults
+
+    # Checked as they will be written (float32 about each pivot).
+    frags, written = written_fragments(frags, frags.pivot)
+    require_sound(written)
+    faults = fragment_faults(frags)  # the overlap check's fragment graph and the fault shape both read them
+    checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written, faults=faults))
+    require_volume(checks)
+    scale = surface.normalization.scale
+    checks["input_volume"] = float(frags.input_volume * (scale * scale * scale))
+    # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
+    shape = fault_shape(*faults)
+    checks["fault_mean_dihedral_degrees"] = round(shape["mean_dihedral_degrees"], 6)
+    checks["fault_crease_density"] = round(shape["crease_density"], 6)
+    return frags, checks
+
+
+def _simplify(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.simplify import simplify, skipped, triangle_budget
+
+    surface, frags = state.need("surface", "simplify"), state.need("fragments", "simplify")
+    before = sum(len(f.faces) for f in frags.fragments)
+    if not skipped(surface, options):
+        frags, checks = _checked(surface, simplify(frags, surface, options)[0])
+    else:
+        checks = dict(state.checks or {})
+    # Triangle counts as written, against the budget of issue 20 (input = the solid that was cut).
+    checks["triangles_cut"] = before
+    checks["triangles"] = sum(len(f.faces) for f in frags.fragments)
+    checks["triangle_budget"] = triangle_budget(len(surface.faces), len(frags.fragments))
+    return dataclasses.replace(state, fragments=frags, checks=checks)
+
+
+def _collision(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.io.physics import fragment_physics
+    from fracture_cli.stages.collision import collision
+
+    frags = state.need("fragments", "collision")
+    parts, checks = collision(frags, options)
+    # Mass properties and pivots once, with the parts: the runtime file and the GLB both carry them.
+    physics = tuple(fragment_physics(frags, parts, frags.pivot))
+    return dataclasses.replace(state, collision=parts, physics=physics, checks={**(state.checks or {}), **checks})
+
+
+def _runtime(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.io.physics import fragment_physics, runtime_arrays
+    from fracture_cli.io.write import fragment_name
+    from fracture_cli.stages.fragments.bodies import fragments_graph
+    from fracture_cli.stages.runtime import runtime
+
+    frags = state.need("fragments", "runtime")
+    order = [int(f.piece) for f in frags.fragments]
+    stem = os.path.splitext(os.path.basename(state.need("source", "runtime")))[0]
+    names = tuple(fragment_name(i, stem) for i in range(len(order)))  # as the GLB's nodes
+    # Bonds where fragments share fault faces: every group the game splits off is connected in space.
+    data = runtime(state.need("tet_mesh", "runtime"), state.need("modes", "runtime"), state.need("pieces", "runtime"),
+                   options, fragment_pieces=order, fragment_names=names, fragment_graph=fragments_graph(frags))
+    # Mass properties and collision parts for engines that read the runtime file only (FORMAT.md section 8).
+    physics = state.physics if state.physics is not None else fragment_physics(frags, state.collision, frags.pivot)
+    data = dataclasses.replace(data, gameready=runtime_arrays(physics))
+    return dataclasses.replace(state, runtime=data)
+
+
+STAGES: tuple[Stage, ...] = (
+    Stage("load", "Read a mesh (OBJ, PLY, STL, OFF, GLB, glTF).", "fracture_cli.stages.load:LoadOptions",
+          _load, consumes=("source",), produces=("loaded", "surface", "source_sha256", "source_files")),
+    Stage("repair", "Make the surface a closed solid: weld, fix winding, close holes or thicken open sheets.",
+          "fracture_cli.stages.repair:RepairOptions", _repair, consumes=("surface",), produces=("surface", "repairs")),
+    Stage("cage", "Build the nested cage: a coarse closed surface around the input.",
+          "fracture_cli.stages.cage:CageOptions", _cage, consumes=("surface",), produces=("cage",), cached=True),
+    Stage("tetra", "Tetrahedralize the cage (TetGen), keeping its surface.", "fracture_cli.stages.tetra:TetraOptions",
+          _tetra, consumes=("cage",), produces=("tet_mesh",), cached=True),
+    Stage("material", "Set material weights (grain, painted strength, boxes) on the tet faces.",
+          "fracture_cli.stages.material:MaterialOptions", _material, consumes=("tet_mesh",), uses=("surface",),
+          produces=("eta",)),
+    Stage("modes", "Compute the fracture modes of the tet mesh.", "fracture_cli.stages.modes:ModesOptions", _modes,
+          consumes=("tet_mesh",), uses=("eta",), produces=("modes",), cached=True, short={"num_modes": "-k"}),
+    Stage("pieces", "Split the tet mesh into atomic pieces and build the piece graph.",
+          "fracture_cli.stages.pieces:PiecesOptions", _pieces, consumes=("tet_mesh", "modes"), uses=("surface",),
+          produces=("pieces",)),
+    Stage("smooth", "Smooth the fault surfaces between pieces into closed piece regions.",
+          "fracture_cli.stages.smooth:SmoothOptions", _smooth, consumes=("tet_mesh", "pieces"), uses=("surface",),
+          produces=("regions",)),
+    Stage("fragments", "Cut the input into one closed fragment per piece region, and check them.",
+          "fracture_cli.stages.fragments:FragmentOptions", _fragments, consumes=("surface", "regions"),
+          produces=("fragments", "checks")),
+    Stage("simplify", "Simplify the fragments' faults to a tolerance (outer surface kept), and check them again.",
+          "fracture_cli.stages.simplify:SimplifyOptions", _simplify, consumes=("surface", "fragments"),
+          produces=("fragments", "checks")),
+    Stage("collision", "Convex collision parts per fragment that do not overlap (GLB and runtime file).",
+          "fracture_cli.stages.collision.convex:CollisionOptions", _collision, consumes=("fragments",),
+          produces=("collision", "physics")),
+    Stage("runtime", "Precompute the impact-projection data for the game (the runtime file).",
+          "fracture_cli.stages.runtime:RuntimeOptions", _runtime,
+          consumes=("tet_mesh", "modes", "pieces", "fragments"), uses=("collision", "physics"), produces=("runtime",)),
+)
+STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
+# The steps a bake reports seconds for: every stage, then writing the outputs.
+STEPS: tuple[str, ...] = STAGE_NAMES + ("export",)
+
+
+def stage(name: str) -> Stage:
+    """The row of :data:`STAGES` called ``name``."""
+    for s in STAGES:
+        if s.name == name:
+            return s
+    raise KeyError(name)
+
+
+class Runner:
+    """Runs stages one at a time: logs, times, caches and reports progress for each.
+
+    Parameters
+    ----------
+    label : str
+        Prefix of every log line (the input's stem).
+    total : int, optional
+        Number of steps this run will take, for "[i/n]" (default: unknown).
+    cache : StageCache, optional
+        Where results of :attr:`Stage.cached` stages are stored and found.
+    jobs : int, optional
+        How many processes a stage may use for its independent work (``--jobs``; default: every core).
+        It never changes a result, so it is not part of the options the report and the cache keys record.
+
+    Attributes
+    ----------
+    seconds : dict of str -> float
+        Wall time of every step run, rounded to ms (the report's ``seconds``).
+    options : dict of str -> options dataclass
+        The options each stage ran with (the report's recipe parameters).
+    """
+
+    def __init__(self, label: str, total: int | None = None, cache: StageCache | None = None,
+                 jobs: int | None = None):
+        self.label = label
+        self.total = total
+        self.cache = cache
+        self.jobs = jobs
+        self.seconds: dict[str, float] = {}
+        self.options: dict[str, Any] = {}
+        self._step = 0
+        self._key: str | None = None  # cache key of everything run so far
+
+    def run(self, name: str, state: PipelineState, options: Any) -> PipelineState:
+        """Run stage ``name`` on ``state`` with ``options``; returns the new state."""
+        row = stage(name)
+        key = self._cache_key(row, state, options)
+        with self.step(name):
+            cache = self.cache if row.cached and key is not None else None
+            result = cache.get(name, key, state) if cache and key else None
+            if result is None:
+                with parallel.using(self.jobs):
+                    result = row.run(state, options)
+                if cache and key:
+                    cache.put(name, key, result)
+        if row.name == "load" and self.cache is not None:
+            # The chain of keys starts from the bytes the load read, not from a hash taken before it.
+            from fracture_cli.pipeline.cache import cache_key
+
+            self._key = cache_key("load", result.source_sha256, options)
+        self.options[name] = options
+        return result
+
+    def step(self, name: str) -> contextlib.AbstractContextManager[progress.Task]:
+        """A context that logs, times and shows progress of one step (a stage or ``export``)."""
+        return _timed_step(self, name)
+
+    def _cache_key(self, row: Stage, state: PipelineState, options: Any) -> str | None:
+        if self.cache is None:
+            return None
+        from fracture_cli.pipeline.cache import cache_key
+
+        if row.name == "load":
+            self._key = None  # set from the bytes read, once the load has run (see run)
+        elif self._key is not None:
+            self._key = cache_key(row.name, self._key, options)
+        return self._key
+
+
+@contextlib.contextmanager
+def _timed_step(runner: Runner, name: str) -> Iterator[progress.Task]:
+    interrupts.check()  # a Ctrl-C that a library dropped still stops the run here
+    runner._step += 1
+    where = f"[{runner._step}/{runner.total}] " if runner.total else ""
+    log.info("%s: %s%s ...", runner.label, where, name)
+    t0 = time.perf_counter()
+    try:
+        with progress.task(f"{runner.label}: {where}{name}") as task:
+            yield task
+    except Exception as exc:
+        # Name the stage in a bug's one-line message (the CLI reads these; FractureErrors carry their own).
+        if not hasattr(exc, "fracture_stage"):
+            exc.fracture_stage = name  # type: ignore[attr-defined]
+        raise
+    runner.seconds[name] = round(time.perf_counter() - t0, 3)
+    log.info("%s: %s%s done in %.2f s", runner.label, where, name, runner.seconds[name])

@@ -1,0 +1,345 @@
+"""Fragments: the input mesh intersected with each piece region (ALGORITHM.md section 6)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import manifold3d
+import numpy as np
+
+from fracture_cli.errors import StageError
+from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.rows import unique_rows, used_vertices
+from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask, surface_solid
+from fracture_cli.geometry.uvs import box_uvs
+from fracture_cli.options import option
+from fracture_cli.stages.fragments.bodies import stable_order
+from fracture_cli.system import parallel
+from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Regions, SurfaceMesh
+
+if TYPE_CHECKING:  # components imports this module
+    from fracture_cli.stages.fragments.bodies import SplitReport
+
+log = logging.getLogger(__name__)
+
+STAGE = "fragments"
+
+# Vertex property layout carried through the booleans: position, uv, normal.
+_UV = slice(3, 5)
+_NORMAL = slice(5, 8)
+_NUM_COLUMNS = 8
+
+
+@dataclass(frozen=True)
+class FragmentOptions:
+    """Options of :func:`fragments`."""
+
+    uv_scale: float = option(
+        1.0,
+        "interior faces' box-projected UVs: world units (input units) per UV unit",
+        min=0.0,
+        min_exclusive=True,
+    )
+    interior_color: list = option(
+        [0.55, 0.5, 0.45, 1.0],
+        "RGBA (0..1) base colour of the 'interior' material on the new fault faces",
+        min=0.0,
+        max=1.0,
+    )
+    pivot: str = option(
+        "center_of_mass",
+        "origin of every fragment node in the GLB: its centre of mass (where engines put a rigid body's origin) "
+        "or its bounding-box centre (bbox)",
+        choices=("center_of_mass", "bbox"),
+    )
+    min_body_fraction: float = option(
+        0.001,
+        "a fragment that falls apart is split into one fragment per closed body; bodies holding less than this "
+        "fraction of the asset's volume are glued to the neighbour they share the most fault area with",
+        min=0.0,
+        max=1.0,
+    )
+
+
+def fragments(surface: SurfaceMesh, regions: Regions, options: FragmentOptions = FragmentOptions()) -> Fragments:
+    """Cut the input surface into closed one-body fragments (:func:`fragments_with_split`, without its report)."""
+    return fragments_with_split(surface, regions, options)[0]
+
+
+def fragments_with_split(surface: SurfaceMesh, regions: Regions,
+                         options: FragmentOptions = FragmentOptions()) -> tuple[Fragments, SplitReport]:
+    """Cut the input surface into one closed fragment per piece region, then one per connected body.
+
+    Parameters
+    ----------
+    surface : SurfaceMesh
+        The input as a closed solid, normalized coordinates: the result of
+        :func:`~fracture_cli.stages.repair.repair` (the same surface the cage
+        was built around). May have UV seams (split vertices), several
+        materials, and an ``interior`` material slot (faces repair added).
+    regions : Regions
+        One closed region per piece, partitioning a volume that contains the input.
+    options : FragmentOptions, optional
+        ``uv_scale`` (default 1.0 world unit per UV unit).
+
+    Returns
+    -------
+    fragments : Fragments
+        Non-empty fragments, each one connected closed body, sorted by their centroid (x, then y, then z, rounded
+        to 1e-6); ``Fragment.piece`` names the piece of each. ``materials`` are
+        the input's plus the interior material as the last slot (or the
+        input's own slot if one is already named ``interior``).
+    split : SplitReport
+        How many bodies each cut held and how many tiny ones were merged.
+
+    Raises
+    ------
+    StageError
+        If the input is not a closed solid (run ``repair`` first), or a region
+        is not a valid closed mesh.
+
+    Notes
+    -----
+    ALGORITHM.md section 6. The input is made a solid by the repair stage
+    (welding, hole filling or shelling, union of overlapping bodies), so that
+    the cage and the fragments agree on it; here it is only converted to a
+    manifold3d solid (:func:`~fracture_cli.geometry.solids.surface_solid`:
+    vertices at one position welded topologically, attributes kept).
+
+    Each fragment is ``input ^ region`` in manifold3d with UV and normal as
+    vertex properties: outer faces keep the input's values (interpolated where
+    a face is cut), material ids travel as manifold3d run ids. Faces that come
+    from the region are the new inside: interior material, flat normals
+    (vertices split per plane), and UVs from a box projection of world-space
+    positions divided by ``uv_scale``.
+
+    Pieces whose region misses the input are logged and left out; the
+    runtime uses ``Fragment.piece`` to map fragments to pieces.
+
+    A cut can fall apart (a region holding the tips of two legs); a game spawns
+    one rigid body per fragment, so every fragment is split into its closed
+    bodies (:func:`~fracture_cli.stages.fragments.bodies.split_fragments`): bodies
+    below ``min_body_fraction`` of the input's volume are glued to their
+    largest-interface neighbour, the others become fragments of their own
+    (same piece). Several fragments may then share one piece.
+    """
+    solid, id_to_material = surface_solid(surface, stage=STAGE)
+    input_volume = float(solid.volume())
+    if input_volume <= 0:
+        raise StageError("the input encloses no volume; fragments need a solid (closed) mesh", stage=STAGE)
+    interior_index, materials = _with_interior(surface.materials, options.interior_color)
+    region_id = manifold3d.Manifold.reserve_ids(1)
+    id_to_material = dict(id_to_material)
+    id_to_material[region_id] = interior_index
+
+    cut = _Cut(solid, regions.meshes, region_id, id_to_material, interior_index, surface, options,
+               SHELL_VOLUME * input_volume)
+    # One boolean per piece, independent of the others: on parallel.current_jobs() processes, results in order.
+    if solid.num_tri() > _CROP_TRIANGLES and len(regions.meshes) > 1:
+        groups = _piece_groups(regions.meshes, _CROP_GROUPS)
+        done: list[_Piece | None] = [None] * len(regions.meshes)
+        for group, parts in zip(groups, parallel.ordered_map(_cut_group, groups, cut)):
+            for piece, part in zip(group, parts):
+                done[piece] = part
+    else:
+        done = parallel.ordered_map(_cut_piece, range(len(regions.meshes)), cut)
+    cuts = [None if d is None else d[0] for d in done]
+    results = [f for f in cuts if f is not None]
+    empty = [piece for piece, f in enumerate(cuts) if f is None]
+    if empty:
+        log.warning("%s: %d piece(s) do not reach the input and give no fragment: %s", STAGE, len(empty),
+                    ", ".join(map(str, empty[:20])) + (" ..." if len(empty) > 20 else ""))
+    if not results:
+        raise StageError("no piece region intersects the input; the regions do not belong to this mesh", stage=STAGE)
+
+    order = stable_order(results)
+    total = sum(trigeom.signed_volume(f.vertices, f.faces) for f in results)
+    log.info("%s: %d fragments from %d regions, volume %.6g of input %.6g (error %.2g)", STAGE, len(results),
+             len(regions.meshes), total, input_volume, abs(total - input_volume) / input_volume)
+    cut_fragments = Fragments(
+        fragments=tuple(results[i] for i in order),
+        materials=materials,
+        normalization=surface.normalization,
+        input_volume=input_volume,
+    )
+    from fracture_cli.stages.fragments.bodies import SplitReport, split_fragments
+
+    # The workers found each cut's bodies (body_faces) and their volumes: when there are as many bodies as cuts,
+    # none of them tiny, split_fragments returns the fragments as they are (its first test), so it is not run again.
+    counts = tuple(len(d[1]) for d in done if d is not None)
+    volumes = np.array([volume for d in done if d is not None for volume in d[1]])
+    if sum(counts) == len(results) and not np.any(volumes < options.min_body_fraction * input_volume):
+        return cut_fragments, SplitReport(bodies=counts, source=tuple(range(len(counts))), merged=0, isolated=0)
+    return split_fragments(cut_fragments, options.min_body_fraction)
+
+
+@dataclass(frozen=True)
+class _Cut:
+    """What cutting one piece needs (shared with the worker processes)."""
+
+    solid: manifold3d.Manifold
+    meshes: tuple
+    region_id: int
+    id_to_material: dict
+    interior_index: int
+    surface: SurfaceMesh
+    options: FragmentOptions
+    min_volume: float
+
+
+# Inputs above this many triangles are first cropped to a box around each group of nearby pieces, so a piece's
+# boolean reads a part of the input, not all of it (the cost of a boolean grows with both operands). Cropping
+# changes no geometry (each region lies inside its group's box) but may triangulate a fragment differently,
+# so small inputs, whose booleans are cheap anyway, are cut from the whole input.
+_CROP_TRIANGLES = 200_000
+# ... into this many groups of pieces (a k-d split of the regions' box centres).
+_CROP_GROUPS = 16
+# How far a group's box reaches beyond its regions' boxes (normalized units: bbox diagonal 1).
+_CROP_MARGIN = 1e-3
+
+
+def _piece_groups(meshes: tuple, count: int) -> list[list[int]]:
+    """Pieces in about ``count`` spatial groups: halve the set at the median box centre along its widest axis."""
+    centres = np.array([(V.min(axis=0) + V.max(axis=0)) / 2 if len(V) else np.zeros(3) for V, _ in meshes])
+    groups = [np.arange(len(meshes))]
+    while len(groups) < count:
+        big = max(range(len(groups)), key=lambda g: (len(groups[g]), -g))
+        members = groups[big]
+        if len(members) < 2:
+            break
+        spread = np.ptp(centres[members], axis=0)
+        order = members[np.lexsort((members, centres[members, int(np.argmax(spread))]))]
+        groups[big:big + 1] = [np.sort(order[:len(order) // 2]), np.sort(order[len(order) // 2:])]
+    return [g.tolist() for g in groups]
+
+
+# A cut fragment and the volume of each of its closed bodies (gameready.components.body_faces).
+_Piece = tuple[Fragment, list[float]]
+
+
+def _cut_group(cut: _Cut, pieces: list[int]) -> list[_Piece | None]:
+    """The fragments of ``pieces``, cut from the input cropped to a box around their regions."""
+    boxes = [(V.min(axis=0), V.max(axis=0)) for V, _ in (cut.meshes[p] for p in pieces) if len(V)]
+    if not boxes:
+        return [None] * len(pieces)
+    lo = np.min([b[0] for b in boxes], axis=0) - _CROP_MARGIN
+    hi = np.max([b[1] for b in boxes], axis=0) + _CROP_MARGIN
+    crop = cut.solid ^ manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
+    return [_cut_piece(cut, piece, crop) for piece in pieces]
+
+
+def _cut_piece(cut: _Cut, piece: int, solid: manifold3d.Manifold | None = None) -> _Piece | None:
+    """The fragment of ``piece`` (``input ^ region``; ``solid``: the input or a crop of it around the region) and
+    its bodies' volumes, or None where the region misses the input."""
+    from fracture_cli.geometry.mass import mass_properties
+    from fracture_cli.stages.fragments.bodies import body_faces
+
+    rv, rf = cut.meshes[piece]
+    part = (cut.solid if solid is None else solid) ^ _region_manifold(rv, rf, cut.region_id, piece)
+    if part.is_empty() or part.volume() <= cut.min_volume:
+        return None
+    frag = _to_fragment(part, piece, cut.id_to_material, cut.interior_index, cut.surface, cut.options,
+                        cut.min_volume)
+    # As split_fragments measures them, here on the workers.
+    volumes = [mass_properties(frag.vertices, frag.faces[faces]).volume for faces in body_faces(frag.vertices,
+                                                                                                 frag.faces)]
+    return frag, volumes
+
+
+def _with_interior(materials: tuple[Material, ...], color: list) -> tuple[int, tuple[Material, ...]]:
+    """The interior material's slot and the materials with it (the recipe's colour).
+
+    The repair stage may already have given the surface an interior slot (faces
+    closing its holes): it is reused, so the asset has one interior material.
+    """
+    r, g, b, a = (float(c) for c in color)
+    interior = Material(INTERIOR_MATERIAL_NAME, base_color=(r, g, b, a))
+    names = [m.name for m in materials]
+    if INTERIOR_MATERIAL_NAME in names:
+        index = names.index(INTERIOR_MATERIAL_NAME)
+        return index, tuple(interior if i == index else m for i, m in enumerate(materials))
+    return len(names), tuple(materials) + (interior,)
+
+
+def _region_manifold(vertices: np.ndarray, faces: np.ndarray, region_id: int, piece: int):
+    props = np.zeros((len(vertices), _NUM_COLUMNS))
+    props[:, :3] = vertices
+    mesh = manifold3d.Mesh64(
+        vert_properties=props,
+        tri_verts=np.ascontiguousarray(faces, dtype=np.uint64),
+        run_index=np.array([0, 3 * len(faces)], dtype=np.uint64),
+        run_original_id=np.array([region_id], dtype=np.uint32),
+    )
+    region = manifold3d.Manifold(mesh)
+    if region.status() != manifold3d.Error.NoError:
+        raise StageError(f"the region of piece {piece} is not a closed manifold mesh ({region.status()}); "
+                         "regions must come from the smooth stage", stage=STAGE)
+    return region
+
+
+def _to_fragment(part, piece: int, id_to_material: dict, interior_index: int, surface: SurfaceMesh,
+                 options: FragmentOptions, min_shell_volume: float) -> Fragment:
+    """Turn a manifold3d result into a Fragment with split interior vertices."""
+    mesh = part.to_mesh64()
+    props = np.array(mesh.vert_properties, dtype=np.float64)
+    tris = np.array(mesh.tri_verts, dtype=np.int64).reshape(-1, 3)
+    # Zero-volume shells left where region and input faces coincide are dropped (cavities are kept).
+    keep = shell_mask(mesh, min_shell_volume)
+    run_index = np.asarray(mesh.run_index, dtype=np.int64) // 3
+    run_ids = np.asarray(mesh.run_original_id, dtype=np.int64)
+    material = np.empty(len(tris), dtype=np.int32)
+    for r, original in enumerate(run_ids.tolist()):
+        if original not in id_to_material:
+            if run_index[r] == run_index[r + 1]:
+                continue  # an operand none of whose faces is left (a crop's box)
+            raise StageError(f"a boolean result has faces of unknown origin (id {original})", stage=STAGE)
+        material[run_index[r]:run_index[r + 1]] = id_to_material[original]
+    tris, material = tris[keep], material[keep]
+
+    inside = material == interior_index
+    positions = props[:, :3]
+    normals = props[:, _NORMAL].copy()
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), 0.0)
+    uvs = props[:, _UV].copy()
+
+    # Interior faces: one vertex per (vertex, plane) so normals are flat and
+    # UVs follow the face's projection axis.
+    ti = tris[inside]
+    a, b, c = positions[ti[:, 0]], positions[ti[:, 1]], positions[ti[:, 2]]
+    fn = np.cross(b - a, c - a)
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    offset = np.einsum("ij,ij->i", fn, a)
+    plane_key = np.column_stack([np.round(fn * 1e6), np.round(offset * 1e9)]).astype(np.int64)
+    _, plane = unique_rows(plane_key, return_inverse=True)
+    plane = plane.reshape(-1)
+    corner_key = np.column_stack([ti.reshape(-1), np.repeat(plane, 3)])
+    uniq, corner_vertex = unique_rows(corner_key, return_inverse=True)
+    corner_vertex = corner_vertex.reshape(-1)
+    new_positions = positions[uniq[:, 0]]
+    # Each plane's normal: mean of its faces' normals (they agree to 1e-6).
+    plane_normal = np.zeros((plane.max() + 1 if len(plane) else 0, 3))
+    np.add.at(plane_normal, plane, fn)
+    plane_normal /= np.maximum(np.linalg.norm(plane_normal, axis=1, keepdims=True), 1e-300)
+    new_normals = plane_normal[uniq[:, 1]]
+    new_uvs = box_uvs(surface.normalization.to_world(new_positions), new_normals, options.uv_scale)
+
+    outer_used = used_vertices(tris[~inside], len(props))
+    remap = np.full(len(props), -1, dtype=np.int64)
+    remap[outer_used] = np.arange(len(outer_used))
+    vertices = np.vstack([positions[outer_used], new_positions])
+    all_normals = np.vstack([normals[outer_used], new_normals])
+    all_uvs = np.vstack([uvs[outer_used], new_uvs])
+    faces = np.empty_like(tris)
+    faces[~inside] = remap[tris[~inside]]
+    faces[inside] = len(outer_used) + corner_vertex.reshape(-1, 3)
+    return Fragment(
+        vertices=vertices,
+        faces=faces,
+        uvs=all_uvs,
+        normals=all_normals,
+        material_ids=material,
+        piece=piece,
+    )

@@ -1,0 +1,483 @@
+"""Fracture modes of a tet mesh: the stage ``modes`` (ALGORITHM.md section 2).
+
+Per-tet displacements, an interior-face discontinuity energy, and the adapted
+ICCM loop (paper Algorithm 1) started from the tet mesh's generalized Laplacian
+eigenvectors. The convex subproblem of each ICCM round is solved exactly by
+:class:`fracture_cli.stages.modes.solver.CutSubproblemSolver` (default, ``solver =
+"fast"``) or by the interior-point baseline
+:class:`fracture_cli.stages.modes.solver.ConicSubproblemSolver` (``solver = "clarabel"``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+from scipy.sparse.linalg import eigsh
+
+from fracture_cli.errors import StageError
+from fracture_cli.options import option
+from fracture_cli.stages.modes.solver import (
+    ConicSubproblemSolver,
+    CutSubproblemSolver,
+    discontinuity_energy,
+    face_weights,
+    jump_norms,
+    lp_backend,
+)
+from fracture_cli.system import parallel, progress
+from fracture_cli.types import Modes, TetMesh
+
+log = logging.getLogger(__name__)
+
+STAGE = "modes"
+
+
+# ARPACK iterations before the eigensolver tries again differently (shift-invert converges in a few when it can).
+_ARPACK_MAXITER = 1000
+# Largest vertex count for the dense eigensolver fallback (n^2 doubles of memory, n^3 time: ~4 s at 4000).
+_DENSE_EIGEN_MAX = 4000
+# ICCM rounds of a mode with a max-flow budget at most, and that budget (see _iccm_mode). Measured at
+# k = 24 on 6k tets (one run each, CPU s on a loaded machine, before budgeted rounds could merge cells):
+# budgets 1, 2, 3, 4 gave 12.7, 10.0, 10.2, 12.2 s and worst/median 4.8, 6.4, 3.6, 5.2, with sums of
+# the 24 energies 35.9, 36.9, 37.1, 37.4 (37.1 with exact rounds only, 17-18 s, worst/median 9).
+_BUDGET_ROUNDS = 60
+_ROUND_FLOWS = 3
+# The first round of a mode stops (uncertified) when the master's objective has not decreased for this
+# many max-flows (CutSubproblemSolver.solve's stall_flows). k = 24 and 32 on the 3k/6k/12k bench meshes:
+# max-flows 476/520/695 -> 470/495/597 (k = 24), 878/1021/1295 -> 873/1051/1175 (k = 32), sums of
+# energies within +-2% either way (other local minima, as with any change of the ICCM path).
+_FIRST_ROUND_STALL = 3
+
+@dataclass(frozen=True)
+class ModesOptions:
+    """Options of :func:`modes`."""
+
+    num_modes: int = option(12, "number of non-trivial fracture modes k (translations are not counted)", min=1,
+                            max=200)
+    dim: int = option(1, "displacement dimension: 1 = scalar modes (fast default), 3 = vector modes", choices=(1, 3))
+    solver: str = option("fast", "subproblem solver: 'fast' (exact: partition LP + min-cut pricing, scalar per "
+                         "axis) or 'clarabel' (interior-point baseline, slow)", choices=("fast", "clarabel"))
+    sigma: float = option(1e-3, "a face is cut when its jump exceeds sigma times the mode's largest jump", min=0.0,
+                          max=1.0, min_exclusive=True)
+    tol: float = option(1e-6, "ICCM stops when max|U_i - c| <= tol * max|c|", min=0.0, max=1.0, min_exclusive=True)
+    max_iter: int = option(30, "ICCM rounds per mode at most", min=1, max=10000)
+    inner_tol: float = option(1e-9, "subproblem tolerance (relative dual violation / interior-point gap)", min=0.0,
+                              max=1e-2, min_exclusive=True)
+    inner_max_iter: int = option(1000, "subproblem iterations at most (max-flows or interior-point steps)", min=1,
+                                 max=1000000)
+    seed: int = option(0, "seed of the eigensolver's start vector (fixed: results are reproducible)", min=0)
+
+
+def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.ndarray | None = None) -> Modes:
+    """Compute the ``k`` lowest fracture modes of a tet mesh.
+
+    Parameters
+    ----------
+    tet_mesh : TetMesh
+        The (cage) tet mesh; ``t`` tets, ``f`` interior faces.
+    options : ModesOptions, optional
+        See :class:`ModesOptions` (default: 12 scalar modes, fast solver).
+    eta : (f,) or (f, d) float, optional (default all ones)
+        Material weight of every interior face (and axis, for ``d = 3``):
+        anisotropy and strength maps. A large value makes a face effectively
+        unbreakable. Must be positive and finite.
+
+    Returns
+    -------
+    Modes
+        ``U (k, t, d)`` M_T-orthonormal and M_T-orthogonal to translations,
+        ``labels (k, t)``, ``cut (k, f)``, ``piece_counts``, ``energies``
+        (``sum_f A_f ||eta_f o jump_f||``), ICCM ``iterations`` and ``stats``
+        (solver name, seconds and subproblem counters per mode, duality gaps).
+
+    Raises
+    ------
+    StageError
+        If the mesh is too small for ``k`` modes, ``eta`` has the wrong shape or
+        values, or a subproblem solver fails.
+
+    Notes
+    -----
+    ALGORITHM.md section 2 and the paper's Algorithm 1 (adapted ICCM). Each ICCM
+    round solves ``min E_D(u)`` subject to ``U_j^T M_T u = 0`` (earlier modes and
+    translations) and ``c^T M_T u = 1``, then sets ``c = u / ||u||_M``.
+
+    For ``d = 3`` the start vectors are the scalar eigenvectors times the axes,
+    ``s_j (x) e_a`` (mode ``i`` uses ``s_{i // 3} (x) e_{i % 3}``). With such a
+    ``c`` and axis-aligned earlier modes, the vector subproblem has an
+    axis-aligned minimiser: ``sum_f w_f ||eta_f o jump_f|| >= sum_f w_f eta_fa
+    |jump_fa|``, the right side is the scalar problem on axis ``a`` with weights
+    ``w_f eta_fa``, and that scalar minimiser times ``e_a`` attains it. So the
+    fast solver computes ``d = 3`` modes exactly as scalar modes per axis (once
+    per distinct column of ``eta``); the Clarabel baseline solves the vector
+    problem itself and reaches the same energies.
+
+    The fast solver (:class:`fracture_cli.stages.modes.solver.CutSubproblemSolver`)
+    is exact: a mode is the output of a subproblem that ends with a dual
+    certificate (no tet set violates its max-flow/min-cut condition), its
+    solution is piecewise constant, so the pieces do not depend on ``sigma``.
+    The ICCM rounds between a mode's first and last may stop early, on a
+    max-flow budget (:func:`_iccm_mode`: descent is kept, the fixed point is
+    certified). ``stats["max_gap"]`` is the largest
+    primal-dual gap over all subproblems.
+
+    Parallelism (the global ``--jobs``, :func:`fracture_cli.system.parallel.current_jobs`):
+    mode ``i`` is constrained by modes ``< i``, so one ICCM chain is sequential;
+    only chains that share nothing (``d = 3`` with per-axis weights) run in worker
+    processes. BLAS is single-threaded in every chain (threadpoolctl), so results
+    are the same bytes for any job count and a pool of bakes does not
+    oversubscribe the cores.
+    """
+    opts = options
+    t = tet_mesh.num_tets
+    k = int(opts.num_modes)
+    d = int(opts.dim)
+    face_tets = tet_mesh.interior_face_tets
+    f = len(face_tets)
+    if t < 2 or f == 0:
+        raise StageError(f"the tet mesh has {t} tets and {f} interior faces; fracture modes need at least two "
+                         "tets sharing a face", stage=STAGE)
+    scalar_count = k if d == 1 else math.ceil(k / 3)
+    if scalar_count + 2 > tet_mesh.num_vertices or k > d * (t - 1):
+        raise StageError(f"{k} modes of dimension {d} need a larger tet mesh (it has {t} tets, "
+                         f"{tet_mesh.num_vertices} vertices); lower num_modes or refine the mesh", stage=STAGE)
+    eta2 = _check_eta(eta, f, d)
+    areas = face_weights(tet_mesh)
+    volumes = np.asarray(tet_mesh.tet_volumes, dtype=np.float64)
+    if np.any(volumes <= 0):
+        raise StageError("the tet mesh has tets with non-positive volume; re-run the tetrahedralization",
+                         stage=STAGE)
+
+    start = time.perf_counter()
+    scalar_init = _scalar_start_vectors(tet_mesh, scalar_count, opts.seed)
+    eig_seconds = time.perf_counter() - start
+    log.info("%s: %d start vectors from the Laplacian eigenproblem in %.2f s", STAGE, scalar_count, eig_seconds)
+
+    if opts.solver == "fast":
+        U, info = _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts)
+    else:
+        U, info = _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts)
+
+    labels = np.zeros((k, t), dtype=np.int32)
+    cut = np.zeros((k, f), dtype=bool)
+    piece_counts = np.zeros(k, dtype=np.int32)
+    energies = np.zeros(k)
+    for i in range(k):
+        cut[i], labels[i], piece_counts[i] = mode_pieces(U[i], face_tets, t, opts.sigma)
+        energies[i] = discontinuity_energy(U[i], face_tets, areas, eta2)
+        if piece_counts[i] < 2:
+            log.warning("%s: mode %d has a single piece (degenerate)", STAGE, i)
+    stats = {
+        "solver": opts.solver,
+        "dim": d,
+        "eigensolver_seconds": eig_seconds,
+        "seconds": time.perf_counter() - start,
+        **info,
+    }
+    log.info("%s: %d modes in %.2f s (%.3f s per mode), pieces per mode %s", STAGE, k, stats["seconds"],
+             stats["seconds"] / k, piece_counts.tolist())
+    return Modes(U=U, labels=labels, cut=cut, piece_counts=piece_counts, energies=energies,
+                 iterations=np.asarray(info["iterations"], dtype=np.int32), stats=stats)
+
+
+def mode_pieces(u: np.ndarray, face_tets: np.ndarray, num_tets: int, sigma: float):
+    """Cut faces and pieces of one mode.
+
+    Parameters
+    ----------
+    u : (t, d) or (t,) float
+        One mode.
+    face_tets : (f, 2) int
+        Interior faces' tets.
+    num_tets : int
+        ``t``.
+    sigma : float
+        Relative threshold: a face is cut when its jump exceeds ``sigma`` times the largest jump.
+
+    Returns
+    -------
+    cut : (f,) bool
+    labels : (t,) int32
+        Connected components of the face-adjacency graph without cut faces.
+    count : int
+        Number of pieces.
+    """
+    jumps = jump_norms(u, face_tets)
+    largest = float(jumps.max()) if len(jumps) else 0.0
+    cut = jumps > sigma * largest if largest > 0 else np.zeros(len(jumps), dtype=bool)
+    keep = ~cut
+    a, b = face_tets[keep, 0], face_tets[keep, 1]
+    graph = sp.csr_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(num_tets, num_tets))
+    count, labels = connected_components(graph, directed=False)
+    return cut, labels.astype(np.int32), int(count)
+
+
+def _check_eta(eta, f: int, d: int) -> np.ndarray:
+    if eta is None:
+        return np.ones((f, d))
+    eta = np.asarray(eta, dtype=np.float64)
+    if eta.ndim == 1:
+        eta = eta[:, None] * np.ones((1, d))
+    if eta.shape != (f, d):
+        raise StageError(f"eta has shape {eta.shape}; expected ({f},) or ({f}, {d}) (one weight per interior face "
+                         "and axis)", stage=STAGE)
+    if not np.all(np.isfinite(eta)) or np.any(eta <= 0):
+        raise StageError("eta must be positive and finite; use a large value (e.g. 1e6) for unbreakable faces",
+                         stage=STAGE)
+    return eta
+
+
+def _scalar_start_vectors(tet_mesh: TetMesh, count: int, seed: int) -> np.ndarray:
+    """The first ``count`` non-constant generalized eigenvectors of ``(K, M_V)``, averaged onto tets.
+
+    Returns (count, t). Shift-invert just below 0 (``K`` is singular); ARPACK's
+    start vector is drawn from ``seed`` so runs are reproducible.
+    """
+    K = tet_mesh.stiffness.tocsc()
+    M = tet_mesh.vertex_mass.tocsc()
+    n = K.shape[0]
+    want = min(count + 1, n - 1)
+    # Below the spectrum by a margin far smaller than the first non-zero eigenvalue.
+    shift = -1e-6 * float(K.diagonal().sum() / M.diagonal().sum())
+    # Uniform, not normal: numpy's normal draws call libm's exp/log, which round by the CPU (numeric_env.py).
+    v0 = np.random.default_rng(seed).uniform(-1.0, 1.0, n)
+    try:
+        values, vectors = _lowest_eigenpairs(K, M, want, shift, v0)
+    except Exception as error:  # ARPACK and LAPACK raise several types; report one message
+        raise StageError(f"the Laplacian eigensolver failed ({error}); is the tet mesh connected and valid?",
+                         stage=STAGE) from error
+    order = np.argsort(values, kind="stable")
+    vectors = vectors[:, order[1:want]]  # the first is the constant
+    return np.asarray((tet_mesh.tet_from_vertex @ vectors).T)
+
+
+def _lowest_eigenpairs(K, M, want: int, shift: float, v0: np.ndarray):
+    """The ``want`` (or a few more) lowest generalized eigenpairs of ``(K, M)``.
+
+    ARPACK (shift-invert just below 0) first. When it does not converge (a
+    near-flat tet puts the shift far below the spectrum; or ``want`` cuts
+    through a cluster of repeated eigenvalues of a symmetric shape), it is
+    asked for a few more pairs at shift -1 with a larger Krylov space, and as a
+    last resort (small meshes only) LAPACK solves the dense problem.
+    """
+    from scipy.sparse.linalg import ArpackNoConvergence
+
+    n = K.shape[0]
+    try:
+        return eigsh(K, k=want, M=M, sigma=shift, which="LM", v0=v0, maxiter=_ARPACK_MAXITER)
+    except ArpackNoConvergence as first:
+        log.info("%s: ARPACK did not converge for %d eigenpairs (%s); retrying with more", STAGE, want, first)
+    # A near-flat tet inflates the stiffness trace, and with it the first shift, far below the spectrum,
+    # where shift-invert separates nothing; the bounding-box diagonal is 1, so the smallest non-zero
+    # eigenvalues are O(1) to O(100) and -1 sits just below them.
+    more = min(want + 6, n - 1)
+    try:
+        return eigsh(K, k=more, M=M, sigma=-1.0, which="LM", v0=v0, ncv=min(n, 2 * more + 20),
+                     maxiter=_ARPACK_MAXITER)
+    except ArpackNoConvergence as second:
+        if n > _DENSE_EIGEN_MAX:
+            raise
+        log.info("%s: ARPACK did not converge again (%s); solving the dense problem (%d vertices)", STAGE, second, n)
+    import scipy.linalg
+
+    return scipy.linalg.eigh(K.toarray(), M.toarray(), subset_by_index=[0, want - 1])
+
+
+class _MInner:
+    """M_T inner products of (t, d) fields."""
+
+    def __init__(self, volumes: np.ndarray, d: int):
+        self.vol = volumes
+        self.d = d
+        self.translations = []
+        for a in range(d):
+            e = np.zeros((len(volumes), d))
+            e[:, a] = 1.0 / math.sqrt(volumes.sum())
+            self.translations.append(e)
+
+    def dot(self, x, y) -> float:
+        return float(np.einsum("t,td,td->", self.vol, x, y))
+
+    def orthonormalize(self, c, basis):
+        """``c`` minus its M_T-projection on ``basis`` (M_T-orthonormal), normalized; None if nothing is left."""
+        norm0 = math.sqrt(self.dot(c, c))
+        for _ in range(2):  # twice is enough (Gram-Schmidt reorthogonalization)
+            for b in basis:
+                c = c - self.dot(c, b) * b
+        norm = math.sqrt(self.dot(c, c))
+        if not norm > 1e-8 * norm0:
+            return None
+        return c / norm
+
+
+def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, random_start,
+          restricted: bool = False):
+    """Adapted ICCM (paper Algorithm 1): ``count`` modes (t, d) from start vectors ``starts``.
+
+    ``solve(c, earlier_modes, max_flows, first_round) -> SubproblemResult`` (``max_flows`` None: exact,
+    except that a first round may stop on a stalled objective);
+    ``restricted``: the solver takes a max-flow budget (see :func:`_iccm_mode`).
+    """
+    found: list[np.ndarray] = []
+    per_mode: list[dict] = []
+    progress.items(count, f"mode{label}")
+    for i in range(count):
+        mode_start = time.perf_counter()
+        mode_cpu = time.process_time()
+        c = inner.orthonormalize(starts[i], inner.translations + found)
+        attempts = 0
+        while c is None:  # the start vector lies in the span of the earlier modes
+            attempts += 1
+            c = inner.orthonormalize(random_start(attempts), inner.translations + found)
+        c, stats = _iccm_mode(solve, c, found, inner, opts, f"mode {i}{label}", restricted)
+        rounds, inner_iterations = stats["rounds"], stats["inner_iterations"]
+        found.append(c)
+        seconds = time.perf_counter() - mode_start
+        per_mode.append(dict(stats, seconds=seconds, cpu_seconds=time.process_time() - mode_cpu))
+        log.info("%s: mode %d%s: %d ICCM rounds, %d inner iterations, %.3f s", STAGE, i, label, rounds,
+                 inner_iterations, seconds)
+        progress.advance()
+    return found, per_mode
+
+
+def _iccm_mode(solve, c, found, inner: _MInner, opts: ModesOptions, name: str, restricted: bool):
+    """ICCM rounds of one mode from the start vector ``c`` (t, d); returns the mode and its stats.
+
+    The first round has no max-flow budget: from the smooth start vector it picks the basin
+    (budgeting it too lands later modes in other local minima, about 5% more energy in total);
+    with ``restricted`` it stops once the master's objective stalls (:data:`_FIRST_ROUND_STALL`
+    max-flows without a decrease: only the duals were still moving). With ``restricted``,
+    the rounds after it get a budget of :data:`_ROUND_FLOWS` max-flows each: a round that runs out
+    returns the master's solution on the refined partition, uncertified. It is feasible and its
+    energy is at most ``E(c)`` (``c`` itself, rescaled, is in the master), so the Rayleigh quotient
+    ``E(u) / ||u||_M`` never increases, and the partition keeps growing where the next rounds need
+    it instead of being refined to the end for vectors ``c`` that ICCM is about to leave (late
+    modes took 8-10 exact rounds of ~8 max-flows each). The mode returned is always the output of
+    a certified round that moved ``c`` by at most ``tol``: a fixed point of the exact ICCM map, as
+    with exact rounds only. After :data:`_BUDGET_ROUNDS` budgeted rounds every round is exact;
+    ``opts.max_iter`` caps the exact ones.
+    """
+    rounds = budgeted = inner_iterations = 0
+    gaps: list[float] = []
+    converged = False
+    while rounds < opts.max_iter:
+        budget = _ROUND_FLOWS if restricted and rounds > 0 and budgeted < _BUDGET_ROUNDS else None
+        try:
+            result = solve(c, found, budget, rounds + budgeted == 0)
+        except (RuntimeError, ValueError) as error:
+            raise StageError(f"{name}: subproblem failed in ICCM round {rounds + budgeted + 1}: {error}",
+                             stage=STAGE) from error
+        inner_iterations += result.iterations
+        certified = result.stats.get("certified", True)
+        if budget is None:
+            rounds += 1
+        else:
+            budgeted += 1
+        if certified:
+            gaps.append(result.energy - result.lower_bound)
+        u = result.u / math.sqrt(inner.dot(result.u, result.u))
+        change = float(np.abs(u - c).max()) / max(float(np.abs(c).max()), 1e-300)
+        c = u
+        if change <= opts.tol and certified:
+            converged = True
+            break
+    if not converged:
+        log.warning("%s: %s did not converge in %d ICCM rounds (last change above tol=%g)", STAGE, name,
+                    opts.max_iter, opts.tol)
+    return c, {"rounds": rounds + budgeted, "budgeted_rounds": budgeted, "converged": converged,
+               "inner_iterations": inner_iterations, "max_gap": float(max(gaps, default=float("nan"))),
+               "last_gap": float(gaps[-1]) if gaps else float("nan")}
+
+
+def _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
+    """Scalar modes per distinct axis weight (see the Notes of :func:`modes`).
+
+    Axes with equal weights share one ICCM chain; distinct chains are independent and run in the
+    worker processes of :func:`fracture_cli.system.parallel.ordered_map` (the global ``--jobs``). Each
+    chain has its own random generator and BLAS runs single-threaded in every chain, so the
+    result does not depend on the number of workers.
+    """
+    axis_count = [len(range(a, k, d)) for a in range(d)]
+    chains = []  # (axis that runs the chain, axes it serves, modes to compute)
+    served: set[int] = set()
+    for a in range(d):
+        if a not in served:
+            same = [b for b in range(a, d) if np.array_equal(eta2[:, b], eta2[:, a])]
+            served.update(same)
+            chains.append((a, same, max(axis_count[b] for b in same)))
+    scale = float(areas.mean())
+    tasks = [(face_tets, areas * eta2[:, a], scale, volumes, scalar_init, count, opts, a, d) for a, _, count in chains]
+    results = parallel.ordered_map(_axis_chain, tasks)
+    per_axis_modes: list = [None] * d
+    per_axis_stats: list = [None] * d
+    backend = results[0][2]
+    for (a, same, _), (found, stats, _backend) in zip(chains, results):
+        for b in same:
+            per_axis_modes[b] = found
+            per_axis_stats[b] = stats if b == a else [dict(m, seconds=0.0, replicated=True) for m in stats]
+    t = len(volumes)
+    U = np.zeros((k, t, d))
+    per_mode = []
+    for i in range(k):
+        a, j = i % d, i // d
+        U[i, :, a] = per_axis_modes[a][j][:, 0]
+        per_mode.append(dict(per_axis_stats[a][j]))
+    return U, {**_summary(per_mode), "max_flow_backend": backend, "lp_backend": lp_backend(),
+               "chains": len(chains), "workers": min(len(chains), parallel.current_jobs())}
+
+
+def _axis_chain(_shared, task):
+    """One ICCM chain of scalar modes with face weights ``weights`` (in units of ``weight_scale``).
+
+    Returns the modes, their stats and the max-flow backend. Runs in the caller or in a worker
+    process (BLAS single-threaded either way). ``task`` is ``(face_tets, weights, weight_scale,
+    volumes, scalar_init, count, opts, axis, d)``; :func:`parallel.ordered_map` passes no shared data.
+    """
+    from threadpoolctl import threadpool_limits
+
+    face_tets, weights, weight_scale, volumes, scalar_init, count, opts, axis, d = task
+    t = len(volumes)
+    inner = _MInner(volumes, 1)
+    # Axis 0 keeps the generator of the scalar case; other axes get their own stream.
+    rng = np.random.default_rng(opts.seed + 1 if axis == 0 else (opts.seed + 1, axis))
+    solver = CutSubproblemSolver(face_tets, weights, volumes, tol=opts.inner_tol, max_iter=opts.inner_max_iter,
+                                 weight_scale=weight_scale)
+    label = "" if d == 1 else f" (axis {'xyz'[axis]})"
+    with threadpool_limits(limits=1, user_api="blas"):
+        found, stats = _iccm(lambda c, fixed, budget, first: solver.solve(
+            c, fixed, max_flows=budget, stall_flows=_FIRST_ROUND_STALL if first else None), scalar_init[:, :, None],
+                             count, inner, opts, label, lambda n: rng.uniform(-1.0, 1.0, (t, 1)), restricted=True)
+    return found, stats, solver.max_flow_backend
+
+
+def _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
+    t = len(volumes)
+    inner = _MInner(volumes, d)
+    solver = ConicSubproblemSolver(face_tets, areas, eta2, volumes, tol=opts.inner_tol, max_iter=opts.inner_max_iter,
+                                   weight_scale=float(areas.mean()))
+    starts = []
+    for i in range(k):
+        s = np.zeros((t, d))
+        s[:, i % d] = scalar_init[i // d]
+        starts.append(s)
+    rng = np.random.default_rng(opts.seed + 1)
+    found, per_mode = _iccm(lambda c, fixed, budget, first: solver.solve(c, fixed), starts, k, inner, opts, "",
+                            lambda n: rng.uniform(-1.0, 1.0, (t, d)))
+    return np.stack(found), _summary(per_mode)
+
+
+def _summary(per_mode):
+    return {
+        "iterations": [m["rounds"] for m in per_mode],
+        "converged": [m["converged"] for m in per_mode],
+        "inner_iterations": [m["inner_iterations"] for m in per_mode],
+        "mode_seconds": [m["seconds"] for m in per_mode],
+        "max_gap": max(m["max_gap"] for m in per_mode),
+        "per_mode": per_mode,
+    }

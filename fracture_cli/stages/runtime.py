@@ -1,0 +1,193 @@
+"""The ``runtime`` stage: precompute the impact-projection data a game needs (ALGORITHM.md section 4).
+
+Named ``precompute`` so it is not confused with :mod:`fracture_cli.runtime`, the
+game-side reader of what it writes; the recipe section keeps the name ``runtime``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from fracture_cli.errors import StageError
+from fracture_cli.options import option
+from fracture_cli.runtime.format import UNITS_NOTE, RuntimeData, check_runtime
+from fracture_cli.system import detmath
+from fracture_cli.types import Modes, Pieces, TetMesh
+
+log = logging.getLogger(__name__)
+STAGE = "runtime"
+
+
+@dataclass(frozen=True)
+class RuntimeOptions:
+    """Options of the runtime precomputation.
+
+    Attributes
+    ----------
+    radius : float, optional (default 0.05)
+        Impact radius ``r`` relative to the bounding-box diagonal; the impulse is
+        spread by one implicit diffusion step of time ``tau = r^2``.
+    threshold : float, optional (default 3.0)
+        Default toughness written to the file (games may override it per hit).
+        Dimensionless per unit of impulse: an impulse of magnitude ``m`` breaks
+        the same edges as an impulse of magnitude 1 with threshold ``T / m``.
+        With 3.0 a unit impulse typically splits an object into 2-3 groups
+        (measured on two boxes joined by a neck, k = 6 and 12 modes).
+    """
+
+    radius: float = option(0.05, "impact radius as a fraction of the bounding-box diagonal (diffusion time r^2)",
+                           min=0.0, max=1.0, min_exclusive=True)
+    threshold: float = option(3.0, "default toughness: an edge breaks when the fragments' displacement jump per "
+                                   "unit impulse exceeds it (bigger = harder to break)", min=0.0)
+
+
+def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOptions = RuntimeOptions(),
+            fragment_pieces=None, fragment_names: tuple[str, ...] | None = None,
+            fragment_graph: tuple[np.ndarray, np.ndarray] | None = None) -> RuntimeData:
+    """Compute the contact sites, site-to-mode coefficients ``B`` and piece modes ``W``.
+
+    Parameters
+    ----------
+    tet_mesh : TetMesh
+        The mesh the modes live on (normalized coordinates); its boundary
+        vertices are the contact sites.
+    modes : Modes
+        ``U : (k, t, d)`` M_T-orthonormal fracture modes.
+    pieces : Pieces
+        Atomic pieces: ``W : (k, p, d)``, ``edges : (e, 2)``, ``edge_areas : (e,)``.
+    options : RuntimeOptions, optional
+    fragment_pieces : (f,) int, optional (default ``0..p-1``)
+        The piece of every exported fragment, in the fragments file's order
+        (``[frag.piece for frag in fragments.fragments]``). Pieces without a
+        fragment (regions that miss the input) are left out with their edges:
+        there is no material there to hold fragments together. A piece may
+        hold several fragments (a region cut into separate bodies): each gets
+        the piece's column of ``W``; ``fragment_graph`` is then required.
+    fragment_names : tuple of str, optional (default ``fragment_000``, ...)
+        Node name of every fragment, in the same order.
+    fragment_graph : ((e, 2) int, (e,) float), optional
+        Bonds between fragments measured on their meshes (pairs ``P < Q`` in
+        the fragments' order, sorted; shared fault area in normalized units
+        squared, see :func:`fracture_cli.stages.fragments.bodies.fragment_graph`).
+        Default: the piece graph mapped to the fragments, which may bond
+        fragments that touch only outside the input.
+
+    Returns
+    -------
+    RuntimeData
+        Sites and areas in the input's units; ``B`` and ``W`` scaled so the
+        threshold is a dimensionless toughness (see Notes).
+
+    Notes
+    -----
+    ALGORITHM.md section 4, with the two scalings of section 8 that make the
+    result independent of the mesh and of the asset's size: the impulse is
+    spread as a unit-mass density, and modes are rescaled to unit RMS over the
+    volume. ``B`` for all sites costs ``k d`` solves with one factorization
+    (``M_V + tau K`` is symmetric).
+    """
+    started = time.perf_counter()
+    U = np.asarray(modes.U, dtype=np.float64)
+    W = np.asarray(pieces.W, dtype=np.float64)
+    if U.ndim != 3 or U.shape[1] != tet_mesh.num_tets:
+        raise StageError(f"modes have shape {U.shape}, expected (k, {tet_mesh.num_tets}, d) for this tet mesh",
+                         stage=STAGE)
+    k, t, d = U.shape
+    if W.ndim != 3 or W.shape[0] != k or W.shape[2] != d:
+        raise StageError(f"piece modes W have shape {W.shape}, expected ({k}, p, {d}) to match the modes",
+                         stage=STAGE)
+    W, edges, edge_areas = _restrict_to_fragments(W, pieces, fragment_pieces, fragment_graph)
+    p = W.shape[1]
+    if fragment_names is None:
+        fragment_names = tuple(f"fragment_{j:03d}" for j in range(p))
+    fragment_names = tuple(str(n) for n in fragment_names)
+    if len(fragment_names) != p:
+        raise StageError(f"{len(fragment_names)} fragment names for {p} fragments", stage=STAGE)
+    if not options.radius > 0:
+        raise StageError(f"radius must be > 0, got {options.radius}", stage=STAGE)
+
+    volumes = tet_mesh.tet_volumes
+    total_volume = float(volumes.sum())
+    if not total_volume > 0:
+        raise StageError("tet mesh has no volume", stage=STAGE)
+    sites = tet_mesh.boundary_vertices
+    scale = np.sqrt(total_volume)
+    B = _site_coefficients(tet_mesh, U, detmath.square(float(options.radius)))[sites] * scale
+
+    norm = tet_mesh.normalization
+    data = RuntimeData(
+        sites=norm.to_world(tet_mesh.vertices[sites]).astype(np.float32),
+        B=B.astype(np.float32),
+        W=(W * scale).astype(np.float32),
+        edges=edges.astype(np.int32),
+        edge_areas=(edge_areas * detmath.square(norm.scale)).astype(np.float32),
+        fragment_names=fragment_names,
+        transform=norm.matrix(),
+        default_threshold=float(options.threshold),
+        radius=float(options.radius),
+        units=UNITS_NOTE,
+    )
+    problem = check_runtime(data)
+    if problem:
+        raise StageError(f"runtime data is inconsistent: {problem}", stage=STAGE)
+    log.info("%s: %d sites, %d modes (d=%d), %d fragments, %d edges, radius %.3g, %.2fs", STAGE, len(sites), k, d,
+             p, data.num_edges, options.radius, time.perf_counter() - started)
+    return data
+
+
+def _site_coefficients(tet_mesh: TetMesh, U: np.ndarray, tau: float) -> np.ndarray:
+    """``(M_V + tau K)^{-1} C^T M_T U_i`` at every vertex, (n, k, d): the unit-mass spread of ALGORITHM.md s. 4."""
+    k, t, d = U.shape
+    volumes = tet_mesh.tet_volumes
+    C = sp.csr_matrix(tet_mesh.tet_from_vertex)
+    # Lumped vertex mass built from C and M_T themselves (a quarter of each tet's
+    # volume per corner), so 1^T M_T C = 1^T M_V holds exactly and the impulse
+    # density has unit mass whatever TetMesh.vertex_mass does.
+    vertex_mass = sp.diags(np.asarray(C.T @ volumes).ravel())
+    system = (vertex_mass + tau * tet_mesh.stiffness).tocsc()
+    try:
+        lu = spla.splu(system, permc_spec="MMD_AT_PLUS_A")
+    except RuntimeError as exc:
+        raise StageError(f"cannot factor M_V + tau K ({exc}); is the tet mesh valid?", stage=STAGE) from None
+    # Right-hand sides C^T M_T U_i, one column per (mode, component).
+    weighted = (U * volumes[None, :, None]).transpose(1, 0, 2).reshape(t, k * d)
+    rhs = np.asarray(C.T @ weighted)
+    return lu.solve(np.asfortranarray(rhs)).reshape(-1, k, d)  # (n, k, d)
+
+
+def _restrict_to_fragments(W: np.ndarray, pieces: Pieces, fragment_pieces, fragment_graph=None):
+    """Piece modes in the fragments' order (a piece's column repeated for each of its fragments) and their bonds."""
+    p = W.shape[1]
+    edges = np.asarray(pieces.edges, dtype=np.int64).reshape(-1, 2)
+    areas = np.asarray(pieces.edge_areas, dtype=np.float64).reshape(-1)
+    if fragment_pieces is None and fragment_graph is None:
+        return W, edges, areas
+    order = np.arange(p) if fragment_pieces is None else np.asarray(fragment_pieces, dtype=np.int64).reshape(-1)
+    if len(order) == 0 or order.min() < 0 or order.max() >= p:
+        raise StageError(f"fragment_pieces must list pieces in 0..{p - 1}, got {len(order)} entries", stage=STAGE)
+    if len(np.unique(order)) < p:
+        log.info("%s: %d piece(s) without a fragment left out of the runtime file", STAGE, p - len(np.unique(order)))
+    if fragment_graph is not None:
+        edges = np.asarray(fragment_graph[0], dtype=np.int64).reshape(-1, 2)
+        areas = np.asarray(fragment_graph[1], dtype=np.float64).reshape(-1)
+        if len(edges) and (edges.min() < 0 or edges.max() >= len(order) or np.any(edges[:, 0] >= edges[:, 1])):
+            raise StageError(f"fragment graph edges must be pairs P < Q of fragments 0..{len(order) - 1}",
+                             stage=STAGE)
+        sort = np.lexsort((edges[:, 1], edges[:, 0]))
+        return W[:, order], edges[sort], areas[sort]
+    if len(np.unique(order)) != len(order):
+        raise StageError("several fragments share a piece: the runtime needs their graph (fragment_graph)",
+                         stage=STAGE)
+    fragment_of_piece = np.full(p, -1, dtype=np.int64)
+    fragment_of_piece[order] = np.arange(len(order))
+    mapped = fragment_of_piece[edges]
+    kept = np.all(mapped >= 0, axis=1)
+    mapped, areas = np.sort(mapped[kept], axis=1), areas[kept]
+    sort = np.lexsort((mapped[:, 1], mapped[:, 0]))
+    return W[:, order], mapped[sort], areas[sort]
