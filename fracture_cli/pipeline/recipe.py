@@ -51,7 +51,7 @@ def builtin_recipes_dir() -> Path:
     packaged = resources.files("fracture_cli") / "recipes"
     if packaged.is_dir():
         return Path(str(packaged))
-    return Path(__file__).resolve().parent.parent / "recipes"
+    return Path(__file__).resolve().parents[2] / "recipes"  # fracture_cli/pipeline/recipe.py -> the checkout
 
 
 def search_path(recipes_dir: str | None = None, assets: Iterable[str] = ()) -> list[Path]:

@@ -3,7 +3,7 @@
 TetGen does not always raise on bad input: on a self-intersecting or otherwise
 invalid surface it can abort or crash the whole process (SIGABRT, SIGSEGV). The
 cage search deliberately feeds it surfaces that may be invalid, so every call
-goes to a persistent worker process (``python -m fracture_cli.stages.tetra.tetgen``,
+goes to a persistent worker process (``python -c`` running :func:`serve` of this module,
 talking pickled frames over a pipe). A crash or a timeout kills only the
 worker; the caller gets a :class:`TetGenFailure` and the next call starts a
 fresh worker. A plain subprocess rather than :mod:`multiprocessing` because
@@ -72,7 +72,7 @@ def _write_frame(stream, obj) -> None:
     stream.flush()
 
 
-def _serve() -> None:
+def serve() -> None:
     """Worker loop: read ``(vertices, faces, switches)`` frames, write result frames."""
     # Ctrl-C (SIGINT to the whole process group) is for the parent, which stops the worker itself;
     # dying here would look like a TetGen crash and print a traceback.
@@ -162,7 +162,7 @@ def clean_stale_workdirs(folder: str | None = None) -> list[str]:
 
 
 class _Worker:
-    """One child process running :func:`_serve`, restarted after a crash or timeout."""
+    """One child process running :func:`serve`, restarted after a crash or timeout."""
 
     def __init__(self) -> None:
         self._process: subprocess.Popen | None = None
@@ -170,7 +170,8 @@ class _Worker:
         self._lock = threading.Lock()
 
     def _start(self) -> subprocess.Popen:
-        package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        # The folder holding fracture_cli/ (this file is fracture_cli/stages/tetra/tetgen.py).
+        package_root = os.path.abspath(os.path.join(os.path.dirname(__file__), os.pardir, os.pardir, os.pardir))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH", "")) if p)
         # TetGen writes debug files (tetgen-tmpfile_skipped.*) into its working
@@ -178,7 +179,7 @@ class _Worker:
         clean_stale_workdirs()
         self._workdir = tempfile.TemporaryDirectory(prefix=f"{_WORKDIR_PREFIX}{os.getpid()}-")
         self._process = subprocess.Popen(
-            [sys.executable, "-m", "fracture_cli.stages.tetra.tetgen"],
+            [sys.executable, "-c", "from fracture_cli.stages.tetra.tetgen import serve; serve()"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
             cwd=self._workdir.name,
         )
@@ -338,4 +339,4 @@ def shutdown() -> None:
 
 
 if __name__ == "__main__":
-    _serve()
+    serve()
