@@ -12,7 +12,16 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import field
-from typing import Any
+from typing import Any, ClassVar, Protocol
+
+# What a recipe key or a flag can hold (TOML scalars and lists of them).
+OptionValue = bool | int | float | str | list | tuple | None
+
+
+class StageOptions(Protocol):
+    """Every stage's options: a frozen dataclass of :func:`option` fields (one class per stage)."""
+
+    __dataclass_fields__: ClassVar[dict[str, Any]]
 
 
 def option(default: Any, help: str, *, min: float | None = None, max: float | None = None,
@@ -45,7 +54,7 @@ def check_value(options_cls, name: str, value: Any) -> str | None:
     """Return why ``value`` is not allowed for option ``name``, or None if it is."""
     fields = {f.name: f for f in option_fields(options_cls)}
     if name not in fields:
-        return f"unknown option '{name}'; valid: {', '.join(sorted(fields))}"
+        return f"{name}: unknown option; valid: {', '.join(sorted(fields))}"
     f = fields[name]
     meta = f.metadata
     default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[operator]

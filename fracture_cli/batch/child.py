@@ -62,11 +62,11 @@ def _impacts(job: BakeJob, inputs: tuple[InputFile, ...], seed: int):
     from fracture_cli.batch.impacts import asset_impacts
     from fracture_cli.io.inputs import input_files, recording_reads
     from fracture_cli.runtime.format import load_runtime
-    from fracture_cli.stages.load import load_surface
+    from fracture_cli.stages.load import LoadOptions, load_surface
 
     data = load_runtime(os.path.join(job.out_dir, f"{job.stem}.fracture.json"))
     with recording_reads() as reads:
-        surface = load_surface(job.input_path, job.recipe["load"])
+        surface = load_surface(job.input_path, job.recipe.section("load", LoadOptions))
     now = {f.name: f.sha256 for f in as_read(job.input_path, reads.as_read(input_files(job.input_path)))}
     baked = {f.name: f.sha256 for f in inputs}
     # Files on one side only mean another listing, hence another asset file: its own hash differs then.

@@ -26,9 +26,22 @@ from fracture_cli.system import interrupts, parallel, progress
 if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help` imports neither
     import numpy as np
 
+    from fracture_cli.options import StageOptions
     from fracture_cli.pipeline.cache import StageCache
     from fracture_cli.runtime.format import RuntimeData
+    from fracture_cli.stages.cage import CageOptions
+    from fracture_cli.stages.collision.convex import CollisionOptions
+    from fracture_cli.stages.fragments import FragmentOptions
+    from fracture_cli.stages.load import LoadOptions
+    from fracture_cli.stages.material import MaterialOptions
+    from fracture_cli.stages.modes import ModesOptions
+    from fracture_cli.stages.pieces import PiecesOptions
+    from fracture_cli.stages.repair import RepairOptions
     from fracture_cli.stages.repair.records import RepairRecord
+    from fracture_cli.stages.runtime import RuntimeOptions
+    from fracture_cli.stages.simplify import SimplifyOptions
+    from fracture_cli.stages.smooth import SmoothOptions
+    from fracture_cli.stages.tetra import TetraOptions
     from fracture_cli.types import Cage, Fragments, Modes, Pieces, Regions, SurfaceMesh, TetMesh
 
 log = logging.getLogger(__name__)
@@ -138,7 +151,7 @@ class Stage:
 # ---------------------------------------------------------------------------
 # What each stage calls. Imports are local so `fracture --help` does not load the geometry stack.
 
-def _load(state: PipelineState, options: Any) -> PipelineState:
+def _load(state: PipelineState, options: LoadOptions) -> PipelineState:
     from fracture_cli.io.inputs import digest_of, input_files, recording_reads
     from fracture_cli.stages.load import load_surface
 
@@ -152,7 +165,7 @@ def _load(state: PipelineState, options: Any) -> PipelineState:
                                source_files=files)
 
 
-def _repair(state: PipelineState, options: Any) -> PipelineState:
+def _repair(state: PipelineState, options: RepairOptions) -> PipelineState:
     from fracture_cli.stages.repair import repair_surface
 
     # Cage and fragments both use the repaired solid, so they agree on what is inside.
@@ -160,31 +173,31 @@ def _repair(state: PipelineState, options: Any) -> PipelineState:
     return dataclasses.replace(state, surface=result.surface, repairs=result.records)
 
 
-def _cage(state: PipelineState, options: Any) -> PipelineState:
+def _cage(state: PipelineState, options: CageOptions) -> PipelineState:
     from fracture_cli.stages.cage import cage
 
     return dataclasses.replace(state, cage=cage(state.need("surface", "cage"), options))
 
 
-def _tetra(state: PipelineState, options: Any) -> PipelineState:
+def _tetra(state: PipelineState, options: TetraOptions) -> PipelineState:
     from fracture_cli.stages.tetra import tetra
 
     return dataclasses.replace(state, tet_mesh=tetra(state.need("cage", "tetra"), options))
 
 
-def _material(state: PipelineState, options: Any) -> PipelineState:
+def _material(state: PipelineState, options: MaterialOptions) -> PipelineState:
     from fracture_cli.stages.material import material
 
     return dataclasses.replace(state, eta=material(state.need("tet_mesh", "material"), state.surface, options))
 
 
-def _modes(state: PipelineState, options: Any) -> PipelineState:
+def _modes(state: PipelineState, options: ModesOptions) -> PipelineState:
     from fracture_cli.stages.modes import modes
 
     return dataclasses.replace(state, modes=modes(state.need("tet_mesh", "modes"), options, eta=state.eta))
 
 
-def _pieces(state: PipelineState, options: Any) -> PipelineState:
+def _pieces(state: PipelineState, options: PiecesOptions) -> PipelineState:
     from fracture_cli.stages.pieces import pieces
 
     # Piece sizes are measured in asset volume: the repaired surface says what is material.
@@ -192,14 +205,14 @@ def _pieces(state: PipelineState, options: Any) -> PipelineState:
     return dataclasses.replace(state, pieces=result)
 
 
-def _smooth(state: PipelineState, options: Any) -> PipelineState:
+def _smooth(state: PipelineState, options: SmoothOptions) -> PipelineState:
     from fracture_cli.stages.smooth import smooth
 
     regions = smooth(state.need("tet_mesh", "smooth"), state.need("pieces", "smooth"), options, surface=state.surface)
     return dataclasses.replace(state, regions=regions)
 
 
-def _fragments(state: PipelineState, options: Any) -> PipelineState:
+def _fragments(state: PipelineState, options: FragmentOptions) -> PipelineState:
     from fracture_cli.stages.fragments import fragments_with_split
 
     surface = state.need("surface", "fragments")
@@ -231,7 +244,7 @@ def _checked(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments, dict[st
     return frags, checks
 
 
-def _simplify(state: PipelineState, options: Any) -> PipelineState:
+def _simplify(state: PipelineState, options: SimplifyOptions) -> PipelineState:
     from fracture_cli.stages.simplify import simplify, skipped, triangle_budget
 
     surface, frags = state.need("surface", "simplify"), state.need("fragments", "simplify")
@@ -247,7 +260,7 @@ def _simplify(state: PipelineState, options: Any) -> PipelineState:
     return dataclasses.replace(state, fragments=frags, checks=checks)
 
 
-def _collision(state: PipelineState, options: Any) -> PipelineState:
+def _collision(state: PipelineState, options: CollisionOptions) -> PipelineState:
     from fracture_cli.io.physics import fragment_physics
     from fracture_cli.stages.collision import collision
 
@@ -258,7 +271,7 @@ def _collision(state: PipelineState, options: Any) -> PipelineState:
     return dataclasses.replace(state, collision=parts, physics=physics, checks={**(state.checks or {}), **checks})
 
 
-def _runtime(state: PipelineState, options: Any) -> PipelineState:
+def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     from fracture_cli.io.physics import fragment_physics, runtime_arrays
     from fracture_cli.io.write import fragment_name
     from fracture_cli.stages.fragments.bodies import fragments_graph
@@ -353,11 +366,11 @@ class Runner:
         self.cache = cache
         self.jobs = jobs
         self.seconds: dict[str, float] = {}
-        self.options: dict[str, Any] = {}
+        self.options: dict[str, StageOptions] = {}
         self._step = 0
         self._key: str | None = None  # cache key of everything run so far
 
-    def run(self, name: str, state: PipelineState, options: Any) -> PipelineState:
+    def run(self, name: str, state: PipelineState, options: StageOptions) -> PipelineState:
         """Run stage ``name`` on ``state`` with ``options``; returns the new state."""
         row = stage(name)
         key = self._cache_key(row, state, options)
@@ -381,7 +394,7 @@ class Runner:
         """A context that logs, times and shows progress of one step (a stage or ``export``)."""
         return _timed_step(self, name)
 
-    def _cache_key(self, row: Stage, state: PipelineState, options: Any) -> str | None:
+    def _cache_key(self, row: Stage, state: PipelineState, options: StageOptions) -> str | None:
         if self.cache is None:
             return None
         from fracture_cli.pipeline.cache import cache_key

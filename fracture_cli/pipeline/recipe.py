@@ -31,13 +31,14 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from fracture_cli.errors import RecipeError
-from fracture_cli.options import check_value, option_fields
+from fracture_cli.options import OptionValue, StageOptions, check_value, option_fields
 from fracture_cli.pipeline import STAGE_NAMES, stage
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 
 # The recipe sections, in pipeline order: one per stage of the pipeline table.
 SECTIONS: tuple[str, ...] = STAGE_NAMES
@@ -98,11 +99,18 @@ class Recipe:
 
     name: str
     description: str
-    options: dict[str, Any] = field(default_factory=dict)
+    options: dict[str, StageOptions] = field(default_factory=dict)
     chain: tuple[str, ...] = ()
 
-    def __getitem__(self, section: str) -> Any:
+    def __getitem__(self, section: str) -> StageOptions:
         return self.options[section]
+
+    def section(self, section: str, kind: type[T]) -> T:
+        """The options of ``section``, typed as the stage's options class ``kind``."""
+        options = self.options[section]
+        if not isinstance(options, kind):
+            raise TypeError(f"recipe section {section!r} holds {type(options).__name__}, not {kind.__name__}")
+        return options
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         """Resolved parameters as plain data (for reports and ``recipes show``)."""
@@ -181,7 +189,7 @@ def _raw_chain(name_or_path: str, search: Sequence[Path], seen: tuple[str, ...] 
                                 asked_by=path)
 
 
-def _coerce(section: str, key: str, value: Any, where: str | None) -> Any:
+def _coerce(section: str, key: str, value: OptionValue, where: str | None) -> OptionValue:
     cls = options_class(section)
     fields = {f.name: f for f in option_fields(cls)}
     if key in fields:
@@ -212,7 +220,7 @@ def _current_key(section: str, key: str, where: str | None) -> str | None:
     return None
 
 
-def parse_override(text: str) -> tuple[str, str, Any]:
+def parse_override(text: str) -> tuple[str, str, OptionValue]:
     """Parse ``section.key=value`` (value in TOML syntax; bare words are strings)."""
     if "=" not in text or "." not in text.split("=", 1)[0]:
         raise RecipeError(f"--set '{text}' must look like section.key=value (e.g. modes.num_modes=16)")
