@@ -187,6 +187,23 @@ def test_no_module_over_500_lines():
     assert long == {}
 
 
+def test_every_stage_has_its_home():
+    from fracture_cli.pipeline import STAGES
+
+    homes = {row.name: (PACKAGE / "stages" / f"{row.name}.py", PACKAGE / "stages" / row.name / "__init__.py")
+             for row in STAGES}
+    assert [name for name, (file, package) in homes.items() if not (file.exists() or package.exists())] == []
+
+
+def test_readme_package_map_names_every_package():
+    readme = (PACKAGE.parent / "README.md").read_text(encoding="utf-8")
+    block = readme[readme.index("    fracture_cli/   the package"):readme.index("    recipes/ ")]
+    top = sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists())
+    assert [name for name in top if f"  {name}/ " not in block] == []
+    stage_packages = sorted(p.name for p in (PACKAGE / "stages").iterdir() if (p / "__init__.py").exists())
+    assert [name for name in stage_packages if f"{name}/" not in block] == []
+
+
 if __name__ == "__main__":
     g = graph()
     for c in cycles(_edges(g)):

@@ -12,7 +12,7 @@ import logging
 import manifold3d
 import numpy as np
 
-from fracture_cli.checks.faultshape import fragment_faults
+from fracture_cli.checks.faultshape import fault_shape, fragment_faults
 from fracture_cli.errors import StageError
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.rows import unique_rows
@@ -21,6 +21,9 @@ from fracture_cli.system import parallel
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, SurfaceMesh
 
 log = logging.getLogger(__name__)
+
+# Report values of the fragment checks: numbers and flags.
+CheckValue = float | int | bool
 
 # A bake fails when the fragments' volumes differ from the input solid's by more than this fraction
 # (they are exact booleans of it: the error is rounding, ~1e-9, plus zero-volume slivers dropped).
@@ -335,3 +338,36 @@ def _on_vertices(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray
     row = np.dtype((np.void, 3 * np.dtype(np.float64).itemsize))
     keys = np.ascontiguousarray(points, dtype=np.float64).view(row).reshape(-1)
     return np.isin(keys, np.ascontiguousarray(V[used], dtype=np.float64).view(row).reshape(-1))
+
+
+def checked_fragments(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments, dict[str, CheckValue]]:
+    """The fragments as they will be written and the report's checks of them; a broken fragment stops the bake.
+
+    The one place the report's ``checks`` of the fragments are assembled (the ``fragments`` and
+    ``simplify`` stages call it; later stages add their own keys, e.g. ``collision_*``).
+
+    Parameters
+    ----------
+    surface : SurfaceMesh
+        The solid the fragments were cut from.
+    frags : Fragments
+        The fragments, with their pivot rule.
+
+    Returns
+    -------
+    Fragments, dict of str -> CheckValue
+        The fragments without faces their written positions collapse, and the checks.
+    """
+    # Checked as they will be written (float32 about each pivot).
+    frags, written = written_fragments(frags, frags.pivot)
+    require_sound(written)
+    faults = fragment_faults(frags)  # the overlap check's fragment graph and the fault shape both read them
+    checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written, faults=faults))
+    require_volume(checks)
+    scale = surface.normalization.scale
+    checks["input_volume"] = float(frags.input_volume * (scale * scale * scale))
+    # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
+    shape = fault_shape(*faults)
+    checks["fault_mean_dihedral_degrees"] = round(shape["mean_dihedral_degrees"], 6)
+    checks["fault_crease_density"] = round(shape["crease_density"], 6)
+    return frags, checks

@@ -26,6 +26,7 @@ from fracture_cli.system import interrupts, parallel, progress
 if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help` imports neither
     import numpy as np
 
+    from fracture_cli.checks import CheckValue
     from fracture_cli.options import StageOptions
     from fracture_cli.pipeline.cache import StageCache
     from fracture_cli.runtime.format import RuntimeData
@@ -46,8 +47,6 @@ if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help`
 
 log = logging.getLogger(__name__)
 
-# Report values of the fragment checks: numbers and flags.
-CheckValue = float | int | bool
 
 
 @dataclass(frozen=True)
@@ -213,44 +212,26 @@ def _smooth(state: PipelineState, options: SmoothOptions) -> PipelineState:
 
 
 def _fragments(state: PipelineState, options: FragmentOptions) -> PipelineState:
+    from fracture_cli.checks import checked_fragments
     from fracture_cli.stages.fragments import fragments_with_split
 
     surface = state.need("surface", "fragments")
     frags, split = fragments_with_split(surface, state.need("regions", "fragments"), options)
-    frags, checks = _checked(surface, dataclasses.replace(frags, pivot=options.pivot))
+    frags, checks = checked_fragments(surface, dataclasses.replace(frags, pivot=options.pivot))
     # Cuts that fell apart: bodies that became fragments of their own, and tiny ones glued to a neighbour.
     checks["split_bodies"] = sum(split.bodies) - len(split.bodies) - split.merged
     checks["merged_bodies"] = split.merged
     return dataclasses.replace(state, fragments=frags, checks=checks)
 
 
-def _checked(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments, dict[str, CheckValue]]:
-    """The fragments as they will be written and the report's checks; a broken fragment stops the bake here."""
-    from fracture_cli.checks import fragment_invariants, require_sound, require_volume, written_fragments
-    from fracture_cli.checks.faultshape import fault_shape, fragment_faults
-
-    # Checked as they will be written (float32 about each pivot).
-    frags, written = written_fragments(frags, frags.pivot)
-    require_sound(written)
-    faults = fragment_faults(frags)  # the overlap check's fragment graph and the fault shape both read them
-    checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written, faults=faults))
-    require_volume(checks)
-    scale = surface.normalization.scale
-    checks["input_volume"] = float(frags.input_volume * (scale * scale * scale))
-    # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.
-    shape = fault_shape(*faults)
-    checks["fault_mean_dihedral_degrees"] = round(shape["mean_dihedral_degrees"], 6)
-    checks["fault_crease_density"] = round(shape["crease_density"], 6)
-    return frags, checks
-
-
 def _simplify(state: PipelineState, options: SimplifyOptions) -> PipelineState:
+    from fracture_cli.checks import checked_fragments
     from fracture_cli.stages.simplify import simplify, skipped, triangle_budget
 
     surface, frags = state.need("surface", "simplify"), state.need("fragments", "simplify")
     before = sum(len(f.faces) for f in frags.fragments)
     if not skipped(surface, options):
-        frags, checks = _checked(surface, simplify(frags, surface, options)[0])
+        frags, checks = checked_fragments(surface, simplify(frags, surface, options)[0])
     else:
         checks = dict(state.checks or {})
     # Triangle counts as written, against the budget of issue 20 (input = the solid that was cut).
