@@ -197,12 +197,14 @@ class TetMesh:
     @cached_property
     def tet_volumes(self) -> np.ndarray:
         """(t,) float64 signed volumes; positive for a valid mesh."""
+        # scipy loads on first use, not with the types
         from fracture_cli.geometry import tetgeom
 
         return tetgeom.tet_volumes(self.vertices, self.tets)
 
     @cached_property
     def _faces(self):
+        # scipy loads on first use, not with the types
         from fracture_cli.geometry import tetgeom
 
         return tetgeom.tet_faces(self.tets)
@@ -230,6 +232,7 @@ class TetMesh:
     @cached_property
     def interior_face_areas(self) -> np.ndarray:
         """(f,) float64 areas of the interior faces."""
+        # scipy loads on first use, not with the types
         from fracture_cli.geometry import tetgeom
 
         return tetgeom.triangle_areas(self.vertices, self.interior_faces)
@@ -237,6 +240,7 @@ class TetMesh:
     @cached_property
     def interior_face_normals(self) -> np.ndarray:
         """(f, 3) float64 unit normals of interior faces, pointing from tet 0 to tet 1."""
+        # scipy loads on first use, not with the types
         from fracture_cli.geometry import tetgeom
 
         return tetgeom.interior_face_normals(self.vertices, self.tets, self.interior_faces, self.interior_face_tets)
@@ -249,6 +253,7 @@ class TetMesh:
     @cached_property
     def stiffness(self) -> sp.csr_matrix:
         """(n, n) positive semi-definite cotangent stiffness matrix ``K``."""
+        # scipy loads on first use, not with the types
         from fracture_cli.geometry import tetgeom
 
         return tetgeom.stiffness_matrix(self.vertices, self.tets)
@@ -256,6 +261,7 @@ class TetMesh:
     @cached_property
     def vertex_mass(self) -> sp.dia_matrix:
         """(n, n) lumped (diagonal) vertex mass matrix ``M_V``."""
+        # scipy loads on first use, not with the types
         from fracture_cli.geometry import tetgeom
 
         return tetgeom.lumped_mass(self.vertices, self.tets)
@@ -263,6 +269,7 @@ class TetMesh:
     @cached_property
     def tet_from_vertex(self) -> sp.csr_matrix:
         """(t, n) averaging operator ``C``: each tet takes the mean of its 4 vertices."""
+        # scipy loads on first use, not with the types
         from fracture_cli.geometry import tetgeom
 
         return tetgeom.tet_from_vertex(self.tets, self.num_vertices)

@@ -161,6 +161,57 @@ def private(g: dict[str, list[tuple[str, str, int]]]) -> list[str]:
     return bad
 
 
+def _import_blocks(tree: ast.AST):
+    """(first line, last line, [ImportFrom of fracture_cli ...]) per block inside a function (1-based lines)."""
+    out = []
+
+    def lists(node):
+        for name in ("body", "orelse", "finalbody"):
+            seq = getattr(node, name, None)
+            if isinstance(seq, list) and seq and isinstance(seq[0], ast.stmt):
+                yield seq
+        for h in getattr(node, "handlers", []) or []:
+            yield h.body
+
+    def visit(node, inside):
+        for seq in lists(node):
+            block = []
+            for stmt in seq + [None]:
+                if isinstance(stmt, (ast.Import, ast.ImportFrom)):
+                    block.append(stmt)
+                    continue
+                ours = [n for n in block if isinstance(n, ast.ImportFrom) and (n.module or "").startswith(
+                    "fracture_cli")]
+                if inside and ours:
+                    out.append((block[0].lineno, block[-1].end_lineno, ours))
+                block = []
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.If) and getattr(child.test, "id", None) == "TYPE_CHECKING":
+                continue
+            visit(child, inside or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)))
+
+    visit(tree, False)
+    return sorted({(a, b): (a, b, c) for a, b, c in out}.values(), key=lambda t: t[0])
+
+
+def _uncommented(text: str):
+    lines = text.splitlines()
+    bad = []
+    for first, last, ours in _import_blocks(ast.parse(text)):
+        prev = lines[first - 2].strip() if first >= 2 else ""
+        if prev.startswith("#") or any("#" in lines[i - 1] for i in range(first, last + 1)):
+            continue
+        bad.append((first, ours))
+    return bad
+
+
+def test_function_level_imports_say_why():
+    """Imports inside functions exist for start-up time (or to load a heavy dependency only when used): each
+    block of them says so in a comment."""
+    bad = [f"{m}:{line}" for m, p in modules().items() for line, _ in _uncommented(p.read_text(encoding="utf-8"))]
+    assert bad == []
+
+
 def test_every_layer_is_declared():
     assert {layer(m) for m in modules()} <= set(RANK)
 

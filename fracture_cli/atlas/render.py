@@ -33,6 +33,7 @@ WIDTH, HEIGHT = 1500, 1000
 
 def fragment_triangles(glb_path: str, names: tuple[str, ...]) -> list[FragmentGeometry] | None:
     """Outer and interior triangles of each fragment (in ``names`` order) from the GLB; None if one is missing."""
+    # on first use: the atlas loads the renderer only for a PNG
     from fracture_cli.io.gltf import glb_meshes, read_glb_chunks
 
     doc, binary = read_glb_chunks(glb_path)
@@ -184,6 +185,7 @@ def render_atlas(data: RuntimeData, layout: FragmentLayout, site_d1: np.ndarray,
     import matplotlib
 
     matplotlib.use("Agg")
+    # on first use: the atlas loads the renderer only for a PNG
     import matplotlib.pyplot as plt
     from matplotlib.cm import ScalarMappable
 

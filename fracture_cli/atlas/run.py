@@ -149,6 +149,7 @@ def run_atlas(runtime_json_path: str | os.PathLike, *, sites: int = DEFAULT_SITE
     }
     written = None
     if png_path is not None:
+        # on first use: the atlas loads the renderer only for a PNG
         from fracture_cli.atlas.render import render_atlas
 
         site_d1 = site_first_detachments(data, layout.asset_center(data), criterion)

@@ -34,6 +34,7 @@ class BakeOutcome:
 
 def output_names(stem: str) -> tuple[str, ...]:
     """File names a bake of ``stem`` may publish (checked against the inputs before any work)."""
+    # on first use: the batch driver starts light; workers load the stages
     from fracture_cli.io.outputs import all_names
 
     return all_names(stem)
@@ -47,6 +48,7 @@ def bake_asset(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | N
     FractureError
         Bad input or a stage that could not finish; nothing is published then.
     """
+    # on first use: the batch driver starts light; workers load the stages
     from fracture_cli.pipeline.bake import bake
 
     # One process per asset: the batch's parallelism is across assets (one Dask worker per core),

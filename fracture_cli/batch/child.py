@@ -59,6 +59,7 @@ class _Collect(logging.Handler):
 
 def _impacts(job: BakeJob, inputs: tuple[InputFile, ...], seed: int):
     """The dataset rows of an asset, from the input read again: refused if it is not the input baked."""
+    # on first use: the batch driver starts light; workers load the stages
     from fracture_cli.batch.impacts import asset_impacts
     from fracture_cli.io.inputs import input_files, recording_reads
     from fracture_cli.runtime.format import load_runtime

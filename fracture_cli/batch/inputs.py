@@ -55,6 +55,7 @@ def dependency_files(path: str) -> list[str]:
     the cache key and the output preflight use too), so a batch never decides
     "up to date" from a different set of files than the bake reads.
     """
+    # on first use: the batch driver starts light; workers load the stages
     from fracture_cli.io.inputs import input_files
 
     return sorted({os.path.abspath(p) for p in input_files(path)[1:]} - {os.path.abspath(path)})
@@ -86,6 +87,7 @@ def hash_inputs(path: str, previous: dict[str, InputFile] | None = None,
     besides the listed companions (a texture trimesh found by another path),
     so the key is taken over the same files the last bake's key was.
     """
+    # on first use: the batch driver starts light; workers load the stages
     from fracture_cli.io.inputs import companion_or_none
 
     folder = os.path.dirname(os.path.abspath(path))

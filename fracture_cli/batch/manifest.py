@@ -282,6 +282,7 @@ def resolve_assets(manifest: Manifest, out_root: str, overrides: tuple[str, ...]
         mesh, an unknown recipe or bad override, an asset outside the
         manifest's folder, or two assets that would write the same outputs.
     """
+    # on first use: the batch driver starts light; workers load the stages
     from fracture_cli.stages.load import READERS
 
     out_root = os.path.abspath(out_root)

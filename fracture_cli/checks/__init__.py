@@ -61,6 +61,7 @@ def written_fragments(fragments: Fragments, pivot: str = "center_of_mass") -> tu
 
 def _written_fragment(shared: tuple[Fragments, str], index: int) -> tuple[Fragment | None, MeshCheck]:
     """Fragment ``index`` without the faces its written positions collapse (None: none do) and its check."""
+    # numba kernels load on first use
     from fracture_cli.io.physics import fragment_physics
 
     fragments, pivot = shared
@@ -117,6 +118,7 @@ def require_sound(checks: list[MeshCheck]) -> None:
         written) and what is wrong with it. Nothing has been written yet, so
         earlier outputs stay as they were.
     """
+    # numba kernels load on first use
     from fracture_cli.io.write import fragment_name
 
     bad = [i for i, c in enumerate(checks) if not c.watertight]

@@ -39,6 +39,7 @@ def main(argv: list[str] | None = None) -> None:
         signal.signal(signal.SIGTERM, _terminated)
     try:
         try:
+            # on first use: keeps `fracture` start-up light
             from fracture_cli.cli.commands import cli
         except BaseException as exc:  # noqa: BLE001  (an interrupt while the tool loads: any exception it became)
             if isinstance(exc, SystemExit) or not interrupts.caused_by_interrupt(exc):
@@ -60,6 +61,7 @@ def _run(cli: Any, argv: list[str] | None) -> int:
     usage errors, and a Ctrl-C or a closed stdout outside any command, which
     click would report as "Aborted!" or a broken pipe with exit code 1.
     """
+    # on first use: keeps `fracture` start-up light
     import click
 
     from fracture_cli.cli.group import quiet_broken_pipe, stdout_closed

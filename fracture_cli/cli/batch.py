@@ -17,6 +17,7 @@ from fracture_cli.errors import FractureError, UsageError
 
 def _options(meta: dict[str, Any], out_dir: str, scheduler: str | None, workers: int | None, timeout: float,
              impacts: int, cache_dir: str | None, overrides: tuple[str, ...], force: bool, verbose: bool) -> Any:
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.batch.runner import BatchOptions
 
     if scheduler and workers is not None:
@@ -28,6 +29,7 @@ def _options(meta: dict[str, Any], out_dir: str, scheduler: str | None, workers:
 
 
 def _run(manifest: str, options: Any, as_json: bool, quiet: bool, debug: bool) -> None:
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.batch.report import summary_text, to_json
     from fracture_cli.batch.runner import batch_files, run_batch
 

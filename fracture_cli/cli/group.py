@@ -124,6 +124,7 @@ class Step:
 
 def guard_chain(processors: list[Processor | None]) -> None:
     """Refuse a chain whose outputs would replace a file it reads or a published bake set's file."""
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.io.inputs import input_files
     from fracture_cli.io.preflight import guard_outputs
     from fracture_cli.io.write import surface_outputs
@@ -154,6 +155,7 @@ def _root_meta() -> dict[str, Any]:
 
 def active_recipe(assets: tuple[str, ...] = ()) -> Any:
     """The recipe the command line chose (``-r``, ``--set``, ``--recipes``), loaded once."""
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.pipeline.recipe import load_recipe, search_path
 
     meta = _root_meta()
@@ -200,6 +202,7 @@ class FractureGroup(click.Group):
             _interrupted()
 
     def invoke(self, ctx: click.Context) -> Any:
+        # on first use: keeps `fracture` start-up light
         from fracture_cli.io.outputs import forget_published
 
         forget_published()  # the Ctrl-C message lists only this run's outputs
@@ -210,6 +213,7 @@ class FractureGroup(click.Group):
         except KeyboardInterrupt:
             _interrupted()
         except Exception as exc:  # FractureError: one line; anything else is a bug: one line unless --debug
+            # on first use: keeps `fracture` start-up light
             from fracture_cli.pipeline.bake import describe_error
 
             if caused_by_interrupt(exc):  # an interrupt that surfaced as another error (a native import that failed)
@@ -224,6 +228,7 @@ class FractureGroup(click.Group):
 
 def _interrupted() -> NoReturn:
     """End the command as interrupted: one truthful line (what was published), exit code 130."""
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.io.outputs import interrupt_message
 
     click.echo(f"fracture: {interrupt_message()}", err=True)
@@ -365,6 +370,7 @@ def _file_command(name: str, doc: str, run: Callable[[Chain, str], None], access
 
 
 def _save(chain: Chain, path: str) -> None:
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.io.write import save_surface
 
     save_surface(path, chain.state.need("surface", "save"))
@@ -372,24 +378,28 @@ def _save(chain: Chain, path: str) -> None:
 
 
 def _save_cage(chain: Chain, path: str) -> None:
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.io.cage_io import save_cage
 
     save_cage(path, chain.state.need("cage", "save-cage"))
 
 
 def _save_tets(chain: Chain, path: str) -> None:
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.io.cage_io import save_tetmesh
 
     save_tetmesh(path, chain.state.need("tet_mesh", "save-tets"))
 
 
 def _load_tets(chain: Chain, path: str) -> None:
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.io.cage_io import load_tetmesh
 
     chain.state = dataclasses.replace(chain.state, tet_mesh=load_tetmesh(path))
 
 
 def _export(chain: Chain, out_dir: str) -> None:
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.pipeline.bake import build_report, stem_of, write_outputs
 
     state = chain.state

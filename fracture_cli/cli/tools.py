@@ -58,6 +58,7 @@ def bake_cmd(ctx: click.Context, inputs: tuple[str, ...], out_dir: str, recipe_n
         preview = True
 
     def process(chain: Chain) -> None:
+        # on first use: keeps `fracture` start-up light
         from fracture_cli.pipeline.bake import bake_many
 
         recipe = active_recipe(inputs)
@@ -96,6 +97,7 @@ def recipes_cmd(action: str, name: str | None, overrides: tuple[str, ...]) -> Pr
     """List the destructible materials, or 'recipes show NAME' for one's resolved parameters."""
 
     def process(chain: Chain) -> None:
+        # on first use: keeps `fracture` start-up light
         from fracture_cli.pipeline.recipe import list_recipes, load_recipe, search_path
 
         meta = click.get_current_context().find_root().meta
@@ -143,6 +145,7 @@ def impact_cmd(runtime_file: str, point: tuple[float, float, float], impulse: tu
     """
 
     def process(chain: Chain) -> None:
+        # on first use: keeps `fracture` start-up light
         import numpy as np
 
         from fracture_cli.io.regroup import group_name
@@ -172,6 +175,7 @@ def impact_cmd(runtime_file: str, point: tuple[float, float, float], impulse: tu
             for name, members in groups.items():
                 click.echo(f"{name}: {' '.join(members)}")
         if out_glb:
+            # on first use: keeps `fracture` start-up light
             from fracture_cli.io.regroup import write_groups_glb
 
             glb = runtime_file[: -len(".fracture.json")] + ".glb" if runtime_file.endswith(".fracture.json") else None
@@ -179,6 +183,7 @@ def impact_cmd(runtime_file: str, point: tuple[float, float, float], impulse: tu
                 raise UsageError(f"cannot find the fragments file next to {runtime_file} (expected <stem>.glb)")
             write_groups_glb(glb, result.groups, out_glb, fragment_names=data.fragment_names)
         if out_png:
+            # on first use: keeps `fracture` start-up light
             from fracture_cli.view.preview import render_preview
 
             render_preview(runtime_file, out_png, impact=(point, impulse, threshold))
@@ -196,6 +201,7 @@ def preview_cmd(runtime_file: str, out_png: str, size: tuple[int, int]) -> Proce
     """Render a PNG of a bake: input, exploded fragments, modes, an example impact."""
 
     def process(chain: Chain) -> None:
+        # on first use: keeps `fracture` start-up light
         from fracture_cli.view.preview import render_preview
 
         check_preview_size(size, "--size")
@@ -214,6 +220,7 @@ def guard_beside(runtime_file: str, outputs: list[str], *, glb: bool, report: bo
     OutputError
         An output would replace one of them, or a file of a published bake set.
     """
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.io.preflight import guard_outputs
     from fracture_cli.runtime.format import runtime_files
 
@@ -246,6 +253,7 @@ def view_cmd(path: str, port: int, host: str, no_browser: bool) -> Processor:
     """
 
     def process(chain: Chain) -> None:
+        # on first use: keeps `fracture` start-up light
         import sys
 
         from fracture_cli.view.assets import list_assets, resolve_source

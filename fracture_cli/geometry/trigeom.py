@@ -178,6 +178,7 @@ def face_components(F: np.ndarray) -> int:
     Faces are joined when they use the same two vertex ids as an edge, in either direction and however many
     faces share it; faces that meet only at a vertex are not. Compiled, as :func:`vertex_manifold`.
     """
+    # numba kernels load on first use
     from fracture_cli.geometry.trigeom_topology import edge_components
 
     F = np.ascontiguousarray(F, dtype=np.int64).reshape(-1, 3)
@@ -364,6 +365,7 @@ def self_intersections_among(V: np.ndarray, F: np.ndarray, faces: np.ndarray,
     if len(faces) == 0 or len(F) < 2:
         return np.zeros((0, 2), dtype=np.int64)
     boxes = triangle_boxes(V, F)
+    # numba kernels load on first use
     from fracture_cli.geometry import trigeom_grid
 
     pairs = trigeom_grid.among_pairs(boxes, *_grid_cells(boxes), faces)
@@ -386,6 +388,7 @@ def _cell_range(boxes: np.ndarray, origin: np.ndarray, cell: float) -> tuple[np.
 
 def _intersecting_pairs(V: np.ndarray, F: np.ndarray, i: np.ndarray, j: np.ndarray, fold_cos: float) -> np.ndarray:
     """Of the candidate face pairs ``(i, j)`` (p,), those that intersect other than along shared corners/edges."""
+    # numba kernels load on first use
     from fracture_cli.geometry.trigeom_grid import shared_corners
 
     Fi, Fj = F[i], F[j]

@@ -243,6 +243,7 @@ def read_glb_chunks(path: str) -> tuple[dict, bytes | None]:
     InputError
         Missing file, not a GLB, unsupported version, truncated, no JSON chunk.
     """
+    # on first use: reading or writing one format loads only what it needs
     from fracture_cli.io.inputs import read_input
 
     try:

@@ -111,6 +111,7 @@ def read_gltf(path: str) -> list[MeshPart]:
     """
     ext = os.path.splitext(path)[1].lower()
     if ext == ".glb":
+        # on first use: reading or writing one format loads only what it needs
         from fracture_cli.io.gltf import read_glb_chunks
 
         doc, binary = read_glb_chunks(path)

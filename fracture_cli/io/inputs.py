@@ -119,6 +119,7 @@ class ReadLog:
     def add(self, read: FileRead) -> None:
         old = self.files.get(read.path)
         if old is not None and old.sha256 != read.sha256:
+            # on first use: reading or writing one format loads only what it needs
             from fracture_cli.errors import InputError
 
             raise InputError("changed while it was being read (two reads gave different bytes); run again when "

@@ -290,6 +290,7 @@ def output_set(out_dir: str, stem: str, *, lock_timeout: float = LOCK_TIMEOUT_SE
 
 def write_error(exc: OSError, out_dir: str) -> OutputError:
     """One line for an OSError while writing into ``out_dir`` (nothing of the previous set was replaced)."""
+    # on first use: reading or writing one format loads only what it needs
     from fracture_cli.io.diskspace import free_bytes, human_size
 
     where = printable(out_dir)

@@ -34,10 +34,12 @@ def read_parts(path: str, file_type: str) -> list[MeshPart]:
         The file cannot be read as its type.
     """
     if file_type in ("glb", "gltf"):
+        # each format's reader loads when a file of its type is read
         from fracture_cli.io.gltf_read import read_gltf
 
         return read_gltf(path)
     if file_type == "stl":
+        # each format's reader loads when a file of its type is read
         from fracture_cli.io.stl import read_stl
 
         V, F = read_stl(path)
@@ -48,6 +50,7 @@ def read_parts(path: str, file_type: str) -> list[MeshPart]:
 
 
 def _ply_parts(path: str) -> list[MeshPart]:
+    # each format's reader loads when a file of its type is read
     from fracture_cli.io.gltf import MaterialSource
     from fracture_cli.io.ply import read_ply, texture_path
 
@@ -71,6 +74,7 @@ def _open_image(file: str, path: str):
     InputError
         The name is a FIFO, a device or a folder (never opened in a way that could block).
     """
+    # each format's reader loads when a file of its type is read
     from fracture_cli.io.inputs import NotRegularFile, read_input
 
     try:
@@ -108,6 +112,7 @@ def _folder_resolver_class() -> type:
             self.refused: InputError | None = None
 
         def get(self, name: str) -> bytes:
+            # each format's reader loads when a file of its type is read
             from fracture_cli.io.inputs import EscapingReference, NotRegularFile, companion_path, read_input
 
             try:
@@ -135,6 +140,7 @@ def _folder_resolver_class() -> type:
 
 def _trimesh_source(path: str, file_type: str) -> bytes:
     """The bytes trimesh parses: the file as read (recorded), an OBJ with its whitespace and indices made plain."""
+    # each format's reader loads when a file of its type is read
     from fracture_cli.io.inputs import NotRegularFile, read_input
     from fracture_cli.io.obj import absolute_indices, plain_whitespace
 

@@ -71,6 +71,7 @@ def read_ply(path: str) -> PlyMesh:
         Not a PLY file, an unknown format or property type, data shorter than
         the header promises, or an index past the vertices.
     """
+    # on first use: reading or writing one format loads only what it needs
     from fracture_cli.io.inputs import read_input
 
     raw = read_input(path)
@@ -329,6 +330,7 @@ def texture_path(path: str, mesh: PlyMesh) -> str | None:
     InputError
         The name is absolute, a URL or climbs out of the PLY's folder.
     """
+    # on first use: reading or writing one format loads only what it needs
     from fracture_cli.io.inputs import EscapingReference, companion_path
 
     if not mesh.texture:

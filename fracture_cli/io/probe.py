@@ -142,6 +142,7 @@ def _probe_gltf(path: str) -> int:
 
 def _probe_stl(path: str) -> int:
     """Triangles by the rules of :mod:`fracture_cli.io.stl` (binary by size, not by the word 'solid')."""
+    # on first use: reading or writing one format loads only what it needs
     from fracture_cli.io.stl import HEADER, RECORD, header_count, not_stl, size_count
 
     size = os.path.getsize(path)

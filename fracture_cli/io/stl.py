@@ -46,6 +46,7 @@ def read_stl(path: str) -> tuple[np.ndarray, np.ndarray]:
         Not an STL file (see the module docstring), or an ASCII facet
         without three corners.
     """
+    # on first use: reading or writing one format loads only what it needs
     from fracture_cli.io.inputs import read_input
 
     raw = read_input(path)

@@ -201,6 +201,7 @@ def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: st
         (:func:`fracture_cli.io.physics.fragment_physics`); computed here from ``pivot`` and
         ``parts`` when not given.
     """
+    # on first use: reading or writing one format loads only what it needs
     from fracture_cli.io.physics import fragment_physics, physics_extender
 
     if physics is None:

@@ -151,6 +151,7 @@ class Stage:
 # What each stage calls. Imports are local so `fracture --help` does not load the geometry stack.
 
 def _load(state: PipelineState, options: LoadOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.io.inputs import digest_of, input_files, recording_reads
     from fracture_cli.stages.load import load_surface
 
@@ -165,6 +166,7 @@ def _load(state: PipelineState, options: LoadOptions) -> PipelineState:
 
 
 def _repair(state: PipelineState, options: RepairOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.stages.repair import repair_surface
 
     # Cage and fragments both use the repaired solid, so they agree on what is inside.
@@ -173,30 +175,35 @@ def _repair(state: PipelineState, options: RepairOptions) -> PipelineState:
 
 
 def _cage(state: PipelineState, options: CageOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.stages.cage import cage
 
     return dataclasses.replace(state, cage=cage(state.need("surface", "cage"), options))
 
 
 def _tetra(state: PipelineState, options: TetraOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.stages.tetra import tetra
 
     return dataclasses.replace(state, tet_mesh=tetra(state.need("cage", "tetra"), options))
 
 
 def _material(state: PipelineState, options: MaterialOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.stages.material import material
 
     return dataclasses.replace(state, eta=material(state.need("tet_mesh", "material"), state.surface, options))
 
 
 def _modes(state: PipelineState, options: ModesOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.stages.modes import modes
 
     return dataclasses.replace(state, modes=modes(state.need("tet_mesh", "modes"), options, eta=state.eta))
 
 
 def _pieces(state: PipelineState, options: PiecesOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.stages.pieces import pieces
 
     # Piece sizes are measured in asset volume: the repaired surface says what is material.
@@ -205,6 +212,7 @@ def _pieces(state: PipelineState, options: PiecesOptions) -> PipelineState:
 
 
 def _smooth(state: PipelineState, options: SmoothOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.stages.smooth import smooth
 
     regions = smooth(state.need("tet_mesh", "smooth"), state.need("pieces", "smooth"), options, surface=state.surface)
@@ -212,6 +220,7 @@ def _smooth(state: PipelineState, options: SmoothOptions) -> PipelineState:
 
 
 def _fragments(state: PipelineState, options: FragmentOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.checks import checked_fragments
     from fracture_cli.stages.fragments import fragments_with_split
 
@@ -225,6 +234,7 @@ def _fragments(state: PipelineState, options: FragmentOptions) -> PipelineState:
 
 
 def _simplify(state: PipelineState, options: SimplifyOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.checks import checked_fragments
     from fracture_cli.stages.simplify import simplify, skipped, triangle_budget
 
@@ -242,6 +252,7 @@ def _simplify(state: PipelineState, options: SimplifyOptions) -> PipelineState:
 
 
 def _collision(state: PipelineState, options: CollisionOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.io.physics import fragment_physics
     from fracture_cli.stages.collision import collision
 
@@ -253,6 +264,7 @@ def _collision(state: PipelineState, options: CollisionOptions) -> PipelineState
 
 
 def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
     from fracture_cli.io.physics import fragment_physics, runtime_arrays
     from fracture_cli.io.write import fragment_name
     from fracture_cli.stages.fragments.bodies import fragments_graph
@@ -378,6 +390,7 @@ class Runner:
     def _cache_key(self, row: Stage, state: PipelineState, options: StageOptions) -> str | None:
         if self.cache is None:
             return None
+        # on first use: `fracture --help` loads no stage
         from fracture_cli.pipeline.cache import cache_key
 
         if row.name == "load":

@@ -135,6 +135,7 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
         preflight(out_dir, stem, inputs=depends, estimate_bytes=estimate_output_bytes(depends))
         cache = None
         if cache_dir is not None:
+            # on first use: keeps `fracture` start-up light
             from fracture_cli.pipeline.cache import StageCache
 
             cache = StageCache(cache_dir)
@@ -169,6 +170,7 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
     ``recipe`` names the recipe; the parameters are those the stages ran with
     (``runner.options``), so a chain with changed flags reports what it did.
     """
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.stages.repair.report import records_for_report
 
     loaded, surface = state.need("loaded", "export"), state.need("surface", "export")
@@ -214,6 +216,7 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
     With ``preview_size`` (width, height) the preview PNG is rendered from the
     staged files and published with them.
     """
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.io.write import write_fragments_glb
     from fracture_cli.runtime.format import write_runtime
 
@@ -226,6 +229,7 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
                             stem=stem, physics=state.physics)
         write_runtime(state.need("runtime", "export"), staging.file(f"{stem}.fracture.json"))
         if preview_size is not None:
+            # on first use: keeps `fracture` start-up light
             from fracture_cli.view.preview import render_preview
 
             # The report is not in the staging folder yet (it is written last, with the others' hashes).

@@ -38,6 +38,7 @@ log = logging.getLogger(__name__)
 
 def input_key(path: str) -> str:
     """What the cache keys of an input depend on: its bytes and its companion files' (:func:`input_digest`)."""
+    # on first use: keeps `fracture` start-up light
     from fracture_cli.io.inputs import input_files
 
     return input_digest(input_files(path))

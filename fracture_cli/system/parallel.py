@@ -263,6 +263,7 @@ def _start_worker() -> None:
     import signal
 
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the parent's SIGTERM-as-Ctrl-C (cli.main) is not for workers
+    # on first use: start-up
     from fracture_cli.system import progress
 
     progress.configure(None)  # the parent process owns the terminal

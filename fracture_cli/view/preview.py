@@ -52,6 +52,7 @@ class FragmentGeometry:
 
 def load_fragments(glb_path: str) -> list[FragmentGeometry]:
     """Read the fragments of a baked GLB for drawing."""
+    # on first use: the viewer's start-up loads no geometry
     from fracture_cli.io.gltf import glb_meshes, read_glb_chunks
 
     doc, binary = read_glb_chunks(glb_path)
@@ -188,6 +189,7 @@ def pick_example_impact(data, center: np.ndarray):
     The impulse magnitude is the smallest of a geometric series that breaks the
     object into at least three groups (or the largest tried).
     """
+    # on first use: the viewer's start-up loads no geometry
     from fracture_cli.runtime.impact import project_impact
 
     sites = np.asarray(data.sites, dtype=np.float64)
@@ -237,6 +239,7 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
     import matplotlib
 
     matplotlib.use("Agg")
+    # on first use: the viewer's start-up loads no geometry
     import matplotlib.pyplot as plt
 
     from fracture_cli.io.atomic import atomic_path
@@ -319,6 +322,7 @@ def _draw_exploded(ax: Any, frags: list, view: _View, pixels: int) -> None:
 
 def _draw_impact(ax: Any, data: Any, frags: list, view: _View, impact: tuple | None, pixels: int) -> int:
     """An impact (given, or :func:`pick_example_impact`) and the groups it breaks into; returns their number."""
+    # on first use: the viewer's start-up loads no geometry
     from fracture_cli.runtime.impact import project_impact
 
     if impact is None:
