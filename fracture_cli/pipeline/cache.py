@@ -79,7 +79,7 @@ def input_digest(files: list[str]) -> str:
 def cache_key(*parts: Any) -> str:
     """Hex SHA-256 of the JSON encoding of ``parts`` (dataclasses as their fields)."""
 
-    def encode(value):
+    def encode(value: object) -> object:
         if dataclasses.is_dataclass(value):
             return {f.name: encode(getattr(value, f.name)) for f in dataclasses.fields(value)}
         if isinstance(value, (list, tuple)):

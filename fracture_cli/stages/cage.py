@@ -158,7 +158,8 @@ def _surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float) ->
     return np.concatenate(parts, axis=0)
 
 
-def _outer_level_set(values: np.ndarray, d: float, origin: np.ndarray, spacing: float):
+def _outer_level_set(values: np.ndarray, d: float, origin: np.ndarray,
+                     spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Marching cubes of the outer sheet of ``{values = d}``.
 
     The level set of an unsigned distance has an inner sheet inside solid inputs
@@ -180,7 +181,7 @@ def _outer_level_set(values: np.ndarray, d: float, origin: np.ndarray, spacing: 
     return verts.astype(np.float64) + origin, faces.astype(np.int64)
 
 
-def _decimate(vertices: np.ndarray, faces: np.ndarray, target: int, decimator: str):
+def _decimate(vertices: np.ndarray, faces: np.ndarray, target: int, decimator: str) -> tuple[np.ndarray, np.ndarray]:
     """Quadric decimation to ``target`` faces; unreferenced vertices removed."""
     if len(faces) > target:
         if decimator == "fast-simplification":
@@ -433,7 +434,8 @@ class _Search:
         return self.best
 
 
-def _try_offset(d, values, field, options, check, seconds, entry):
+def _try_offset(d: float, values: np.ndarray, field: _DistanceField, options: CageOptions, check: _ContainmentCheck,
+                seconds: dict[str, float], entry: dict[str, object]) -> tuple[np.ndarray, np.ndarray] | None:
     """One try of the search at offset ``d``; returns ``(vertices, faces)`` or None (reason in ``entry``)."""
     tick = time.perf_counter()
     mc_vertices, mc_faces = _outer_level_set(values, d, field.origin, field.spacing)

@@ -14,6 +14,7 @@ import logging
 import os
 import stat
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,6 +25,9 @@ from fracture_cli.io.parts import read_parts
 from fracture_cli.io.probe import probe_triangles
 from fracture_cli.options import option
 from fracture_cli.types import Material, Normalization, SurfaceMesh
+
+if TYPE_CHECKING:
+    import trimesh
 
 log = logging.getLogger(__name__)
 
@@ -361,7 +365,7 @@ def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) 
     return surface
 
 
-def surface_from_trimesh(mesh, name: str = "mesh") -> SurfaceMesh:
+def surface_from_trimesh(mesh: trimesh.Trimesh, name: str = "mesh") -> SurfaceMesh:
     """Wrap an in-memory ``trimesh.Trimesh`` (world units) as a normalized SurfaceMesh.
 
     Used by tests and benchmarks that build shapes in code.

@@ -18,6 +18,7 @@ lives. This stage turns a recipe's material section into one weight per face:
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,7 +49,7 @@ class MaterialOptions:
     boxes: list = option([], "named boxes {name, min = [x, y, z], max = [x, y, z], strength} in input units")
 
 
-def _check_boxes(boxes) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
+def _check_boxes(boxes: Sequence[object]) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
     out = []
     for i, box in enumerate(boxes):
         if not isinstance(box, dict):

@@ -179,7 +179,7 @@ def _atomic_deviation(U: np.ndarray, tet_piece: np.ndarray, volumes_t: np.ndarra
     return max_deviation
 
 
-def _piece_means(U: np.ndarray, tet_piece: np.ndarray, volumes_t: np.ndarray, p: int):
+def _piece_means(U: np.ndarray, tet_piece: np.ndarray, volumes_t: np.ndarray, p: int) -> tuple[np.ndarray, float]:
     """Volume-weighted mean of every mode per piece, ``W`` (k, p, d), and the worst relative deviation from it.
 
     ``W[i, P] = sum_{t in P} vol_t U[i, t] / vol_P``; the deviation is the
@@ -212,7 +212,8 @@ def _checked_modes(tet_mesh: TetMesh, modes: Modes) -> tuple[np.ndarray, np.ndar
     return U, cut
 
 
-def _merge_small(tet_piece, face_tets, face_areas, volumes_t, fraction):
+def _merge_small(tet_piece: np.ndarray, face_tets: np.ndarray, face_areas: np.ndarray, volumes_t: np.ndarray,
+                 fraction: float) -> np.ndarray:
     """Merge pieces below ``fraction`` of the total of ``volumes_t`` (t,) into their largest-interface neighbour.
 
     ``volumes_t`` is what counts of each tet (its volume, or the asset volume
@@ -244,7 +245,8 @@ def _merge_small(tet_piece, face_tets, face_areas, volumes_t, fraction):
     return labels
 
 
-def _piece_graph(tet_mesh: TetMesh, tet_piece: np.ndarray, centroids: np.ndarray):
+def _piece_graph(tet_mesh: TetMesh, tet_piece: np.ndarray,
+                 centroids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Edges (P < Q), shared areas, area-weighted centroids and P-to-Q normals."""
     face_tets = tet_mesh.interior_face_tets
     a, b = tet_piece[face_tets[:, 0]], tet_piece[face_tets[:, 1]]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,7 +49,7 @@ class RuntimeOptions:
 
 
 def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOptions = RuntimeOptions(),
-            fragment_pieces=None, fragment_names: tuple[str, ...] | None = None,
+            fragment_pieces: Sequence[int] | np.ndarray | None = None, fragment_names: tuple[str, ...] | None = None,
             fragment_graph: tuple[np.ndarray, np.ndarray] | None = None) -> RuntimeData:
     """Compute the contact sites, site-to-mode coefficients ``B`` and piece modes ``W``.
 
@@ -161,7 +162,9 @@ def _site_coefficients(tet_mesh: TetMesh, U: np.ndarray, tau: float) -> np.ndarr
     return lu.solve(np.asfortranarray(rhs)).reshape(-1, k, d)  # (n, k, d)
 
 
-def _restrict_to_fragments(W: np.ndarray, pieces: Pieces, fragment_pieces, fragment_graph=None):
+def _restrict_to_fragments(W: np.ndarray, pieces: Pieces, fragment_pieces: Sequence[int] | np.ndarray | None,
+                           fragment_graph: tuple[np.ndarray, np.ndarray] | None = None,
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Piece modes in the fragments' order (a piece's column repeated for each of its fragments) and their bonds."""
     p = W.shape[1]
     edges = np.asarray(pieces.edges, dtype=np.int64).reshape(-1, 2)

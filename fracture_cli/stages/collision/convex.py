@@ -32,6 +32,7 @@ the workers): the same meshes give the same bytes.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import manifold3d
@@ -126,7 +127,8 @@ class CollisionShapes:
     part_faces: tuple | None = None  # per part in order, (face planes, surface area, volume) of its hull
 
 
-def collision_shapes(meshes, options: CollisionOptions = CollisionOptions(), faults=None) -> CollisionShapes:
+def collision_shapes(meshes: Sequence[tuple[np.ndarray, np.ndarray]], options: CollisionOptions = CollisionOptions(),
+                     faults: Sequence[np.ndarray] | None = None) -> CollisionShapes:
     """Non-overlapping convex parts for every fragment.
 
     Parameters
@@ -243,7 +245,8 @@ class _Intrusion:
         return float(sum((hull ^ self.solids[k]).volume() for k in near.tolist() if k != self.own))
 
 
-def max_overlap_fraction(parts_a, parts_b=None, faces=None) -> float:
+def max_overlap_fraction(parts_a: Sequence[np.ndarray], parts_b: Sequence[np.ndarray] | None = None,
+                         faces: Sequence[tuple[tuple[np.ndarray, np.ndarray], float, float]] | None = None) -> float:
     """Largest overlap volume between two convex parts, over the smaller part's volume.
 
     Parameters

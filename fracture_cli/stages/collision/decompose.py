@@ -9,6 +9,8 @@ overlap. Deterministic: fixed candidate order, stable tie-breaks.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import manifold3d
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
@@ -31,7 +33,8 @@ _BOUND_SLACK = 1e-3
 
 
 def convex_decomposition(solid: manifold3d.Manifold, max_parts: int, concavity: float,
-                         intrusion=None, max_intrusion: float = 0.05) -> list[manifold3d.Manifold]:
+                         intrusion: Callable[[manifold3d.Manifold], float] | None = None,
+                         max_intrusion: float = 0.05) -> list[manifold3d.Manifold]:
     """Approximate convex decomposition of a closed solid by best-first plane cuts.
 
     Parameters
@@ -60,7 +63,8 @@ def convex_decomposition(solid: manifold3d.Manifold, max_parts: int, concavity: 
     return decomposition_cells(solid, max_parts, concavity, intrusion, max_intrusion)[0]
 
 
-def decomposition_cells(solid: manifold3d.Manifold, max_parts: int, concavity: float, intrusion=None,
+def decomposition_cells(solid: manifold3d.Manifold, max_parts: int, concavity: float,
+                        intrusion: Callable[[manifold3d.Manifold], float] | None = None,
                         max_intrusion: float = 0.05) -> tuple[list[manifold3d.Manifold], list[int]]:
     """:func:`convex_decomposition` and the cell of the partition each piece lies in (a list of ints).
 
@@ -72,7 +76,8 @@ def decomposition_cells(solid: manifold3d.Manifold, max_parts: int, concavity: f
     return leaves, cells
 
 
-def decomposition_hulls(solid: manifold3d.Manifold, max_parts: int, concavity: float, intrusion=None,
+def decomposition_hulls(solid: manifold3d.Manifold, max_parts: int, concavity: float,
+                        intrusion: Callable[[manifold3d.Manifold], float] | None = None,
                         max_intrusion: float = 0.05) -> tuple[list[manifold3d.Manifold], list[int],
                                                               list[manifold3d.Manifold]]:
     """:func:`decomposition_cells` and the convex hull of each piece (computed once: a dense piece's hull is
@@ -99,6 +104,7 @@ def decomposition_hulls(solid: manifold3d.Manifold, max_parts: int, concavity: f
         if count < 2 or len(leaves) - 1 + count > max_parts:
             waste[worst] = -np.inf  # final: no cut helps, or no room for its pieces
             continue
+        assert sides is not None  # count >= 2
         pieces = [p for side in sides for p in side]
         leaves[worst:worst + 1] = pieces
         hulls[worst:worst + 1] = [p.hull() for p in pieces]
@@ -114,7 +120,8 @@ def components(solid: manifold3d.Manifold) -> list[manifold3d.Manifold]:
     return sorted(parts, key=lambda p: (-round(p.volume(), 15), tuple(np.round(p.bounding_box()[:3], 12))))
 
 
-def _best_cut(part: manifold3d.Manifold, hull: manifold3d.Manifold):
+def _best_cut(part: manifold3d.Manifold,
+              hull: manifold3d.Manifold) -> tuple[list[manifold3d.Manifold], list[manifold3d.Manifold]] | None:
     """The pieces above and below the candidate plane with the smallest total hull volume; None if no cut helps.
 
     A part with many vertices first gets a lower bound of every candidate's cost (:func:`_cost_bounds`); the

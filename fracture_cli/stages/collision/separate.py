@@ -11,10 +11,13 @@ processes, with results that do not depend on scheduling.
 
 from __future__ import annotations
 
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import manifold3d
 import numpy as np
+import numpy.typing as npt
 
 from fracture_cli.geometry.hulls import (
     MIN_PART_VOLUME,
@@ -30,6 +33,14 @@ from fracture_cli.geometry.mass import MassProperties, mass_properties
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.geometry.trigeom import cross3
 from fracture_cli.system import detmath, parallel
+
+# A closed mesh: vertices (n, 3), faces (m, 3).
+_Mesh = tuple[np.ndarray, np.ndarray]
+# separate_hulls' bodies: the meshes, the body of each part[, per body the faces that may touch another].
+_FullBodies = tuple[Sequence[_Mesh], Sequence[int] | np.ndarray, Sequence[np.ndarray] | None]
+_Bodies = tuple[Sequence[_Mesh], Sequence[int] | np.ndarray] | _FullBodies
+# hull_faces of a part: face planes (normals (m, 3), offsets (m,)) and surface area.
+_HullFaces = tuple[tuple[np.ndarray, np.ndarray], float]
 
 # Overlaps below this volume (fraction of the smaller part) are contact, not overlap.
 _TOUCH = 1e-9
@@ -73,7 +84,8 @@ class _Shared:
     contacts: dict  # (body P, body Q), P < Q -> (signed area-weighted normals (f, 3) from P to Q, centroids (f, 3))
 
 
-def volume_beyond(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, offsets) -> np.ndarray:
+def volume_beyond(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray,
+                  offsets: np.ndarray | float) -> np.ndarray:
     """Exact volume of a closed mesh on the side ``normal . x > offset`` of parallel planes.
 
     Parameters
@@ -107,7 +119,7 @@ def volume_beyond(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, o
     return _volume_beyond(_Material(vertices, faces), normal, offsets)
 
 
-def _volume_beyond(material: _Material, normal: np.ndarray, offsets) -> np.ndarray:
+def _volume_beyond(material: _Material, normal: np.ndarray, offsets: np.ndarray | float) -> np.ndarray:
     normal = np.asarray(normal, dtype=np.float64)
     offsets = np.atleast_1d(np.asarray(offsets, dtype=np.float64))
     # Triangles wholly below every plane add nothing: only the others are measured (found from their centroids'
@@ -136,8 +148,10 @@ def _volume_beyond(material: _Material, normal: np.ndarray, offsets) -> np.ndarr
     return result + positive @ weight[reach]
 
 
-def separate_parts(parts: list[np.ndarray], materials=None, groups=None, bodies=None,
-                   masses=None, hull_faces=None) -> list[np.ndarray]:
+def separate_parts(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = None,
+                   groups: Sequence[Hashable] | None = None, bodies: _Bodies | None = None,
+                   masses: list[MassProperties] | None = None,
+                   hull_faces: Sequence[_HullFaces] | None = None) -> list[np.ndarray]:
     """Clip every overlapping pair of convex parts by one plane so that they only touch: the corners of
     :func:`separate_hulls` (same parameters), an empty (0, 3) array for a part clipped away."""
     return [separated_corners(h) for h in separate_hulls(parts, materials, groups, bodies, masses, hull_faces)]
@@ -148,8 +162,10 @@ def separated_corners(hull: manifold3d.Manifold) -> np.ndarray:
     return hull_corners(hull) if not hull.is_empty() and hull.volume() > MIN_PART_VOLUME else np.zeros((0, 3))
 
 
-def separate_hulls(parts: list[np.ndarray], materials=None, groups=None, bodies=None,
-                   masses=None, hull_faces=None) -> list[manifold3d.Manifold]:
+def separate_hulls(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = None,
+                   groups: Sequence[Hashable] | None = None, bodies: _Bodies | None = None,
+                   masses: list[MassProperties] | None = None,
+                   hull_faces: Sequence[_HullFaces] | None = None) -> list[manifold3d.Manifold]:
     """Clip every overlapping pair of convex parts by one plane so that they only touch.
 
     Parameters
@@ -216,7 +232,7 @@ def separate_hulls(parts: list[np.ndarray], materials=None, groups=None, bodies=
         index: dict = {}
         group = np.array([index.setdefault(g, len(index)) for g in groups], dtype=np.int64)
         pairs = pairs[group[pairs[:, 0]] != group[pairs[:, 1]]]
-    meshes, body, candidates = (tuple(bodies) + (None,))[:3] if bodies is not None else (
+    meshes, body, candidates = cast(_FullBodies, (tuple(bodies) + (None,))[:3]) if bodies is not None else (
         materials, np.arange(len(materials)), None)
     if hull_faces is None:
         hull_faces = [_faces_of(h) for h in hulls]
@@ -295,7 +311,7 @@ def _depth(shared: _Shared, trims: list, pair: tuple[int, int], centre: np.ndarr
     return depth if np.isfinite(depth) else 0.0
 
 
-def overlapping_boxes(boxes) -> np.ndarray:
+def overlapping_boxes(boxes: npt.ArrayLike) -> np.ndarray:
     """Pairs ``(i, j)``, ``i < j`` (e, 2), of axis-aligned boxes (n, 6) (min, max) that touch or overlap."""
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 6)
     lo, hi = boxes[:, :3], boxes[:, 3:]
@@ -331,7 +347,8 @@ def _separated(a: np.ndarray, b: np.ndarray, centre_a: np.ndarray, centre_b: np.
     return bool(len(a) == 0 or len(b) == 0 or (a @ axis).max() < (b @ axis).min())
 
 
-def _contacts(meshes, tolerance: float, candidates=None) -> dict:
+def _contacts(meshes: Sequence[_Mesh], tolerance: float,
+              candidates: Sequence[np.ndarray] | None = None) -> dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]:
     """The faces every pair of bodies share: ``(P, Q) -> (area-weighted normals from P to Q (f, 3), centroids)``;
     ``candidates``: per body, the (m_i,) bool mask of faces that may touch another (None: all)."""
     from fracture_cli.stages.fragments.bodies import coincident_faces

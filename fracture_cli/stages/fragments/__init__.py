@@ -263,7 +263,7 @@ def _with_interior(materials: tuple[Material, ...], color: list) -> tuple[int, t
     return len(names), tuple(materials) + (interior,)
 
 
-def _region_manifold(vertices: np.ndarray, faces: np.ndarray, region_id: int, piece: int):
+def _region_manifold(vertices: np.ndarray, faces: np.ndarray, region_id: int, piece: int) -> manifold3d.Manifold:
     props = np.zeros((len(vertices), _NUM_COLUMNS))
     props[:, :3] = vertices
     mesh = manifold3d.Mesh64(
@@ -279,7 +279,7 @@ def _region_manifold(vertices: np.ndarray, faces: np.ndarray, region_id: int, pi
     return region
 
 
-def _to_fragment(part, piece: int, id_to_material: dict, interior_index: int, surface: SurfaceMesh,
+def _to_fragment(part: manifold3d.Manifold, piece: int, id_to_material: dict, interior_index: int, surface: SurfaceMesh,
                  options: FragmentOptions, min_shell_volume: float) -> Fragment:
     """Turn a manifold3d result into a Fragment with split interior vertices."""
     mesh = part.to_mesh64()

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import manifold3d
@@ -114,7 +115,8 @@ def body_faces(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
     return [np.flatnonzero(np.isin(patch, members[p])) for p in order]
 
 
-def interface_areas(meshes, candidates=None, tolerance: float | None = None):
+def interface_areas(meshes: Sequence[tuple[np.ndarray, np.ndarray]], candidates: Sequence[np.ndarray] | None = None,
+                    tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Area of the coincident, opposite-facing faces between every pair of meshes.
 
     Parameters
@@ -179,7 +181,8 @@ class FaceMatches:
 _QUERY_BLOCK = 65_536
 
 
-def coincident_faces(meshes, candidates=None, tolerance: float | None = None) -> FaceMatches:
+def coincident_faces(meshes: Sequence[tuple[np.ndarray, np.ndarray]], candidates: Sequence[np.ndarray] | None = None,
+                     tolerance: float | None = None) -> FaceMatches:
     """Faces of each mesh that lie on the surface of another mesh, facing it.
 
     Parameters
@@ -255,7 +258,8 @@ def _inside(points: np.ndarray, triangles: np.ndarray, tolerance: float) -> np.n
     return inside
 
 
-def fragment_graph(meshes, candidates=None, min_area: float = 0.0, tolerance: float | None = None):
+def fragment_graph(meshes: Sequence[tuple[np.ndarray, np.ndarray]], candidates: Sequence[np.ndarray] | None = None,
+                   min_area: float = 0.0, tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The fragment graph from the meshes: one edge per pair of fragments sharing more than ``min_area``.
 
     Parameters
@@ -371,7 +375,8 @@ def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> 
 
 
 
-def _merge_tiny(volumes: np.ndarray, pairs: np.ndarray, areas: np.ndarray, min_volume: float):
+def _merge_tiny(volumes: np.ndarray, pairs: np.ndarray, areas: np.ndarray,
+                min_volume: float) -> tuple[list[list[int]], int, int]:
     """Groups of body indices after gluing every tiny body to its largest-interface neighbour.
 
     Returns the groups (lists, each sorted, ordered by first member), the number

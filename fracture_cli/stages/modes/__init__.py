@@ -13,7 +13,9 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -25,6 +27,7 @@ from fracture_cli.options import option
 from fracture_cli.stages.modes.solver import (
     ConicSubproblemSolver,
     CutSubproblemSolver,
+    SubproblemResult,
     discontinuity_energy,
     face_weights,
     jump_norms,
@@ -53,6 +56,10 @@ _ROUND_FLOWS = 3
 # max-flows 476/520/695 -> 470/495/597 (k = 24), 878/1021/1295 -> 873/1051/1175 (k = 32), sums of
 # energies within +-2% either way (other local minima, as with any change of the ICCM path).
 _FIRST_ROUND_STALL = 3
+# solve(c, earlier_modes, max_flows, first_round) of an ICCM chain (see _iccm).
+_Solve = Callable[[np.ndarray, list[np.ndarray], int | None, bool], SubproblemResult]
+# One chain of _axis_chain: face_tets, weights, weight_scale, volumes, scalar_init, count, opts, axis, d.
+_ChainTask = tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray, int, "ModesOptions", int, int]
 
 @dataclass(frozen=True)
 class ModesOptions:
@@ -186,7 +193,8 @@ def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.nda
                  iterations=np.asarray(info["iterations"], dtype=np.int32), stats=stats)
 
 
-def mode_pieces(u: np.ndarray, face_tets: np.ndarray, num_tets: int, sigma: float):
+def mode_pieces(u: np.ndarray, face_tets: np.ndarray, num_tets: int,
+                sigma: float) -> tuple[np.ndarray, np.ndarray, int]:
     """Cut faces and pieces of one mode.
 
     Parameters
@@ -218,7 +226,7 @@ def mode_pieces(u: np.ndarray, face_tets: np.ndarray, num_tets: int, sigma: floa
     return cut, labels.astype(np.int32), int(count)
 
 
-def _check_eta(eta, f: int, d: int) -> np.ndarray:
+def _check_eta(eta: np.ndarray | None, f: int, d: int) -> np.ndarray:
     if eta is None:
         return np.ones((f, d))
     eta = np.asarray(eta, dtype=np.float64)
@@ -257,7 +265,8 @@ def _scalar_start_vectors(tet_mesh: TetMesh, count: int, seed: int) -> np.ndarra
     return np.asarray((tet_mesh.tet_from_vertex @ vectors).T)
 
 
-def _lowest_eigenpairs(K, M, want: int, shift: float, v0: np.ndarray):
+def _lowest_eigenpairs(K: sp.csc_matrix, M: sp.csc_matrix, want: int, shift: float,
+                       v0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The ``want`` (or a few more) lowest generalized eigenpairs of ``(K, M)``.
 
     ARPACK (shift-invert just below 0) first. When it does not converge (a
@@ -301,10 +310,10 @@ class _MInner:
             e[:, a] = 1.0 / math.sqrt(volumes.sum())
             self.translations.append(e)
 
-    def dot(self, x, y) -> float:
+    def dot(self, x: np.ndarray, y: np.ndarray) -> float:
         return float(np.einsum("t,td,td->", self.vol, x, y))
 
-    def orthonormalize(self, c, basis):
+    def orthonormalize(self, c: np.ndarray, basis: Sequence[np.ndarray]) -> np.ndarray | None:
         """``c`` minus its M_T-projection on ``basis`` (M_T-orthonormal), normalized; None if nothing is left."""
         norm0 = math.sqrt(self.dot(c, c))
         for _ in range(2):  # twice is enough (Gram-Schmidt reorthogonalization)
@@ -316,8 +325,9 @@ class _MInner:
         return c / norm
 
 
-def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, random_start,
-          restricted: bool = False):
+def _iccm(solve: _Solve, starts: np.ndarray | Sequence[np.ndarray], count: int, inner: _MInner, opts: ModesOptions,
+          label: str, random_start: Callable[[int], np.ndarray],
+          restricted: bool = False) -> tuple[list[np.ndarray], list[dict]]:
     """Adapted ICCM (paper Algorithm 1): ``count`` modes (t, d) from start vectors ``starts``.
 
     ``solve(c, earlier_modes, max_flows, first_round) -> SubproblemResult`` (``max_flows`` None: exact,
@@ -346,7 +356,8 @@ def _iccm(solve, starts, count, inner: _MInner, opts: ModesOptions, label: str, 
     return found, per_mode
 
 
-def _iccm_mode(solve, c, found, inner: _MInner, opts: ModesOptions, name: str, restricted: bool):
+def _iccm_mode(solve: _Solve, c: np.ndarray, found: list[np.ndarray], inner: _MInner, opts: ModesOptions, name: str,
+               restricted: bool) -> tuple[np.ndarray, dict[str, int | float | bool]]:
     """ICCM rounds of one mode from the start vector ``c`` (t, d); returns the mode and its stats.
 
     The first round has no max-flow budget: from the smooth start vector it picks the basin
@@ -395,7 +406,8 @@ def _iccm_mode(solve, c, found, inner: _MInner, opts: ModesOptions, name: str, r
                "last_gap": float(gaps[-1]) if gaps else float("nan")}
 
 
-def _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
+def _modes_fast(face_tets: np.ndarray, areas: np.ndarray, eta2: np.ndarray, volumes: np.ndarray,
+                scalar_init: np.ndarray, k: int, d: int, opts: ModesOptions) -> tuple[np.ndarray, dict[str, Any]]:
     """Scalar modes per distinct axis weight (see the Notes of :func:`modes`).
 
     Axes with equal weights share one ICCM chain; distinct chains are independent and run in the
@@ -432,7 +444,7 @@ def _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
                "chains": len(chains), "workers": min(len(chains), parallel.current_jobs())}
 
 
-def _axis_chain(_shared, task):
+def _axis_chain(_shared: None, task: _ChainTask) -> tuple[list[np.ndarray], list[dict], str]:
     """One ICCM chain of scalar modes with face weights ``weights`` (in units of ``weight_scale``).
 
     Returns the modes, their stats and the max-flow backend. Runs in the caller or in a worker
@@ -456,7 +468,8 @@ def _axis_chain(_shared, task):
     return found, stats, solver.max_flow_backend
 
 
-def _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
+def _modes_clarabel(face_tets: np.ndarray, areas: np.ndarray, eta2: np.ndarray, volumes: np.ndarray,
+                    scalar_init: np.ndarray, k: int, d: int, opts: ModesOptions) -> tuple[np.ndarray, dict[str, Any]]:
     t = len(volumes)
     inner = _MInner(volumes, d)
     solver = ConicSubproblemSolver(face_tets, areas, eta2, volumes, tol=opts.inner_tol, max_iter=opts.inner_max_iter,
@@ -472,7 +485,7 @@ def _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts):
     return np.stack(found), _summary(per_mode)
 
 
-def _summary(per_mode):
+def _summary(per_mode: list[dict]) -> dict[str, Any]:
     return {
         "iterations": [m["rounds"] for m in per_mode],
         "converged": [m["converged"] for m in per_mode],

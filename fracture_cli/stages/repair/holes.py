@@ -183,7 +183,7 @@ def _ear_clip(loop: np.ndarray, P: np.ndarray, normal: np.ndarray) -> np.ndarray
     ring = list(range(len(loop)))[::-1]
     tris = []
 
-    def cross(o, a, b):
+    def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
         return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
     guard = 0
@@ -211,7 +211,7 @@ def _ear_clip(loop: np.ndarray, P: np.ndarray, normal: np.ndarray) -> np.ndarray
 
 def _inside_triangle(R: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Whether 2-d points R (k, 2) lie in or on the counter-clockwise triangle (a, b, c)."""
-    def side(p, q):
+    def side(p: np.ndarray, q: np.ndarray) -> np.ndarray:
         return (q[0] - p[0]) * (R[:, 1] - p[1]) - (q[1] - p[1]) * (R[:, 0] - p[0])
 
     return (side(a, b) >= 0) & (side(b, c) >= 0) & (side(c, a) >= 0)

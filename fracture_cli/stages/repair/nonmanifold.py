@@ -128,7 +128,7 @@ def _pair_within_patches(sides: np.ndarray, sign: np.ndarray, patch: np.ndarray)
     return pairs
 
 
-def _glue(V: np.ndarray, F: np.ndarray, table: EdgeTable):
+def _glue(V: np.ndarray, F: np.ndarray, table: EdgeTable) -> tuple[np.ndarray, set[int], list[int]]:
     """Glued side pairs (g, 2) of every edge, the wall faces found, and the unresolved many-face edges."""
     glued = [table.manifold_pairs()]
     order, start = table.sides_of_edges()

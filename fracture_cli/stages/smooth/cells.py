@@ -81,7 +81,8 @@ class _CellList:
         whole = tet_volumes[np.concatenate(self.tets)] if self.tets else np.zeros(0)
         return np.concatenate([whole, np.array(self.clipped_volumes, dtype=np.float64)])
 
-    def union_by_piece(self, V: np.ndarray, T: np.ndarray, p: int, only: list[int]):
+    def union_by_piece(self, V: np.ndarray, T: np.ndarray, p: int,
+                       only: list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
         """Closed, edge-manifold meshes (vertices, faces) of the union of the cells of each piece in ``only``."""
         parts: list[list] = [[] for _ in range(p)]
         tets = np.concatenate(self.tets) if self.tets else np.zeros(0, np.int64)
@@ -121,7 +122,7 @@ def _whole_tets_solids(V: np.ndarray, T: np.ndarray, tets: np.ndarray) -> list:
     """
     local_faces = np.ascontiguousarray(tetgeom.TET_FACES.astype(np.uint64))
 
-    def tet_solid(tet):
+    def tet_solid(tet: int) -> manifold3d.Manifold:
         corners = np.ascontiguousarray(V[T[tet]], dtype=np.float64)
         return manifold3d.Manifold(manifold3d.Mesh64(vert_properties=corners, tri_verts=local_faces))
 
@@ -156,7 +157,8 @@ def _whole_tets_solids(V: np.ndarray, T: np.ndarray, tets: np.ndarray) -> list:
     return [tet_solid(t) for t in singles + body.tolist()]
 
 
-def _separate_pinches(vertices: np.ndarray, faces: np.ndarray, distance: float = _PINCH_SEPARATION):
+def _separate_pinches(vertices: np.ndarray, faces: np.ndarray,
+                      distance: float = _PINCH_SEPARATION) -> tuple[np.ndarray, np.ndarray]:
     """Move apart the vertex copies where a region touches itself.
 
     A union of cells is edge-manifold by index, but where a region touches
@@ -178,7 +180,8 @@ def _separate_pinches(vertices: np.ndarray, faces: np.ndarray, distance: float =
     return moved, faces
 
 
-def _field_cells(V, T, Z, forced, tet_piece, vanished) -> _CellList:
+def _field_cells(V: np.ndarray, T: np.ndarray, Z: np.ndarray, forced: np.ndarray, tet_piece: np.ndarray,
+                 vanished: list[int]) -> _CellList:
     """Cells of the pieces that win in each tet under the smoothed field ``Z`` (n, p)."""
     cells = _CellList()
     Zv = Z.copy()
@@ -241,7 +244,7 @@ def _snap(points: np.ndarray, tol: float = 1e-10) -> np.ndarray:
     return points[first[labels]]
 
 
-def _cell_corners(G: np.ndarray):
+def _cell_corners(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Corners, in barycentric coordinates, of the cell of each candidate in each tet.
 
     Parameters

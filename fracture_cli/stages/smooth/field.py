@@ -24,7 +24,7 @@ _MIN_TET_WEIGHT = 1e-12
 _MAX_BIAS = 0.5
 
 
-def refined(tet_mesh: TetMesh, tet_piece: np.ndarray, levels: int, max_tets: int):
+def refined(tet_mesh: TetMesh, tet_piece: np.ndarray, levels: int, max_tets: int) -> tuple[TetMesh, np.ndarray]:
     """The tet mesh after up to ``levels`` regular refinements (at most ``max_tets`` tets) and its pieces.
 
     Children keep their parent's piece, so the tet-aligned regions do not
@@ -46,7 +46,8 @@ def refined(tet_mesh: TetMesh, tet_piece: np.ndarray, levels: int, max_tets: int
 
 
 def winning_field(tet_mesh: TetMesh, topo: Topology, tet_piece: np.ndarray, pieces: Pieces, lam: float,
-                   vanish_fraction: float):
+                   vanish_fraction: float) -> tuple[np.ndarray, list[int], tuple[
+                       list[tuple[np.ndarray, np.ndarray]], int, list[np.ndarray]]]:
     """Field method: the smoothed field ``Z`` (n, p), raised for pieces that would vanish, the pieces that
     vanish anyway (they keep their own tets), and the direct regions of that field (``direct_regions``' result,
     so the caller need not build them again)."""
@@ -106,7 +107,7 @@ def _rescue_bias(tet_mesh: TetMesh, Z: np.ndarray, P: int, target: float) -> flo
     return float(np.clip(0.5 * (steps[k] + min(following, _MAX_BIAS)), 0.0, _MAX_BIAS))
 
 
-def forced_field(Z: np.ndarray, tet_piece: np.ndarray, vanished: list[int]):
+def forced_field(Z: np.ndarray, tet_piece: np.ndarray, vanished: list[int]) -> tuple[np.ndarray, np.ndarray]:
     """Tets (t,) bool that vanished pieces keep, and the field with those pieces never winning."""
     forced = np.isin(tet_piece, vanished)
     Zv = Z.copy()

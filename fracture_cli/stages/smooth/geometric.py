@@ -181,7 +181,7 @@ def _harmonic_extension(tet_mesh: TetMesh, displacement: np.ndarray, known: np.n
 
 
 def smoothed_vertices(tet_mesh: TetMesh, topo: Topology, tet_piece: np.ndarray, p: int, lam: float,
-                       surface: SurfaceMesh | None = None):
+                       surface: SurfaceMesh | None = None) -> tuple[np.ndarray, dict]:
     """Tet vertex positions (n, 3) with smoothed faults, and counts for the log.
 
     With ``surface`` (the input inside the cage) the boundary fault curves slide along the cage (see
@@ -200,7 +200,9 @@ def smoothed_vertices(tet_mesh: TetMesh, topo: Topology, tet_piece: np.ndarray, 
             return X, stats
         log.warning("%s: sliding the faults along the cage kept flattening tets or bringing the cage too close to "
                     "the input after %d rounds; cage-boundary vertices stay where they are", STAGE, stats["rounds"])
-    return _deform(tet_mesh, graph, lam, np.zeros(n, dtype=bool), None, None)
+    X, stats = _deform(tet_mesh, graph, lam, np.zeros(n, dtype=bool), None, None)
+    assert X is not None  # nothing slides: _deform has no partial answer to refuse
+    return X, stats
 
 
 def _deform(tet_mesh: TetMesh, graph: FaultGraph, lam: float, slide: np.ndarray, cage: CageSurface | None,

@@ -24,7 +24,8 @@ _MAX_REPAIRS = 12
 
 
 def repaired_regions(V: np.ndarray, T: np.ndarray, topo: Topology, Zv: np.ndarray | None, forced: np.ndarray,
-                     tet_piece: np.ndarray, p: int, first: tuple | None = None):
+                     tet_piece: np.ndarray, p: int,
+                     first: tuple | None = None) -> tuple[list[tuple[np.ndarray, np.ndarray]], int, int]:
     """Direct regions; where a region touches itself along a line, the tets there become tet-aligned (repeatedly).
 
     ``first``, when given, is :func:`direct_regions`' result for exactly these arguments (the caller built it
@@ -108,7 +109,8 @@ class _Ties:
 
 
 def direct_regions(V: np.ndarray, T: np.ndarray, topo: Topology, Zv: np.ndarray | None, forced: np.ndarray,
-                   tet_piece: np.ndarray, p: int, check: bool = True):
+                   tet_piece: np.ndarray, p: int,
+                   check: bool = True) -> tuple[list[tuple[np.ndarray, np.ndarray]], int, list[np.ndarray]]:
     """Boundary meshes of every piece's region, built directly from keyed polygons.
 
     Parameters

@@ -15,7 +15,7 @@ _PINCH_SPINDLE = 0.02
 
 
 def aligned_pinches(V: np.ndarray, T: np.ndarray, topo: Topology, forced: np.ndarray, tet_piece: np.ndarray, p: int,
-                    aligned: np.ndarray, X1: np.ndarray, X2: np.ndarray):
+                    aligned: np.ndarray, X1: np.ndarray, X2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Edges, all of whose tets are forced, around which some piece's tets form two or more runs.
 
     Returns the pinched edge ids (ascending) and the piece that gets each edge's spindle (the piece with
@@ -50,7 +50,7 @@ def aligned_pinches(V: np.ndarray, T: np.ndarray, topo: Topology, forced: np.nda
     return e_sorted[first], piece_sel[order][first]
 
 
-def notches(V: np.ndarray, topo: Topology, pinched: np.ndarray):
+def notches(V: np.ndarray, topo: Topology, pinched: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Notch vertices in every face next to a pinched edge.
 
     Returns, per notch, its face (ascending), its edge and its position
@@ -69,7 +69,8 @@ def notches(V: np.ndarray, topo: Topology, pinched: np.ndarray):
 
 
 def spindle_faces(V: np.ndarray, T: np.ndarray, topo: Topology, tet_piece: np.ndarray, pinched: np.ndarray,
-                  owner: np.ndarray, n_face: np.ndarray, n_edge: np.ndarray, nid: np.ndarray, X2: np.ndarray):
+                  owner: np.ndarray, n_face: np.ndarray, n_edge: np.ndarray, nid: np.ndarray,
+                  X2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Triangles of the spindles carved around pinched tet-aligned edges.
 
     Around a pinched edge ``(a, b)`` each tet ``(a, b, c, d)`` loses the

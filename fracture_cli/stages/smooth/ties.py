@@ -12,7 +12,7 @@ from fracture_cli.system import detmath
 _CANDIDATE_TOL = 1e-12
 
 
-def tie_points(V: np.ndarray, Zv: np.ndarray, S: np.ndarray):
+def tie_points(V: np.ndarray, Zv: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Points inside simplices where ``k + 1`` pieces tie for the maximum of the field.
 
     Parameters
@@ -89,8 +89,8 @@ def tie_points(V: np.ndarray, Zv: np.ndarray, S: np.ndarray):
     return kept[simplex[order]], np.concatenate(out_tie)[order], np.concatenate(out_pos)[order]
 
 
-def fan(poly: np.ndarray, keys: np.ndarray, normals: np.ndarray, positions: np.ndarray, centre_ids=None,
-         centre_pos=None):
+def fan(poly: np.ndarray, keys: np.ndarray, normals: np.ndarray, positions: np.ndarray,
+        centre_ids: np.ndarray | None = None, centre_pos: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Triangulate convex polygons given as unordered vertex sets.
 
     Parameters

@@ -59,7 +59,7 @@ def combinations(m: int, k: int) -> np.ndarray:
     return _COMBOS[key]
 
 
-def join(owners: np.ndarray, point_simplex: np.ndarray):
+def join(owners: np.ndarray, point_simplex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (owner row, point index) for every point whose simplex is ``owners[row]``.
 
     ``owners`` (q,) simplex ids (any order, repeats allowed), ``point_simplex`` sorted.

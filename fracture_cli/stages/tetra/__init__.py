@@ -46,7 +46,8 @@ def tetgen_switches(options: TetraOptions, cage_volume: float) -> str:
     return switches + f"O{options.optimization}Q"
 
 
-def _run_tetgen(vertices: np.ndarray, faces: np.ndarray, switches: str, timeout: float):
+def _run_tetgen(vertices: np.ndarray, faces: np.ndarray, switches: str, timeout: float) -> tuple[
+        str | None, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
     """One TetGen run and its checks: ``(problem or None, nodes, tets, volumes)``."""
     try:
         nodes, tets = _tetgen.tetrahedralize(vertices, faces, switches, timeout=timeout)
@@ -134,6 +135,7 @@ def tetra(cage: Cage, options: TetraOptions = TetraOptions()) -> TetMesh:
     else:
         raise StageError(f"{problem} (switches {', '.join(attempts)}); try a looser --radius-edge-ratio or "
                          "--min-dihedral, or rebuild the cage with a larger offset", stage=STAGE)
+    assert nodes is not None and tets is not None  # problem is None: _run_tetgen returned the mesh
     # Shape measure: volume / longest edge^3 (0.118 for a regular tet). Flat
     # tets can remain where four cage vertices are nearly coplanar, because the
     # boundary may not be split; report the worst so later stages can be judged.
@@ -152,7 +154,7 @@ def _shape(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return tetgeom.tet_volumes(nodes, tets) / detmath.cube(tetgeom.tet_edge_lengths(nodes, tets).max(axis=1))
 
 
-def _peel_flat_boundary_tets(nodes: np.ndarray, tets: np.ndarray):
+def _peel_flat_boundary_tets(nodes: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, int]:
     """Remove tets flat to rounding (shape <= _FLAT_SHAPE) that have a face on the boundary.
 
     Four coplanar cage vertices can form such a tet (TetGen ``Y`` may not split
@@ -189,7 +191,7 @@ def _same_triangles(F: np.ndarray, G: np.ndarray) -> bool:
     if len(F) != len(G):
         return False
 
-    def canonical(T):
+    def canonical(T: np.ndarray) -> np.ndarray:
         T = np.asarray(T, dtype=np.int64)
         k = np.argmin(T, axis=1)
         r = np.arange(len(T))

@@ -28,6 +28,7 @@ import sys
 import tempfile
 import threading
 import time
+from typing import IO, Any
 
 import numpy as np
 
@@ -50,7 +51,7 @@ class TetGenFailure(Exception):
         self.reason = reason
 
 
-def _read_exact(stream, size: int) -> bytes:
+def _read_exact(stream: IO[bytes], size: int) -> bytes:
     chunks = []
     while size > 0:
         chunk = stream.read(size)
@@ -61,12 +62,12 @@ def _read_exact(stream, size: int) -> bytes:
     return b"".join(chunks)
 
 
-def _read_frame(stream):
+def _read_frame(stream: IO[bytes]) -> Any:
     (size,) = _HEADER.unpack(_read_exact(stream, _HEADER.size))
     return pickle.loads(_read_exact(stream, size))
 
 
-def _write_frame(stream, obj) -> None:
+def _write_frame(stream: IO[bytes], obj: object) -> None:
     data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
     stream.write(_HEADER.pack(len(data)) + data)
     stream.flush()
@@ -215,6 +216,7 @@ class _Worker:
             try:
                 if process is not None and process.poll() is None:
                     try:
+                        assert process.stdin is not None  # opened with PIPE
                         _write_frame(process.stdin, None)
                         process.wait(timeout=2)
                     except (OSError, subprocess.TimeoutExpired):
@@ -250,11 +252,14 @@ class _Worker:
         with self._lock:
             self._running()
 
-    def run(self, vertices: np.ndarray, faces: np.ndarray, switches: str, timeout: float):
+    def run(self, vertices: np.ndarray, faces: np.ndarray, switches: str,
+            timeout: float) -> tuple[np.ndarray, np.ndarray | None]:
         with self._lock:
             process = self._running()
+            stdin, stdout = process.stdin, process.stdout
+            assert stdin is not None and stdout is not None  # opened with PIPE
             try:
-                _write_frame(process.stdin, (vertices, faces, switches))
+                _write_frame(stdin, (vertices, faces, switches))
             except OSError:
                 reason = self._exit_reason()
                 self._kill()
@@ -264,7 +269,7 @@ class _Worker:
 
             def read() -> None:
                 try:
-                    box.append(_read_frame(process.stdout))
+                    box.append(_read_frame(stdout))
                 except (EOFError, OSError, pickle.UnpicklingError):
                     pass
 
@@ -293,7 +298,8 @@ _worker = _Worker()
 atexit.register(_worker.stop)
 
 
-def tetrahedralize(vertices: np.ndarray, faces: np.ndarray, switches: str, timeout: float = 60.0):
+def tetrahedralize(vertices: np.ndarray, faces: np.ndarray, switches: str,
+                   timeout: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
     """Tetrahedralize a closed surface with TetGen in a child process.
 
     Parameters

@@ -7,6 +7,7 @@ The slow reference that the exact cut solver (:mod:`.cut`) is checked against
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -48,7 +49,8 @@ class ConicSubproblemSolver:
 
     name = "clarabel"
 
-    def __init__(self, face_tets, weights, eta, volumes, *, tol: float = 1e-9, max_iter: int = 200,
+    def __init__(self, face_tets: np.ndarray, weights: np.ndarray, eta: np.ndarray, volumes: np.ndarray, *,
+                 tol: float = 1e-9, max_iter: int = 200,
                  weight_scale: float | None = None):
         import clarabel  # the baseline only; the default solver does not need it
 
@@ -87,7 +89,7 @@ class ConicSubproblemSolver:
         return sp.csc_matrix((np.concatenate(val_parts), (np.concatenate(row_parts), np.concatenate(col_parts))),
                              shape=(block * f, nu + f))
 
-    def solve(self, c: np.ndarray, fixed=()) -> SubproblemResult:
+    def solve(self, c: np.ndarray, fixed: Sequence[np.ndarray] = ()) -> SubproblemResult:
         """Minimise the energy subject to the constraints (see :meth:`CutSubproblemSolver.solve`).
 
         ``c`` and every fixed vector are (t, d) (or (t,) when ``d = 1``).

@@ -8,6 +8,7 @@ One ICCM round minimises ``sum_f w_f |u_a - u_b|`` subject to ``1^T M_T u =
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -97,7 +98,8 @@ class CutSubproblemSolver:
 
     name = "cut"
 
-    def __init__(self, face_tets, weights, volumes, *, tol: float = 1e-9, max_iter: int = 1000,
+    def __init__(self, face_tets: np.ndarray, weights: np.ndarray, volumes: np.ndarray, *, tol: float = 1e-9,
+                 max_iter: int = 1000,
                  weight_scale: float | None = None, max_flow: str = "auto", merge_cells: int = MERGE_CELLS):
         self.face_tets, self.scale, self.omega, self.vol = scaled_problem(face_tets, weights, volumes, weight_scale)
         self.t = len(self.vol)
@@ -197,7 +199,7 @@ class CutSubproblemSolver:
         self._cell_cache = None
         self._partition_version += 1
 
-    def _cell_graph(self):
+    def _cell_graph(self) -> tuple[int, np.ndarray, np.ndarray, sp.csr_matrix]:
         """``(n, edges (E, 2), edge_omega (E,), indicator (n, t))`` of the current partition (cached)."""
         if self._cell_cache is None:
             n = int(self.cells.max()) + 1
@@ -207,7 +209,7 @@ class CutSubproblemSolver:
             self._cell_cache = (n, edges, edge_omega, indicator)
         return self._cell_cache
 
-    def _project_fixed(self, k: int, y) -> np.ndarray:
+    def _project_fixed(self, k: int, y: np.ndarray) -> np.ndarray:
         """Projected fixed vector ``k``, cached (the same earlier modes recur in every ICCM round)."""
         y = np.asarray(y, dtype=np.float64).reshape(-1)
         if k < len(self._fixed_cache) and (self._fixed_cache[k][0] is y or np.array_equal(self._fixed_cache[k][0], y)):
@@ -217,7 +219,7 @@ class CutSubproblemSolver:
         return self._fixed_cache[k][1]
 
     # ----------------------------------------------------------------- solve
-    def solve(self, c: np.ndarray, fixed=(), *, max_flows: int | None = None,
+    def solve(self, c: np.ndarray, fixed: Sequence[np.ndarray] = (), *, max_flows: int | None = None,
               stall_flows: int | None = None) -> SubproblemResult:
         """Minimise the energy subject to the constraints.
 
@@ -267,7 +269,7 @@ class CutSubproblemSolver:
         return SubproblemResult(u=u[:, None], energy=energy * self.scale, lower_bound=bound,
                                 iterations=stats["max_flows"], seconds=time.perf_counter() - start, stats=stats)
 
-    def _constraint_vectors(self, c, fixed):
+    def _constraint_vectors(self, c: np.ndarray, fixed: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, float]:
         """The constraint vectors ``Y`` (t, m) (fixed ones, then ``c``, all projected), the feasible start
         vector ``v`` (t,) (``c`` made M_T-orthogonal to the fixed vectors, ``c^T M v = 1``) and its energy."""
         cp = self._constraints.project(np.asarray(c, dtype=np.float64).reshape(-1))
@@ -286,7 +288,7 @@ class CutSubproblemSolver:
         return Y, v, float(self.omega @ np.abs(v[self._fa] - v[self._fb]))
 
     def _cut_loop(self, Y: np.ndarray, b: np.ndarray, v: np.ndarray, v_cost: float, max_flows: int | None = None,
-                  stall_flows: int | None = None):
+                  stall_flows: int | None = None) -> tuple[np.ndarray, float, float, float, bool]:
         """Master LP and pricing until no tet set is violated; returns ``x`` (cells,), ``theta``, the
         objective, the last reduced cost and whether it is certified (False: ``max_flows`` ran out or
         the objective stalled for ``stall_flows``)."""
@@ -320,7 +322,7 @@ class CutSubproblemSolver:
             self.counters["refinements"] += 1
         raise RuntimeError(f"no optimality certificate after {self.max_iter} max-flows")
 
-    def _solve_master(self, Y: np.ndarray, b: np.ndarray, v_cost: float):
+    def _solve_master(self, Y: np.ndarray, b: np.ndarray, v_cost: float) -> tuple[np.ndarray, float, np.ndarray, float]:
         """The master LP on the current partition. If every LP solver fails on it (a merged partition
         can be badly conditioned), once more on its common refinement with the partition before the
         last merge."""
@@ -353,7 +355,7 @@ class CutSubproblemSolver:
             raise RuntimeError(f"the recovered solution's energy {energy:.9g} exceeds the master's {objective:.9g}")
         return energy, residual
 
-    def _price(self, supply: np.ndarray):
+    def _price(self, supply: np.ndarray) -> tuple[np.ndarray | None, float]:
         """Tet set minimising ``w(boundary of S) - supply(S)``, and that value; (None, 0) if none is negative."""
         members = self._max_flow.source_side(supply)
         self.counters["max_flows"] += 1

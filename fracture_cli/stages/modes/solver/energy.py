@@ -9,11 +9,15 @@ tet; its discontinuity energy is a weighted group lasso over the interior faces,
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from fracture_cli.types import TetMesh
 
-def face_weights(tet_mesh) -> np.ndarray:
+
+def face_weights(tet_mesh: TetMesh) -> np.ndarray:
     """Face weights ``w_f = A_f`` (f,) of the discontinuity energy.
 
     The paper writes ``sqrt(A_f)``; ``A_f`` makes the cost of a crack
@@ -34,7 +38,8 @@ def jump_norms(u: np.ndarray, face_tets: np.ndarray, eta: np.ndarray | None = No
     return np.sqrt(np.einsum("fd,fd->f", jump, jump))
 
 
-def discontinuity_energy(u, face_tets, weights, eta=None) -> float:
+def discontinuity_energy(u: np.ndarray, face_tets: np.ndarray, weights: np.ndarray,
+                         eta: np.ndarray | None = None) -> float:
     """``E_D(u) = sum_f weights_f || eta_f o (u_a - u_b) ||`` for ``u`` (t,) or (t, d)."""
     return float(np.dot(weights, jump_norms(u, face_tets, eta)))
 
@@ -88,7 +93,8 @@ class Constraints:
         return y - mean
 
 
-def scaled_problem(face_tets, weights, volumes, weight_scale):
+def scaled_problem(face_tets: np.ndarray, weights: np.ndarray, volumes: np.ndarray,
+                   weight_scale: float | None) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """Arrays of a subproblem with the face weights divided by their mean (or ``weight_scale``).
 
     Raw weights (face areas, ~1e-5 on a unit-diagonal asset) leave solvers far

@@ -11,7 +11,7 @@ row duals.
 from __future__ import annotations
 
 import logging
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -22,12 +22,24 @@ try:  # HiGHS's own bindings allow warm starts; scipy's linprog (same HiGHS) is 
 except ImportError:
     _highspy = None
 
+if TYPE_CHECKING:
+    import highspy
+
+# The dual master LP: matrix, costs, column lower / upper bounds, row lower / upper bounds.
+_DualLP = tuple[sp.csc_matrix, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+# The master's arguments: cells (t,), partition version, n, edges (E, 2), edge_omega (E,), indicator (n, t),
+# G (m, n), b (m,), g_c, v_cost.
+_MasterArgs = tuple[np.ndarray, int, int, np.ndarray, np.ndarray, sp.csr_matrix, np.ndarray, np.ndarray, float, float]
+# x (n,), theta, lambda (m,), objective
+_MasterSolution = tuple[np.ndarray, float, np.ndarray, float]
+
 log = logging.getLogger(__name__)
 
 # The master LP's duals are the pricing's supply: keep HiGHS's tolerances tight.
 # Serial dual simplex: deterministic.
-_HIGHS_SETTINGS = {"solver": "simplex", "simplex_strategy": 1, "primal_feasibility_tolerance": 1e-9,
-                   "dual_feasibility_tolerance": 1e-9, "threads": 1, "output_flag": False}
+_HIGHS_SETTINGS: dict[str, bool | float | str] = {
+    "solver": "simplex", "simplex_strategy": 1, "primal_feasibility_tolerance": 1e-9,
+    "dual_feasibility_tolerance": 1e-9, "threads": 1, "output_flag": False}
 # Cold retries when the warm-started solve does not end optimal (small masters with nearly dependent
 # constraint rows can leave HiGHS without a status): a fresh dual simplex, primal simplex, both
 # without presolve, then IPM.
@@ -47,7 +59,7 @@ def lp_backend() -> str:
     return "highspy" if _highspy is not None else "scipy"
 
 
-def _new_highs():
+def _new_highs() -> highspy.Highs:
     """A ``highspy.Highs`` whose one-time copyright banner does not reach our stdout.
 
     HiGHS prints it from C++ on the first construction in a process, before any
@@ -72,7 +84,9 @@ def _new_highs():
     return highs
 
 
-def _highs_model(A: sp.csc_matrix, cost, col_lower, col_upper, row_lower, row_upper, *, reuse=None, **extra):
+def _highs_model(A: sp.csc_matrix, cost: np.ndarray, col_lower: np.ndarray, col_upper: np.ndarray,
+                 row_lower: np.ndarray, row_upper: np.ndarray, *, reuse: highspy.Highs | None = None,
+                 **extra: bool | float | str) -> highspy.Highs:
     """A ``highspy.Highs`` holding the LP, with the project's settings (and ``extra`` ones).
 
     ``reuse``: a ``Highs`` made here before with the project's settings only; passing a new model
@@ -104,7 +118,7 @@ def _basis_statuses() -> np.ndarray:
     return lookup
 
 
-def _independent_fixed_rows(G: np.ndarray):
+def _independent_fixed_rows(G: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """``(W (r, n), back (m - 1, r))``: an orthonormal basis of the row space of the fixed rows ``G[:-1]``
     and the map of its multipliers to theirs; None if those rows are independent (nothing to reduce)."""
     fixed = G[:-1]
@@ -133,13 +147,15 @@ class MasterLP:
         self._lp_G: Any = None
         # (cells, edges, m, column statuses, row statuses) of the last optimal basis
         self._lp_basis: tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray] | None = None
-        self._highs = None  # the Highs object of the master with default settings (see _highs_model)
+        # the Highs object of the master with default settings (see _highs_model)
+        self._highs: highspy.Highs | None = None
         self.retries = 0
         # (partition version, (E,) bool): cell edges whose flow was basic (strictly inside its bounds)
         # in the last optimal HiGHS basis; None after a solve without a basis (scipy's linprog).
         self.slack_edges: tuple[int, np.ndarray] | None = None
 
-    def solve(self, cells: np.ndarray, version: int, cell_graph, Y: np.ndarray, b: np.ndarray, v_cost: float):
+    def solve(self, cells: np.ndarray, version: int, cell_graph: tuple[int, np.ndarray, np.ndarray, sp.csr_matrix],
+              Y: np.ndarray, b: np.ndarray, v_cost: float) -> _MasterSolution:
         """Solve the master on the partition ``cells`` (t,) (``version`` changes with it).
 
         ``cell_graph`` is ``(n, edges (E, 2), edge_omega (E,), indicator (n, t))``; ``Y`` (t, m)
@@ -163,12 +179,12 @@ class MasterLP:
             x, theta, lam, objective = self._solve_reduced(args, *reduced)
         return x, theta, lam * row_scale, objective
 
-    def _solve_any(self, args):
+    def _solve_any(self, args: _MasterArgs) -> _MasterSolution:
         if _highspy is None:
             return self._solve_linprog(*args[2:])
         return self._solve_highs(*args)
 
-    def _solve_reduced(self, args, W: np.ndarray, back: np.ndarray):
+    def _solve_reduced(self, args: _MasterArgs, W: np.ndarray, back: np.ndarray) -> _MasterSolution:
         """The master with the fixed rows replaced by an orthonormal basis ``W`` (r, n) of their row space.
 
         On a coarse partition the earlier modes' rows can be dependent up to round-off (singular values
@@ -187,7 +203,8 @@ class MasterLP:
         return x, theta, np.concatenate([back @ lam[:-1], lam[-1:]]), objective
 
     @staticmethod
-    def _dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+    def _dual_lp(n: int, edges: np.ndarray, edge_omega: np.ndarray, indicator: sp.csr_matrix, G: np.ndarray,
+                 b: np.ndarray, g_c: float, v_cost: float) -> _DualLP:
         """Matrix (n + 1, E + m + 1), costs, column bounds and row bounds of the dual master LP."""
         E, m = len(edges), G.shape[0]
         cell_vol = np.asarray(indicator.sum(axis=1)).reshape(-1)
@@ -214,7 +231,9 @@ class MasterLP:
         row_upper = np.concatenate([np.zeros(n), [v_cost]])
         return A, cost, col_lower, col_upper, row_lower, row_upper
 
-    def _solve_highs(self, cells, version, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+    def _solve_highs(self, cells: np.ndarray, version: int, n: int, edges: np.ndarray, edge_omega: np.ndarray,
+                     indicator: sp.csr_matrix, G: np.ndarray, b: np.ndarray, g_c: float,
+                     v_cost: float) -> _MasterSolution:
         E, m = len(edges), G.shape[0]
         key = (version, m)
         h = self._lp
@@ -248,7 +267,8 @@ class MasterLP:
         row_dual = np.asarray(solution.row_dual)
         return row_dual[:n], max(-float(row_dual[n]), 0.0), lam, -float(h.getInfo().objective_function_value)
 
-    def _retry(self, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+    def _retry(self, n: int, edges: np.ndarray, edge_omega: np.ndarray, indicator: sp.csr_matrix, G: np.ndarray,
+               b: np.ndarray, g_c: float, v_cost: float) -> highspy.Highs | None:
         """Cold solves with other HiGHS settings after a warm-started one did not end optimal; None if all fail."""
         self.retries += 1
         lp = self._dual_lp(n, edges, edge_omega, indicator, G, b, g_c, v_cost)
@@ -262,7 +282,7 @@ class MasterLP:
                   len(_HIGHS_RETRIES))
         return None
 
-    def _inherited_basis(self, cells, n, edges, m):
+    def _inherited_basis(self, cells: np.ndarray, n: int, edges: np.ndarray, m: int) -> highspy.HighsBasis | None:
         """A starting basis for the master after a refinement, from the previous optimal basis.
 
         Every new cell is part of an old one: its row inherits the old row's status
@@ -316,7 +336,8 @@ class MasterLP:
         result.valid = True
         return result
 
-    def _solve_linprog(self, n, edges, edge_omega, indicator, G, b, g_c, v_cost):
+    def _solve_linprog(self, n: int, edges: np.ndarray, edge_omega: np.ndarray, indicator: sp.csr_matrix,
+                       G: np.ndarray, b: np.ndarray, g_c: float, v_cost: float) -> _MasterSolution:
         # Imported here: scipy.optimize costs ~0.1 s to import, and with highspy this fallback rarely runs.
         from scipy.optimize import linprog
 

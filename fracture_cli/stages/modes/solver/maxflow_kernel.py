@@ -34,7 +34,8 @@ from fracture_cli.system.jit import njit
 
 
 @njit()
-def arc_structure(lo: np.ndarray, hi: np.ndarray, n: int):  # pragma: no cover (compiled)
+def arc_structure(lo: np.ndarray, hi: np.ndarray,  # pragma: no cover (compiled)
+                  n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Residual arcs of the faces ``lo`` -- ``hi`` (f,) among ``n`` nodes, grouped by tail.
 
     Returns ``first`` (n + 1,) int32 (the arcs out of node v are ``first[v]:first[v + 1]``), ``head``
@@ -66,7 +67,8 @@ def arc_structure(lo: np.ndarray, hi: np.ndarray, n: int):  # pragma: no cover (
 
 
 @njit()
-def _global_relabel(first, head, sister, r, excess, label, queue):  # pragma: no cover (compiled)
+def _global_relabel(first: np.ndarray, head: np.ndarray, sister: np.ndarray, r: np.ndarray,  # pragma: no cover
+                    excess: np.ndarray, label: np.ndarray, queue: np.ndarray) -> int:
     """Exact labels: 1 + the residual distance to an absorbing node (excess < 0, label 1; at most n), and
     ``n + 1`` for the nodes that cannot reach one; returns how many can (first in ``queue``, in BFS order)."""
     n = excess.shape[0]
@@ -94,7 +96,8 @@ def _global_relabel(first, head, sister, r, excess, label, queue):  # pragma: no
 
 
 @njit()
-def source_side(first, head, sister, face, capacity, supply, relabel_period=6):  # pragma: no cover (compiled)
+def source_side(first: np.ndarray, head: np.ndarray, sister: np.ndarray, face: np.ndarray,  # pragma: no cover
+                capacity: np.ndarray, supply: np.ndarray, relabel_period: int = 6) -> tuple[np.ndarray, bool]:
     """Minimal source side of ``min_S capacity(boundary of S) - supply(S)``.
 
     Parameters

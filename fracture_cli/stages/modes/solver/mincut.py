@@ -116,7 +116,7 @@ class MinCut:
         arange = np.arange(t)
         return (np.concatenate([fa, fb, np.full(t, t), arange]), np.concatenate([fb, fa, arange, np.full(t, t + 1)]))
 
-    def _one_arc_graph(self, incidence: bool = True):
+    def _one_arc_graph(self, incidence: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, sp.csr_matrix | None]:
         """Face arcs (lower, higher) (f,) int32, node order (t,) (solver node -> node) and face-node
         incidence (t, f) of the one-arc form (None if not ``incidence``: the kernel needs none).
 

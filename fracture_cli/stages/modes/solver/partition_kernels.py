@@ -30,7 +30,8 @@ def _root(parent: np.ndarray, x: int) -> int:  # pragma: no cover (compiled)
 
 
 @njit()
-def masked_components(fa: np.ndarray, fb: np.ndarray, keep: np.ndarray, t: int):  # pragma: no cover (compiled)
+def masked_components(fa: np.ndarray, fb: np.ndarray, keep: np.ndarray,  # pragma: no cover (compiled)
+                      t: int) -> tuple[int, np.ndarray]:
     """Connected components of ``t`` nodes joined by the edges ``(fa[i], fb[i])`` (f,) where ``keep[i]``.
 
     Returns ``(count, labels (t,) int64)``, labels numbered in the order of each component's smallest node
@@ -55,7 +56,8 @@ def masked_components(fa: np.ndarray, fb: np.ndarray, keep: np.ndarray, t: int):
 
 
 @njit()
-def cell_graph(cells: np.ndarray, fa: np.ndarray, fb: np.ndarray, omega: np.ndarray, n: int):  # pragma: no cover
+def cell_graph(cells: np.ndarray, fa: np.ndarray, fb: np.ndarray, omega: np.ndarray,  # pragma: no cover
+               n: int) -> tuple[np.ndarray, np.ndarray]:
     """Boundaries between the ``n`` cells of a partition ``cells`` (t,) of the face graph ``(fa, fb)`` (f,).
 
     Returns ``edges (E, 2)`` int64, the distinct cell pairs ``(lo, hi)`` that share a face in ascending order of
@@ -89,7 +91,7 @@ def cell_graph(cells: np.ndarray, fa: np.ndarray, fb: np.ndarray, omega: np.ndar
 
 
 @njit()
-def cell_order(cells: np.ndarray, n: int):  # pragma: no cover (compiled)
+def cell_order(cells: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover (compiled)
     """``(order (t,), indptr (n + 1,))``: the tets sorted by cell, ascending within a cell (a stable counting
     sort, as ``np.argsort(cells, kind="stable")``), and where each cell's run starts."""
     t = cells.shape[0]
