@@ -199,6 +199,7 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, target: int, decimator: s
                 if len(faces) <= (1.0 + FACE_COUNT_TOLERANCE) * target:
                     break
         else:
+            # open3d loads only for the optional open3d decimator
             from fracture_cli.geometry.open3d_bridge import open3d as _import_open3d
             o3d = _import_open3d()
 

@@ -32,6 +32,7 @@ from fracture_cli.geometry.hulls import (
 from fracture_cli.geometry.mass import MassProperties, mass_properties
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.geometry.trigeom import cross3
+from fracture_cli.stages.fragments.bodies import INTERFACE_TOLERANCE, coincident_faces
 from fracture_cli.system import detmath, parallel
 
 # A closed mesh: vertices (n, 3), faces (m, 3).
@@ -224,7 +225,6 @@ def separate_hulls(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = 
     if masses is None:
         masses = [mass_properties(V, F) for V, F in materials]
     points = np.vstack([m.vertices for m in solids]) if solids else np.zeros((1, 3))
-    from fracture_cli.stages.fragments.bodies import INTERFACE_TOLERANCE
 
     tolerance = INTERFACE_TOLERANCE * float(np.linalg.norm(np.ptp(points, axis=0)))
     pairs = overlapping_boxes([h.bounding_box() for h in hulls])
@@ -351,7 +351,6 @@ def _contacts(meshes: Sequence[_Mesh], tolerance: float,
               candidates: Sequence[np.ndarray] | None = None) -> dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]:
     """The faces every pair of bodies share: ``(P, Q) -> (area-weighted normals from P to Q (f, 3), centroids)``;
     ``candidates``: per body, the (m_i,) bool mask of faces that may touch another (None: all)."""
-    from fracture_cli.stages.fragments.bodies import coincident_faces
 
     match = coincident_faces(meshes, candidates, tolerance=tolerance)
     lo, hi = np.minimum(match.owner, match.other), np.maximum(match.owner, match.other)

@@ -4,23 +4,20 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import manifold3d
 import numpy as np
 
 from fracture_cli.errors import StageError
 from fracture_cli.geometry import trigeom
+from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.geometry.rows import unique_rows, used_vertices
 from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask, surface_solid
 from fracture_cli.geometry.uvs import box_uvs
 from fracture_cli.options import option
-from fracture_cli.stages.fragments.bodies import stable_order
+from fracture_cli.stages.fragments.bodies import SplitReport, body_faces, split_fragments, stable_order
 from fracture_cli.system import parallel
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Regions, SurfaceMesh
-
-if TYPE_CHECKING:  # components imports this module
-    from fracture_cli.stages.fragments.bodies import SplitReport
 
 log = logging.getLogger(__name__)
 
@@ -164,7 +161,6 @@ def fragments_with_split(surface: SurfaceMesh, regions: Regions,
         normalization=surface.normalization,
         input_volume=input_volume,
     )
-    from fracture_cli.stages.fragments.bodies import SplitReport, split_fragments
 
     # The workers found each cut's bodies (body_faces) and their volumes: when there are as many bodies as cuts,
     # none of them tiny, split_fragments returns the fragments as they are (its first test), so it is not run again.
@@ -233,9 +229,6 @@ def _cut_group(cut: _Cut, pieces: list[int]) -> list[_Piece | None]:
 def _cut_piece(cut: _Cut, piece: int, solid: manifold3d.Manifold | None = None) -> _Piece | None:
     """The fragment of ``piece`` (``input ^ region``; ``solid``: the input or a crop of it around the region) and
     its bodies' volumes, or None where the region misses the input."""
-    from fracture_cli.geometry.mass import mass_properties
-    from fracture_cli.stages.fragments.bodies import body_faces
-
     rv, rf = cut.meshes[piece]
     part = (cut.solid if solid is None else solid) ^ _region_manifold(rv, rf, cut.region_id, piece)
     if part.is_empty() or part.volume() <= cut.min_volume:

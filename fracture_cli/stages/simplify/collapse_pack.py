@@ -15,7 +15,7 @@ import numpy as np
 
 from fracture_cli.stages.simplify.collapse_loop import collapse_loop
 from fracture_cli.stages.simplify.collapse_replay import replay_loop
-from fracture_cli.stages.simplify.decimate_faces import MIN_NORMAL_COS, MIN_NORMAL_COS_OUTER, MIN_SHAPE
+from fracture_cli.stages.simplify.decimate_faces import MIN_NORMAL_COS, MIN_NORMAL_COS_OUTER, MIN_SHAPE, merged
 
 if TYPE_CHECKING:
     from fracture_cli.stages.simplify.decimate import SurfaceComplex
@@ -143,7 +143,6 @@ def replay(complex_: SurfaceComplex, collapses: list[tuple[int, int, float, list
 def _replay_onto(complex_: SurfaceComplex, collapses: tuple, quadric: np.ndarray) -> None:
     """Apply the loop's collapses (:func:`.collapse_loop.logged`) to the complex, as
     :meth:`.SurfaceComplex._apply` does, with the points and faces the loop chose; ``quadric``: the loop's."""
-    from fracture_cli.stages.simplify.decimate_faces import merged
 
     log, bounds = collapses[0].tolist(), collapses[1].tolist()
     faces, vertex_faces, assigned, history = complex_.faces, complex_.vertex_faces, complex_.assigned, complex_.history

@@ -485,6 +485,7 @@ class SurfaceComplex:
 
 def _kernels() -> ModuleType:
     """:mod:`.collapse_kernels`, imported on first use: numba loads only when the simplify stage runs."""
+    # numba loads only when the simplify stage runs
     from fracture_cli.stages.simplify import collapse_kernels
 
     return collapse_kernels
@@ -492,6 +493,7 @@ def _kernels() -> ModuleType:
 
 def _collapse_pack() -> ModuleType:
     """:mod:`.collapse_pack` (and the compiled loop), imported on first use as :func:`_kernels`."""
+    # numba loads only when the simplify stage runs
     from fracture_cli.stages.simplify import collapse_pack
 
     return collapse_pack
