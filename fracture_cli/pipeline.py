@@ -207,6 +207,12 @@ def _smooth(state: PipelineState, options: Any) -> PipelineState:
     return dataclasses.replace(state, regions=regions)
 
 
+def _faults(state: PipelineState, options: Any) -> PipelineState:
+    from fracture_cli.stages.pattern.noise import faults
+
+    return dataclasses.replace(state, regions=faults(state.need("regions", "faults"), options))
+
+
 def _fragments(state: PipelineState, options: Any) -> PipelineState:
     from fracture_cli.stages.fragments import fragments_with_split
 
@@ -305,6 +311,8 @@ STAGES: tuple[Stage, ...] = (
     Stage("smooth", "Smooth the fault surfaces between pieces into closed piece regions.",
           "fracture_cli.stages.smooth:SmoothOptions", _smooth, consumes=("tet_mesh", "pieces"), uses=("surface",),
           produces=("regions",)),
+    Stage("faults", "Add value noise to the shared faults (off unless faults.noise > 0); both sides move alike.",
+          "fracture_cli.stages.pattern.noise:FaultOptions", _faults, consumes=("regions",), produces=("regions",)),
     Stage("fragments", "Cut the input into one closed fragment per piece region, and check them.",
           "fracture_cli.stages.fragments:FragmentOptions", _fragments, consumes=("surface", "regions"),
           produces=("fragments", "checks")),

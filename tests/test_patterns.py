@@ -231,3 +231,34 @@ def test_the_report_names_the_pattern(box, tmp_path):
         report = json.load(fh)
     assert report["recipe"]["parameters"]["pattern"]["kind"] == "slices"
     assert "pattern" in report["seconds"]
+
+
+# --- faults.noise ---------------------------------------------------------------------------------------------
+
+def test_noise_is_a_function_of_position_only():
+    from fracture_cli.stages.pattern.noise import value_noise
+
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-0.5, 0.5, (200, 3))
+    a = value_noise(points, 20.0, 3)
+    b = value_noise(points[::-1], 20.0, 3)[::-1]
+    assert np.array_equal(a, b) and np.all(np.abs(a) <= 1.0) and a.std() > 0.05
+    assert not np.array_equal(a, value_noise(points, 20.0, 3, seed=1))
+
+
+def test_noise_off_leaves_the_regions_alone():
+    from fracture_cli.stages.pattern.noise import FaultOptions, faults
+    from fracture_cli.types import Regions
+
+    regions = Regions(meshes=((np.zeros((3, 3)), np.array([[0, 1, 2]])),))
+    assert faults(regions, FaultOptions()) is regions
+    assert load_recipe("default")["faults"] == FaultOptions()
+
+
+def test_noisy_faults_keep_fragments_closed(box, tmp_path):
+    plain, noisy = str(tmp_path / "plain"), str(tmp_path / "noisy")
+    sets = ["pattern.kind=voronoi", "pattern.count=5"]
+    _bake(box, plain, sets=sets)
+    report = _bake(box, noisy, sets=[*sets, "faults.noise=0.005", "faults.noise_octaves=2"])
+    _assert_game_ready(report, noisy, "box")
+    assert _hashes(plain)["box.glb"] != _hashes(noisy)["box.glb"]
