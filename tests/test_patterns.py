@@ -262,3 +262,36 @@ def test_noisy_faults_keep_fragments_closed(box, tmp_path):
     report = _bake(box, noisy, sets=[*sets, "faults.noise=0.005", "faults.noise_octaves=2"])
     _assert_game_ready(report, noisy, "box")
     assert _hashes(plain)["box.glb"] != _hashes(noisy)["box.glb"]
+
+
+def test_the_cell_graph_has_the_energy_and_mass_of_the_prolongated_field(box_tets):
+    from fracture_cli.discontinuity import discontinuity_energy, face_weights
+    from fracture_cli.stages.pattern.restrict import cell_problem
+
+    tets, surface = box_tets
+    cells = pattern(tets, surface, PatternOptions(kind="voronoi", count=9))
+    rng = np.random.default_rng(0)
+    f = len(tets.interior_face_tets)
+    eta = rng.uniform(0.5, 4.0, (f, 1))  # a material (grain, strength map) weights the cell graph too
+    volumes = np.asarray(tets.tet_volumes)
+    problem = cell_problem(cells, tets.interior_face_tets, face_weights(tets), eta, volumes,
+                           rng.uniform(-1, 1, (2, len(volumes))), 12)
+    w = rng.uniform(-1.0, 1.0, (int(cells.max()) + 1, 1))
+    on_tets = discontinuity_energy(w[cells], tets.interior_face_tets, face_weights(tets), eta)
+    on_cells = discontinuity_energy(w, problem.edges, problem.areas, problem.eta)
+    assert abs(on_tets - on_cells) <= 1e-12 * on_tets
+    assert abs(float(np.sum(volumes * w[cells, 0] ** 2)) - float(np.sum(problem.volumes * w[:, 0] ** 2))) < 1e-12
+    assert problem.num_modes == min(12, int(cells.max()))
+
+
+def test_pattern_bakes_use_the_stage_cache(box, tmp_path):
+    sets = ["pattern.kind=slices", "pattern.slices=2"]
+    recipe = load_recipe("default", [*FAST, *sets])
+    cache = str(tmp_path / "cache")
+    bake(box, str(tmp_path / "a"), recipe, cache_dir=cache)
+    second = bake(box, str(tmp_path / "b"), recipe, cache_dir=cache).report
+    assert second["cache"]["modes"] == "hit"
+    assert _hashes(str(tmp_path / "a")) == _hashes(str(tmp_path / "b"))
+    other = bake(box, str(tmp_path / "c"), load_recipe("default", [*FAST, *sets, "pattern.slices=3"]),
+                 cache_dir=cache).report
+    assert other["cache"]["modes"] == "miss"
