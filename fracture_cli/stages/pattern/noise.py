@@ -4,10 +4,11 @@ The piece regions (the smooth stage's closed meshes that partition the cage)
 share their faults: a fault face of one region is, vertex for vertex, a face
 of its neighbour. With ``noise > 0`` every region is refined by midpoint
 subdivision (``noise_subdivisions`` times, the same midpoints on both sides
-of a shared edge) and every vertex that lies only on faults is moved by a
-vector value noise that is a function of its position alone. Both sides of
-a fault therefore move identically, the regions still partition the cage
-(vertices on its surface, outside the input, stay), and the fragments cut
+of a shared edge) and every vertex inside one fault sheet (two regions meet
+there; not on a junction of three, not on the cage's surface) moves along
+the fault's normal by a value noise of its position alone, at most a share of
+the fault's edge length there. Both sides of a fault therefore move
+identically, the regions still partition the cage, and the fragments cut
 from them stay closed; mass properties, collision parts, the triangle budget
 and the checks are computed after it, by the later stages.
 
@@ -30,6 +31,8 @@ log = logging.getLogger(__name__)
 
 STAGE = "faults"
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+# A fault vertex moves by at most this share of its shortest edge before subdivision (no fold-over).
+_EDGE_SHARE = 0.3
 _PRIMES = (np.uint64(0xC2B2AE3D27D4EB4F), np.uint64(0x165667B19E3779F9), np.uint64(0x27D4EB2F165667C5))
 
 
@@ -111,6 +114,42 @@ def subdivide(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
     return np.concatenate([vertices, mids]), new
 
 
+def _normal_shift(positions: np.ndarray, faces: np.ndarray, owner: np.ndarray, face_key: np.ndarray,
+                  counts: np.ndarray, moving: np.ndarray, options: FaultOptions) -> np.ndarray:
+    """Displacement (n, 3) of every vertex: noise along its fault's normal, 0 where it does not move.
+
+    The normal is the area-weighted normal of the fault faces around the vertex, oriented as the
+    lower-numbered region sees them (both sides get the same vector). The move is at most
+    :data:`_EDGE_SHARE` of the vertex's shortest edge before subdivision, so a fault does not fold
+    over its neighbours.
+    """
+    n = len(positions)
+    # One occurrence of every fault face: the first in region order (the lower region's orientation).
+    shared = np.flatnonzero(counts[face_key] == 2)  # faces are in region order: the first seen is the lower's
+    _, first = np.unique(face_key[shared], return_index=True)
+    keep = np.zeros(len(faces), dtype=bool)
+    keep[shared[first]] = True
+    tri = positions[faces[keep]]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    corners = faces[keep].reshape(-1)
+    normal = np.stack([np.bincount(corners, weights=np.repeat(cross[:, a], 3), minlength=n) for a in range(3)],
+                      axis=1)
+    length = np.sqrt(np.einsum("ij,ij->i", normal, normal))
+    unit = normal / np.maximum(length, 1e-300)[:, None]
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    d = positions[edges[:, 0]] - positions[edges[:, 1]]
+    edge_length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    shortest = np.full(n, np.inf)
+    np.minimum.at(shortest, edges.reshape(-1), np.repeat(edge_length, 2))
+    value = float(options.noise) * value_noise(positions, options.noise_frequency, options.noise_octaves,
+                                               options.seed)[:, 0]
+    # In units of the edges before subdivision (each halves them): the noise field itself is smooth.
+    bound = _EDGE_SHARE * shortest * float(1 << int(options.noise_subdivisions))
+    value = np.clip(value, -bound, bound)
+    value[~moving | ~(length > 0)] = 0.0
+    return value[:, None] * unit
+
+
 def faults(regions: Regions, options: FaultOptions = FaultOptions()) -> Regions:
     """The regions with noise on their shared faults (unchanged when ``options.noise`` is 0).
 
@@ -137,16 +176,20 @@ def faults(regions: Regions, options: FaultOptions = FaultOptions()) -> Regions:
     global_id = global_id.reshape(-1)
     starts = np.cumsum([0] + [len(v) for v, _ in meshes])
     region_faces = [global_id[starts[r] + f] for r, (_, f) in enumerate(meshes)]
-    keys = np.sort(np.concatenate(region_faces), axis=1)
-    _, face_key, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    outer = counts[face_key.reshape(-1)] == 1
-    fixed = np.zeros(len(positions), dtype=bool)
-    fixed[np.concatenate(region_faces)[outer].reshape(-1)] = True
-    shift = float(options.noise) * value_noise(positions, options.noise_frequency, options.noise_octaves,
-                                               options.seed)
-    shift[fixed] = 0.0
+    all_faces = np.concatenate(region_faces)
+    owner = np.concatenate([np.full(len(f), r) for r, f in enumerate(region_faces)])
+    _, face_key, counts = np.unique(np.sort(all_faces, axis=1), axis=0, return_inverse=True, return_counts=True)
+    face_key = face_key.reshape(-1)
+    outer = counts[face_key] == 1
+    n = len(positions)
+    fixed = np.zeros(n, dtype=bool)
+    fixed[all_faces[outer].reshape(-1)] = True
+    # Only vertices inside one fault sheet move (two regions meet there): junctions of three or more stay.
+    pairs = np.unique(np.stack([np.repeat(owner, 3), all_faces.reshape(-1)], axis=1), axis=0)
+    moving = ~fixed & (np.bincount(pairs[:, 1], minlength=n) == 2)
+    shift = _normal_shift(positions, all_faces, owner, face_key, counts, moving, options)
     moved = positions + shift
     out = tuple((moved[global_id[starts[r]:starts[r + 1]]], f) for r, (_, f) in enumerate(meshes))
     log.info("%s: noise %.3g on %d fault vertices of %d regions (%d subdivisions)", STAGE, options.noise,
-             int((~fixed).sum()), len(out), options.noise_subdivisions)
+             int(moving.sum()), len(out), options.noise_subdivisions)
     return Regions(meshes=out, smoothing=regions.smoothing, vanished=regions.vanished)
