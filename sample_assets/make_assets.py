@@ -8,6 +8,10 @@ Every asset is made here from primitives, so nothing is copied from elsewhere:
   a small checker texture: the ordinary case.
 * ``chair.glb``    seat, back and four thin legs unioned into one solid, with
   box-projected UVs: thin parts that must not vanish in the cage.
+* ``pane.glb``     a thin glass pane (1.0 x 0.8 x 0.012, normal +Z) for the
+  ``glass_pane`` recipe (radial pattern).
+* ``wall.glb``     a wall (2.0 x 1.2 x 0.25, courses along +X) for the
+  ``brick_wall`` recipe (bricks pattern).
 All assets are +Y up (the glTF convention), in metres.
 
 * ``vase.obj``     a surface of revolution, open at the top (a single sheet, no
@@ -139,7 +143,33 @@ def vase() -> None:
         fh.write("newmtl glaze\nKd 0.20 0.35 0.60\n")
 
 
+def pane() -> None:
+    # Built +Z up as the others: 1.0 wide (x), 0.012 thick (y), 0.8 high (z); +Y up it faces +Z.
+    solid = m3d.Manifold.cube((1.0, 0.012, 0.8)).translate((-0.5, -0.006, 0.0))
+    mesh = _manifold_to_trimesh(solid.refine_to_length(0.08))
+    mesh = _box_uv_split(mesh, texel=1.0)
+    material = trimesh.visual.material.PBRMaterial(
+        name="glass", baseColorFactor=[190, 215, 230, 110], metallicFactor=0.0, roughnessFactor=0.05,
+        alphaMode="BLEND")
+    _glb(mesh, "pane", material)
+
+
+def wall() -> None:
+    # 2.0 long (x), 0.25 deep (y), 1.2 high (z); +Y up the courses run along +X and stack along +Y.
+    solid = m3d.Manifold.cube((2.0, 0.25, 1.2)).translate((-1.0, -0.125, 0.0))
+    mesh = _manifold_to_trimesh(solid.refine_to_length(0.1))
+    mesh = _box_uv_split(mesh, texel=0.4)
+    material = trimesh.visual.material.PBRMaterial(
+        name="brick", baseColorFactor=[255, 255, 255, 255],
+        baseColorTexture=_checker(a=(170, 80, 60), b=(140, 62, 48)), metallicFactor=0.0, roughnessFactor=0.95)
+    _glb(mesh, "wall", material)
+
+
+MAKERS = {"pillar": pillar, "chair": chair, "vase": vase, "pane": pane, "wall": wall}
+
 if __name__ == "__main__":
-    pillar()
-    chair()
-    vase()
+    import sys
+
+    # `python sample_assets/make_assets.py pane wall` makes only those; no names: all of them.
+    for name in sys.argv[1:] or list(MAKERS):
+        MAKERS[name]()

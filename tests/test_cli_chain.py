@@ -22,7 +22,8 @@ BYTES = ("chair.glb", "chair.fracture.json", "chair.fracture.bin")
 def test_chain_of_every_stage_writes_what_bake_writes_byte_for_byte(tmp_path):
     chair = os.path.join(SAMPLE_ASSETS, "chair.glb")
     chain = SMALL + ["load", chair, "repair", "cage", "save-cage", str(tmp_path / "cage.obj"), "tetra", "save-tets",
-                     str(tmp_path / "tets.npz"), "material", "modes", "pieces", "smooth", "fragments", "simplify",
+                     str(tmp_path / "tets.npz"), "material", "pattern", "modes", "pieces", "smooth", "faults",
+                     "fragments", "simplify",
                      "collision",
                      "runtime", "export", str(tmp_path / "chain")]
     result = CliRunner().invoke(cli, chain)

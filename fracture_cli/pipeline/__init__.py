@@ -32,10 +32,12 @@ if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help`
     from fracture_cli.runtime.format import RuntimeData
     from fracture_cli.stages.cage import CageOptions
     from fracture_cli.stages.collision.convex import CollisionOptions
+    from fracture_cli.stages.faults import FaultOptions
     from fracture_cli.stages.fragments import FragmentOptions
     from fracture_cli.stages.load import LoadOptions
     from fracture_cli.stages.material import MaterialOptions
     from fracture_cli.stages.modes import ModesOptions
+    from fracture_cli.stages.pattern import PatternOptions
     from fracture_cli.stages.pieces import PiecesOptions
     from fracture_cli.stages.repair import RepairOptions
     from fracture_cli.stages.repair.records import RepairRecord
@@ -62,6 +64,7 @@ class PipelineState:
     cage: Cage | None = None
     tet_mesh: TetMesh | None = None
     eta: np.ndarray | None = None  # (f,) or (f, d) material weights of the interior faces
+    cells: np.ndarray | None = None  # (t,) an authored pattern's cell of every tet (None: the modes decide)
     modes: Modes | None = None
     pieces: Pieces | None = None
     regions: Regions | None = None
@@ -195,11 +198,19 @@ def _material(state: PipelineState, options: MaterialOptions) -> PipelineState:
     return dataclasses.replace(state, eta=material(state.need("tet_mesh", "material"), state.surface, options))
 
 
+def _pattern(state: PipelineState, options: PatternOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
+    from fracture_cli.stages.pattern import pattern
+
+    return dataclasses.replace(state, cells=pattern(state.need("tet_mesh", "pattern"), state.surface, options))
+
+
 def _modes(state: PipelineState, options: ModesOptions) -> PipelineState:
     # on first use: `fracture --help` loads no stage
     from fracture_cli.stages.modes import modes
 
-    return dataclasses.replace(state, modes=modes(state.need("tet_mesh", "modes"), options, eta=state.eta))
+    result = modes(state.need("tet_mesh", "modes"), options, eta=state.eta, cells=state.cells)
+    return dataclasses.replace(state, modes=result)
 
 
 def _pieces(state: PipelineState, options: PiecesOptions) -> PipelineState:
@@ -207,7 +218,8 @@ def _pieces(state: PipelineState, options: PiecesOptions) -> PipelineState:
     from fracture_cli.stages.pieces import pieces
 
     # Piece sizes are measured in asset volume: the repaired surface says what is material.
-    result = pieces(state.need("tet_mesh", "pieces"), state.need("modes", "pieces"), options, surface=state.surface)
+    result = pieces(state.need("tet_mesh", "pieces"), state.need("modes", "pieces"), options, surface=state.surface,
+                    cells=state.cells)
     return dataclasses.replace(state, pieces=result)
 
 
@@ -217,6 +229,13 @@ def _smooth(state: PipelineState, options: SmoothOptions) -> PipelineState:
 
     regions = smooth(state.need("tet_mesh", "smooth"), state.need("pieces", "smooth"), options, surface=state.surface)
     return dataclasses.replace(state, regions=regions)
+
+
+def _faults(state: PipelineState, options: FaultOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
+    from fracture_cli.stages.faults import faults
+
+    return dataclasses.replace(state, regions=faults(state.need("regions", "faults"), options))
 
 
 def _fragments(state: PipelineState, options: FragmentOptions) -> PipelineState:
@@ -295,14 +314,21 @@ STAGES: tuple[Stage, ...] = (
     Stage("material", "Set material weights (grain, painted strength, boxes) on the tet faces.",
           "fracture_cli.stages.material:MaterialOptions", _material, consumes=("tet_mesh",), uses=("surface",),
           produces=("eta",)),
-    Stage("modes", "Compute the fracture modes of the tet mesh.", "fracture_cli.stages.modes:ModesOptions", _modes,
-          consumes=("tet_mesh",), uses=("eta",), produces=("modes",), cached=True, short={"num_modes": "-k"}),
+    Stage("pattern", "Choose what decides the pieces: the fracture modes, or an authored pattern's cells.",
+          "fracture_cli.stages.pattern:PatternOptions", _pattern, consumes=("tet_mesh",), uses=("surface",),
+          produces=("cells",)),
+    Stage("modes", "Compute the fracture modes of the tet mesh (on the pattern's cells, if any).",
+          "fracture_cli.stages.modes:ModesOptions", _modes, consumes=("tet_mesh",), uses=("eta", "cells"),
+          produces=("modes",), cached=True, short={"num_modes": "-k"}),
     Stage("pieces", "Split the tet mesh into atomic pieces and build the piece graph.",
-          "fracture_cli.stages.pieces:PiecesOptions", _pieces, consumes=("tet_mesh", "modes"), uses=("surface",),
+          "fracture_cli.stages.pieces:PiecesOptions", _pieces, consumes=("tet_mesh", "modes"),
+          uses=("surface", "cells"),
           produces=("pieces",)),
     Stage("smooth", "Smooth the fault surfaces between pieces into closed piece regions.",
           "fracture_cli.stages.smooth:SmoothOptions", _smooth, consumes=("tet_mesh", "pieces"), uses=("surface",),
           produces=("regions",)),
+    Stage("faults", "Add value noise to the shared faults (off unless faults.noise > 0); both sides move alike.",
+          "fracture_cli.stages.faults:FaultOptions", _faults, consumes=("regions",), produces=("regions",)),
     Stage("fragments", "Cut the input into one closed fragment per piece region, and check them.",
           "fracture_cli.stages.fragments:FragmentOptions", _fragments, consumes=("surface", "regions"),
           produces=("fragments", "checks")),

@@ -73,7 +73,7 @@ def tet_material_fraction(tet_mesh: TetMesh, surface: SurfaceMesh) -> np.ndarray
 
 
 def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptions(), *,
-           surface: SurfaceMesh | None = None) -> Pieces:
+           surface: SurfaceMesh | None = None, cells: np.ndarray | None = None) -> Pieces:
     """Atomic pieces of a tet mesh under a set of fracture modes.
 
     Two tets sharing an interior face are glued when that face is cut in no
@@ -95,6 +95,9 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
         then the asset volume they hold (:func:`tet_material_fraction`), so
         cage volume around thin or open parts does not count. Without it, the
         tets' own volume.
+    cells : (t,) int, optional
+        An authored pattern's cell of every tet (the ``pattern`` stage): the
+        cells are then the atomic pieces (the modes were solved on them).
 
     Returns
     -------
@@ -120,8 +123,11 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
     face_tets = tet_mesh.interior_face_tets
     U, cut = _checked_modes(tet_mesh, modes)
 
-    glued = ~cut.any(axis=0)
-    tet_piece = components(t, face_tets[glued])
+    if cells is None:
+        glued = ~cut.any(axis=0)
+        tet_piece = components(t, face_tets[glued])
+    else:
+        tet_piece = renumber_by_first(np.asarray(cells, dtype=np.int64))
     volumes_t = np.abs(tet_mesh.tet_volumes)
     k = U.shape[0]
 

@@ -81,7 +81,8 @@ class ModesOptions:
     seed: int = option(0, "seed of the eigensolver's start vector (fixed: results are reproducible)", min=0)
 
 
-def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.ndarray | None = None) -> Modes:
+def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.ndarray | None = None,
+          cells: np.ndarray | None = None) -> Modes:
     """Compute the ``k`` lowest fracture modes of a tet mesh.
 
     Parameters
@@ -94,6 +95,11 @@ def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.nda
         Material weight of every interior face (and axis, for ``d = 3``):
         anisotropy and strength maps. A large value makes a face effectively
         unbreakable. Must be positive and finite.
+    cells : (t,) int, optional
+        An authored pattern's cell of every tet (the ``pattern`` stage): the
+        modes are then solved with one value per cell, on the cells' adjacency
+        graph (:mod:`fracture_cli.stages.pattern.restrict`), and are piecewise
+        constant on the cells; ``k`` is at most ``d (cells - 1)``.
 
     Returns
     -------
@@ -166,7 +172,10 @@ def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.nda
     eig_seconds = time.perf_counter() - start
     log.info("%s: %d start vectors from the Laplacian eigenproblem in %.2f s", STAGE, scalar_count, eig_seconds)
 
-    if opts.solver == "fast":
+    if cells is not None:
+        U, info = _modes_on_cells(cells, face_tets, areas, eta2, volumes, scalar_init, k, d, opts)
+        k = U.shape[0]
+    elif opts.solver == "fast":
         U, info = _modes_fast(face_tets, areas, eta2, volumes, scalar_init, k, d, opts)
     else:
         U, info = _modes_clarabel(face_tets, areas, eta2, volumes, scalar_init, k, d, opts)
@@ -404,6 +413,21 @@ def _iccm_mode(solve: _Solve, c: np.ndarray, found: list[np.ndarray], inner: _MI
     return c, {"rounds": rounds + budgeted, "budgeted_rounds": budgeted, "converged": converged,
                "inner_iterations": inner_iterations, "max_gap": float(max(gaps, default=float("nan"))),
                "last_gap": float(gaps[-1]) if gaps else float("nan")}
+
+
+def _modes_on_cells(cells: np.ndarray, face_tets: np.ndarray, areas: np.ndarray, eta2: np.ndarray,
+                    volumes: np.ndarray, scalar_init: np.ndarray, k: int, d: int,
+                    opts: ModesOptions) -> tuple[np.ndarray, dict[str, Any]]:
+    """The modes with one value per pattern cell: the same solvers on the cell graph, prolongated to the tets."""
+    from fracture_cli.stages.pattern.restrict import cell_problem
+
+    problem = cell_problem(cells, face_tets, areas, eta2, volumes, scalar_init, k, stage=STAGE)
+    if problem.num_modes < k:
+        log.info("%s: %d cells hold %d modes (of %d asked for)", STAGE, len(problem.volumes), problem.num_modes, k)
+    solve = _modes_fast if opts.solver == "fast" else _modes_clarabel
+    W, info = solve(problem.edges, problem.areas, problem.eta, problem.volumes, problem.starts, problem.num_modes,
+                    d, opts)
+    return problem.prolong(W), {**info, "cells": len(problem.volumes), "cell_edges": len(problem.edges)}
 
 
 def _modes_fast(face_tets: np.ndarray, areas: np.ndarray, eta2: np.ndarray, volumes: np.ndarray,
