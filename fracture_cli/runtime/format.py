@@ -22,9 +22,11 @@ from pathlib import Path
 import numpy as np
 
 from fracture_cli.errors import RuntimeFileError
+from fracture_cli.runtime.stress import CRITERIA, KNOWN_FEATURES, STRESS_LAYOUT, check_stress
 
 FORMAT_NAME = "fracture-modes-runtime"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 1  # what a bake without any version-2 feature writes (byte-identical to before version 2)
+MAX_VERSION = 2  # the newest version this reader reads (docs/notes/runtime-format-v2.md)
 ALIGNMENT = 16
 JSON_SUFFIX = ".fracture.json"
 BIN_SUFFIX = ".fracture.bin"
@@ -84,6 +86,12 @@ class RuntimeData:
     gameready : dict of str -> array
         The optional arrays of :data:`GAMEREADY_LAYOUT` (mass properties and
         collision parts per fragment, model space), all or none.
+    criterion : str
+        ``"modes"`` (version 1) or ``"stress"`` (version 2 with feature ``"stress"``).
+    stress : dict of str -> array
+        The arrays of :data:`fracture_cli.runtime.stress.STRESS_LAYOUT` (criterion ``"stress"`` only).
+    stress_info : dict
+        The stress criterion's material parameters (header key ``stress``; informational).
     """
 
     sites: np.ndarray
@@ -97,6 +105,19 @@ class RuntimeData:
     radius: float = 0.05
     units: str = UNITS_NOTE
     gameready: dict[str, np.ndarray] = field(default_factory=dict)
+    criterion: str = "modes"
+    stress: dict[str, np.ndarray] = field(default_factory=dict)
+    stress_info: dict = field(default_factory=dict)
+
+    @property
+    def features(self) -> tuple[str, ...]:
+        """The format-2 features the data needs (sorted; empty: a version-1 file)."""
+        return ("stress",) if self.stress else ()
+
+    @property
+    def version(self) -> int:
+        """The format version the data is written as: 1 without features, 2 with."""
+        return 2 if self.features else FORMAT_VERSION
 
     @property
     def dim(self) -> int:
@@ -128,6 +149,9 @@ class RuntimeData:
         for name, (dtype, _) in GAMEREADY_LAYOUT.items():
             if name in self.gameready:
                 arrays[name] = np.ascontiguousarray(self.gameready[name], dtype=_DTYPES[dtype])
+        for name, (dtype, _) in STRESS_LAYOUT.items():
+            if name in self.stress:
+                arrays[name] = np.ascontiguousarray(self.stress[name], dtype=_DTYPES[dtype])
         return arrays
 
     def counts(self) -> dict[str, int]:
@@ -136,6 +160,8 @@ class RuntimeData:
         if self.gameready:
             counts["collision_parts"] = int(len(self.gameready["collision_part_offsets"]) - 1)
             counts["collision_vertices"] = int(len(self.gameready["collision_vertices"]))
+        if self.stress:
+            counts["site_bonds"] = int(len(self.stress["site_bonds"]))
         return counts
 
 
@@ -179,6 +205,12 @@ def check_runtime(data: RuntimeData) -> str | None:
             return problem
     if not (np.all(np.isfinite(data.transform)) and np.isfinite(data.radius)):
         return "transform and impact radius must be finite numbers"
+    if data.criterion not in CRITERIA:
+        return f"unknown criterion {data.criterion!r}"
+    if (data.criterion == "stress") != bool(data.stress):
+        return "the stress criterion and the stress arrays come together"
+    if data.stress:
+        return check_stress(data.stress, s, expected["edges"][0])
     return None
 
 
@@ -234,7 +266,7 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
     for name, array in data.arrays().items():
         raw = array.tobytes(order="C")
         table[name] = {
-            "dtype": {**ARRAY_LAYOUT, **GAMEREADY_LAYOUT}[name][0],
+            "dtype": {**ARRAY_LAYOUT, **GAMEREADY_LAYOUT, **STRESS_LAYOUT}[name][0],
             "shape": list(array.shape),
             "byte_offset": offset,
             "byte_length": len(raw),
@@ -245,7 +277,7 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
     binary = b"".join(chunks)
     header = {
         "format": FORMAT_NAME,
-        "version": FORMAT_VERSION,
+        "version": data.version,
         "dim": data.dim,
         "counts": data.counts(),
         "fragment_names": list(data.fragment_names),
@@ -256,6 +288,10 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
         "buffer": {"uri": bin_name, "byte_length": len(binary), "crc32": zlib.crc32(binary)},
         "arrays": table,
     }
+    if data.features:  # version 2 (docs/FORMAT.md section 11); a version-1 header stays as it was
+        header["features"] = list(data.features)
+        header["criterion"] = data.criterion
+        header["stress"] = {key: data.stress_info[key] for key in sorted(data.stress_info)}
     text = json.dumps(header, sort_keys=True, indent=2, ensure_ascii=True, allow_nan=False) + "\n"
     return text.encode("ascii"), binary
 
@@ -364,9 +400,10 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
         raise _fail(f"not a fracture runtime file (expected \"format\": \"{FORMAT_NAME}\")", path)
     version = header.get("version")
-    if isinstance(version, bool) or not isinstance(version, int) or version < 1 or version > FORMAT_VERSION:
-        raise _fail(f"runtime file version {version!r} is not supported (this reader knows 1..{FORMAT_VERSION}); "
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1 or version > MAX_VERSION:
+        raise _fail(f"runtime file version {version!r} is not supported (this reader knows 1..{MAX_VERSION}); "
                     "re-bake the asset or update fracture", path)
+    features, criterion = _features(header, version, path)
     try:
         buffer = header["buffer"]
         table = header["arrays"]
@@ -392,8 +429,12 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     # Optional arrays: read when any is listed (check_runtime then wants all of them).
     gameready = {name: _array(table, name, binary, path, GAMEREADY_LAYOUT) for name in GAMEREADY_LAYOUT
                  if name in table}
+    stress = ({name: _array(table, name, binary, path, STRESS_LAYOUT) for name in STRESS_LAYOUT}
+              if "stress" in features else {})
+    info: dict = header["stress"] if isinstance(header.get("stress"), dict) else {}
     data = RuntimeData(fragment_names=names, transform=transform, default_threshold=threshold,
-                       radius=radius, units=units, gameready=gameready, **arrays)
+                       radius=radius, units=units, gameready=gameready, criterion=criterion, stress=stress,
+                       stress_info=dict(info), **arrays)
     problem = check_runtime(data)
     if problem is None and data.dim != dim:
         problem = f"header says dim = {dim} but W has d = {data.dim}"
@@ -404,6 +445,22 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     if problem:
         raise _fail(f"inconsistent runtime file: {problem}", path)
     return data
+
+
+def _features(header: dict, version: int, path) -> tuple[tuple[str, ...], str]:
+    """The header's ``features`` and ``criterion`` (docs/FORMAT.md section 11); refuses unknown ones by name."""
+    features = header.get("features", []) if version >= 2 else []
+    if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
+        raise _fail("runtime header 'features' must be a list of strings", path)
+    for name in features:
+        if name not in KNOWN_FEATURES:
+            raise _fail(f"runtime file needs feature {name!r}, which this reader does not implement", path)
+    criterion = header.get("criterion", "modes") if version >= 2 else "modes"
+    if criterion not in CRITERIA:
+        raise _fail(f"runtime file needs criterion {criterion!r}, which this reader does not implement", path)
+    if criterion == "stress" and "stress" not in features:
+        raise _fail("runtime file has criterion 'stress' but does not list feature 'stress'", path)
+    return tuple(features), str(criterion)
 
 
 def _array(table: dict, name: str, binary: bytes, path, layout: dict = ARRAY_LAYOUT) -> np.ndarray:
