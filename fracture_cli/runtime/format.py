@@ -452,6 +452,8 @@ def _features(header: dict, version: int, path) -> tuple[tuple[str, ...], str]:
     features = header.get("features", []) if version >= 2 else []
     if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
         raise _fail("runtime header 'features' must be a list of strings", path)
+    if version >= 2 and not features:  # version 2 exists only for its features (notes/runtime-format-v2.md)
+        raise _fail(f"runtime file version {version} lists no features; a file without any is version 1", path)
     for name in features:
         if name not in KNOWN_FEATURES:
             raise _fail(f"runtime file needs feature {name!r}, which this reader does not implement", path)
