@@ -411,8 +411,7 @@ _file_command("export", "Write <stem>.glb, the runtime file <stem>.fracture.json
 # ----------------------------------------------------------------------------
 # Terminal commands
 
-from fracture_cli import cli_atlas  # noqa: E402,F401  (registers atlas on `cli`)
-from fracture_cli import cli_tools  # noqa: E402  (registers bake, recipes, impact, preview, view on `cli`)
+from fracture_cli import cli_atlas, cli_tools  # noqa: E402,F401  (register atlas; bake, recipes, impact, preview, view)
 from fracture_cli.batch.command import register as _register_batch  # noqa: E402
 
 _register_batch(cli, TerminalCommand)
