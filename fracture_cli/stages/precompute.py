@@ -62,6 +62,9 @@ class RuntimeOptions:
     stress_reach: float = option(0.05, "stress criterion: how far the impact's stress wave runs during the contact "
                                        "(fraction of the diagonal; small = local breaks, 0 = quasi-static)",
                                  min=0.0, max=100.0)
+    stress_measure: str = option("tension_shear", "stress criterion: what loads a bond: 'tension' (normal traction) "
+                                                  "or 'tension_shear' (traction without its compressive part)",
+                                 choices=("tension_shear", "tension"))
     stress_max_bonds: int = option(48, "stress criterion: at most this many bonds per site (0 = no limit)",
                                    min=0, max=100000)
 

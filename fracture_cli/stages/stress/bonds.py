@@ -38,12 +38,15 @@ class BondFaces:
         ``area_f / sum of the areas of its bond's faces``: averaging weights (sum 1 per bond).
     face_area : (e,) float64
         Total tet-face area of each bond (0 for a bond with no tet face).
+    sign : (m,) float64
+        +1 where ``interior_face_normals`` points from the bond's fragment ``P`` to ``Q``, else -1.
     """
 
     faces: np.ndarray
     bond: np.ndarray
     weight: np.ndarray
     face_area: np.ndarray
+    sign: np.ndarray
 
 
 def tet_fragments(tet_mesh: TetMesh, pieces: Pieces, fragment_pieces, fragment_vertices=None) -> np.ndarray:
@@ -108,7 +111,9 @@ def bond_faces(tet_mesh: TetMesh, tet_fragment: np.ndarray, edges: np.ndarray) -
     area = tet_mesh.interior_face_areas[faces]
     face_area = np.bincount(bond, weights=area, minlength=e)
     weight = area / np.where(face_area[bond] > 0.0, face_area[bond], 1.0)
-    return BondFaces(faces=faces, bond=bond, weight=weight, face_area=face_area)
+    first = tet_fragment[tet_mesh.interior_face_tets[faces, 0]]
+    sign = np.where(first == edges[bond, 0], 1.0, -1.0)
+    return BondFaces(faces=faces, bond=bond, weight=weight, face_area=face_area, sign=sign)
 
 
 def bond_strengths(faces: BondFaces, eta, edge_areas: np.ndarray, tensile_strength: float) -> np.ndarray:
@@ -256,4 +261,4 @@ def split_into_patches(tet_mesh: TetMesh, faces: BondFaces, parts: int = 2) -> t
     if len(empty):
         patch_bond = np.concatenate([patch_bond, empty])
         patch_area = np.concatenate([patch_area, np.zeros(len(empty))])
-    return BondFaces(faces=faces.faces, bond=patch, weight=weight, face_area=patch_area), patch_bond
+    return BondFaces(faces=faces.faces, bond=patch, weight=weight, face_area=patch_area, sign=faces.sign), patch_bond

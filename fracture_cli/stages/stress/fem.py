@@ -99,6 +99,19 @@ def normal_traction_coefficients(G: np.ndarray, normals: np.ndarray, lam: float,
     return lam * G + 2.0 * mu * ng[:, :, None] * normals[:, None, :]
 
 
+def traction_vector_coefficients(G: np.ndarray, normals: np.ndarray, lam: float, mu: float) -> np.ndarray:
+    """Coefficients (f, 4, 3, 3) of the traction vector ``sigma n`` of one tet per face.
+
+    ``(sigma n)[c] = sum_{i, a} coef[i, a, c] u_i[a]`` with
+    ``coef[i, a, c] = lambda g_i[a] n[c] + mu (delta_ac (g_i . n) + g_i[c] n[a])``.
+    """
+    ng = np.einsum("fid,fd->fi", G, normals)  # (f, 4)
+    coef = lam * G[:, :, :, None] * normals[:, None, None, :]
+    coef = coef + mu * (np.eye(3)[None, None, :, :] * ng[:, :, None, None]
+                        + normals[:, None, :, None] * G[:, :, None, :])
+    return coef
+
+
 def tet_stress(G: np.ndarray, T: np.ndarray, u: np.ndarray, lam: float, mu: float) -> np.ndarray:
     """Stress tensors (t, 3, 3) of displacement ``u`` (n, 3); for tests and diagnostics."""
     grad = np.einsum("tia,tib->tab", u[T], G)  # grad u[a, b] = sum_i u_i[a] g_i[b]

@@ -27,7 +27,13 @@ import scipy.sparse.linalg as spla
 
 from fracture_cli.errors import StageError
 from fracture_cli.stages.stress.bonds import BondFaces, ContactPoints
-from fracture_cli.stages.stress.fem import STAGE, elasticity_matrix, lame, normal_traction_coefficients
+from fracture_cli.stages.stress.fem import (
+    STAGE,
+    elasticity_matrix,
+    lame,
+    normal_traction_coefficients,
+    traction_vector_coefficients,
+)
 from fracture_cli.types import TetMesh
 
 
@@ -84,30 +90,35 @@ def _pins(V: np.ndarray, center: np.ndarray) -> np.ndarray:
 
 
 def _traction_functionals(tet_mesh: TetMesh, G: np.ndarray, faces: BondFaces, lam: float, mu: float,
-                          contacts: ContactPoints | None = None) -> sp.csr_matrix:
+                          contacts: ContactPoints | None = None, vector: bool = False) -> sp.csr_matrix:
     """``R`` (e, 3n): ``R u`` = the mean normal traction over every bond's fault (both tets averaged).
 
     Bonds without tet faces are measured at their ``contacts`` (one tet per sample) when given.
+    ``vector``: ``R`` (3e, 3n) instead, row ``3 b + c`` the mean traction vector ``sigma n`` component ``c``
+    with ``n`` oriented from the bond's fragment ``P`` to ``Q``.
     """
     ft = tet_mesh.interior_face_tets[faces.faces]  # (m, 2)
-    normals = tet_mesh.interior_face_normals[faces.faces]
+    normals = tet_mesh.interior_face_normals[faces.faces] * faces.sign[:, None]
     rows, cols, vals = [], [], []
-    for side in range(2):
-        tets = ft[:, side]
-        coef = normal_traction_coefficients(G[tets], normals, lam, mu)  # (m, 4, 3)
-        dofs = 3 * tet_mesh.tets[tets][:, :, None] + np.arange(3)[None, None, :]
-        rows.append(np.repeat(faces.bond, 12))
-        cols.append(dofs.reshape(-1))
-        vals.append((coef * (0.5 * faces.weight)[:, None, None]).reshape(-1))
+    samples = [(ft[:, side], normals, faces.bond, 0.5 * faces.weight) for side in range(2)]
     if contacts is not None and len(contacts.bond):
-        coef = normal_traction_coefficients(G[contacts.tet], contacts.normal, lam, mu)
-        dofs = 3 * tet_mesh.tets[contacts.tet][:, :, None] + np.arange(3)[None, None, :]
-        rows.append(np.repeat(contacts.bond, 12))
-        cols.append(dofs.reshape(-1))
-        vals.append((coef * contacts.weight[:, None, None]).reshape(-1))
+        samples.append((contacts.tet, contacts.normal, contacts.bond, contacts.weight))
+    for tets, normal, bond, weight in samples:
+        dofs = 3 * tet_mesh.tets[tets][:, :, None] + np.arange(3)[None, None, :]  # (m, 4, 3)
+        if vector:
+            coef = traction_vector_coefficients(G[tets], normal, lam, mu)  # (m, 4, 3, 3)
+            rows.append((3 * bond[:, None, None, None] + np.arange(3)[None, None, None, :]
+                         + np.zeros((1, 4, 3, 1), dtype=np.int64)).reshape(-1))
+            cols.append(np.repeat(dofs[:, :, :, None], 3, axis=3).reshape(-1))
+            vals.append((coef * weight[:, None, None, None]).reshape(-1))
+        else:
+            coef = normal_traction_coefficients(G[tets], normal, lam, mu)  # (m, 4, 3)
+            rows.append(np.repeat(bond, 12))
+            cols.append(dofs.reshape(-1))
+            vals.append((coef * weight[:, None, None]).reshape(-1))
     e = len(faces.face_area)
     R = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                      shape=(e, 3 * tet_mesh.num_vertices)).tocsr()
+                      shape=(3 * e if vector else e, 3 * tet_mesh.num_vertices)).tocsr()
     R.sum_duplicates()
     return R
 
@@ -127,7 +138,8 @@ def _inverse3(inertia: np.ndarray) -> np.ndarray:
 
 def site_bond_tractions(tet_mesh: TetMesh, faces: BondFaces, sites: np.ndarray, radius: float,
                         youngs_modulus: float, poisson_ratio: float,
-                        contacts: ContactPoints | None = None, reach: float = 0.0) -> np.ndarray:
+                        contacts: ContactPoints | None = None, reach: float = 0.0,
+                        vector: bool = False) -> np.ndarray:
     """Mean normal traction on every bond's fault per unit load at every site, (s, 3, e) float64.
 
     Parameters
@@ -145,6 +157,8 @@ def site_bond_tractions(tet_mesh: TetMesh, faces: BondFaces, sites: np.ndarray, 
     reach : float, optional (default 0: quasi-static)
         ``l > 0``: the response after one implicit elastodynamic step (:func:`_impact_step`) instead of the
         quasi-static inertia relief; normalized units.
+    vector : bool, optional (default False)
+        Return the mean traction *vector* of every bond instead: ``(s, 3, 3e)``, entry ``3 b + c``.
 
     Returns
     -------
@@ -157,7 +171,7 @@ def site_bond_tractions(tet_mesh: TetMesh, faces: BondFaces, sites: np.ndarray, 
     T = np.asarray(tet_mesh.tets, dtype=np.int64)
     n = len(V)
     K, G = elasticity_matrix(V, T, lam, mu)
-    R = _traction_functionals(tet_mesh, G, faces, lam, mu, contacts)
+    R = _traction_functionals(tet_mesh, G, faces, lam, mu, contacts, vector)
     mass = np.bincount(T.reshape(-1), weights=np.repeat(np.abs(tet_mesh.tet_volumes) / 4.0, 4), minlength=n)
     patchT = site_patches(tet_mesh, sites, radius).T.tocsr()
     if reach > 0.0:

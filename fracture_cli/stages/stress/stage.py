@@ -73,6 +73,10 @@ class StressParameters:
     patches : int
         Each fault is cut into ``patches x patches`` quadrant patches
         (:func:`fracture_cli.stages.stress.bonds.split_into_patches`); 1 = the whole fault's mean traction.
+    measure : {"tension_shear", "tension"}
+        What loads a bond: ``"tension"``, the normal traction ``n . sigma n`` (Rankine on the fault plane);
+        ``"tension_shear"``, the traction vector without its compressive part, ``|sigma n - min(0, s_nn) n|``,
+        along its direction under an inward hit (:func:`shear_gains`).
     """
 
     youngs_modulus: float = 1.0
@@ -83,6 +87,7 @@ class StressParameters:
     radius: float = 0.05
     reach: float = 0.05
     patches: int = 2
+    measure: str = "tension_shear"
 
 
 def round_bits(values: np.ndarray, bits: int = SIGNIFICANT_BITS) -> np.ndarray:
@@ -141,10 +146,16 @@ def stress_arrays(tet_mesh: TetMesh, pieces: Pieces, fragments: Fragments, eta, 
         patch_of = np.full(len(edges), -1, dtype=np.int64)
         patch_of[patch_bond[::-1]] = np.arange(len(patch_bond))[::-1]
         contacts = dataclasses.replace(contacts, bond=patch_of[contacts.bond])
+    vector = parameters.measure == "tension_shear"
     traction = site_bond_tractions(tet_mesh, patches, sites, parameters.radius, parameters.youngs_modulus,
-                                   parameters.poisson_ratio, contacts, parameters.reach)  # (s, 3, P)
+                                   parameters.poisson_ratio, contacts, parameters.reach, vector)  # (s, 3, P or 3P)
     strength = round_bits(bond_strengths(faces, eta, areas, parameters.tensile_strength))
-    gain = most_loaded_patch(round_bits(traction * areas[patch_bond][None, None, :]), patch_bond, len(edges))
+    score = None
+    if vector:
+        traction, score = shear_gains(tet_mesh, traction, patches, contacts, sites, len(patch_bond))
+    patch_gain = round_bits(traction * areas[patch_bond][None, None, :])
+    gain = most_loaded_patch(patch_gain, patch_bond, len(edges),
+                             None if score is None else round_bits(score * areas[patch_bond][None, :]))
     ptr, bonds, kept = sparsify(gain, strength, parameters.keep, parameters.max_bonds)
     unmeasured = len(faceless) - (0 if contacts is None else len(np.unique(contacts.bond)))
     log.info("runtime: stress gains for %d sites x %d bonds, %d kept (%.1f per site), %d bond(s) measured at "
@@ -158,14 +169,66 @@ def stress_arrays(tet_mesh: TetMesh, pieces: Pieces, fragments: Fragments, eta, 
     }
 
 
-def most_loaded_patch(gain: np.ndarray, patch_bond: np.ndarray, e: int) -> np.ndarray:
-    """Per site and bond, the gain (s, 3, e) of the bond's patch with the largest ``|G|`` (ties: the first).
+def shear_gains(tet_mesh: TetMesh, traction: np.ndarray, patches, contacts, sites: np.ndarray, count: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Linear gains of the tension-and-shear load of every patch, frozen at an inward hit.
 
-    ``|G[v, e, :]|`` is the most tension a unit impulse at ``v`` can cause on the patch (in the direction of
-    ``G``): the site keeps, for each bond, the patch it can load the most.
+    Parameters
+    ----------
+    traction : (s, 3, 3P) float64
+        Mean traction vectors (entry ``3 p + c``) per unit force along each axis at each site.
+
+    Returns
+    -------
+    gains : (s, 3, P) float64
+        ``w . t_k`` with ``t_k`` the patch's traction for a unit force along axis ``k`` and ``w`` the unit
+        direction of ``t_eff = t(u) - min(0, n . t(u)) n`` for the inward unit impulse ``u`` at the site
+        (towards the tet mesh's centroid): the traction without its compressive part. For the inward hit
+        ``G . u = |t_eff|`` (shear and tension load the bond, compression does not); other directions are
+        measured along the same ``w`` (linear, as the runtime needs).
+    score : (s, P) float64
+        ``|t_eff|`` for the inward hit.
+    """
+    s = traction.shape[0]
+    T = traction.reshape(s, 3, count, 3)  # [v, k, p, c]
+    V = tet_mesh.vertices
+    centroid = tet_mesh.tet_centroids
+    volume = np.abs(tet_mesh.tet_volumes)
+    center = np.array([float((volume * centroid[:, c]).sum()) for c in range(3)]) / float(volume.sum())
+    inward = center[None, :] - V[np.asarray(sites, dtype=np.int64)]
+    length = np.sqrt((inward[:, 0] * inward[:, 0] + inward[:, 1] * inward[:, 1]) + inward[:, 2] * inward[:, 2])
+    inward = inward / np.where(length > 0.0, length, 1.0)[:, None]
+    normal = patch_normals(tet_mesh, patches, contacts, count)  # (P, 3)
+    t = (T[:, 0] * inward[:, 0, None, None] + T[:, 1] * inward[:, 1, None, None]) + T[:, 2] * inward[:, 2, None, None]
+    snn = (t[:, :, 0] * normal[None, :, 0] + t[:, :, 1] * normal[None, :, 1]) + t[:, :, 2] * normal[None, :, 2]
+    eff = t - np.minimum(snn, 0.0)[:, :, None] * normal[None, :, :]
+    mag = np.sqrt((eff[:, :, 0] * eff[:, :, 0] + eff[:, :, 1] * eff[:, :, 1]) + eff[:, :, 2] * eff[:, :, 2])
+    w = eff / np.where(mag > 0.0, mag, 1.0)[:, :, None]
+    gains = (T[:, :, :, 0] * w[:, None, :, 0] + T[:, :, :, 1] * w[:, None, :, 1]) + T[:, :, :, 2] * w[:, None, :, 2]
+    return gains, mag
+
+
+def patch_normals(tet_mesh: TetMesh, patches, contacts, count: int) -> np.ndarray:
+    """Unit mean normal (P, 3) of every patch, oriented from the bond's fragment ``P`` to ``Q``."""
+    normals = tet_mesh.interior_face_normals[patches.faces] * (patches.sign * patches.weight)[:, None]
+    total = np.stack([np.bincount(patches.bond, weights=normals[:, c], minlength=count) for c in range(3)], axis=1)
+    if contacts is not None and len(contacts.bond):
+        extra = contacts.normal * contacts.weight[:, None]
+        total += np.stack([np.bincount(contacts.bond, weights=extra[:, c], minlength=count) for c in range(3)], 1)
+    length = np.sqrt((total[:, 0] * total[:, 0] + total[:, 1] * total[:, 1]) + total[:, 2] * total[:, 2])
+    return total / np.where(length > 0.0, length, 1.0)[:, None]
+
+
+def most_loaded_patch(gain: np.ndarray, patch_bond: np.ndarray, e: int, score: np.ndarray | None = None
+                      ) -> np.ndarray:
+    """Per site and bond, the gain (s, 3, e) of the bond's most loaded patch (ties: the first).
+
+    The load is ``score`` (s, P) when given, else ``|G[v, p, :]|``, the most a unit impulse at ``v`` can
+    load the patch (in the direction of ``G``): the site keeps, for each bond, the patch it loads the most.
     """
     s = gain.shape[0]
-    norm = np.sqrt((gain[:, 0] * gain[:, 0] + gain[:, 1] * gain[:, 1]) + gain[:, 2] * gain[:, 2])  # (s, P)
+    norm = (np.sqrt((gain[:, 0] * gain[:, 0] + gain[:, 1] * gain[:, 1]) + gain[:, 2] * gain[:, 2])
+            if score is None else score)  # (s, P)
     out = np.zeros((s, 3, e))
     rows = np.arange(s)
     for bond in range(e):
@@ -244,9 +307,10 @@ def with_stress(data, tet_mesh: TetMesh, pieces: Pieces, fragments: Fragments, e
                                   poisson_ratio=float(options.poisson_ratio),
                                   tensile_strength=float(options.tensile_strength), keep=float(options.stress_keep),
                                   max_bonds=int(options.stress_max_bonds), radius=float(options.radius),
-                                  reach=float(options.stress_reach))
+                                  reach=float(options.stress_reach), measure=str(options.stress_measure))
     arrays = stress_arrays(tet_mesh, pieces, fragments, eta, edges, areas, parameters)
     info = {"youngs_modulus": parameters.youngs_modulus, "poisson_ratio": parameters.poisson_ratio,
             "tensile_strength": parameters.tensile_strength, "keep": parameters.keep,
-            "max_bonds": parameters.max_bonds, "reach": parameters.reach, "significant_bits": SIGNIFICANT_BITS}
+            "max_bonds": parameters.max_bonds, "reach": parameters.reach, "measure": parameters.measure,
+            "significant_bits": SIGNIFICANT_BITS}
     return dataclasses.replace(data, criterion="stress", stress=arrays, stress_info=info)
