@@ -273,3 +273,22 @@ def test_a_stress_bake_has_the_same_fragments_and_a_version_2_file(tmp_path):
     site = data.sites[0]
     r = project_impact(data, site, -np.asarray(site, dtype=np.float64), 1e-6)
     assert r.broken.any()
+
+
+def test_tension_shear_sees_the_shear_of_a_pushed_fragment():
+    """A push down on the top of one half, beside the middle fault: the fault is sheared. Its normal
+    traction is small; the tension-and-shear load (the default measure) is not, and is linear along w."""
+    from fracture_cli.stages.stress.stage import shear_gains
+
+    mesh = box_mesh(nx=8, ny=2, nz=2)
+    faces = bond_faces(mesh, halves(mesh), np.array([[0, 1]]))
+    V = mesh.vertices
+    top = np.flatnonzero(np.isclose(V[:, 2], 0.5) & np.isclose(V[:, 0], 0.25) & np.isclose(V[:, 1], 0.0))
+    normal = site_bond_tractions(mesh, faces, top, 0.2, E, NU, reach=0.5)[0, :, 0]
+    vector = site_bond_tractions(mesh, faces, top, 0.2, E, NU, reach=0.5, vector=True)
+    gains, score = shear_gains(mesh, vector, faces, None, top, 1)
+    down = np.array([0.0, 0.0, -1.0])
+    assert gains.shape == (1, 3, 1) and score[0, 0] > 0
+    assert float(gains[0, :, 0] @ down) > 3 * abs(float(normal @ down))
+    inward = -V[top[0]] / np.linalg.norm(V[top[0]])
+    assert float(gains[0, :, 0] @ inward) == pytest.approx(score[0, 0], rel=1e-12)
