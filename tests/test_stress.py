@@ -292,3 +292,25 @@ def test_tension_shear_sees_the_shear_of_a_pushed_fragment():
     assert float(gains[0, :, 0] @ down) > 3 * abs(float(normal @ down))
     inward = -V[top[0]] / np.linalg.norm(V[top[0]])
     assert float(gains[0, :, 0] @ inward) == pytest.approx(score[0, 0], rel=1e-12)
+
+
+def test_the_atlas_command_gates_a_stress_bake(tmp_path):
+    """`fracture atlas` on the chair baked with the stress criterion (the conformance copy): figures, the gate."""
+    import shutil
+
+    from click.testing import CliRunner
+
+    from fracture_cli.cli import cli
+
+    src = os.path.join(REPO, "tests", "data", "runtime_conformance", "chair_stress")
+    for suffix in (".fracture.json", ".fracture.bin"):
+        shutil.copyfile(src + suffix, tmp_path / ("chair_stress" + suffix))
+    path = str(tmp_path / "chair_stress.fracture.json")
+    ok = CliRunner().invoke(cli, ["atlas", path, "--sites", "40", "--json", "--require", "locality_8x<=0.6"])
+    assert ok.exit_code == 0, ok.output
+    summary = json.loads(ok.output)
+    assert summary["criterion"] == "stress" and summary["hits"]["used"] == 40
+    failing = CliRunner().invoke(cli, ["atlas", path, "--sites", "40", "--require", "hit_detached>=0.999"])
+    assert failing.exit_code == 1 and "hit_detached" in failing.output
+    modes = CliRunner().invoke(cli, ["atlas", path, "--sites", "40", "--criterion", "modes", "--json"])
+    assert modes.exit_code == 0 and json.loads(modes.output)["criterion"] == "modes"
