@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from fracture_cli.errors import RuntimeFileError
-from fracture_cli.runtime.stress import CRITERIA, KNOWN_FEATURES, STRESS_LAYOUT, check_stress
+from fracture_cli.runtime.stress import CRITERIA, STRESS_LAYOUT, check_stress, header_features
 
 FORMAT_NAME = "fracture-modes-runtime"
 FORMAT_VERSION = 1  # what a bake without any version-2 feature writes (byte-identical to before version 2)
@@ -403,7 +403,10 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     if isinstance(version, bool) or not isinstance(version, int) or version < 1 or version > MAX_VERSION:
         raise _fail(f"runtime file version {version!r} is not supported (this reader knows 1..{MAX_VERSION}); "
                     "re-bake the asset or update fracture", path)
-    features, criterion = _features(header, version, path)
+    try:
+        features, criterion = header_features(header, version)
+    except ValueError as exc:
+        raise _fail(str(exc), path) from None
     try:
         buffer = header["buffer"]
         table = header["arrays"]
@@ -445,24 +448,6 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     if problem:
         raise _fail(f"inconsistent runtime file: {problem}", path)
     return data
-
-
-def _features(header: dict, version: int, path) -> tuple[tuple[str, ...], str]:
-    """The header's ``features`` and ``criterion`` (docs/FORMAT.md section 11); refuses unknown ones by name."""
-    features = header.get("features", []) if version >= 2 else []
-    if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
-        raise _fail("runtime header 'features' must be a list of strings", path)
-    if version >= 2 and not features:  # version 2 exists only for its features (notes/runtime-format-v2.md)
-        raise _fail(f"runtime file version {version} lists no features; a file without any is version 1", path)
-    for name in features:
-        if name not in KNOWN_FEATURES:
-            raise _fail(f"runtime file needs feature {name!r}, which this reader does not implement", path)
-    criterion = header.get("criterion", "modes") if version >= 2 else "modes"
-    if criterion not in CRITERIA:
-        raise _fail(f"runtime file needs criterion {criterion!r}, which this reader does not implement", path)
-    if criterion == "stress" and "stress" not in features:
-        raise _fail("runtime file has criterion 'stress' but does not list feature 'stress'", path)
-    return tuple(features), str(criterion)
 
 
 def _array(table: dict, name: str, binary: bytes, path, layout: dict = ARRAY_LAYOUT) -> np.ndarray:

@@ -30,6 +30,31 @@ KNOWN_FEATURES: tuple[str, ...] = ("stress",)
 CRITERIA: tuple[str, ...] = ("modes", "stress")
 
 
+def header_features(header: dict, version: int) -> tuple[tuple[str, ...], str]:
+    """The header's ``features`` and ``criterion`` (docs/FORMAT.md section 11).
+
+    Raises
+    ------
+    ValueError
+        With the reason: ``features`` malformed or empty in version 2, a feature or criterion this reader
+        does not implement (named), or criterion ``"stress"`` without the feature.
+    """
+    features = header.get("features", []) if version >= 2 else []
+    if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
+        raise ValueError("runtime header 'features' must be a list of strings")
+    if version >= 2 and not features:  # version 2 exists only for its features (notes/runtime-format-v2.md)
+        raise ValueError(f"runtime file version {version} lists no features; a file without any is version 1")
+    for name in features:
+        if name not in KNOWN_FEATURES:
+            raise ValueError(f"runtime file needs feature {name!r}, which this reader does not implement")
+    criterion = header.get("criterion", "modes") if version >= 2 else "modes"
+    if criterion not in CRITERIA:
+        raise ValueError(f"runtime file needs criterion {criterion!r}, which this reader does not implement")
+    if criterion == "stress" and "stress" not in features:
+        raise ValueError("runtime file has criterion 'stress' but does not list feature 'stress'")
+    return tuple(features), str(criterion)
+
+
 def check_stress(arrays: dict[str, np.ndarray], s: int, e: int) -> str | None:
     """Why the stress arrays are inconsistent with ``s`` sites and ``e`` bonds, or None.
 
