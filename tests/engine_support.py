@@ -48,8 +48,31 @@ def require_tool(name: str, package: str) -> str:
     return path
 
 
-def vector_names() -> list[str]:
-    """Names of the runtime files that have vectors (``example``, ``pillar``, ...)."""
+def vector_names(features=()) -> list[str]:
+    """Names of the runtime files that have vectors (``example``, ``pillar``, ...) a reader can run.
+
+    Parameters
+    ----------
+    features : iterable of str, optional (default none: version-1 files only)
+        The format-2 features the reader implements (docs/FORMAT.md section 11): vectors whose
+        ``features`` need another one are left out (:func:`vectors_needing` lists them, to report skips by name).
+    """
+    known = set(features)
+    return [name for name in _all_vector_names() if set(load_vectors(name).get("features", ())) <= known]
+
+
+def vectors_needing(features=()) -> dict[str, list[str]]:
+    """The vector files a reader implementing ``features`` cannot run, with the features each one needs."""
+    known = set(features)
+    out = {}
+    for name in _all_vector_names():
+        missing = sorted(set(load_vectors(name).get("features", ())) - known)
+        if missing:
+            out[name] = missing
+    return out
+
+
+def _all_vector_names() -> list[str]:
     return sorted(f[: -len(".vectors.json")] for f in os.listdir(CONFORMANCE) if f.endswith(".vectors.json"))
 
 

@@ -236,8 +236,10 @@ def test_run_atlas_errors(tmp_path):
         run_atlas(tmp_path / "missing.fracture.json", require=["nope<1"])  # the gate is checked first
     with pytest.raises(UsageError, match="sites"):
         run_atlas(os.path.join(CONFORMANCE, "example.fracture.json"), sites=0)
-    with pytest.raises(UsageError, match="pick one of modes"):
-        criterion_named("stress")
+    with pytest.raises(UsageError, match="pick one of modes, stress"):
+        criterion_named("damage")
+    with pytest.raises(UsageError, match="runtime.criterion = 'stress'"):  # a modes file has no stress gains
+        run_atlas(os.path.join(CONFORMANCE, "example.fracture.json"), criterion="stress")
     assert criterion_named("modes") is modes_breaking_impulses
 
 

@@ -7,7 +7,8 @@ hit at contact site ``site`` with unit impulse direction ``direction``, entry
 :mod:`fracture_cli.atlas` (first break, first detachment, groups at any
 magnitude, the sweep's figures) is derived from these magnitudes and the
 fragment graph, so another criterion (a stress criterion) plugs in by adding one
-function to :data:`CRITERIA`; it only has to be *monotone*: a bond broken at
+function to :data:`CRITERIA` (the ``stress`` criterion, docs/FORMAT.md section 11, is one);
+it only has to be *monotone*: a bond broken at
 some magnitude stays broken at every larger one.
 
 The ``modes`` criterion is the runtime algorithm of docs/FORMAT.md section 4.
@@ -89,7 +90,41 @@ def modes_breaking_impulses(data: RuntimeData, site: int, direction: np.ndarray)
     return out
 
 
-CRITERIA: dict[str, BreakingImpulses] = {"modes": modes_breaking_impulses}
+def stress_breaking_impulses(data: RuntimeData, site: int, direction: np.ndarray) -> np.ndarray:
+    """Breaking impulse magnitude of every bond for one hit, stress criterion (closed form).
+
+    The runtime test (docs/FORMAT.md section 11) breaks bond ``e`` of site ``v``'s list when
+    ``G[v, e] . n' > (T / m) * S_e``; with ``n = M u`` that is ``M * (G[v, e] . u) > T * S_e``, so
+    ``m[e] = T * S_e / (G[v, e] . u)`` where the gain is positive, ``+inf`` elsewhere (compression, or a bond
+    the site does not list), exactly up to one rounding as for the modes criterion.
+
+    Parameters
+    ----------
+    data : RuntimeData
+        A file baked with ``runtime.criterion = "stress"``.
+    site : int
+    direction : (3,) float
+        Unit impulse direction, model axes.
+
+    Returns
+    -------
+    (e,) float64
+    """
+    from fracture_cli.runtime.impact import prepare
+
+    stress = prepare(data).stress
+    if stress is None:
+        raise UsageError("the stress criterion needs a runtime file baked with runtime.criterion = 'stress' "
+                         "(fracture bake --set runtime.criterion=stress)")
+    u = np.asarray(direction, dtype=np.float64)
+    bonds, g = stress.gains(site, float(u[0]), float(u[1]), float(u[2]))
+    out = np.full(data.num_edges, np.inf)
+    pulled = g > 0.0
+    out[bonds[pulled]] = (float(data.default_threshold) * stress.strength[bonds[pulled]]) / g[pulled]
+    return out
+
+
+CRITERIA: dict[str, BreakingImpulses] = {"modes": modes_breaking_impulses, "stress": stress_breaking_impulses}
 """The criteria the atlas knows, by the name ``runtime.criterion`` will use."""
 
 

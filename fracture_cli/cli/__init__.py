@@ -85,7 +85,7 @@ def _run(cli: Any, argv: list[str] | None) -> int:
     return code if isinstance(code, int) else 0
 
 
-_SUBMODULES = frozenset({"batch", "commands", "group", "options", "tools"})
+_SUBMODULES = frozenset({"atlas", "batch", "commands", "group", "options", "tools"})
 
 
 def __getattr__(name: str) -> Any:

@@ -294,8 +294,14 @@ def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     stem = os.path.splitext(os.path.basename(state.need("source", "runtime")))[0]
     names = tuple(fragment_name(i, stem) for i in range(len(order)))  # as the GLB's nodes
     # Bonds where fragments share fault faces: every group the game splits off is connected in space.
+    graph = fragments_graph(frags)
     data = runtime(state.need("tet_mesh", "runtime"), state.need("modes", "runtime"), state.need("pieces", "runtime"),
-                   options, fragment_pieces=order, fragment_names=names, fragment_graph=fragments_graph(frags))
+                   options, fragment_pieces=order, fragment_names=names, fragment_graph=graph)
+    if options.criterion == "stress":
+        from fracture_cli.stages.stress.stage import with_stress
+
+        data = with_stress(data, state.need("tet_mesh", "runtime"), state.need("pieces", "runtime"), frags,
+                           state.eta, graph, options)
     # Mass properties and collision parts for engines that read the runtime file only (FORMAT.md section 8).
     physics = state.physics if state.physics is not None else fragment_physics(frags, state.collision, frags.pivot)
     data = dataclasses.replace(data, gameready=runtime_arrays(physics))

@@ -23,9 +23,12 @@ import numpy as np
 
 from fracture_cli.errors import RuntimeFileError
 from fracture_cli.runtime.gameready import GAMEREADY_LAYOUT, check_gameready
+from fracture_cli.runtime.header import parse_header
+from fracture_cli.runtime.stress import CRITERIA, STRESS_LAYOUT, check_stress, header_features
 
 FORMAT_NAME = "fracture-modes-runtime"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 1  # what a bake without any version-2 feature writes (byte-identical to before version 2)
+MAX_VERSION = 2  # the newest version this reader reads (docs/notes/runtime-format-v2.md)
 ALIGNMENT = 16
 JSON_SUFFIX = ".fracture.json"
 BIN_SUFFIX = ".fracture.bin"
@@ -76,6 +79,12 @@ class RuntimeData:
     gameready : dict of str -> array
         The optional arrays of :data:`GAMEREADY_LAYOUT` (mass properties and
         collision parts per fragment, model space), all or none.
+    criterion : str
+        ``"modes"`` (version 1) or ``"stress"`` (version 2 with feature ``"stress"``).
+    stress : dict of str -> array
+        The arrays of :data:`fracture_cli.runtime.stress.STRESS_LAYOUT` (criterion ``"stress"`` only).
+    stress_info : dict
+        The stress criterion's material parameters (header key ``stress``; informational).
     """
 
     sites: np.ndarray
@@ -89,6 +98,19 @@ class RuntimeData:
     radius: float = 0.05
     units: str = UNITS_NOTE
     gameready: dict[str, np.ndarray] = field(default_factory=dict)
+    criterion: str = "modes"
+    stress: dict[str, np.ndarray] = field(default_factory=dict)
+    stress_info: dict = field(default_factory=dict)
+
+    @property
+    def features(self) -> tuple[str, ...]:
+        """The format-2 features the data needs (sorted; empty: a version-1 file)."""
+        return ("stress",) if self.stress else ()
+
+    @property
+    def version(self) -> int:
+        """The format version the data is written as: 1 without features, 2 with."""
+        return 2 if self.features else FORMAT_VERSION
 
     @property
     def dim(self) -> int:
@@ -120,6 +142,9 @@ class RuntimeData:
         for name, (dtype, _) in GAMEREADY_LAYOUT.items():
             if name in self.gameready:
                 arrays[name] = np.ascontiguousarray(self.gameready[name], dtype=_DTYPES[dtype])
+        for name, (dtype, _) in STRESS_LAYOUT.items():
+            if name in self.stress:
+                arrays[name] = np.ascontiguousarray(self.stress[name], dtype=_DTYPES[dtype])
         return arrays
 
     def counts(self) -> dict[str, int]:
@@ -128,6 +153,8 @@ class RuntimeData:
         if self.gameready:
             counts["collision_parts"] = int(len(self.gameready["collision_part_offsets"]) - 1)
             counts["collision_vertices"] = int(len(self.gameready["collision_vertices"]))
+        if self.stress:
+            counts["site_bonds"] = int(len(self.stress["site_bonds"]))
         return counts
 
 
@@ -171,6 +198,12 @@ def check_runtime(data: RuntimeData) -> str | None:
             return problem
     if not (np.all(np.isfinite(data.transform)) and np.isfinite(data.radius)):
         return "transform and impact radius must be finite numbers"
+    if data.criterion not in CRITERIA:
+        return f"unknown criterion {data.criterion!r}"
+    if (data.criterion == "stress") != bool(data.stress):
+        return "the stress criterion and the stress arrays come together"
+    if data.stress:
+        return check_stress(data.stress, s, expected["edges"][0])
     return None
 
 
@@ -202,7 +235,7 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
     for name, array in data.arrays().items():
         raw = array.tobytes(order="C")
         table[name] = {
-            "dtype": {**ARRAY_LAYOUT, **GAMEREADY_LAYOUT}[name][0],
+            "dtype": {**ARRAY_LAYOUT, **GAMEREADY_LAYOUT, **STRESS_LAYOUT}[name][0],
             "shape": list(array.shape),
             "byte_offset": offset,
             "byte_length": len(raw),
@@ -213,7 +246,7 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
     binary = b"".join(chunks)
     header = {
         "format": FORMAT_NAME,
-        "version": FORMAT_VERSION,
+        "version": data.version,
         "dim": data.dim,
         "counts": data.counts(),
         "fragment_names": list(data.fragment_names),
@@ -224,6 +257,10 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
         "buffer": {"uri": bin_name, "byte_length": len(binary), "crc32": zlib.crc32(binary)},
         "arrays": table,
     }
+    if data.features:  # version 2 (docs/FORMAT.md section 11); a version-1 header stays as it was
+        header["features"] = list(data.features)
+        header["criterion"] = data.criterion
+        header["stress"] = {key: data.stress_info[key] for key in sorted(data.stress_info)}
     text = json.dumps(header, sort_keys=True, indent=2, ensure_ascii=True, allow_nan=False) + "\n"
     return text.encode("ascii"), binary
 
@@ -283,46 +320,6 @@ def _count(value, what: str) -> int:
     return value
 
 
-MAX_JSON_DEPTH = 64
-
-
-def _reject_constant(name: str):
-    raise ValueError(f"{name} is not JSON")
-
-
-def parse_header(header_bytes: bytes):
-    """The header's JSON value, parsed strictly (docs/FORMAT.md section 1).
-
-    UTF-8, standard JSON only (``NaN``, ``Infinity`` rejected), nesting at most
-    :data:`MAX_JSON_DEPTH` levels (checked before parsing, so a hostile file
-    cannot make the parser recurse without bound).
-
-    Raises
-    ------
-    ValueError
-        With the reason (``UnicodeDecodeError`` and ``json.JSONDecodeError`` are ValueErrors).
-    """
-    text = header_bytes.decode("utf-8")
-    depth, in_string, escaped = 0, False, False
-    for char in text:
-        if in_string:
-            if escaped:
-                escaped = False
-            elif char == "\\":
-                escaped = True
-            elif char == '"':
-                in_string = False
-        elif char == '"':
-            in_string = True
-        elif char in "[{":
-            depth += 1
-            if depth > MAX_JSON_DEPTH:
-                raise ValueError(f"nested deeper than {MAX_JSON_DEPTH} levels")
-        elif char in "]}":
-            depth -= 1
-    return json.loads(text, parse_constant=_reject_constant)
-
-
 def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> RuntimeData:
     """Parse a header and its binary payload (see :func:`load_runtime`)."""
     try:
@@ -332,9 +329,13 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
         raise _fail(f"not a fracture runtime file (expected \"format\": \"{FORMAT_NAME}\")", path)
     version = header.get("version")
-    if isinstance(version, bool) or not isinstance(version, int) or version < 1 or version > FORMAT_VERSION:
-        raise _fail(f"runtime file version {version!r} is not supported (this reader knows 1..{FORMAT_VERSION}); "
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1 or version > MAX_VERSION:
+        raise _fail(f"runtime file version {version!r} is not supported (this reader knows 1..{MAX_VERSION}); "
                     "re-bake the asset or update fracture", path)
+    try:
+        features, criterion = header_features(header, version)
+    except ValueError as exc:
+        raise _fail(str(exc), path) from None
     try:
         buffer = header["buffer"]
         table = header["arrays"]
@@ -360,8 +361,12 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     # Optional arrays: read when any is listed (check_runtime then wants all of them).
     gameready = {name: _array(table, name, binary, path, GAMEREADY_LAYOUT) for name in GAMEREADY_LAYOUT
                  if name in table}
+    stress = ({name: _array(table, name, binary, path, STRESS_LAYOUT) for name in STRESS_LAYOUT}
+              if "stress" in features else {})
+    info: dict = header["stress"] if isinstance(header.get("stress"), dict) else {}
     data = RuntimeData(fragment_names=names, transform=transform, default_threshold=threshold,
-                       radius=radius, units=units, gameready=gameready, **arrays)
+                       radius=radius, units=units, gameready=gameready, criterion=criterion, stress=stress,
+                       stress_info=dict(info), **arrays)
     problem = check_runtime(data)
     if problem is None and data.dim != dim:
         problem = f"header says dim = {dim} but W has d = {data.dim}"

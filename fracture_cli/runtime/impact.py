@@ -14,6 +14,7 @@ import numpy as np
 
 from fracture_cli.errors import ImpactArgumentError
 from fracture_cli.runtime.format import RuntimeData
+from fracture_cli.runtime.stress import PreparedStress
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,6 +68,7 @@ class _Prepared:
         self.WdW = np.ascontiguousarray(np.concatenate([W.reshape(k, p * d), dW.reshape(k, self.e * d)], axis=1))
         self.split = p * d
         self.forest = _SpanningForest(p, self.edge_p, self.edge_q)
+        self.stress = PreparedStress(data.stress, self.e) if data.criterion == "stress" else None
 
 
 _PREPARED: weakref.WeakKeyDictionary[RuntimeData, _Prepared] = weakref.WeakKeyDictionary()
@@ -319,7 +321,9 @@ def project_impact(data: RuntimeData, point, impulse, threshold: float | None = 
     displacement = out[: prep.split].reshape(prep.p, prep.d)
     jumps = out[prep.split:]
     limit = threshold / m  # Python floats: overflow gives inf (nothing breaks), underflow 0.0
-    if prep.d == 1:
+    if prep.stress is not None:  # criterion "stress" (docs/FORMAT.md section 11): tension over strength
+        broken = prep.stress.broken(site, nx, ny, nz, limit)
+    elif prep.d == 1:
         broken = np.abs(jumps) > limit
     else:
         j = jumps.reshape(prep.e, 3)

@@ -131,6 +131,36 @@ def single_fragment() -> RuntimeData:
     )
 
 
+def stress_dyadic() -> RuntimeData:
+    """Criterion ``"stress"`` (format version 2): four fragments in a cycle, three sites, dyadic gains.
+
+    Every product and sum of the stress test is exact, so the ties below are ties in any order:
+    at site 0 a unit x impulse gives bond 0 ``g = 1`` against ``t * S = 0.5 * T`` (a tie at ``T = 2``),
+    bond 2 is compressed, bond 3 is not in site 0's list (never breaks from there).
+    """
+    gains = [[1.0, 0.0, 0.0], [0.5, 0.25, 0.0], [-0.5, 0.0, 0.25],  # site 0: bonds 0, 1, 2
+             [0.0, 2.0, 0.0], [0.0, -1.0, 1.0],  # site 1: bonds 1, 3
+             [0.25, 0.25, 0.25], [1.0, -1.0, 0.5], [0.0, 0.0, 4.0], [-2.0, 0.0, 0.0]]  # site 2: bonds 0..3
+    return RuntimeData(
+        sites=np.array([[0, 0, 0], [4, 0, 0], [0, 4, 2]], np.float32),
+        B=np.array([[[1.0]], [[0.5]], [[-0.25]]], np.float32),
+        W=np.array([[[1.0], [0.5], [-0.5], [0.0]]], np.float32),
+        edges=np.array([[0, 1], [0, 3], [1, 2], [2, 3]], np.int32),
+        edge_areas=np.array([1.0, 0.5, 2.0, 0.25], np.float32),
+        fragment_names=_names(4),
+        default_threshold=2.0,
+        radius=0.05,
+        criterion="stress",
+        stress={
+            "site_bonds_ptr": np.array([0, 3, 5, 9], np.int32),
+            "site_bonds": np.array([0, 1, 2, 1, 3, 0, 1, 2, 3], np.int32),
+            "site_bond_gain": np.array(gains, np.float32),
+            "bond_strength": np.array([0.5, 0.25, 1.0, 0.125], np.float32),
+        },
+        stress_info={"note": "synthetic"},
+    )
+
+
 def random_data(d: int, seed: int, s: int = 400, k: int = 8, p: int = 40, e: int = 100) -> RuntimeData:
     """Random sites on a bumpy sphere and a connected graph with cycles (many cuts per hit)."""
     rng = np.random.default_rng(seed)
@@ -160,9 +190,15 @@ def sample_assets() -> list[tuple[str, str]]:
         return sorted(tomllib.load(fh)["assets"].items())
 
 
+# Sample assets baked with the stress criterion too: (asset, recipe, name of the runtime file here).
+STRESS_BAKES = [("chair.glb", "wood", "chair_stress")]
+
+
 def rebake_sample_assets(dest: str) -> None:
     """Bake every sample asset with its manifest recipe and copy its runtime file to ``dest``."""
-    for asset, recipe in sample_assets():
+    bakes = [(asset, recipe, os.path.splitext(asset)[0], ()) for asset, recipe in sample_assets()]
+    bakes += [(asset, recipe, name, ("--set", "runtime.criterion=stress")) for asset, recipe, name in STRESS_BAKES]
+    for asset, recipe, name, extra in bakes:
         stem = os.path.splitext(asset)[0]
         with tempfile.TemporaryDirectory() as tmp:
             subprocess.run(
@@ -177,12 +213,17 @@ def rebake_sample_assets(dest: str) -> None:
                     tmp,
                     "--recipe",
                     recipe,
+                    *extra,
                 ],
                 check=True,
                 cwd=REPO,
             )
-            for suffix in (".fracture.json", ".fracture.bin"):
-                shutil.copyfile(os.path.join(tmp, stem + suffix), os.path.join(dest, stem + suffix))
+            if name == stem:
+                for suffix in (".fracture.json", ".fracture.bin"):
+                    shutil.copyfile(os.path.join(tmp, stem + suffix), os.path.join(dest, name + suffix))
+            else:  # renamed: the header names its binary file
+                data = load_runtime(os.path.join(tmp, stem + ".fracture.json"))
+                write_runtime(data, os.path.join(dest, name + ".fracture.json"))
 
 
 # ---------------------------------------------------------------- the impacts
@@ -209,7 +250,14 @@ def _midpoint_tie(rt: reference.Runtime, rng):
 
 
 def _typical_jump(rt: reference.Runtime, point, direction) -> float:
-    """Largest |jump| of a unit impulse at ``point`` (to scale impulses so some edges break)."""
+    """Largest |jump| of a unit impulse at ``point`` (to scale impulses so some edges break); stress: ``g / S``."""
+    if rt.criterion == "stress":
+        v = reference.nearest(rt, point)[0]
+        m = max(abs(c) for c in direction)
+        n = [c / m for c in direction]
+        strength = rt.stress[3]
+        ratios = [g / m / strength[e] for e, g in reference.stress_gains(rt, v, n) if g > 0 and strength[e] > 0]
+        return max(ratios, default=0.0) or 1.0
     result = reference.project(rt, point, direction, math.inf)
     jumps = [abs(result.displacement[P][c] - result.displacement[Q][c]) for P, Q in rt.edges for c in range(rt.d)]
     return max(jumps, default=0.0) or 1.0
@@ -322,6 +370,36 @@ DYADIC_TIES: list[dict] = [
         "exact": True,
     },
 ]
+STRESS_TIES: list[dict] = [
+    {
+        "name": "exact stress tie: g == t * S holds (site 0, bond 0)",
+        "point": [0.5, 0.0, 0.0],
+        "impulse": [1.0, 0.0, 0.0],
+        "threshold": 2.0,
+        "exact": True,
+    },
+    {
+        "name": "exact stress tie x 1024",
+        "point": [0.5, 0.0, 0.0],
+        "impulse": [1024.0, 0.0, 0.0],
+        "threshold": 2048.0,
+        "exact": True,
+    },
+    {
+        "name": "just above the tie: bond 0 breaks, bond 2 compressed, bond 3 not listed",
+        "point": [0.5, 0.0, 0.0],
+        "impulse": [1.0, 0.0, 0.0],
+        "threshold": 1.75,
+        "exact": True,
+    },
+    {
+        "name": "site 2, every bond listed, mixed signs",
+        "point": [0.0, 3.5, 2.0],
+        "impulse": [0.5, -1.0, 1.0],
+        "threshold": 1.0,
+        "exact": True,
+    },
+]
 EXAMPLE_TIES: list[dict] = [
     {
         "name": "worked example case 1 with T = 2.5: |jump| == T holds",
@@ -386,6 +464,8 @@ def vector_entry(rt: reference.Runtime, impact: dict) -> dict:
         alpha=[_number(a) for a in result.alpha],
         displacement=[[_number(x) for x in row] for row in result.displacement],
     )
+    if result.loads is not None:
+        entry["loads"] = [_number(x) for x in result.loads]
     return entry
 
 
@@ -399,6 +479,9 @@ def write_vectors(path: str, runtime_name: str, rt: reference.Runtime, impacts: 
         "counts": {"sites": len(rt.sites), "modes": rt.k, "fragments": rt.p, "edges": len(rt.edges)},
         "default_threshold": rt.default_threshold,
     }
+    if rt.criterion != "modes":  # version 2: what a reader needs to run these vectors
+        head["features"] = ["stress"]
+        head["criterion"] = rt.criterion
     lines = [json.dumps(vector_entry(rt, impact), allow_nan=False) for impact in impacts]
     text = (
         json.dumps(head, indent=2, allow_nan=False)[:-2]
@@ -421,17 +504,19 @@ def generate(out: str, rebake: bool = False) -> list[str]:
         "random_d1": random_data(1, seed=11),
         "random_d3": random_data(3, seed=13),
     }
-    for name, data in small.items():
+    stress_small = {"stress_dyadic": stress_dyadic()}  # version 2: after the others, so their seeds stay
+    for name, data in {**small, **stress_small}.items():
         write_runtime(data, os.path.join(out, f"{name}.fracture.json"))
         written += [f"{name}.fracture.json", f"{name}.fracture.bin"]
     if rebake:
         rebake_sample_assets(out)
     stems = [os.path.splitext(asset)[0] for asset, _ in sample_assets()]
-    for stem in stems:
+    stress_stems = [name for _, _, name in STRESS_BAKES]
+    for stem in stems + stress_stems:
         if os.path.abspath(out) != HERE and not rebake:
             for suffix in (".fracture.json", ".fracture.bin"):
                 shutil.copyfile(os.path.join(HERE, stem + suffix), os.path.join(out, stem + suffix))
-    for seed, name in enumerate([*small, *stems]):
+    for seed, name in enumerate([*small, *stems, *stress_small, *stress_stems]):
         rt = reference.Runtime.from_data(load_runtime(os.path.join(out, f"{name}.fracture.json")))
         rng = np.random.default_rng(100 + seed)
         impacts = designed_impacts(rt, rng)
@@ -439,7 +524,10 @@ def generate(out: str, rebake: bool = False) -> list[str]:
             impacts = _doc_cases() + EXAMPLE_TIES + impacts
         elif name == "dyadic_d3":
             impacts = DYADIC_TIES + impacts
-        count = SMALL_IMPACTS if name.startswith("random") else SAMPLE_IMPACTS if name in stems else 8
+        elif name == "stress_dyadic":
+            impacts = STRESS_TIES + impacts
+        count = (SMALL_IMPACTS if name.startswith("random") else
+                 SAMPLE_IMPACTS if name in stems + stress_stems else 8)
         impacts += random_impacts(rt, count, seed=200 + seed)
         write_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", rt, impacts)
         written.append(f"{name}.vectors.json")

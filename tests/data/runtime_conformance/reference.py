@@ -38,6 +38,10 @@ class Runtime:
     W : list over modes of list over fragments of d-tuples
     edges : list of (P, Q)
     default_threshold : float
+    criterion : str
+        ``"modes"`` or ``"stress"`` (docs/FORMAT.md section 11).
+    stress : tuple or None
+        With the stress criterion: ``(ptr, bonds, gains, strength)`` as lists (gains of 3-tuples).
     """
 
     sites: list
@@ -45,6 +49,8 @@ class Runtime:
     W: list
     edges: list
     default_threshold: float
+    criterion: str = "modes"
+    stress: tuple | None = None
 
     @property
     def d(self) -> int:
@@ -61,11 +67,17 @@ class Runtime:
     @classmethod
     def from_data(cls, data) -> Runtime:
         """From a :class:`fracture_cli.runtime.format.RuntimeData`."""
+        stress = None
+        if getattr(data, "criterion", "modes") == "stress":
+            arrays = data.stress
+            stress = (arrays["site_bonds_ptr"].tolist(), arrays["site_bonds"].tolist(),
+                      [tuple(g) for g in arrays["site_bond_gain"].tolist()], arrays["bond_strength"].tolist())
         return cls(sites=[tuple(float(c) for c in s) for s in data.sites.tolist()],
                    B=[[tuple(m) for m in site] for site in data.B.tolist()],
                    W=[[tuple(f) for f in mode] for mode in data.W.tolist()],
                    edges=[tuple(e) for e in data.edges.tolist()],
-                   default_threshold=float(data.default_threshold))
+                   default_threshold=float(data.default_threshold),
+                   criterion=getattr(data, "criterion", "modes"), stress=stress)
 
 
 @dataclass(frozen=True)
@@ -79,7 +91,8 @@ class Expected:
     broken: list
     groups: list
     site_margin: float  # relative gap to the runner-up site (inf: one site, 0: exact tie)
-    edge_margin: float  # smallest relative gap between |jump'| and T/m over the edges
+    edge_margin: float  # smallest relative gap between |jump'| and T/m over the edges (stress: g and t * S)
+    loads: list | None = None  # stress criterion: L_e = g / (t * S_e) for listed bonds with g > 0, else 0
 
 
 def squared_distance(site, x, y, z) -> float:
@@ -174,6 +187,12 @@ def project(rt: Runtime, point, impulse, threshold) -> Expected:
             row.append(acc)
         disp.append(row)
     t = T / m  # overflow -> inf (nothing breaks), underflow -> 0 (any nonzero jump breaks)
+    if rt.criterion == "stress":
+        broken, loads, edge_margin = stress_test(rt, v, n, t)
+        return Expected(site=v, tied_sites=tied, alpha=[m * a for a in alpha],
+                        displacement=[[m * x for x in row] for row in disp], broken=broken,
+                        groups=components(p, rt.edges, broken), site_margin=site_margin, edge_margin=edge_margin,
+                        loads=loads)
     broken, edge_margin = [], math.inf
     for P, Q in rt.edges:
         jump = [disp[P][c] - disp[Q][c] for c in range(d)]
@@ -185,3 +204,35 @@ def project(rt: Runtime, point, impulse, threshold) -> Expected:
     return Expected(site=v, tied_sites=tied, alpha=[m * a for a in alpha],
                     displacement=[[m * x for x in row] for row in disp], broken=broken,
                     groups=components(p, rt.edges, broken), site_margin=site_margin, edge_margin=edge_margin)
+
+
+def stress_gains(rt: Runtime, v: int, n) -> list:
+    """``(bond, g)`` for site ``v``'s list: ``g = (G0 * n0 + G1 * n1) + G2 * n2`` (docs/FORMAT.md section 11)."""
+    ptr, bonds, gains, _ = rt.stress
+    out = []
+    for j in range(ptr[v], ptr[v + 1]):
+        G = gains[j]
+        out.append((bonds[j], G[0] * n[0] + G[1] * n[1] + G[2] * n[2]))
+    return out
+
+
+def stress_test(rt: Runtime, v: int, n, t: float) -> tuple[list, list, float]:
+    """Broken bonds, loads and the smallest relative gap to a tie, stress criterion (section 11).
+
+    Bond ``e`` of the list breaks when ``g > t * S_e``; the gap is ``|g - t S_e|`` over
+    ``sum |G_c n_c| + t S_e`` (the magnitudes that went into the comparison).
+    """
+    strength = rt.stress[3]
+    broken = [False] * len(rt.edges)
+    loads = [0.0] * len(rt.edges)
+    margin = math.inf
+    ptr, _, gains, _ = rt.stress
+    for j, (e, g) in zip(range(ptr[v], ptr[v + 1]), stress_gains(rt, v, n)):
+        limit = t * strength[e]
+        broken[e] = g > limit
+        if g > 0:
+            loads[e] = g / limit if limit > 0 else (math.inf if limit == 0 else 0.0)
+        scale = sum(abs(gains[j][c] * n[c]) for c in range(3)) + (limit if math.isfinite(limit) else 0.0)
+        if math.isfinite(limit) and scale > 0:
+            margin = min(margin, abs(g - limit) / scale)
+    return broken, loads, margin
