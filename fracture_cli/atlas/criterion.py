@@ -110,6 +110,7 @@ def stress_breaking_impulses(data: RuntimeData, site: int, direction: np.ndarray
     -------
     (e,) float64
     """
+    # on first use: the atlas loads the reader's stress step only for stress files
     from fracture_cli.runtime.impact import prepare
 
     stress = prepare(data).stress

@@ -35,6 +35,7 @@ def atlas_cmd(runtime_file: str, criterion: str, sites: int, require: tuple[str,
     """
 
     def process(chain: Chain) -> None:
+        # on first use: keeps `fracture` start-up light
         from fracture_cli.atlas import run_atlas
         from fracture_cli.cli.tools import guard_beside
         from fracture_cli.runtime.format import load_runtime

@@ -298,6 +298,7 @@ def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     data = runtime(state.need("tet_mesh", "runtime"), state.need("modes", "runtime"), state.need("pieces", "runtime"),
                    options, fragment_pieces=order, fragment_names=names, fragment_graph=graph)
     if options.criterion == "stress":
+        # the elasticity solve loads only for the stress criterion
         from fracture_cli.stages.stress.stage import with_stress
 
         data = with_stress(data, state.need("tet_mesh", "runtime"), state.need("pieces", "runtime"), frags,

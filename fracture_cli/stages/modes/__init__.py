@@ -20,7 +20,6 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
-from scipy.sparse.linalg import eigsh
 
 from fracture_cli.errors import StageError
 from fracture_cli.options import option
@@ -33,6 +32,7 @@ from fracture_cli.stages.modes.solver import (
     jump_norms,
     lp_backend,
 )
+from fracture_cli.stages.modes.start import scalar_start_vectors
 from fracture_cli.system import parallel, progress
 from fracture_cli.types import Modes, TetMesh
 
@@ -41,10 +41,6 @@ log = logging.getLogger(__name__)
 STAGE = "modes"
 
 
-# ARPACK iterations before the eigensolver tries again differently (shift-invert converges in a few when it can).
-_ARPACK_MAXITER = 1000
-# Largest vertex count for the dense eigensolver fallback (n^2 doubles of memory, n^3 time: ~4 s at 4000).
-_DENSE_EIGEN_MAX = 4000
 # ICCM rounds of a mode with a max-flow budget at most, and that budget (see _iccm_mode). Measured at
 # k = 24 on 6k tets (one run each, CPU s on a loaded machine, before budgeted rounds could merge cells):
 # budgets 1, 2, 3, 4 gave 12.7, 10.0, 10.2, 12.2 s and worst/median 4.8, 6.4, 3.6, 5.2, with sums of
@@ -168,7 +164,7 @@ def modes(tet_mesh: TetMesh, options: ModesOptions = ModesOptions(), eta: np.nda
                          stage=STAGE)
 
     start = time.perf_counter()
-    scalar_init = _scalar_start_vectors(tet_mesh, scalar_count, opts.seed)
+    scalar_init = scalar_start_vectors(tet_mesh, scalar_count, opts.seed)
     eig_seconds = time.perf_counter() - start
     log.info("%s: %d start vectors from the Laplacian eigenproblem in %.2f s", STAGE, scalar_count, eig_seconds)
 
@@ -248,63 +244,6 @@ def _check_eta(eta: np.ndarray | None, f: int, d: int) -> np.ndarray:
         raise StageError("eta must be positive and finite; use a large value (e.g. 1e6) for unbreakable faces",
                          stage=STAGE)
     return eta
-
-
-def _scalar_start_vectors(tet_mesh: TetMesh, count: int, seed: int) -> np.ndarray:
-    """The first ``count`` non-constant generalized eigenvectors of ``(K, M_V)``, averaged onto tets.
-
-    Returns (count, t). Shift-invert just below 0 (``K`` is singular); ARPACK's
-    start vector is drawn from ``seed`` so runs are reproducible.
-    """
-    K = tet_mesh.stiffness.tocsc()
-    M = tet_mesh.vertex_mass.tocsc()
-    n = K.shape[0]
-    want = min(count + 1, n - 1)
-    # Below the spectrum by a margin far smaller than the first non-zero eigenvalue.
-    shift = -1e-6 * float(K.diagonal().sum() / M.diagonal().sum())
-    # Uniform, not normal: numpy's normal draws call libm's exp/log, which round by the CPU (numeric_env.py).
-    v0 = np.random.default_rng(seed).uniform(-1.0, 1.0, n)
-    try:
-        values, vectors = _lowest_eigenpairs(K, M, want, shift, v0)
-    except Exception as error:  # ARPACK and LAPACK raise several types; report one message
-        raise StageError(f"the Laplacian eigensolver failed ({error}); is the tet mesh connected and valid?",
-                         stage=STAGE) from error
-    order = np.argsort(values, kind="stable")
-    vectors = vectors[:, order[1:want]]  # the first is the constant
-    return np.asarray((tet_mesh.tet_from_vertex @ vectors).T)
-
-
-def _lowest_eigenpairs(K: sp.csc_matrix, M: sp.csc_matrix, want: int, shift: float,
-                       v0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The ``want`` (or a few more) lowest generalized eigenpairs of ``(K, M)``.
-
-    ARPACK (shift-invert just below 0) first. When it does not converge (a
-    near-flat tet puts the shift far below the spectrum; or ``want`` cuts
-    through a cluster of repeated eigenvalues of a symmetric shape), it is
-    asked for a few more pairs at shift -1 with a larger Krylov space, and as a
-    last resort (small meshes only) LAPACK solves the dense problem.
-    """
-    from scipy.sparse.linalg import ArpackNoConvergence
-
-    n = K.shape[0]
-    try:
-        return eigsh(K, k=want, M=M, sigma=shift, which="LM", v0=v0, maxiter=_ARPACK_MAXITER)
-    except ArpackNoConvergence as first:
-        log.info("%s: ARPACK did not converge for %d eigenpairs (%s); retrying with more", STAGE, want, first)
-    # A near-flat tet inflates the stiffness trace, and with it the first shift, far below the spectrum,
-    # where shift-invert separates nothing; the bounding-box diagonal is 1, so the smallest non-zero
-    # eigenvalues are O(1) to O(100) and -1 sits just below them.
-    more = min(want + 6, n - 1)
-    try:
-        return eigsh(K, k=more, M=M, sigma=-1.0, which="LM", v0=v0, ncv=min(n, 2 * more + 20),
-                     maxiter=_ARPACK_MAXITER)
-    except ArpackNoConvergence as second:
-        if n > _DENSE_EIGEN_MAX:
-            raise
-        log.info("%s: ARPACK did not converge again (%s); solving the dense problem (%d vertices)", STAGE, second, n)
-    import scipy.linalg
-
-    return scipy.linalg.eigh(K.toarray(), M.toarray(), subset_by_index=[0, want - 1])
 
 
 class _MInner:
@@ -419,6 +358,7 @@ def _modes_on_cells(cells: np.ndarray, face_tets: np.ndarray, areas: np.ndarray,
                     volumes: np.ndarray, scalar_init: np.ndarray, k: int, d: int,
                     opts: ModesOptions) -> tuple[np.ndarray, dict[str, Any]]:
     """The modes with one value per pattern cell: the same solvers on the cell graph, prolongated to the tets."""
+    # pattern code loads only when a recipe uses a pattern
     from fracture_cli.stages.pattern.restrict import cell_problem
 
     problem = cell_problem(cells, face_tets, areas, eta2, volumes, scalar_init, k, stage=STAGE)

@@ -102,6 +102,7 @@ def pattern(tet_mesh: TetMesh, surface: SurfaceMesh | None, options: PatternOpti
     """
     if options.kind == "modes":
         return None
+    # each kind's module loads only when a recipe uses a pattern (recipes import this module)
     from fracture_cli.stages.pattern import bricks, cells, clustered, profile, radial, slices, voronoi
 
     started = time.perf_counter()

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from fracture_cli.geometry.edges import components, renumber_by_first
+from fracture_cli.stages.pieces import tet_material_fraction
 from fracture_cli.types import SurfaceMesh, TetMesh
 
 AXES = {"x": 0, "y": 1, "z": 2}
@@ -22,8 +23,6 @@ def held_volumes(tet_mesh: TetMesh, surface: SurfaceMesh | None) -> np.ndarray:
     volumes = np.abs(np.asarray(tet_mesh.tet_volumes, dtype=np.float64))
     if surface is None:
         return volumes
-    from fracture_cli.stages.pieces import tet_material_fraction
-
     return volumes * tet_material_fraction(tet_mesh, surface)
 
 
