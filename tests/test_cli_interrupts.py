@@ -107,11 +107,11 @@ def test_ctrl_c_while_parsing_is_an_interrupt(monkeypatch):
 def test_ctrl_c_while_the_tool_loads_is_an_interrupt(monkeypatch, capsys):
     class Interrupting(importlib.abc.MetaPathFinder):
         def find_spec(self, name, path=None, target=None):
-            if name == "fracture_cli.cli.group":
+            if name == "fracture_cli.cli.commands":  # what main() imports first: every command of the tool
                 raise KeyboardInterrupt
             return None
 
-    monkeypatch.delitem(sys.modules, "fracture_cli.cli.group")
+    monkeypatch.delitem(sys.modules, "fracture_cli.cli.commands")
     monkeypatch.setattr(sys, "meta_path", [Interrupting(), *sys.meta_path])
     with pytest.raises(SystemExit) as stopped:
         main(["recipes"])
@@ -126,7 +126,7 @@ def test_ctrl_c_in_an_import_is_delivered_after_it(tmp_path, monkeypatch):
     monkeypatch.setattr(interrupts, "_redeliver", lambda pid: redelivered.append(pid))
     monkeypatch.setattr(interrupts, "RETRY_SECONDS", 0.0)
     (tmp_path / "slow_native.py").write_text(
-        "import sys\nfrom fracture_cli import interrupts\n"
+        "import sys\nfrom fracture_cli.system import interrupts\n"
         "interrupts._on_sigint(2, sys._getframe())\nINITIALISED = True\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     module = importlib.import_module("slow_native")

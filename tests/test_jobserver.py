@@ -221,7 +221,7 @@ def test_real_make_passes_its_jobserver_to_recursive_lines_only(tmp_path):
     # What make on this machine does: a '+' line gets the jobserver (two free slots of -j3), a plain line
     # may not (make 4.3 closes the pipe; 4.4's FIFO works for both).
     probe = tmp_path / "probe.py"
-    probe.write_text("import sys\nsys.path.insert(0, sys.argv[1])\nfrom fracture_cli import jobserver\n"
+    probe.write_text("import sys\nsys.path.insert(0, sys.argv[1])\nfrom fracture_cli.system import jobserver\n"
                      "client = jobserver.client()\n"
                      "if client is None:\n    print('none', jobserver.default_jobs(8))\n"
                      "else:\n    with client.tokens(5) as extra:\n        print('tokens', extra)\n")
@@ -248,7 +248,7 @@ def test_asset_rules_get_the_jobserver_but_stay_dry_under_make_n(tmp_path):
     variables = [line for line in generated.splitlines() if line.startswith(("JOBSERVER =", "MAKE_LETTERS ="))]
     assert len(variables) == 2
     # The generated prefix on a recipe that records whether it got a usable jobserver.
-    probe = ("import sys; sys.path.insert(0, sys.argv[1]); from fracture_cli import jobserver; "
+    probe = ("import sys; sys.path.insert(0, sys.argv[1]); from fracture_cli.system import jobserver; "
              "open('ran', 'w').write(str(jobserver.client() is not None))")
     rule = f'.PHONY: all\nall:\n\t$(JOBSERVER){sys.executable} -c "{probe}" {REPO}\n'
     (tmp_path / "Makefile").write_text("\n".join(variables) + "\n" + rule)

@@ -66,7 +66,7 @@ def test_tbb_has_no_worker_threads_to_fork_from():
     import sys
 
     code = ("import os, manifold3d\n"
-            "from fracture_cli import parallel\n"
+            "from fracture_cli.system import parallel\n"
             "parallel.single_threaded_tbb()\n"
             "big = manifold3d.Manifold.sphere(1.0, 400)\n"
             "(big ^ manifold3d.Manifold.cube((1, 1, 1))).volume()\n"

@@ -51,7 +51,7 @@ def _recipe(tmp_path, text, name="mine.toml"):
         ('description = "x"\n[modes]\nnum_modes = -3\n', ["modes.num_modes", "-3", "range"]),
         ('description = "x"\n[modes]\nnum_modes = "many"\n', ["modes.num_modes", "'many'", "number"]),
         ('description = "x"\n[modes]\nnum_modes = 2.5\n', ["modes.num_modes", "2.5", "whole number"]),
-        ('description = "x"\n[modes]\nbogus = 1\n', ["modes.", "unknown option 'bogus'", "num_modes"]),
+        ('description = "x"\n[modes]\nbogus = 1\n', ["modes.bogus: unknown option", "num_modes"]),
         ('description = "x"\n[nonsense]\na = 1\n', ["unknown key", "nonsense"]),
         ('description = "x"\n[material]\ngrain_axis = "w"\n', ["material.grain_axis", "'w'", "'x'"]),
         ('description = "x"\nextends = "no_such_recipe"\n', ["unknown recipe 'no_such_recipe'", "default"]),
