@@ -52,7 +52,7 @@ def require_tool(name: str, package: str) -> str:
 # vector files that need them (``vector_names(READER_FEATURES[reader])``) and skips only the others.
 READER_FEATURES: dict[str, tuple[str, ...]] = {
     "c": ("stress",),
-    "csharp": (),
+    "csharp": ("stress",),
     "gdscript": (),
     "js": (),
 }
