@@ -54,7 +54,7 @@ READER_FEATURES: dict[str, tuple[str, ...]] = {
     "c": ("stress",),
     "csharp": ("stress",),
     "gdscript": (),
-    "js": (),
+    "js": ("stress",),
 }
 
 
