@@ -53,7 +53,7 @@ def require_tool(name: str, package: str) -> str:
 READER_FEATURES: dict[str, tuple[str, ...]] = {
     "c": ("stress",),
     "csharp": ("stress",),
-    "gdscript": (),
+    "gdscript": ("stress",),
     "js": ("stress",),
 }
 
