@@ -99,7 +99,44 @@ def run(quick: bool = False, bake: bool = True) -> str:
             "readers compute the groups and broken edges only (no displacements, as a game that only spawns bodies), "
             "the Python reference everything. Then the Python reference on synthetic files of larger sizes. "
             "Targets: Python < 100 us (aim 50 us), C < 2 us median; paper 1-2 ms.\n\n"
-            + _sample_assets(hits, rng, bake) + "\n" + "\n".join(rows) + "\n")
+            + _sample_assets(hits, rng, bake) + "\n" + _stress_rows(hits, rng) + "\n" + "\n".join(rows) + "\n")
+
+
+STRESS_FILES = (("chair.glb", "chair_stress"),)  # (sample asset, conformance runtime file with criterion "stress")
+
+
+def _stress_rows(hits: int, rng) -> str:
+    """The C reader per hit with the stress criterion (docs/FORMAT.md section 11) on the committed files."""
+    from fracture_cli.stages.load import load_surface
+
+    rows = ["| asset | runtime file | criterion | sites | fragments | bonds | site_bonds (max per site) | impulse | "
+            "groups (median) | C median / p99 (us) | C mean CPU (us) | C memory (MiB) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    notes: list[str] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        c_bench = _build_c_bench(tmp, notes)
+        if c_bench is None:
+            return "C reader, stress criterion: not measured (no C compiler).\n"
+        for asset, stem in STRESS_FILES:
+            points, impulses = _surface_hits(load_surface(os.path.join(REPO, "sample_assets", asset)), hits, rng)
+            for magnitude, name in ((4, stem.replace("_stress", "")), (4, stem), (40, stem)):
+                hits_file = os.path.join(tmp, f"{stem}.{magnitude}.hits.txt")
+                with open(hits_file, "w") as fh:
+                    fh.writelines(" ".join(_bits(c) for c in (*p, *(n * magnitude / 4))) + " -\n"
+                                  for p, n in zip(points, impulses))
+                data = load_runtime(os.path.join(CONFORMANCE, f"{name}.fracture.json"))
+                ptr = data.stress["site_bonds_ptr"] if data.criterion == "stress" else None
+                lists = f"{len(data.stress['site_bonds'])} ({int(np.diff(ptr).max())})" if ptr is not None else "-"
+                c = _run_c_bench(c_bench, os.path.join(CONFORMANCE, f"{name}.fracture.json"), hits_file)
+                rows.append(f"| {asset} | {name} | {data.criterion} | {data.num_sites} | {data.p} | {data.num_edges} | "
+                            f"{lists} | {magnitude} | {c['groups_median']} | {_cell(c)} | "
+                            f"{float(c['cpu_mean_ns']) / 1e3:.2f} | {float(c['memory_kib']) / 1024:.2f} |")
+    return ("C reader per hit with the stress criterion (docs/FORMAT.md section 11; target <= 5 us median) beside "
+            f"the modes on the same asset: the committed conformance runtime files, {hits} random surface hits of "
+            "magnitude 4 (and 40, where the stress criterion breaks more bonds) in random directions, the file's "
+            f"default threshold, groups only, {ROUNDS} rounds (the modes file uses the d = 1 jump table; the stress "
+            "file has none).\n\n"
+            + "\n".join(rows) + "\n")
 
 
 def _sample_assets(hits: int, rng, bake: bool = True) -> str:

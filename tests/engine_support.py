@@ -48,6 +48,16 @@ def require_tool(name: str, package: str) -> str:
     return path
 
 
+# The format-2 features (docs/FORMAT.md section 11) each engine reader implements: its harness runs the
+# vector files that need them (``vector_names(READER_FEATURES[reader])``) and skips only the others.
+READER_FEATURES: dict[str, tuple[str, ...]] = {
+    "c": ("stress",),
+    "csharp": ("stress",),
+    "gdscript": ("stress",),
+    "js": ("stress",),
+}
+
+
 def vector_names(features=()) -> list[str]:
     """Names of the runtime files that have vectors (``example``, ``pillar``, ...) a reader can run.
 

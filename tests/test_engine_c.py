@@ -8,6 +8,7 @@ import subprocess
 import pytest
 from engine_support import (
     CORRUPT,
+    READER_FEATURES,
     REPO,
     SAMPLE_ASSETS,
     check_answers,
@@ -25,6 +26,7 @@ C_DIR = os.path.join(REPO, "engines", "c")
 SOURCES = [os.path.join(C_DIR, "fracture_runtime.c"), os.path.join(C_DIR, "tools", "fracture_check.c")]
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 SANITIZE = ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g"]
+FEATURES = READER_FEATURES["c"]
 SANITIZER_ENV = {"ASAN_OPTIONS": "detect_leaks=1:abort_on_error=0", "UBSAN_OPTIONS": "print_stacktrace=1"}
 
 
@@ -73,7 +75,7 @@ MODES = {"table": (), "compact": ("--compact",)}
 
 
 @pytest.mark.parametrize("mode", sorted(MODES))
-@pytest.mark.parametrize("name", vector_names())
+@pytest.mark.parametrize("name", vector_names(FEATURES))
 def test_c_reader_passes_the_vectors(driver, name, mode):
     vectors = load_vectors(name)
     result = run_driver(driver, *runtime_paths(name), protocol_input(vectors["impacts"]), *MODES[mode])
@@ -103,7 +105,7 @@ def test_c_reader_on_damaged_files(driver, case):
 
 def test_c_reader_under_sanitizers(sanitized_driver):
     """Every vector and damaged file under ASan + UBSan, then truncations and mutations of two files."""
-    for name in vector_names():
+    for name in vector_names(FEATURES):
         vectors = load_vectors(name)
         for flags in MODES.values():
             result = run_driver(sanitized_driver, *runtime_paths(name), protocol_input(vectors["impacts"]), *flags)
@@ -115,7 +117,7 @@ def test_c_reader_under_sanitizers(sanitized_driver):
         )
         _assert_clean(result, allowed=(0, 2))
         assert (result.returncode == 2) == (case["expect"] == "rejected"), case["name"]
-    for name in ("example", "dyadic_d3", "pillar"):
+    for name in ("example", "dyadic_d3", "pillar", "stress_dyadic"):
         result = run_driver(sanitized_driver, *runtime_paths(name), "", "--sweep")
         _assert_clean(result)
         assert result.stdout.startswith("sweep loads=")

@@ -7,6 +7,7 @@ import subprocess
 
 import pytest
 from engine_support import (
+    READER_FEATURES,
     REPO,
     SAMPLE_ASSETS,
     check_answers,
@@ -51,7 +52,7 @@ MODES = {"table": (), "compact": ("--compact",)}
 
 
 @pytest.mark.parametrize("mode", sorted(MODES))
-@pytest.mark.parametrize("name", vector_names())
+@pytest.mark.parametrize("name", vector_names(READER_FEATURES["csharp"]))
 def test_csharp_reader_passes_the_vectors(driver, name, mode):
     vectors = load_vectors(name)
     result = run_driver(driver, *runtime_paths(name), protocol_input(vectors["impacts"]), *MODES[mode])

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from engine_support import (
     CORRUPT,
+    READER_FEATURES,
     REPO,
     SAMPLE_ASSETS,
     check_answers,
@@ -37,7 +38,7 @@ def conformance_output(tmp_path_factory) -> dict[str, list[str]]:
     root = tmp_path_factory.mktemp("godot_conformance")
     project = GodotProject(root / "project")
     jobs = []
-    for name in vector_names():
+    for name in vector_names(READER_FEATURES["gdscript"]):
         impacts = root / f"{name}.impacts"
         impacts.write_text(protocol_input(load_vectors(name)["impacts"]))
         jobs.append((name, *runtime_paths(name), str(impacts), ""))
@@ -69,7 +70,7 @@ def conformance_output(tmp_path_factory) -> dict[str, list[str]]:
     return output
 
 
-@pytest.mark.parametrize("name", vector_names())
+@pytest.mark.parametrize("name", vector_names(READER_FEATURES["gdscript"]))
 def test_gdscript_reader_passes_the_vectors(conformance_output, name):
     vectors = load_vectors(name)
     assert check_answers(vectors, "\n".join(conformance_output[name])) == []

@@ -16,6 +16,7 @@ from engine_support import (
     CORRUPT,
     JS_DRIVER,
     NODE,
+    READER_FEATURES,
     check_answers,
     corrupt_cases,
     float_to_bits,
@@ -40,7 +41,7 @@ def run_driver(header: str, binary: str, stdin: str = "", *flags: str) -> subpro
                           timeout=300, check=False)
 
 
-@pytest.mark.parametrize("name", vector_names())
+@pytest.mark.parametrize("name", vector_names(READER_FEATURES["js"]))
 def test_js_reader_passes_the_vectors(name):
     vectors = load_vectors(name)
     result = run_driver(*runtime_paths(name), protocol_input(vectors["impacts"]))

@@ -397,16 +397,23 @@ static int key_is(const char *key, size_t length, const char *name)
 
 /* ------------------------------------------------------------------ header */
 
-enum { A_SITES, A_B, A_W, A_EDGES, A_AREAS, A_COUNT };
+/* The five arrays of section 2, then the four of the stress criterion (section 11, only with feature "stress"). */
+enum { A_SITES, A_B, A_W, A_EDGES, A_AREAS, A_PTR, A_BONDS, A_GAIN, A_STRENGTH, A_COUNT };
+#define A_REQUIRED 5
 enum { DT_NONE, DT_F32, DT_I32, DT_OTHER };
-static const char *const ARRAY_NAMES[A_COUNT] = {"sites", "B", "W", "edges", "edge_areas"};
-static const int ARRAY_RANK[A_COUNT] = {2, 3, 3, 2, 1};
-static const int ARRAY_DTYPE[A_COUNT] = {DT_F32, DT_F32, DT_F32, DT_I32, DT_F32};
-static const char *const COUNT_NAMES[4] = {"sites", "modes", "fragments", "edges"};
+static const char *const ARRAY_NAMES[A_COUNT] = {"sites", "B", "W", "edges", "edge_areas", "site_bonds_ptr",
+                                                 "site_bonds", "site_bond_gain", "bond_strength"};
+static const int ARRAY_RANK[A_COUNT] = {2, 3, 3, 2, 1, 1, 1, 2, 1};
+static const int ARRAY_DTYPE[A_COUNT] = {DT_F32, DT_F32, DT_F32, DT_I32, DT_F32, DT_I32, DT_I32, DT_F32, DT_F32};
+#define COUNT_KEYS 5 /* counts.site_bonds (index 4) only with the stress criterion */
+static const char *const COUNT_NAMES[COUNT_KEYS] = {"sites", "modes", "fragments", "edges", "site_bonds"};
+#define NAME_MAX_SHOWN 64 /* bytes of an unknown feature or criterion name kept for the message */
+enum { CRIT_MODES, CRIT_STRESS, CRIT_OTHER };
 
 enum {
     K_FORMAT = 1, K_VERSION = 2, K_DIM = 4, K_COUNTS = 8, K_NAMES = 16, K_TRANSFORM = 32, K_THRESHOLD = 64,
-    K_RADIUS = 128, K_BUFFER = 256, K_ARRAYS = 512, K_URI = 1024, K_LENGTH = 2048, K_CRC = 4096
+    K_RADIUS = 128, K_BUFFER = 256, K_ARRAYS = 512, K_URI = 1024, K_LENGTH = 2048, K_CRC = 4096,
+    K_FEATURES = 8192, K_CRITERION = 16384
 };
 
 typedef struct array_entry {
@@ -417,7 +424,7 @@ typedef struct array_entry {
 typedef struct header {
     unsigned seen, counts_seen;
     int format_ok, shape_bad;
-    int64_t version, dim, counts[4], byte_length, crc32;
+    int64_t version, dim, counts[COUNT_KEYS], byte_length, crc32;
     double transform[16], default_threshold, impact_radius;
     char uri[URI_MAX + 1];
     size_t uri_length;
@@ -425,7 +432,75 @@ typedef struct header {
     int64_t name_count, name_bytes;
     int name_bad; /* a name is not a string or holds U+0000 */
     array_entry arrays[A_COUNT];
+    /* Version 2 (section 11): features and criterion. */
+    int features_bad;     /* `features` is not a list of strings */
+    int feature_count, has_stress;
+    int feature_unknown;  /* a feature this reader does not implement; its name in unknown_name */
+    char unknown_name[NAME_MAX_SHOWN + 1];
+    int criterion;        /* CRIT_*; CRIT_MODES when absent */
+    int criterion_bad;    /* `criterion` is not a string */
+    char criterion_name[NAME_MAX_SHOWN + 1];
 } header;
+
+/* A name read by j_string into a buffer of NAME_MAX_SHOWN bytes: NUL-terminated, truncated if longer. */
+static void terminate_name(char *buf, size_t length)
+{
+    buf[length < NAME_MAX_SHOWN ? length : NAME_MAX_SHOWN] = 0;
+}
+
+/* "features": a list of strings; records whether it holds "stress" and the first name it does not know. */
+static int parse_features(jp *j, header *h)
+{
+    int first = 1, more;
+    h->seen |= K_FEATURES;
+    if (j_peek(j) != '[') {
+        h->features_bad = 1;
+        return j_skip(j);
+    }
+    if (!j_open(j, '['))
+        return 0;
+    while ((more = j_next_item(j, &first)) == 1) {
+        char name[NAME_MAX_SHOWN + 1];
+        size_t n;
+        int nul = 0;
+        if (j_peek(j) != '"') {
+            h->features_bad = 1;
+            if (!j_skip(j))
+                return 0;
+            continue;
+        }
+        if (!j_string(j, name, NAME_MAX_SHOWN, &n, &nul))
+            return 0;
+        terminate_name(name, n);
+        h->feature_count++;
+        if (!nul && n == 6 && memcmp(name, "stress", 6) == 0) {
+            h->has_stress = 1;
+        } else if (!h->feature_unknown) {
+            h->feature_unknown = 1;
+            memcpy(h->unknown_name, name, sizeof name);
+        }
+    }
+    return more == 0;
+}
+
+/* "criterion": "modes" or "stress"; anything else is kept by name for the message. */
+static int parse_criterion(jp *j, header *h)
+{
+    size_t n;
+    int nul = 0;
+    h->seen |= K_CRITERION;
+    if (j_peek(j) != '"') {
+        h->criterion_bad = 1;
+        return j_skip(j);
+    }
+    if (!j_string(j, h->criterion_name, NAME_MAX_SHOWN, &n, &nul))
+        return 0;
+    terminate_name(h->criterion_name, n);
+    h->criterion_bad = 0;
+    h->criterion = nul ? CRIT_OTHER : key_is(h->criterion_name, n, "modes") ? CRIT_MODES
+                 : key_is(h->criterion_name, n, "stress") ? CRIT_STRESS : CRIT_OTHER;
+    return 1;
+}
 
 /* fragment_names: count the strings and their decoded bytes (out == NULL) or decode them. */
 static int parse_names(jp *j, header *h, char *out, int32_t *offsets)
@@ -589,6 +664,12 @@ static int parse_top_key(jp *j, header *h, const char *key, size_t n)
             h->seen |= K_TRANSFORM;
         return more == 0;
     }
+    if (key_is(key, n, "features")) {
+        h->features_bad = h->feature_count = h->has_stress = h->feature_unknown = 0; /* duplicate keys: the last wins */
+        return parse_features(j, h);
+    }
+    if (key_is(key, n, "criterion"))
+        return parse_criterion(j, h);
     if (key_is(key, n, "counts"))
         return parse_object_of(j, h, 0);
     if (key_is(key, n, "buffer"))
@@ -611,7 +692,7 @@ static int parse_object_of(jp *j, header *h, int which)
     h->seen |= which == 0 ? K_COUNTS : which == 1 ? K_BUFFER : K_ARRAYS;
     while ((more = j_next_key(j, &first, key, sizeof key, &n)) == 1) {
         int handled = 0;
-        for (i = 0; which == 0 && i < 4 && !handled; i++)
+        for (i = 0; which == 0 && i < COUNT_KEYS && !handled; i++)
             if (key_is(key, n, COUNT_NAMES[i])) {
                 unsigned bit = 0;
                 handled = 1;
@@ -645,6 +726,39 @@ static int parse_object_of(jp *j, header *h, int which)
     return more == 0;
 }
 
+/*
+ * Section 11: version 2 lists the features it needs (refused by name when unknown) and a criterion.
+ * Version 1 ignores both keys (they were unknown keys then). Like the reference reader, a file that
+ * lists "stress" must use criterion "stress": the stress arrays come with the criterion.
+ */
+static fr_status check_features(header *h, char *msg, size_t cap)
+{
+    if (h->version < 2) {
+        h->has_stress = 0;
+        h->criterion = CRIT_MODES;
+        return FR_OK;
+    }
+    if (h->features_bad)
+        return fail(msg, cap, FR_ERR_HEADER, "runtime header 'features' must be a list of strings");
+    if (h->feature_count == 0)
+        return fail(msg, cap, FR_ERR_FORMAT, "runtime file version %d lists no features; a file without any is "
+                    "version 1", (int)h->version);
+    if (h->feature_unknown)
+        return fail(msg, cap, FR_ERR_FORMAT, "runtime file needs feature '%s', which this reader does not implement",
+                    h->unknown_name);
+    if (h->criterion_bad)
+        return fail(msg, cap, FR_ERR_HEADER, "runtime header 'criterion' must be a string");
+    if (h->criterion == CRIT_OTHER)
+        return fail(msg, cap, FR_ERR_FORMAT, "runtime file needs criterion '%s', which this reader does not "
+                    "implement", h->criterion_name);
+    if (h->criterion == CRIT_STRESS && !h->has_stress)
+        return fail(msg, cap, FR_ERR_FORMAT, "runtime file has criterion 'stress' but does not list feature 'stress'");
+    if (h->criterion != CRIT_STRESS && h->has_stress)
+        return fail(msg, cap, FR_ERR_FORMAT, "runtime file lists feature 'stress' but its criterion is 'modes' (the "
+                    "stress arrays come with criterion 'stress')");
+    return FR_OK;
+}
+
 static fr_status parse_header(const void *data, size_t size, header *h, char *msg, size_t cap)
 {
     jp j;
@@ -672,7 +786,7 @@ static fr_status parse_header(const void *data, size_t size, header *h, char *ms
     if (!(h->seen & K_VERSION) || h->version < 1 || h->version > FR_FORMAT_VERSION)
         return fail(msg, cap, FR_ERR_FORMAT, "runtime file version is not supported (this reader knows 1..%d)",
                     FR_FORMAT_VERSION);
-    return FR_OK;
+    return check_features(h, msg, cap);
 }
 
 static int uri_ok(const header *h)
@@ -738,12 +852,21 @@ struct fr_runtime {
     uint16_t *merge_child;  /* (s, p, 2) the two clusters each merge joins: fragment j, or p + earlier merge */
     int32_t *merge_label;   /* (s, p) smallest fragment of each merge's cluster */
     int32_t merges;         /* merges per site: p minus the whole graph's number of groups */
+    /* Criterion "stress" (section 11; NULL and 0 otherwise): site v's bonds are entries bond_ptr[v] .. bond_ptr[v+1]-1. */
+    int32_t criterion;      /* FR_CRITERION_MODES or FR_CRITERION_STRESS */
+    int32_t nnz;            /* entries of site_bonds */
+    int32_t *bond_ptr;      /* (s + 1,) */
+    int32_t *bond_edge;     /* (nnz,) edge of each entry */
+    float *bond_gain;       /* (nnz, 3) G: tensile force per unit impulse along x, y, z */
+    float *bond_strength;   /* (e,) S */
     size_t bytes;      /* size of the block */
     void *scratch;     /* the built-in workspace */
 };
 
 typedef struct dims {
     int64_t s, k, p, e, d;
+    int64_t nnz;  /* site_bonds entries; 0 without the stress criterion */
+    int stress;   /* criterion "stress" */
 } dims;
 
 static uint32_t read_u32(const unsigned char *p)
@@ -798,7 +921,7 @@ static const char *missing_key(const header *h)
 static fr_status check_arrays(const header *h, size_t binary_size, char *msg, size_t cap)
 {
     int i, r;
-    for (i = 0; i < A_COUNT; i++) {
+    for (i = 0; i < (h->has_stress ? A_COUNT : A_REQUIRED); i++) {
         const array_entry *a = &h->arrays[i];
         uint64_t count = 1;
         if (!a->present || a->dtype == DT_NONE || !a->has_offset || !a->has_length || a->rank < 0)
@@ -846,9 +969,23 @@ static fr_status check_shapes(const header *h, dims *dm, char *msg, size_t cap)
         return fail(msg, cap, FR_ERR_SIZE, "counts beyond 2^31");
     if (h->dim != dm->d)
         return fail(msg, cap, FR_ERR_SIZE, "header says dim = %ld but W has d = %ld", (long)h->dim, (long)dm->d);
-    if (h->counts_seen != 15u || h->counts[0] != dm->s || h->counts[1] != dm->k || h->counts[2] != dm->p
+    if ((h->counts_seen & 15u) != 15u || h->counts[0] != dm->s || h->counts[1] != dm->k || h->counts[2] != dm->p
         || h->counts[3] != dm->e)
         return fail(msg, cap, FR_ERR_SIZE, "header counts do not match the arrays");
+    dm->stress = h->has_stress;
+    dm->nnz = 0;
+    if (dm->stress) {
+        const int64_t *ptr = h->arrays[A_PTR].shape, *bonds = h->arrays[A_BONDS].shape;
+        const int64_t *gain = h->arrays[A_GAIN].shape, *strength = h->arrays[A_STRENGTH].shape;
+        dm->nnz = bonds[0];
+        if (dm->nnz > INT32_MAX)
+            return fail(msg, cap, FR_ERR_SIZE, "counts beyond 2^31");
+        if (ptr[0] != dm->s + 1 || gain[0] != dm->nnz || gain[1] != 3 || strength[0] != dm->e)
+            return fail(msg, cap, FR_ERR_SIZE, "stress arrays must be site_bonds_ptr (s + 1), site_bonds (nnz), "
+                        "site_bond_gain (nnz, 3) and bond_strength (e)");
+        if (!(h->counts_seen & 16u) || h->counts[4] != dm->nnz)
+            return fail(msg, cap, FR_ERR_SIZE, "header counts.site_bonds does not match the arrays");
+    }
     if (h->name_bad || h->name_count != dm->p)
         return fail(msg, cap, FR_ERR_HEADER, "fragment_names must be %ld strings without U+0000", (long)dm->p);
     if (!isfinite(h->default_threshold) || h->default_threshold < 0)
@@ -858,6 +995,46 @@ static fr_status check_shapes(const header *h, dims *dm, char *msg, size_t cap)
             return fail(msg, cap, FR_ERR_HEADER, "transform must be 16 finite numbers");
     if (!isfinite(h->impact_radius))
         return fail(msg, cap, FR_ERR_HEADER, "impact_radius must be finite");
+    return FR_OK;
+}
+
+/*
+ * Section 11's validation of the stress arrays, read straight from the binary: site_bonds_ptr starts at
+ * 0, never decreases and ends at nnz; site_bonds are edge indices, strictly ascending within a site;
+ * site_bond_gain and bond_strength finite, bond_strength >= 0.
+ */
+static fr_status check_stress_data(const header *h, const unsigned char *bin, const dims *dm, char *msg, size_t cap)
+{
+    const unsigned char *ptr = bin + h->arrays[A_PTR].offset, *bonds = bin + h->arrays[A_BONDS].offset;
+    const unsigned char *gain = bin + h->arrays[A_GAIN].offset, *strength = bin + h->arrays[A_STRENGTH].offset;
+    int64_t v, i;
+    if (read_i32(ptr) != 0 || read_i32(ptr + 4 * dm->s) != dm->nnz)
+        return fail(msg, cap, FR_ERR_DATA, "site_bonds_ptr must start at 0, never decrease and end at %ld",
+                    (long)dm->nnz);
+    for (v = 0; v < dm->s; v++)
+        if (read_i32(ptr + 4 * (v + 1)) < read_i32(ptr + 4 * v))
+            return fail(msg, cap, FR_ERR_DATA, "site_bonds_ptr must start at 0, never decrease and end at %ld",
+                        (long)dm->nnz);
+    for (v = 0; v < dm->s; v++) {
+        const int32_t lo = read_i32(ptr + 4 * v), hi = read_i32(ptr + 4 * (v + 1));
+        for (i = lo; i < hi; i++) { /* 0 <= lo <= hi <= nnz: the pointers never decrease from 0 to nnz */
+            const int32_t edge = read_i32(bonds + 4 * i);
+            if (edge < 0 || edge >= dm->e)
+                return fail(msg, cap, FR_ERR_DATA, "site_bonds must be bond indices in 0..%ld", (long)dm->e - 1);
+            if (i > lo && edge <= read_i32(bonds + 4 * (i - 1)))
+                return fail(msg, cap, FR_ERR_DATA, "site_bonds must be strictly ascending within each site");
+        }
+    }
+    for (i = 0; i < 3 * dm->nnz; i++)
+        if ((read_u32(gain + 4 * i) & 0x7F800000u) == 0x7F800000u)
+            return fail(msg, cap, FR_ERR_DATA, "arrays site_bond_gain and bond_strength must be finite");
+    for (i = 0; i < dm->e; i++) {
+        const float value = read_f32(strength + 4 * i);
+        if ((read_u32(strength + 4 * i) & 0x7F800000u) == 0x7F800000u)
+            return fail(msg, cap, FR_ERR_DATA, "arrays site_bond_gain and bond_strength must be finite");
+        if (value < 0)
+            return fail(msg, cap, FR_ERR_DATA, "bond_strength must be >= 0");
+    }
     return FR_OK;
 }
 
@@ -881,7 +1058,7 @@ static fr_status check_data(const header *h, const unsigned char *bin, const dim
             return fail(msg, cap, FR_ERR_DATA, "edge %ld is (%ld, %ld): edges must be (P, Q) with 0 <= P < Q < %ld",
                         (long)i, (long)P, (long)Q, (long)dm->p);
     }
-    return FR_OK;
+    return dm->stress ? check_stress_data(h, bin, dm, msg, cap) : FR_OK;
 }
 
 static fr_status check_header(const header *h, const void *binary, size_t binary_size, unsigned flags, dims *dm,
@@ -955,14 +1132,15 @@ static workspace_layout workspace_plan(int64_t k, int64_t p, int64_t e, int64_t 
  */
 static int wants_table(const dims *dm, unsigned flags)
 {
-    return dm->d == 1 && dm->e > 0 && dm->e <= 65535 && dm->p <= 32767 && (flags & FR_LOAD_COMPACT) == 0 &&
+    return !dm->stress && dm->d == 1 && dm->e > 0 && dm->e <= 65535 && dm->p <= 32767 && (flags & FR_LOAD_COMPACT) == 0 &&
            (uint64_t)(10 * dm->e + 10 * dm->p) <= (uint64_t)FR_TABLE_MAX_BYTES / (uint64_t)dm->s;
 }
 
 /* Offsets of every array in the runtime's block (after the struct itself). */
 typedef struct block_layout {
     uint64_t sites, B, W, areas, edges, names, name_offsets, kd_points, kd_index, kd_nodes, whole, identity;
-    uint64_t jumps, jump_edge, merge_at, merge_child, merge_label, scratch, size, kd_capacity;
+    uint64_t jumps, jump_edge, merge_at, merge_child, merge_label, bond_ptr, bond_edge, bond_gain, bond_strength;
+    uint64_t scratch, size, kd_capacity;
 } block_layout;
 
 static block_layout block_plan(const dims *dm, int64_t name_bytes, int table)
@@ -988,6 +1166,10 @@ static block_layout block_plan(const dims *dm, int64_t name_bytes, int table)
     b.merge_at = take(&cursor, table ? 2u * s * p : 0u);
     b.merge_child = take(&cursor, table ? 4u * s * p : 0u);
     b.merge_label = take(&cursor, table ? 4u * s * p : 0u);
+    b.bond_ptr = take(&cursor, dm->stress ? 4u * (s + 1) : 0u);
+    b.bond_edge = take(&cursor, 4u * (uint64_t)dm->nnz);
+    b.bond_gain = take(&cursor, 12u * (uint64_t)dm->nnz);
+    b.bond_strength = take(&cursor, dm->stress ? 4u * e : 0u);
     b.scratch = take(&cursor, workspace_plan(dm->k, dm->p, dm->e, dm->d).size);
     b.size = take(&cursor, 0);
     return b;
@@ -1012,6 +1194,16 @@ static void copy_arrays(fr_runtime *rt, const header *h, const unsigned char *bi
             rt->Wd[i * rt->row + j] = j < n ? read_f32(bin + h->arrays[A_W].offset + 4 * (i * n + j)) : 0.0;
     for (i = 0; i < 2 * (int64_t)rt->e; i++)
         rt->edges[i] = read_i32(bin + h->arrays[A_EDGES].offset + 4 * i);
+    if (rt->criterion == FR_CRITERION_STRESS) {
+        for (i = 0; i <= (int64_t)rt->s; i++)
+            rt->bond_ptr[i] = read_i32(bin + h->arrays[A_PTR].offset + 4 * i);
+        for (i = 0; i < (int64_t)rt->nnz; i++)
+            rt->bond_edge[i] = read_i32(bin + h->arrays[A_BONDS].offset + 4 * i);
+        for (i = 0; i < 3 * (int64_t)rt->nnz; i++)
+            rt->bond_gain[i] = read_f32(bin + h->arrays[A_GAIN].offset + 4 * i);
+        for (i = 0; i < (int64_t)rt->e; i++)
+            rt->bond_strength[i] = read_f32(bin + h->arrays[A_STRENGTH].offset + 4 * i);
+    }
 }
 
 /*
@@ -1318,7 +1510,7 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
                   unsigned flags, const fr_allocator *allocator, fr_runtime **out, char *message, size_t message_size)
 {
     header h;
-    dims dm = {0, 0, 0, 0, 0};
+    dims dm = {0, 0, 0, 0, 0, 0, 0};
     block_layout b;
     fr_allocator al;
     fr_status status;
@@ -1374,6 +1566,12 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     rt->merge_at = table ? (uint16_t *)(block + b.merge_at) : NULL;
     rt->merge_child = table ? (uint16_t *)(block + b.merge_child) : NULL;
     rt->merge_label = table ? (int32_t *)(block + b.merge_label) : NULL;
+    rt->criterion = dm.stress ? FR_CRITERION_STRESS : FR_CRITERION_MODES;
+    rt->nnz = (int32_t)dm.nnz;
+    rt->bond_ptr = dm.stress ? (int32_t *)(block + b.bond_ptr) : NULL;
+    rt->bond_edge = dm.stress ? (int32_t *)(block + b.bond_edge) : NULL;
+    rt->bond_gain = dm.stress ? (float *)(block + b.bond_gain) : NULL;
+    rt->bond_strength = dm.stress ? (float *)(block + b.bond_strength) : NULL;
     rt->scratch = block + b.scratch;
     copy_arrays(rt, &h, (const unsigned char *)binary);
     decode_names(rt, &h, h.name_bytes);
@@ -1408,6 +1606,8 @@ fr_info fr_get_info(const fr_runtime *rt)
     info.fragments = rt->p;
     info.edges = rt->e;
     info.dim = rt->d;
+    info.criterion = rt->criterion;
+    info.site_bonds = rt->nnz;
     info.default_threshold = rt->default_threshold;
     info.impact_radius = rt->impact_radius;
     memcpy(info.transform, rt->transform, sizeof info.transform);
@@ -1596,6 +1796,41 @@ static int32_t direct_groups(const fr_runtime *rt, double t, const scratch *w, f
     return label(w->uf, rt->p, out->groups);
 }
 
+/*
+ * Section 11, criterion "stress": bond e of site v's list breaks when g > t * S[e] with
+ * g = (G0 n'0 + G1 n'1) + G2 n'2 (in this order, unfused); every other bond holds. Then step 6
+ * over the bonds that hold. Returns the number of groups.
+ */
+static int32_t stress_groups(const fr_runtime *rt, int32_t site, const double n[3], double t, const scratch *w,
+                             fr_impact *out)
+{
+    const int32_t *edges = rt->edges, lo = rt->bond_ptr[site], hi = rt->bond_ptr[site + 1];
+    int32_t j, m, count = 0;
+    if (rt->e > 0)
+        memset(w->cut, 0, (size_t)rt->e);
+    for (j = lo; j < hi; j++) {
+        const float *G = rt->bond_gain + 3 * (size_t)j;
+        const int32_t edge = rt->bond_edge[j];
+        const double g = (double)G[0] * n[0] + (double)G[1] * n[1] + (double)G[2] * n[2];
+        if (g > t * (double)rt->bond_strength[edge]) { /* strictly greater; t = inf never breaks */
+            w->cut[edge] = 1;
+            count++;
+        }
+    }
+    if (out->broken != NULL && rt->e > 0)
+        memcpy(out->broken, w->cut, (size_t)rt->e);
+    out->num_broken = count;
+    if (count == 0) {
+        memcpy(out->groups, rt->whole, sizeof(int32_t) * (size_t)rt->p);
+        return rt->whole_groups;
+    }
+    memcpy(w->uf, rt->identity, sizeof(int32_t) * (size_t)rt->p);
+    for (m = 0; m < rt->e; m++)
+        if (!w->cut[m])
+            unite(w->uf, edges[2 * m], edges[2 * m + 1]);
+    return label(w->uf, rt->p, out->groups);
+}
+
 fr_status fr_project(const fr_runtime *rt, const double point[3], const double impulse[3], double threshold,
                      void *workspace, fr_impact *out)
 {
@@ -1628,7 +1863,10 @@ fr_status fr_project(const fr_runtime *rt, const double point[3], const double i
             n[c] = impulse[c] / m;
         t = threshold / m;
         length = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        if (rt->jumps != NULL) {
+        if (rt->criterion == FR_CRITERION_STRESS) {
+            breaks = 0; /* decided by stress_groups below, not by the modes */
+            out->num_groups = stress_groups(rt, out->site, n, t, &w, out);
+        } else if (rt->jumps != NULL) {
             breaks = !(length * rt->jumps[(size_t)out->site * (size_t)rt->e + (size_t)rt->e - 1] <= t);
         } else {
             double norm2 = 0.0;
@@ -1643,7 +1881,9 @@ fr_status fr_project(const fr_runtime *rt, const double point[3], const double i
         mode_coefficients(rt, out->site, n, length, w.alpha);
     if (out->displacement != NULL || (breaks && rt->jumps == NULL))
         displacements(rt->Wd, (size_t)rt->row, (size_t)rt->k, w.alpha, w.disp);
-    if (breaks && rt->jumps != NULL) {
+    if (rt->criterion == FR_CRITERION_STRESS && m != 0.0) {
+        /* groups done by stress_groups */
+    } else if (breaks && rt->jumps != NULL) {
         out->num_groups = table_groups(rt, out->site, length, t, &w, out);
     } else if (breaks) {
         out->num_groups = direct_groups(rt, t, &w, out);

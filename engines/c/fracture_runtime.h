@@ -4,7 +4,8 @@
  * Loads `<stem>.fracture.json` + `<stem>.fracture.bin` from memory (the engine owns
  * file I/O), validates them, and answers "which fragments break off" for a hit in
  * about a microsecond, without allocating. Specification: docs/FORMAT.md of the
- * fracture repository (format version 1). Usable from C and C++.
+ * fracture repository (format version 1, and version 2 with feature "stress": the
+ * stress criterion of section 11). Usable from C and C++.
  *
  * MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
  *
@@ -30,7 +31,7 @@
 extern "C" {
 #endif
 
-#define FR_FORMAT_VERSION 1  /* highest file format version this reader understands */
+#define FR_FORMAT_VERSION 2  /* highest file format version this reader understands (2: feature "stress") */
 #define FR_MESSAGE_SIZE 192  /* enough for any message fr_load writes */
 
 typedef enum fr_status {
@@ -73,7 +74,8 @@ typedef struct fr_runtime fr_runtime;
  * takes (10 e + 10 p) bytes per site (6 MB for a vase with s = 1002, p = 189,
  * e = 435) and about 10 ms per MB to build; it is skipped when it would exceed
  * FR_TABLE_MAX_BYTES (16 MiB unless the source is compiled with another value), for
- * d = 3 files, and with the flag FR_LOAD_COMPACT. Without it a projection computes
+ * d = 3 files, for the stress criterion (which does not use it) and with the flag
+ * FR_LOAD_COMPACT. Without it a projection computes
  * the displacements and tests every edge (several times slower on files with
  * hundreds of edges). Both give the same answers. fr_memory_size tells the total.
  */
@@ -94,8 +96,14 @@ size_t fr_memory_size(const fr_runtime *rt);
  */
 fr_status fr_header_uri(const void *header, size_t header_size, char *uri, size_t uri_size);
 
+/* fr_info.criterion: how a hit decides which bonds break (docs/FORMAT.md sections 4 and 11). */
+#define FR_CRITERION_MODES 0   /* the jumps of the fracture modes (version 1) */
+#define FR_CRITERION_STRESS 1  /* the stress criterion (version 2, feature "stress") */
+
 typedef struct fr_info {
     int32_t sites, modes, fragments, edges, dim;  /* s, k, p, e, d */
+    int32_t criterion;   /* FR_CRITERION_MODES or FR_CRITERION_STRESS, from the file */
+    int32_t site_bonds;  /* stress criterion: entries of the per-site bond lists (counts.site_bonds); else 0 */
     double default_threshold;
     double impact_radius;
     double transform[16];  /* row-major, normalized bake coordinates -> model space (informational) */
@@ -133,6 +141,10 @@ size_t fr_workspace_size(const fr_runtime *rt);
  * fr_workspace_size(rt) bytes of scratch (16-byte aligned); NULL uses one built
  * into `rt`, which is then not safe to call from several threads at once.
  * FR_ERR_INPUT for a non-finite point or impulse or a NaN or negative threshold.
+ * The file's criterion decides which bonds break: the modes' jumps (section 4) or, for a
+ * version-2 file with criterion "stress", each bond the nearest site lists breaks when its
+ * tensile gain exceeds its strength (section 11); alpha and displacement are the modes'
+ * either way. The groups follow from the broken bonds in both cases.
  */
 fr_status fr_project(const fr_runtime *rt, const double point[3], const double impulse[3], double threshold,
                      void *workspace, fr_impact *out);

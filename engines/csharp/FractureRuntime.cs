@@ -3,7 +3,8 @@
 // C# 7.2 subset, so it builds with Unity (.NET Standard 2.1 / C# 8 and later), .NET and Mono's mcs.
 // Loads `<stem>.fracture.json` + `<stem>.fracture.bin` from bytes, validates them, and answers
 // "which fragments break off" for a hit without allocating. Specification: docs/FORMAT.md of the
-// fracture repository (format version 1).
+// fracture repository (format version 1, and version 2 with feature "stress": the stress criterion of
+// section 11).
 //
 // MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
 //
@@ -87,7 +88,10 @@ namespace Fracture
     /// <summary>A loaded, validated runtime file (immutable: Project may run on several threads).</summary>
     public sealed class FractureRuntime
     {
-        public const int FormatVersion = 1;
+        /// <summary>Highest file format version this reader reads (2: feature "stress", docs/FORMAT.md section 11).</summary>
+        public const int FormatVersion = 2;
+        /// <summary>The version-2 features this reader implements.</summary>
+        public static readonly string[] KnownFeatures = { "stress" };
         const double BoundSlack = 1e-9;
         const int KdLeaf = 16;
         /// <summary>Largest d = 1 jump table Load builds, in bytes (see <see cref="Load"/>).</summary>
@@ -113,6 +117,15 @@ namespace Fracture
         readonly int[] mergeLabel;
         readonly int merges;
         readonly bool[] allBroken; // [e] all true
+        // Criterion "stress" (docs/FORMAT.md section 11; null otherwise): site v's bonds are entries
+        // bondPtr[v] .. bondPtr[v + 1] - 1 of bondEdge and bondGain (G, 3 per entry); bondStrength (S) per edge.
+        readonly int[] bondPtr, bondEdge;
+        readonly float[] bondGain, bondStrength;
+
+        /// <summary>How a hit decides which bonds break: "modes" (section 4) or "stress" (section 11).</summary>
+        public readonly string Criterion;
+        /// <summary>Stress criterion: entries of the per-site bond lists (counts.site_bonds); 0 otherwise.</summary>
+        public readonly int SiteBonds;
 
         /// <summary>Whether Load built the d = 1 jump table (the fast path; see <see cref="Load"/>).</summary>
         public bool HasJumpTable { get { return jumps != null; } }
@@ -227,6 +240,29 @@ namespace Fracture
                 if (edges[2 * m] < 0 || edges[2 * m] >= edges[2 * m + 1] || edges[2 * m + 1] >= Fragments)
                     throw Fail(FractureStatus.Data, "edge " + m + " is (" + edges[2 * m] + ", " + edges[2 * m + 1] +
                                                     "): edges must be (P, Q) with 0 <= P < Q < " + Fragments);
+            Criterion = h.Stress ? "stress" : "modes";
+            if (h.Stress)
+            {
+                long[] ptrShape = h.Arrays[5].Shape, bondsShape = h.Arrays[6].Shape;
+                long[] gainShape = h.Arrays[7].Shape, strengthShape = h.Arrays[8].Shape;
+                long nnz = bondsShape[0];
+                if (nnz > int.MaxValue)
+                    throw Fail(FractureStatus.Size, "counts beyond 2^31");
+                if (ptrShape[0] != Sites + 1L || gainShape[0] != nnz || gainShape[1] != 3 || strengthShape[0] != Edges)
+                    throw Fail(FractureStatus.Size, "stress arrays must be site_bonds_ptr (s + 1), site_bonds (nnz), " +
+                                                    "site_bond_gain (nnz, 3) and bond_strength (e)");
+                if (h.SiteBondsCount != nnz)
+                    throw Fail(FractureStatus.Size, "header counts.site_bonds does not match the arrays");
+                SiteBonds = (int)nnz;
+                bondPtr = ReadInts(binary, h.Arrays[5]);
+                bondEdge = ReadInts(binary, h.Arrays[6]);
+                CheckBondLists();
+                bondGain = ReadFloats(binary, h.Arrays[7], "site_bond_gain");
+                bondStrength = ReadFloats(binary, h.Arrays[8], "bond_strength");
+                for (int m = 0; m < Edges; m++)
+                    if (bondStrength[m] < 0)
+                        throw Fail(FractureStatus.Data, "bond_strength must be >= 0");
+            }
             kdIndex = new int[Sites];
             kdPoints = new double[3 * Sites];
             int kdCapacity = 4 * (Sites / KdLeaf) + 2; // a leaf holds at least KdLeaf / 2 sites
@@ -241,7 +277,7 @@ namespace Fracture
                 Unite(whole, edges[2 * m], edges[2 * m + 1]);
             wholeGroups = Label(whole, Fragments, whole);
             EdgeBounds();
-            if (!compact && Dim == 1 && Edges > 0 && Edges <= ushort.MaxValue && Fragments <= short.MaxValue &&
+            if (!compact && !h.Stress && Dim == 1 && Edges > 0 && Edges <= ushort.MaxValue && Fragments <= short.MaxValue &&
                 (10L * Edges + 10L * Fragments) * Sites <= TableMaxBytes)
             {
                 jumps = new double[(long)Sites * Edges];
@@ -254,6 +290,34 @@ namespace Fracture
                 for (int m = 0; m < Edges; m++)
                     allBroken[m] = true;
             }
+        }
+
+        // site_bonds_ptr starts at 0, never decreases and ends at nnz; site_bonds are edge indices, strictly
+        // ascending within a site (docs/FORMAT.md section 11).
+        void CheckBondLists()
+        {
+            int nnz = bondEdge.Length;
+            if (bondPtr[0] != 0 || bondPtr[Sites] != nnz)
+                throw Fail(FractureStatus.Data, "site_bonds_ptr must start at 0, never decrease and end at " + nnz);
+            for (int v = 0; v < Sites; v++)
+                if (bondPtr[v + 1] < bondPtr[v])
+                    throw Fail(FractureStatus.Data, "site_bonds_ptr must start at 0, never decrease and end at " + nnz);
+            for (int v = 0; v < Sites; v++)
+                for (int j = bondPtr[v]; j < bondPtr[v + 1]; j++)
+                {
+                    if (bondEdge[j] < 0 || bondEdge[j] >= Edges)
+                        throw Fail(FractureStatus.Data, "site_bonds must be bond indices in 0.." + (Edges - 1));
+                    if (j > bondPtr[v] && bondEdge[j] <= bondEdge[j - 1])
+                        throw Fail(FractureStatus.Data, "site_bonds must be strictly ascending within each site");
+                }
+        }
+
+        static int[] ReadInts(byte[] data, ArrayEntry entry)
+        {
+            var values = new int[entry.Length / 4];
+            for (int i = 0; i < values.Length; i++)
+                values[i] = ReadInt(data, entry.Offset + 4L * i);
+            return values;
         }
 
         static FractureRuntimeException Fail(FractureStatus status, string message)
@@ -572,6 +636,18 @@ namespace Fracture
                 t = threshold / m;
                 length = Math.Sqrt(n0 * n0 + n1 * n1 + n2 * n2);
                 ModeCoefficients(result.Site, n0, n1, n2, length, alpha);
+                if (bondPtr != null)
+                {
+                    if (result.ComputeDisplacement)
+                        Displacements(alpha, disp);
+                    result.NumGroups = StressGroups(result.Site, n0, n1, n2, t, result);
+                    if (result.ComputeDisplacement)
+                        for (int i = 0; i < disp.Length; i++)
+                            result.Displacement[i] = m * disp[i];
+                    for (int i = 0; i < Modes; i++)
+                        result.Alpha[i] = m * alpha[i];
+                    return FractureStatus.Ok;
+                }
                 if (jumps != null)
                 {
                     breaks = !(length * jumps[(long)result.Site * Edges + Edges - 1] <= t); // the row's largest
@@ -680,6 +756,38 @@ namespace Fracture
             return p - done;
         }
 
+        // Criterion "stress" (docs/FORMAT.md section 11): bond e of the site's list breaks when
+        // g = (G0 n'0 + G1 n'1) + G2 n'2 exceeds t * S[e] (strictly; in this order); every other bond holds.
+        // Then step 6 over the bonds that hold.
+        int StressGroups(int site, double n0, double n1, double n2, double t, FractureImpact result)
+        {
+            bool[] broken = result.Broken;
+            int count = 0;
+            Array.Clear(broken, 0, Edges);
+            for (int j = bondPtr[site]; j < bondPtr[site + 1]; j++)
+            {
+                int b = 3 * j, e = bondEdge[j];
+                double g = (double)bondGain[b] * n0 + (double)bondGain[b + 1] * n1 + (double)bondGain[b + 2] * n2;
+                if (g > t * (double)bondStrength[e])
+                {
+                    broken[e] = true;
+                    count++;
+                }
+            }
+            result.NumBroken = count;
+            if (count == 0)
+            {
+                Array.Copy(whole, result.Groups, Fragments);
+                return wholeGroups;
+            }
+            int[] uf = result.Labels;
+            Array.Copy(identity, uf, Fragments);
+            for (int m = 0; m < Edges; m++)
+                if (!broken[m])
+                    Unite(uf, edges[2 * m], edges[2 * m + 1]);
+            return Label(uf, Fragments, result.Groups);
+        }
+
         // Steps 5-6 from the displacements: test every edge, union-find over those that hold.
         int DirectGroups(double t, FractureImpact result)
         {
@@ -722,19 +830,23 @@ namespace Fracture
             public bool ShapeOk = true;
         }
 
-        static readonly string[] ArrayNames = { "sites", "B", "W", "edges", "edge_areas" };
-        static readonly int[] ArrayRanks = { 2, 3, 3, 2, 1 };
+        // The five arrays of section 2, then the four of the stress criterion (section 11, with feature "stress").
+        static readonly string[] ArrayNames = { "sites", "B", "W", "edges", "edge_areas", "site_bonds_ptr", "site_bonds",
+                                                "site_bond_gain", "bond_strength" };
+        static readonly int[] ArrayRanks = { 2, 3, 3, 2, 1, 1, 1, 2, 1 };
+        static readonly bool[] ArrayIsInt = { false, false, false, true, false, true, true, false, false };
 
         internal sealed class Header
         {
             public bool HasDim, HasThreshold, HasRadius, HasTransform, HasLength, HasCrc, HasBuffer, HasArrays;
-            public long Dim, ByteLength, Crc;
+            public bool Stress; // version 2 with feature "stress" and criterion "stress"
+            public long Dim, ByteLength, Crc, SiteBondsCount = -1;
             public long[] Counts;
             public string[] Names;
             public string Uri;
             public double DefaultThreshold, ImpactRadius;
             public readonly double[] Transform = new double[16];
-            public readonly ArrayEntry[] Arrays = new ArrayEntry[5];
+            public readonly ArrayEntry[] Arrays = new ArrayEntry[9];
 
             public static Header Parse(byte[] bytes)
             {
@@ -760,8 +872,42 @@ namespace Fracture
                     throw Fail(FractureStatus.Format, "runtime file version is not supported (this reader knows 1.." +
                                                       FormatVersion + ")");
                 var h = new Header();
+                h.Stress = CheckFeatures(top, version);
                 h.Read(top);
                 return h;
+            }
+
+            // Section 11: version 2 lists the features it needs (refused by name when unknown) and a criterion;
+            // version 1 ignores both keys. Like the reference reader, a file that lists "stress" must use
+            // criterion "stress" (the stress arrays come with the criterion). Returns whether it does.
+            static bool CheckFeatures(Dictionary<string, object> top, long version)
+            {
+                if (version < 2)
+                    return false;
+                object value;
+                var features = top.TryGetValue("features", out value) ? value as List<object> : new List<object>();
+                if (features == null || features.Exists(f => !(f is string)))
+                    throw Fail(FractureStatus.Header, "runtime header 'features' must be a list of strings");
+                if (features.Count == 0)
+                    throw Fail(FractureStatus.Format, "runtime file version " + version +
+                                                      " lists no features; a file without any is version 1");
+                foreach (object feature in features)
+                    if (Array.IndexOf(KnownFeatures, (string)feature) < 0)
+                        throw Fail(FractureStatus.Format, "runtime file needs feature '" + feature +
+                                                          "', which this reader does not implement");
+                bool stress = features.Contains("stress");
+                object criterion = top.TryGetValue("criterion", out value) ? value : "modes";
+                if (!(criterion is string))
+                    throw Fail(FractureStatus.Header, "runtime header 'criterion' must be a string");
+                if ((string)criterion != "modes" && (string)criterion != "stress")
+                    throw Fail(FractureStatus.Format, "runtime file needs criterion '" + criterion +
+                                                      "', which this reader does not implement");
+                if ((string)criterion == "stress" && !stress)
+                    throw Fail(FractureStatus.Format, "runtime file has criterion 'stress' but does not list feature 'stress'");
+                if ((string)criterion != "stress" && stress)
+                    throw Fail(FractureStatus.Format, "runtime file lists feature 'stress' but its criterion is 'modes' " +
+                                                      "(the stress arrays come with criterion 'stress')");
+                return stress;
             }
 
             void Read(Dictionary<string, object> top)
@@ -782,6 +928,8 @@ namespace Fracture
                     for (int i = 0; i < 4 && Counts != null; i++)
                         if (!counts.TryGetValue(keys[i], out value) || !Json.AsInteger(value, out Counts[i]))
                             Counts = null;
+                    if (Stress && (!counts.TryGetValue("site_bonds", out value) || !Json.AsInteger(value, out SiteBondsCount)))
+                        SiteBondsCount = -1;
                 }
                 var names = top.TryGetValue("fragment_names", out value) ? value as List<object> : null;
                 if (names != null)
@@ -803,7 +951,7 @@ namespace Fracture
                 }
                 var arrays = top.TryGetValue("arrays", out value) ? value as Dictionary<string, object> : null;
                 HasArrays = arrays != null;
-                for (int i = 0; HasArrays && i < 5; i++)
+                for (int i = 0; HasArrays && i < (Stress ? 9 : 5); i++)
                 {
                     var entry = arrays.TryGetValue(ArrayNames[i], out value) ? value as Dictionary<string, object> : null;
                     if (entry != null)
@@ -849,13 +997,13 @@ namespace Fracture
 
             public void CheckArrays(long binarySize)
             {
-                for (int i = 0; i < 5; i++)
+                for (int i = 0; i < (Stress ? 9 : 5); i++)
                 {
                     ArrayEntry a = Arrays[i];
                     string name = ArrayNames[i];
                     if (a == null || a.DType == null || a.Shape == null)
                         throw Fail(FractureStatus.Header, "array '" + name + "' entry is missing or malformed");
-                    if (a.DType != (i == 3 ? "int32" : "float32"))
+                    if (a.DType != (ArrayIsInt[i] ? "int32" : "float32"))
                         throw Fail(FractureStatus.Header, "array '" + name + "' has the wrong dtype");
                     if (a.Shape.Length != ArrayRanks[i])
                         throw Fail(FractureStatus.Size, "array '" + name + "' has " + a.Shape.Length +

@@ -1,5 +1,6 @@
-// fracture_runtime.js: a reader of the fracture-modes runtime file (version 1) and the
-// realtime impact projection, written from docs/FORMAT.md alone.
+// fracture_runtime.js: a reader of the fracture-modes runtime file (version 1, and version 2
+// with feature "stress": the stress criterion of docs/FORMAT.md section 11) and the realtime
+// impact projection, written from docs/FORMAT.md alone.
 //
 // A standalone ES module with no dependencies; it runs in browsers and in Node.js (>= 18).
 // MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
@@ -20,7 +21,9 @@
 // the limits of double precision give the same groups as moderate ones.
 
 export const FORMAT_NAME = 'fracture-modes-runtime';
-export const FORMAT_VERSION = 1;
+export const FORMAT_VERSION = 2;  // the newest version this reader reads
+/** The version-2 features this reader implements (docs/FORMAT.md section 11). */
+export const KNOWN_FEATURES = ['stress'];
 
 // name -> [dtype, number of dimensions]; also the order of the arrays in the binary file.
 const ARRAY_LAYOUT = [
@@ -29,6 +32,13 @@ const ARRAY_LAYOUT = [
   ['W', 'float32', 3],
   ['edges', 'int32', 2],
   ['edge_areas', 'float32', 1],
+];
+// The stress criterion's arrays (docs/FORMAT.md section 11), after the others; only with feature "stress".
+const STRESS_LAYOUT = [
+  ['site_bonds_ptr', 'int32', 1],
+  ['site_bonds', 'int32', 1],
+  ['site_bond_gain', 'float32', 2],
+  ['bond_strength', 'float32', 1],
 ];
 
 /** A runtime file that is malformed, truncated, of another format or inconsistent. */
@@ -121,6 +131,7 @@ function checkHeader(h) {
   if (!Number.isInteger(h.version) || h.version < 1 || h.version > FORMAT_VERSION) {
     fail(`runtime file version ${JSON.stringify(h.version)} is not supported (this reader knows 1..${FORMAT_VERSION})`);
   }
+  checkFeatures(h);
   if (h.dim !== 1 && h.dim !== 3) fail(`dim must be 1 or 3, got ${JSON.stringify(h.dim)}`);
   const c = h.counts;
   if (!c || typeof c !== 'object' || !['sites', 'modes', 'fragments', 'edges'].every((key) => isCount(c[key]))) {
@@ -146,6 +157,37 @@ function checkHeader(h) {
   }
   checkUri(b.uri);
   if (!h.arrays || typeof h.arrays !== 'object') fail('the header has no arrays table');
+  if (stressOf(h) && !isCount(c.site_bonds)) fail('counts.site_bonds must be a non-negative integer');
+}
+
+// Section 11: version 2 lists the features it needs (refused by name when unknown) and a criterion;
+// version 1 ignores both keys. Like the reference reader, a file that lists "stress" must use
+// criterion "stress" (the stress arrays come with the criterion).
+function checkFeatures(h) {
+  if (h.version < 2) return;
+  const features = h.features === undefined ? [] : h.features;
+  if (!Array.isArray(features) || !features.every((f) => typeof f === 'string')) {
+    fail("runtime header 'features' must be a list of strings");
+  }
+  if (features.length === 0) fail(`runtime file version ${h.version} lists no features; a file without any is version 1`);
+  for (const name of features) {
+    if (!KNOWN_FEATURES.includes(name)) fail(`runtime file needs feature '${name}', which this reader does not implement`);
+  }
+  const criterion = h.criterion === undefined ? 'modes' : h.criterion;
+  if (typeof criterion !== 'string') fail("runtime header 'criterion' must be a string");
+  if (criterion !== 'modes' && criterion !== 'stress') {
+    fail(`runtime file needs criterion '${criterion}', which this reader does not implement`);
+  }
+  const stress = features.includes('stress');
+  if (criterion === 'stress' && !stress) fail("runtime file has criterion 'stress' but does not list feature 'stress'");
+  if (criterion !== 'stress' && stress) {
+    fail("runtime file lists feature 'stress' but its criterion is 'modes' (the stress arrays come with criterion 'stress')");
+  }
+}
+
+/** Whether a (checked) header uses the stress criterion. */
+function stressOf(h) {
+  return h.version >= 2 && h.criterion === 'stress';
 }
 
 /** Throw unless uri is a plain file name in the header's folder (docs/FORMAT.md section 1). */
@@ -158,7 +200,9 @@ export function checkUri(uri) {
 function expectedShapes(h) {
   const { sites: s, modes: k, fragments: p, edges: e } = h.counts;
   const d = h.dim;
-  return { sites: [s, 3], B: [s, k, d], W: [k, p, d], edges: [e, 2], edge_areas: [e] };
+  const nnz = h.counts.site_bonds;
+  return { sites: [s, 3], B: [s, k, d], W: [k, p, d], edges: [e, 2], edge_areas: [e],
+    site_bonds_ptr: [s + 1], site_bonds: [nnz], site_bond_gain: [nnz, 3], bond_strength: [e] };
 }
 
 function readArray(name, dtype, ndim, entry, view, shapes) {
@@ -225,10 +269,31 @@ export function parseRuntime(header, binary, options = {}) {
   for (let m = 0; m < edges.length; m += 2) {
     if (!(edges[m] >= 0 && edges[m] < edges[m + 1] && edges[m + 1] < p)) fail(`edges must be pairs (P, Q) with 0 <= P < Q < ${p}`);
   }
+  if (stressOf(h)) {
+    for (const [name, dtype, ndim] of STRESS_LAYOUT) arrays[name] = readArray(name, dtype, ndim, h.arrays[name], view, shapes);
+    checkStress(arrays, h.counts.sites, h.counts.edges);
+  }
   const runtime = new FractureRuntime(h, arrays);
-  if (options.jumpTable && runtime.dim === 1 && runtime.numEdges > 0 && runtime.numEdges <= 0xffff &&
+  if (options.jumpTable && runtime.criterion === 'modes' && runtime.dim === 1 && runtime.numEdges > 0 && runtime.numEdges <= 0xffff &&
       runtime.numFragments <= 0x7fff) runtime._buildJumpTable();
   return runtime;
+}
+
+// Section 11: site_bonds_ptr starts at 0, never decreases and ends at nnz; site_bonds are edge indices,
+// strictly ascending within a site; bond_strength >= 0 (readArray checked that every float is finite).
+function checkStress(arrays, s, e) {
+  const { site_bonds_ptr: ptr, site_bonds: bonds, bond_strength: strength } = arrays;
+  const nnz = bonds.length;
+  let ok = ptr[0] === 0 && ptr[s] === nnz;
+  for (let v = 0; ok && v < s; v++) ok = ptr[v + 1] >= ptr[v];
+  if (!ok) fail(`site_bonds_ptr must start at 0, never decrease and end at ${nnz}`);
+  for (let v = 0; v < s; v++) {
+    for (let j = ptr[v]; j < ptr[v + 1]; j++) {
+      if (!(bonds[j] >= 0 && bonds[j] < e)) fail(`site_bonds must be bond indices in 0..${e - 1}`);
+      if (j > ptr[v] && bonds[j] <= bonds[j - 1]) fail('site_bonds must be strictly ascending within each site');
+    }
+  }
+  if (!strength.every((x) => x >= 0)) fail('bond_strength must be >= 0');
 }
 
 /**
@@ -282,6 +347,12 @@ export class FractureRuntime {
     this.W = arrays.W;                // (k, p, d)
     this.edges = arrays.edges;        // (e, 2) Int32Array
     this.edgeAreas = arrays.edge_areas;  // (e,)
+    // How a hit decides which bonds break: 'modes' (section 4) or 'stress' (section 11, with the arrays below).
+    this.criterion = stressOf(header) ? 'stress' : 'modes';
+    this.siteBondsPtr = arrays.site_bonds_ptr || null;  // (s + 1,) Int32Array: site v's entries ptr[v] .. ptr[v+1]-1
+    this.siteBonds = arrays.site_bonds || null;         // (nnz,) Int32Array: the bond (edge) of each entry
+    this.siteBondGain = arrays.site_bond_gain || null;  // (nnz, 3) G: tensile force per unit impulse along x, y, z
+    this.bondStrength = arrays.bond_strength || null;   // (e,) S
     this.hasJumpTable = false;
     this._buildKdTree();
   }
@@ -557,6 +628,7 @@ export class FractureRuntime {
     const nUnit = [n[0] / m, n[1] / m, n[2] / m];
     const alpha = this._alpha(site, nUnit);
     const limit = T / m;  // +Infinity: nothing breaks; 0 (underflow or T = 0): any nonzero jump breaks
+    if (this.criterion === 'stress') return this._projectStress(site, nUnit, m, limit, alpha, options);
     if (options.displacement === false && this.hasJumpTable) {
       const length = Math.sqrt(nUnit[0] * nUnit[0] + nUnit[1] * nUnit[1] + nUnit[2] * nUnit[2]);
       for (let i = 0; i < alpha.length; i++) alpha[i] *= m;
@@ -589,6 +661,32 @@ export class FractureRuntime {
     const keep = options.displacement !== false;
     return { site, alpha, displacement: keep ? disp : null, jumps: keep ? jumps : null, broken, groups,
       numGroups: countGroups(groups) };
+  }
+
+  // Criterion "stress" (docs/FORMAT.md section 11): bond e of site v's list breaks when
+  // g = (G0 n'0 + G1 n'1) + G2 n'2 > t * S[e] (in this order, strictly); every other bond holds. Also
+  // gives loads: L_e = g / (t * S_e) for listed bonds with g > 0, else 0. alpha and the displacements
+  // are the modes' (as in section 4), the jumps are not computed (null).
+  _projectStress(site, nUnit, m, limit, alpha, options) {
+    const { siteBondsPtr: ptr, siteBonds: bonds, siteBondGain: G, bondStrength: S, numEdges: e } = this;
+    const broken = new Uint8Array(e);
+    const loads = new Float64Array(e);
+    const [n0, n1, n2] = nUnit;
+    for (let j = ptr[site]; j < ptr[site + 1]; j++) {
+      const edge = bonds[j];
+      const g = G[3 * j] * n0 + G[3 * j + 1] * n1 + G[3 * j + 2] * n2;
+      const bound = limit * S[edge];
+      broken[edge] = g > bound ? 1 : 0;
+      if (g > 0) loads[edge] = bound > 0 ? g / bound : bound === 0 ? Infinity : 0;
+    }
+    let disp = null;
+    if (options.displacement !== false) {
+      disp = this._displacement(alpha);
+      for (let i = 0; i < disp.length; i++) disp[i] *= m;
+    }
+    for (let i = 0; i < alpha.length; i++) alpha[i] *= m;
+    const groups = this.groups(broken);
+    return { site, alpha, displacement: disp, jumps: null, broken, loads, groups, numGroups: countGroups(groups) };
   }
 }
 

@@ -1,7 +1,8 @@
 # fracture_runtime.gd - reader of the `fracture` impact-projection file (Godot 3.x GDScript).
 #
 # Loads `<stem>.fracture.json` + `<stem>.fracture.bin`, validates them and answers "which
-# fragments break off" for a hit (docs/FORMAT.md of the fracture repository, format version 1).
+# fragments break off" for a hit (docs/FORMAT.md of the fracture repository, format version 1, and
+# version 2 with feature "stress": the stress criterion of section 11).
 # All arithmetic in GDScript floats (64-bit doubles); never through Vector3 (32-bit floats).
 #
 #   var runtime = FractureRuntime.new()
@@ -14,9 +15,13 @@
 extends Reference
 class_name FractureRuntime
 
-const FORMAT_VERSION := 1
-const ARRAY_NAMES := ["sites", "B", "W", "edges", "edge_areas"]
-const ARRAY_RANKS := [2, 3, 3, 2, 1]
+const FORMAT_VERSION := 2  # the newest version this reader reads
+const KNOWN_FEATURES := ["stress"]  # the version-2 features this reader implements
+# The five arrays of section 2, then the four of the stress criterion (section 11, with feature "stress").
+const ARRAY_NAMES := ["sites", "B", "W", "edges", "edge_areas", "site_bonds_ptr", "site_bonds", "site_bond_gain",
+		"bond_strength"]
+const ARRAY_RANKS := [2, 3, 3, 2, 1, 1, 1, 2, 1]
+const INT_ARRAYS := [3, 5, 6]
 const KD_LEAF := 16
 const MAX_DEPTH := 64
 const BOUND_SLACK := 1e-9  # far above the rounding of a k-term sum in double
@@ -34,6 +39,9 @@ var edges := PoolIntArray()   # (e, 2): P < Q
 var edge_areas := PoolRealArray()
 var sites := PoolRealArray()  # float32 values, exact
 var error_message := ""
+# How a hit decides which bonds break: "modes" (section 4) or "stress" (section 11, with the arrays below).
+var criterion := "modes"
+var site_bonds_count := 0  # stress criterion: entries of the per-site bond lists (counts.site_bonds)
 
 var _B := PoolRealArray()
 var _W := PoolRealArray()
@@ -47,6 +55,13 @@ var _max_bound := 0.0  # largest per-edge bound, see _edge_bounds()
 var _identity := []   # 0, 1, ..., p - 1
 var _no_edges := []   # e times false
 var _zero_modes := [] # k times 0.0
+# Criterion "stress": site v's bonds are entries _bond_ptr[v] .. _bond_ptr[v + 1] - 1 of _bond_edge and
+# _bond_gain (G, 3 per entry, float32 values); _bond_strength (S) per edge.
+var _bond_ptr := PoolIntArray()
+var _bond_edge := PoolIntArray()
+var _bond_gain := PoolRealArray()
+var _bond_strength := PoolRealArray()
+var _stress := false  # set by _parse_header for the file being loaded
 
 # JSON parsing state (a strict RFC 8259 parser over the header's bytes).
 var _json := PoolByteArray()
@@ -127,7 +142,42 @@ func _parse_header(header: PoolByteArray):
 	var version = _integer(top.get("version"))
 	if version == null or version < 1 or version > FORMAT_VERSION:
 		return _fail("runtime file version is not supported (this reader knows 1..%d)" % FORMAT_VERSION)
+	if _check_features(top, version) == null:
+		return null
 	return top
+
+
+# Section 11: version 2 lists the features it needs (refused by name when unknown) and a criterion;
+# version 1 ignores both keys. Like the reference reader, a file that lists "stress" must use
+# criterion "stress" (the stress arrays come with the criterion). Sets _stress; null on failure.
+func _check_features(top: Dictionary, version: int):
+	_stress = false
+	if version < 2:
+		return true
+	var features = top.get("features", [])
+	if not features is Array:
+		return _fail("runtime header 'features' must be a list of strings")
+	for name in features:
+		if not name is String:
+			return _fail("runtime header 'features' must be a list of strings")
+	if features.empty():
+		return _fail("runtime file version %d lists no features; a file without any is version 1" % version)
+	for name in features:
+		if not name in KNOWN_FEATURES:
+			return _fail("runtime file needs feature '%s', which this reader does not implement" % name)
+	var crit = top.get("criterion", "modes")
+	if not crit is String:
+		return _fail("runtime header 'criterion' must be a string")
+	if crit != "modes" and crit != "stress":
+		return _fail("runtime file needs criterion '%s', which this reader does not implement" % crit)
+	var has_stress: bool = "stress" in features
+	if crit == "stress" and not has_stress:
+		return _fail("runtime file has criterion 'stress' but does not list feature 'stress'")
+	if crit != "stress" and has_stress:
+		return _fail("runtime file lists feature 'stress' but its criterion is 'modes' (the stress arrays come " +
+				"with criterion 'stress')")
+	_stress = has_stress
+	return true
 
 
 # JSON integers are parsed as {"int": value}; other numbers as floats.
@@ -168,7 +218,7 @@ func _check(top: Dictionary, binary: PoolByteArray, check_crc: bool):
 		if check_crc and _crc32(binary) != crc:
 			return _fail("binary file does not match its header (crc32 differs; from another bake?)")
 	var shapes := []
-	for i in range(5):
+	for i in range(9 if _stress else 5):
 		var shape = _check_array(table.get(ARRAY_NAMES[i]), i, binary.size())
 		if shape == null:
 			return null
@@ -181,7 +231,7 @@ func _check_array(entry, i: int, size: int):
 	var name: String = ARRAY_NAMES[i]
 	if not entry is Dictionary or not entry.get("shape") is Array:
 		return _fail("array '%s' entry is missing or malformed" % name)
-	if entry.get("dtype") != ("int32" if i == 3 else "float32"):
+	if entry.get("dtype") != ("int32" if i in INT_ARRAYS else "float32"):
 		return _fail("array '%s' has the wrong dtype" % name)
 	var shape := []
 	var count := 1
@@ -248,6 +298,14 @@ func _check_shapes(shapes, counts, names, header_dim, threshold, radius, transfo
 		var Q: int = arrays[3][2 * m + 1]
 		if P < 0 or P >= Q or Q >= w[1]:
 			return _fail("edge %d is (%d, %d): edges must be (P, Q) with 0 <= P < Q < %d" % [m, P, Q, w[1]])
+	if _stress and _check_stress(shapes, counts, table, peer, arrays) == null:
+		return null
+	criterion = "stress" if _stress else "modes"
+	site_bonds_count = shapes[6][0] if _stress else 0
+	_bond_ptr = arrays[5] if _stress else PoolIntArray()
+	_bond_edge = arrays[6] if _stress else PoolIntArray()
+	_bond_gain = arrays[7] if _stress else PoolRealArray()
+	_bond_strength = arrays[8] if _stress else PoolRealArray()
 	sites_count = s[0]
 	modes = w[0]
 	fragments = w[1]
@@ -264,6 +322,44 @@ func _check_shapes(shapes, counts, names, header_dim, threshold, radius, transfo
 	_W = arrays[2]
 	edges = arrays[3]
 	edge_areas = arrays[4]
+	return true
+
+
+# Section 11: shapes, counts.site_bonds, then site_bonds_ptr (from 0, never decreasing, to nnz), site_bonds
+# (edge indices, strictly ascending within a site), finite gains and strengths, strengths >= 0. Appends the
+# four arrays to `arrays`; null on failure.
+func _check_stress(shapes: Array, counts: Dictionary, table: Dictionary, peer: StreamPeerBuffer, arrays: Array):
+	var s: int = shapes[0][0]
+	var e: int = shapes[3][0]
+	var nnz: int = shapes[6][0]
+	if shapes[5][0] != s + 1 or shapes[7][0] != nnz or shapes[7][1] != 3 or shapes[8][0] != e:
+		return _fail("stress arrays must be site_bonds_ptr (s + 1), site_bonds (nnz), site_bond_gain (nnz, 3) " +
+				"and bond_strength (e)")
+	if _integer(counts.get("site_bonds")) != nnz:
+		return _fail("header counts.site_bonds does not match the arrays")
+	for i in range(5, 9):
+		var entry: Dictionary = table[ARRAY_NAMES[i]]
+		var values = _read_array(peer, _integer(entry["byte_offset"]), _integer(entry["byte_length"]) / 4,
+				i in INT_ARRAYS)
+		if values == null:
+			return _fail("array '%s' has non-finite values" % ARRAY_NAMES[i])
+		arrays.append(values)
+	var ptr: PoolIntArray = arrays[5]
+	var bonds: PoolIntArray = arrays[6]
+	if ptr[0] != 0 or ptr[s] != nnz:
+		return _fail("site_bonds_ptr must start at 0, never decrease and end at %d" % nnz)
+	for v in range(s):
+		if ptr[v + 1] < ptr[v]:
+			return _fail("site_bonds_ptr must start at 0, never decrease and end at %d" % nnz)
+	for v in range(s):
+		for j in range(ptr[v], ptr[v + 1]):
+			if bonds[j] < 0 or bonds[j] >= e:
+				return _fail("site_bonds must be bond indices in 0..%d" % (e - 1))
+			if j > ptr[v] and bonds[j] <= bonds[j - 1]:
+				return _fail("site_bonds must be strictly ascending within each site")
+	for x in arrays[8]:
+		if x < 0.0:
+			return _fail("bond_strength must be >= 0")
 	return true
 
 
@@ -753,11 +849,18 @@ func project(px: float, py: float, pz: float, nx: float, ny: float, nz: float, t
 				alpha[i] = B[base + 3 * i] * n0 + B[base + 3 * i + 1] * n1 + B[base + 3 * i + 2] * n2
 				norm2 += alpha[i] * alpha[i]
 		var t := threshold / m  # overflow: INF, nothing breaks; underflow: 0, any nonzero jump breaks
-		breaks = not (sqrt(norm2) * (1.0 + BOUND_SLACK) * _max_bound <= t)
-		if breaks or with_displacement:
-			disp = _displacements(alpha)
-		if breaks:
-			groups = _break(disp, t, broken)
+		if _stress:
+			breaks = _stress_break(site, n0, n1, n2, t, broken)
+			if with_displacement:
+				disp = _displacements(alpha)
+			if breaks:
+				groups = components(broken)
+		else:
+			breaks = not (sqrt(norm2) * (1.0 + BOUND_SLACK) * _max_bound <= t)
+			if breaks or with_displacement:
+				disp = _displacements(alpha)
+			if breaks:
+				groups = _break(disp, t, broken)
 	elif with_displacement:
 		disp.resize(fragments * dim)
 		for j in range(fragments * dim):
@@ -775,6 +878,24 @@ func project(px: float, py: float, pz: float, nx: float, ny: float, nz: float, t
 			disp[j] *= m
 	return {"ok": true, "site": site, "groups": groups, "num_groups": num_groups, "broken": broken,
 			"alpha": alpha, "displacement": disp}
+
+
+# Criterion "stress" (docs/FORMAT.md section 11): bond e of the site's list breaks when
+# g = (G0 n'0 + G1 n'1) + G2 n'2 > t * S[e] (in this order, strictly); every other bond holds.
+# Marks `broken`; returns whether any bond broke.
+func _stress_break(site: int, n0: float, n1: float, n2: float, t: float, broken: Array) -> bool:
+	var G := _bond_gain
+	var S := _bond_strength
+	var E := _bond_edge
+	var hit_any := false
+	for j in range(_bond_ptr[site], _bond_ptr[site + 1]):
+		var g: float = G[3 * j] * n0 + G[3 * j + 1] * n1 + G[3 * j + 2] * n2
+		var edge: int = E[j]
+		var limit: float = t * S[edge]
+		if g > limit:
+			broken[edge] = true
+			hit_any = true
+	return hit_any
 
 
 # disp'[j, c] = sum over i of alpha'[i] W[i, j, c], each sum in mode order.
