@@ -205,6 +205,7 @@ def _run_forked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T]
     size = max(1, len(items) // (8 * count))
     chunks = [range(i, min(i + size, len(items))) for i in range(0, len(items), size)]
     results: list[Any] = [None] * len(items)
+    others = set(multiprocessing.active_children())
     pool = ProcessPoolExecutor(max_workers=count, mp_context=multiprocessing.get_context("fork"),
                                initializer=_start_worker)
     stalled = False
@@ -231,6 +232,15 @@ def _run_forked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T]
                 process.kill()
             for chunk in pending.values():
                 results[chunk.start:chunk.stop] = [function(shared, items[i]) for i in chunk]
+    except BaseException:
+        # Ctrl-C (the workers ignore SIGINT: this process handles it) or a worker's error: the workers would
+        # finish their chunks before shutdown() returned, so they are killed; the exception goes on as it is.
+        # Also a worker forked but not yet registered in the pool (Ctrl-C in the middle of submit()): with no
+        # manager thread to stop it, the interpreter's exit would wait for it forever.
+        workers = set((getattr(pool, "_processes", None) or {}).values())
+        for process in workers | (set(multiprocessing.active_children()) - others):
+            process.kill()
+        raise
     finally:
         pool.shutdown(wait=not stalled, cancel_futures=True)
     return results
@@ -263,6 +273,9 @@ def _start_worker() -> None:
     import signal
 
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the parent's SIGTERM-as-Ctrl-C (cli.main) is not for workers
+    # Ctrl-C reaches the whole process group: the parent reports it and kills the pool (_run_forked); a worker
+    # raising KeyboardInterrupt would print multiprocessing's traceback (and its siblings an EOFError).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     from fracture_cli import progress
 
     progress.configure(None)  # the parent process owns the terminal

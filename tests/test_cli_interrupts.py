@@ -17,6 +17,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 
 import pytest
 from click.testing import CliRunner
@@ -140,6 +141,88 @@ def test_ctrl_c_in_an_import_is_delivered_after_it(tmp_path, monkeypatch):
         interrupts._on_sigint(2, sys._getframe())  # outside an import: raised at once
     with pytest.raises(KeyboardInterrupt):
         interrupts.check()  # and every checkpoint between stages raises while one is pending
+
+
+# ---------------------------------------------------------------- forked workers
+
+
+_FORKED_CHILD = r"""
+import os, signal, sys, time
+sys.path.insert(0, sys.argv[1])
+from fracture_cli import interrupts
+interrupts.install()
+pid = os.fork()
+if pid == 0:
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(30)
+    os._exit(0)
+print(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]), flush=True)
+try:
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(30)
+except KeyboardInterrupt:
+    print("parent interrupted")
+"""
+
+
+def test_ctrl_c_in_a_forked_child_ends_it_quietly():
+    """A child forked after install() (a worker before its initializer ran) exits 130 without a traceback."""
+    done = subprocess.run([sys.executable, "-c", _FORKED_CHILD, REPO], capture_output=True, text=True, timeout=60)
+    assert done.stdout.split("\n")[:2] == ["130", "parent interrupted"], done.stdout + done.stderr
+    assert done.stderr == ""
+
+
+_MAP = r"""
+import os, sys, time
+sys.path.insert(0, sys.argv[1])
+from fracture_cli import interrupts, parallel
+
+def work(folder, item):
+    if item:
+        return item  # the other worker is soon idle, waiting for work (where a Ctrl-C used to print a traceback)
+    open(os.path.join(folder, "busy"), "w").close()
+    end = time.monotonic() + 120
+    while time.monotonic() < end:  # busy (CPU time: not a stall)
+        pass
+    return item
+
+interrupts.install()
+try:
+    parallel.ordered_map(work, list(range(6)), sys.argv[2], jobs=2)
+except KeyboardInterrupt:
+    print("interrupted", flush=True)
+    sys.exit(130)
+print("finished")
+"""
+
+
+def test_ctrl_c_during_a_parallel_map_kills_the_workers_quietly(tmp_path):
+    """SIGINT to the process group while a worker is busy and another idle: the map stops at once, the workers are
+    gone, and nothing is printed (the workers ignore SIGINT, the parent kills them)."""
+    run = subprocess.Popen([sys.executable, "-c", _MAP, REPO, str(tmp_path)], stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        for _ in range(600):
+            if (tmp_path / "busy").exists() or run.poll() is not None:
+                break
+            threading.Event().wait(0.05)
+        threading.Event().wait(0.3)  # the other worker has taken its items and waits for more
+        started = time.monotonic()
+        os.killpg(run.pid, signal.SIGINT)
+        stdout, stderr = run.communicate(timeout=60)
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+    assert (run.returncode, stdout, stderr) == (130, "interrupted\n", "")
+    assert time.monotonic() - started < 30  # not after the busy item's 120 s
+    for _ in range(100):  # the killed workers are gone with their parent
+        try:
+            os.killpg(run.pid, 0)
+        except ProcessLookupError:
+            break
+        threading.Event().wait(0.05)
+    else:
+        pytest.fail("worker processes outlived the interrupted map")
 
 
 # ---------------------------------------------------------------- real Ctrl-C at a handful of moments
