@@ -10,6 +10,7 @@ other than by republishing that set. Each failure is one
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import secrets
@@ -80,6 +81,8 @@ def _existing_ancestor(out_dir: str) -> str:
     """The nearest existing folder above a missing ``out_dir`` (refused if a file is in the way)."""
     path = os.path.abspath(out_dir)
     while not os.path.exists(path):
+        if os.path.lexists(path):  # a symlink that leads nowhere: makedirs would fail with "File exists" at the end
+            _refuse_broken_link(path, out_dir)
         parent = os.path.dirname(path)
         if parent == path:
             break
@@ -89,6 +92,19 @@ def _existing_ancestor(out_dir: str) -> str:
             f"cannot create the output folder: {printable(path)} is a file"
         raise OutputError(what, path=printable(out_dir))
     return path
+
+
+def _refuse_broken_link(link: str, out_dir: str) -> None:
+    """Refuse an output folder that is, or is inside, a dangling symbolic link or a symbolic link loop."""
+    try:
+        os.stat(link)
+        kind = "a symbolic link that cannot be followed"
+    except OSError as exc:
+        kind = "a symbolic link loop" if exc.errno == errno.ELOOP else \
+            f"a dangling symbolic link (to {printable(os.readlink(link))}, which does not exist)"
+    where = "the output folder is" if link == os.path.abspath(out_dir) else \
+        f"cannot create the output folder: {printable(link)} is"
+    raise OutputError(f"{where} {kind}; give a folder, or fix the link", path=printable(out_dir))
 
 
 def _check_writable(folder: str, *, for_new_folder: bool = False) -> None:
