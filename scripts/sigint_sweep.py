@@ -58,10 +58,11 @@ def trial(asset: str, out: str, delay: float, extra: list[str], old: str | None 
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO, env=env,
                             start_new_session=True)
     time.sleep(delay)
+    sent = bake.poll() is None  # still running: the Ctrl-C must not be lost (exit 0 is then a broken rule)
     try:
         os.killpg(bake.pid, signal.SIGINT)
     except ProcessLookupError:
-        pass
+        sent = False
     try:
         _, stderr = bake.communicate(timeout=HANG_SECONDS)
     except subprocess.TimeoutExpired:  # e.g. exiting, but waiting forever for a worker nobody told to stop
@@ -79,13 +80,15 @@ def trial(asset: str, out: str, delay: float, extra: list[str], old: str | None 
     bad = [line for line in stderr.splitlines() if any(word in line for word in BAD_WORDS)]
     if bad:
         return code, "BROKEN", bad[0] + show
-    folder = folder_problem(out, stem, old, finished=code == 0)
+    published = code == 0 or (code == 130 and "complete outputs were written" in stderr)
+    folder = folder_problem(out, stem, old, finished=published)
     if folder:
         return code, "BROKEN", folder + show
     if code == 130 and "interrupted" in stderr:
-        return code, "interrupted", ""
+        return code, "interrupted" if not published else "interrupted after publishing", ""
     if code == 0:
-        return code, "finished", ""
+        # Sent while it ran, yet exit 0: lost, or (rarely) it came in the interpreter's last milliseconds.
+        return code, "finished" if not sent else "finished, Ctrl-C not reported", ""
     last = (stderr.strip().splitlines() or ["(no stderr)"])[-1]
     return code, "BROKEN", last + show
 

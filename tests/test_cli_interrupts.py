@@ -120,6 +120,23 @@ def test_ctrl_c_while_the_tool_loads_is_an_interrupt(monkeypatch, capsys):
     assert capsys.readouterr().err == NOTHING + "\n"
 
 
+def test_a_ctrl_c_the_command_did_not_stop_for_still_ends_as_an_interrupt(monkeypatch, capsys):
+    """A Ctrl-C held back past the last checkpoint (or dropped by a library after it) used to be lost: exit 0."""
+    from fracture_cli import cli_group
+
+    real = cli_group.hoist_global_flags
+
+    def ctrl_c_then_parse(args):
+        interrupts.record(signal.SIGINT)  # the handler saw it; no KeyboardInterrupt reached the command
+        return real(args)
+
+    monkeypatch.setattr(cli_group, "hoist_global_flags", ctrl_c_then_parse)
+    with pytest.raises(SystemExit) as stopped:
+        main(["recipes"])
+    assert stopped.value.code == 130
+    assert capsys.readouterr().err == NOTHING + "\n"
+
+
 @pytest.mark.skipif(threading.current_thread() is not threading.main_thread(), reason="signals: main thread only")
 def test_ctrl_c_in_an_import_is_delivered_after_it(tmp_path, monkeypatch):
     """The handler does not raise inside an import (where it would break the module): it redelivers the signal."""
