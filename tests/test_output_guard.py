@@ -295,3 +295,10 @@ def test_chain_export_into_an_output_folder_that_cannot_be_made(kind, source, tm
     chain = ["load", source / "s.obj", "repair", "cage", "tetra", "material", "modes", "pieces", "smooth",
              "fragments", "simplify", "collision", "runtime", "export", out]
     assert words in refused(chain, out, folders=[source])
+
+
+@pytest.mark.parametrize("kind", ["a dangling link", "inside a link loop"])
+def test_batch_into_an_output_folder_that_cannot_be_made(kind, source, tmp_path, no_work):
+    out, words = _broken_folder(tmp_path, kind)
+    (source / "m.toml").write_text('[assets]\n"s.obj" = "default"\n')
+    assert words in refused(["batch", source / "m.toml", "-o", out, "--workers", "1"], out, folders=[source])

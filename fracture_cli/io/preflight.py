@@ -77,6 +77,18 @@ def preflight(out_dir: str, stem: str, inputs: Iterable[str] = (), estimate_byte
             lock.release()
 
 
+def check_folder_path(out_dir: str) -> None:
+    """Refuse a folder path no folder can be made at: a file, a dangling symbolic link or a link loop (on the way).
+
+    Raises
+    ------
+    OutputError
+        One line naming ``out_dir`` and what is in the way.
+    """
+    if not os.path.isdir(out_dir):
+        _existing_ancestor(out_dir)
+
+
 def _existing_ancestor(out_dir: str) -> str:
     """The nearest existing folder above a missing ``out_dir`` (refused if a file is in the way)."""
     path = os.path.abspath(out_dir)
