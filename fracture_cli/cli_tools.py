@@ -267,7 +267,9 @@ def view_cmd(path: str, port: int, host: str, no_browser: bool) -> Processor:
         try:
             server.wait()
         except KeyboardInterrupt:
-            pass
+            from fracture_cli import interrupts
+
+            interrupts.forget()  # Ctrl-C is how the server is stopped: a normal end (exit 0), not an interrupt
         finally:
             server.stop()
 

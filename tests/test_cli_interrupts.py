@@ -137,6 +137,33 @@ def test_a_ctrl_c_the_command_did_not_stop_for_still_ends_as_an_interrupt(monkey
     assert capsys.readouterr().err == NOTHING + "\n"
 
 
+def test_ctrl_c_that_stops_view_is_its_normal_end(tmp_path, monkeypatch, capsys):
+    """``fracture view`` runs until Ctrl-C: that ends it with exit code 0, not as an interrupted command."""
+    from fracture_cli.view import server
+
+    class Server:
+        url = "http://127.0.0.1:1/"
+
+        def __init__(self, *a, **k):
+            pass
+
+        def start(self):
+            return self
+
+        def wait(self):
+            interrupts.record(signal.SIGINT)
+            raise KeyboardInterrupt
+
+        def stop(self):
+            pass
+
+    monkeypatch.setattr(server, "ViewServer", Server)
+    with pytest.raises(SystemExit) as stopped:
+        main(["view", str(tmp_path), "--no-browser", "--port", "0"])
+    assert stopped.value.code == 0
+    assert "interrupted" not in capsys.readouterr().err
+
+
 @pytest.mark.skipif(threading.current_thread() is not threading.main_thread(), reason="signals: main thread only")
 def test_ctrl_c_in_an_import_is_delivered_after_it(tmp_path, monkeypatch):
     """The handler does not raise inside an import (where it would break the module): it redelivers the signal."""
