@@ -12,8 +12,10 @@ from __future__ import annotations
 import json
 import logging
 import os
+import signal
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -148,3 +150,36 @@ def test_a_concurrent_bake_waits_for_the_live_owner_then_publishes(tmp_path):
         holder.wait(timeout=60)
     assert holder.returncode == 0
     assert sorted(os.listdir(tmp_path)) == sorted(output_names("s"))
+
+
+def _ctrl_c_inside(monkeypatch, name: str) -> None:
+    """Make ``stemlock.<name>`` send this process a SIGINT half-way through (what a Ctrl-C at that moment does)."""
+    real = getattr(stemlock, name)
+
+    def interrupted(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.05)  # the handler would run here
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(stemlock, name, interrupted)
+
+
+@pytest.mark.skipif(threading.current_thread() is not threading.main_thread(), reason="signals: main thread only")
+@pytest.mark.parametrize("moment", ["process_start", "boot_id", "_read_lock"])
+def test_a_ctrl_c_while_the_lock_is_made_or_removed_leaves_none(tmp_path, monkeypatch, moment):
+    """The sweep once found ``.<stem>.fracture-lock`` left by a Ctrl-C in the preflight: it is now raised after."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        lock = StemLock(str(tmp_path), "s")
+        if moment == "_read_lock":  # in release(): after the heartbeat stopped, before the file goes
+            lock.acquire(timeout=0)
+            _ctrl_c_inside(monkeypatch, moment)
+            with pytest.raises(KeyboardInterrupt):
+                lock.release()
+        else:  # in acquire(): while the owner record is written
+            _ctrl_c_inside(monkeypatch, moment)
+            with pytest.raises(KeyboardInterrupt):
+                lock.acquire(timeout=0)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert os.listdir(tmp_path) == []

@@ -68,13 +68,13 @@ def preflight(out_dir: str, stem: str, inputs: Iterable[str] = (), estimate_byte
     _check_free_space(out_dir, stem, estimate_bytes, out_dir)
     # Complete or clear what a killed bake left now, so the folder holds one set even if this bake fails.
     lock = StemLock(out_dir, stem)
-    if lock.acquire(timeout=0):
-        try:
+    try:  # released whatever happens (a Ctrl-C right after acquire included); only our own lock is removed
+        if lock.acquire(timeout=0):
             recover(out_dir, stem)
-        except OSError as exc:
-            raise write_error(exc, out_dir) from None
-        finally:
-            lock.release()
+    except OSError as exc:
+        raise write_error(exc, out_dir) from None
+    finally:
+        lock.release()
 
 
 def check_folder_path(out_dir: str) -> None:

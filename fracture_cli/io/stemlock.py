@@ -25,10 +25,13 @@ import json
 import logging
 import os
 import secrets
+import signal
 import socket
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+from types import FrameType
 
 from fracture_cli.errors import OutputError, printable
 
@@ -85,9 +88,16 @@ class StemLock:
         seen_since = time.monotonic()
         told: str | None = None  # the token of the live owner the "waiting" line was logged for
         while True:
-            if self._try_create():
-                self._beat = threading.Thread(target=self._heartbeat, name="fracture-lock", daemon=True)
-                self._beat.start()
+            try:
+                with _sigint_held():  # a Ctrl-C while the lock is made and filled in comes right after
+                    created = self._try_create()
+                if created:
+                    self._beat = threading.Thread(target=self._heartbeat, name="fracture-lock", daemon=True)
+                    self._beat.start()
+            except BaseException:
+                self.release()  # the lock just made goes with the interrupt (release removes only our own)
+                raise
+            if created:
                 return True
             holder = _read_lock(self.path)
             if holder is None:
@@ -115,17 +125,22 @@ class StemLock:
             time.sleep(_POLL_SECONDS)
 
     def _try_create(self) -> bool:
+        info = {"host": socket.gethostname(), "pid": os.getpid(), "token": self.token,
+                "started": time.strftime("%Y-%m-%d %H:%M:%S"), "start_ticks": process_start(os.getpid()),
+                "boot_id": boot_id()}
         try:
             fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
         except FileExistsError:
             return False
         except OSError as exc:
             raise OutputError(f"cannot create the output lock ({exc.strerror})", path=printable(self.path)) from None
-        info = {"host": socket.gethostname(), "pid": os.getpid(), "token": self.token,
-                "started": time.strftime("%Y-%m-%d %H:%M:%S"), "start_ticks": process_start(os.getpid()),
-                "boot_id": boot_id()}
-        with os.fdopen(fd, "w") as fh:
-            json.dump(info, fh)
+        try:
+            with os.fdopen(fd, "w") as fh:
+                json.dump(info, fh)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(self.path)
+            raise
         return True
 
     def _break(self, stale_token: str) -> None:
@@ -156,15 +171,38 @@ class StemLock:
                 os.utime(self.path)
 
     def release(self) -> None:
-        """Stop the heartbeat and remove the lock file if it is still ours."""
-        self._stop.set()
-        if self._beat is not None:
-            self._beat.join()
-            self._beat = None
-        holder = _read_lock(self.path)
-        if holder is not None and holder[1].get("token") == self.token:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(self.path)
+        """Stop the heartbeat and remove the lock file if it is still ours (a Ctrl-C meanwhile comes after)."""
+        with _sigint_held():
+            self._stop.set()
+            if self._beat is not None:
+                self._beat.join()
+                self._beat = None
+            holder = _read_lock(self.path)
+            if holder is not None and holder[1].get("token") == self.token:
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(self.path)
+
+
+@contextlib.contextmanager
+def _sigint_held() -> Iterator[None]:
+    """Hold a Ctrl-C back while the block runs, then give it to the handler in place (main thread only).
+
+    A lock file must not be left behind by an interrupt between its creation
+    and its owner record, or between the heartbeat's end and its removal: a
+    next bake would take it for a live bake's (or, empty, wait
+    :data:`STALE_SECONDS` before breaking it).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[FrameType | None] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: held.append(frame))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if held and callable(previous):
+        previous(signal.SIGINT, held[0])
 
 
 def _read_lock(path: str) -> tuple[float, dict] | None:
