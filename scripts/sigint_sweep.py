@@ -81,6 +81,11 @@ def trial(asset: str, out: str, delay: float, extra: list[str], old: str | None 
         # The interpreter's own start-up (its site module, before any of the tool's code runs): CPython ends
         # with exit code 1 and this message; nothing the tool does can change it.
         return code, "interpreter start-up", ""
+    frames = [line for line in stderr.splitlines() if line.lstrip().startswith('File "')]
+    if frames and all('File "<frozen ' in line for line in frames) and stderr.rstrip().endswith("KeyboardInterrupt"):
+        # Python's own module runner (``-m``: runpy finding the package) before the tool's first line: CPython's
+        # KeyboardInterrupt traceback, as above.
+        return code, "interpreter start-up", ""
     bad = [line for line in stderr.splitlines() if any(word in line for word in BAD_WORDS)]
     if bad:
         return code, "BROKEN", bad[0] + show
