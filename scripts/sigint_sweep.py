@@ -56,7 +56,8 @@ def trial(asset: str, out: str, delay: float, extra: list[str], old: str | None 
     shutil.rmtree(out, ignore_errors=True)
     if old is not None:
         shutil.copytree(old, out)
-    env = dict(os.environ, PYTHONPATH=REPO + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    # PYTHONFAULTHANDLER: a hung bake is sent SIGABRT before it is killed, which prints every thread's stack.
+    env = dict(os.environ, PYTHONPATH=REPO + os.pathsep + os.environ.get("PYTHONPATH", ""), PYTHONFAULTHANDLER="1")
     bake = subprocess.Popen([sys.executable, "-m", "fracture_cli", *(jobs or []), "bake", asset, "-o", out, *extra],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO, env=env,
                             start_new_session=True)
@@ -70,9 +71,14 @@ def trial(asset: str, out: str, delay: float, extra: list[str], old: str | None 
     try:
         _, stderr = bake.communicate(timeout=HANG_SECONDS)
     except subprocess.TimeoutExpired:  # e.g. exiting, but waiting forever for a worker nobody told to stop
+        tree = subprocess.run(["ps", "-o", "pid,ppid,stat,wchan:20,args", "-g", str(bake.pid)], capture_output=True,
+                              text=True).stdout
+        os.killpg(bake.pid, signal.SIGABRT)  # the stacks (PYTHONFAULTHANDLER)
+        time.sleep(2)
         os.killpg(bake.pid, signal.SIGKILL)
         _, stderr = bake.communicate()
-        return bake.returncode, "BROKEN", f"still running {HANG_SECONDS:.0f} s after the Ctrl-C (killed)"
+        return bake.returncode, "BROKEN", f"still running {HANG_SECONDS:.0f} s after the Ctrl-C (killed)" + (
+            "\n" + tree + stderr if os.environ.get("SWEEP_SHOW") else "")
     code = bake.returncode
     _wait_for_group(bake.pid)  # a worker still running after the bake ended would show in the folder check
     stem = os.path.splitext(os.path.basename(asset))[0]
