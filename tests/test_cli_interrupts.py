@@ -269,6 +269,41 @@ def test_ctrl_c_during_a_parallel_map_kills_the_workers_quietly(tmp_path):
         pytest.fail("worker processes outlived the interrupted map")
 
 
+_BIG_RESULTS = r"""
+import sys
+sys.path.insert(0, sys.argv[1])
+from fracture_cli import interrupts, parallel
+
+def work(shared, item):
+    return bytes(20_000_000)  # most of a map's time goes into sending these through the result pipe
+
+interrupts.install()
+try:
+    while True:
+        parallel.ordered_map(work, list(range(8)), None, jobs=2)
+except KeyboardInterrupt:
+    print("interrupted", flush=True)
+    sys.exit(130)
+"""
+
+
+@pytest.mark.parametrize("delay", [1.0, 1.4, 1.8])
+def test_ctrl_c_while_workers_send_results_does_not_hang(delay):
+    """A worker killed half-way through sending a result used to leave the pool's manager thread waiting forever
+    for the rest of the message (and the interpreter's exit joining that thread): 9 hangs in 10 Ctrl-Cs."""
+    run = subprocess.Popen([sys.executable, "-c", _BIG_RESULTS, REPO], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True, start_new_session=True)
+    try:
+        threading.Event().wait(delay)
+        os.killpg(run.pid, signal.SIGINT)
+        stdout, stderr = run.communicate(timeout=60)
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+            run.communicate()
+    assert (run.returncode, stdout, stderr) == (130, "interrupted\n", "")
+
+
 # ---------------------------------------------------------------- real Ctrl-C at a handful of moments
 
 
