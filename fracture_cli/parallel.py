@@ -237,7 +237,11 @@ def _run_forked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T]
         _kill_workers(pool, others)
         raise
     finally:
-        pool.shutdown(wait=not stalled, cancel_futures=True)
+        try:
+            pool.shutdown(wait=not stalled, cancel_futures=True)
+        except BaseException:  # a Ctrl-C while shutdown() waits for the workers to stop (seen once in the sweep)
+            _kill_workers(pool, others)
+            raise
     return results
 
 
