@@ -242,7 +242,7 @@ def test_dim3_anisotropic_fast_matches_vector_baseline():
 def test_start_vectors_when_arpack_does_not_converge(arpack, monkeypatch, caplog):
     from scipy.sparse.linalg import ArpackNoConvergence
 
-    from fracture_cli.stages import modes as modes_module
+    from fracture_cli.stages.modes import start as modes_module
 
     real = modes_module.eigsh
     calls = []
@@ -256,7 +256,7 @@ def test_start_vectors_when_arpack_does_not_converge(arpack, monkeypatch, caplog
     monkeypatch.setattr(modes_module, "eigsh", flaky)
     tm = grid_tetmesh((4, 3, 3))
     with caplog.at_level(logging.INFO, logger="fracture_cli.stages.modes"):
-        U = modes_module._scalar_start_vectors(tm, 6, seed=0)
+        U = modes_module.scalar_start_vectors(tm, 6, seed=0)
     assert "did not converge" in caplog.text
     assert calls[1] == -1.0  # the retry shifts to just below the O(1) spectrum
     if arpack == "never-converges":
@@ -265,7 +265,7 @@ def test_start_vectors_when_arpack_does_not_converge(arpack, monkeypatch, caplog
     assert np.all(np.ptp(U, axis=1) > 0) and np.linalg.matrix_rank(U) == 6
     # Whatever path found them, they span the same lowest eigenspaces as a clean ARPACK run.
     monkeypatch.setattr(modes_module, "eigsh", real)
-    clean = modes_module._scalar_start_vectors(tm, 6, seed=0)
+    clean = modes_module.scalar_start_vectors(tm, 6, seed=0)
     residual = clean - clean @ np.linalg.pinv(U) @ U
     assert np.abs(residual).max() < 1e-6 * np.abs(clean).max()
 

@@ -260,3 +260,45 @@ def test_reports_that_are_not_manifests_are_not_sets(tmp_path):
     assert published_sets(str(tmp_path)) == ()
     assert published_sets(str(tmp_path / "missing")) == ()
     guard_outputs([str(tmp_path / "a.report.json")])
+
+
+# ---------------------------------------------------------------- an output folder that cannot be one (issue 38)
+
+
+def _broken_folder(tmp_path, kind: str):
+    """An ``-o`` that no folder can be made at: (the path, the line's words)."""
+    os.symlink(tmp_path / "missing", tmp_path / "dangling")
+    os.symlink(tmp_path / "loop", tmp_path / "loop")
+    (tmp_path / "a file").write_text("not a folder\n")
+    return {"a dangling link": (tmp_path / "dangling", "is a dangling symbolic link"),
+            "a link loop": (tmp_path / "loop", "is a symbolic link loop"),
+            "inside a dangling link": (tmp_path / "dangling" / "out", "dangling symbolic link"),
+            "inside a link loop": (tmp_path / "loop" / "out", "is a symbolic link loop"),
+            "inside a file": (tmp_path / "a file" / "out", "is a file")}[kind]
+
+
+KINDS = ["a dangling link", "a link loop", "inside a dangling link", "inside a link loop", "inside a file"]
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_bake_into_an_output_folder_that_cannot_be_made(kind, source, tmp_path, no_work):
+    """Refused by the preflight, before any stage, with one line (it used to fail after the whole bake)."""
+    out, words = _broken_folder(tmp_path, kind)
+    line = refused(["bake", source / "s.obj", "-o", out], out, folders=[source])
+    assert words in line
+    assert not os.path.exists(tmp_path / "missing") and (tmp_path / "a file").read_text() == "not a folder\n"
+
+
+@pytest.mark.parametrize("kind", ["a dangling link", "inside a file"])
+def test_chain_export_into_an_output_folder_that_cannot_be_made(kind, source, tmp_path, no_work):
+    out, words = _broken_folder(tmp_path, kind)
+    chain = ["load", source / "s.obj", "repair", "cage", "tetra", "material", "modes", "pieces", "smooth",
+             "fragments", "simplify", "collision", "runtime", "export", out]
+    assert words in refused(chain, out, folders=[source])
+
+
+@pytest.mark.parametrize("kind", ["a dangling link", "inside a link loop"])
+def test_batch_into_an_output_folder_that_cannot_be_made(kind, source, tmp_path, no_work):
+    out, words = _broken_folder(tmp_path, kind)
+    (source / "m.toml").write_text('[assets]\n"s.obj" = "default"\n')
+    assert words in refused(["batch", source / "m.toml", "-o", out, "--workers", "1"], out, folders=[source])

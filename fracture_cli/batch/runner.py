@@ -85,6 +85,10 @@ def _check_options(options: BatchOptions) -> None:
 
 
 def _check_writable(folder: str) -> None:
+    # on first use: the batch driver starts light; workers load the stages
+    from fracture_cli.io.preflight import check_folder_path
+
+    check_folder_path(folder)  # a dangling link or a link loop: one clear line, not makedirs' "File exists"
     try:
         os.makedirs(folder, exist_ok=True)
     except OSError as exc:

@@ -82,7 +82,13 @@ def _run(cli: Any, argv: list[str] | None) -> int:
         if not stdout_closed():
             raise
         return quiet_broken_pipe()
-    return code if isinstance(code, int) else 0
+    code = code if isinstance(code, int) else 0
+    if code == 0 and interrupts.received():
+        # A Ctrl-C the command did not stop for (held back past its last step, or dropped by a library after
+        # the last checkpoint): it still came, so the run ends as interrupted, saying what was published.
+        click.echo(f"fracture: {interrupt_message()}", err=True)
+        return interrupts.EXIT_INTERRUPTED
+    return code
 
 
 _SUBMODULES = frozenset({"atlas", "batch", "commands", "group", "options", "tools"})

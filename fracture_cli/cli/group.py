@@ -146,6 +146,11 @@ def guard_chain(processors: list[Processor | None]) -> None:
         if step.exports is not None and source is not None:
             sets.append((step.exports, stem_of(source)))
     guard_outputs(writes, reads, sets=sets)
+    # on first use: keeps `fracture` start-up light
+    from fracture_cli.io.preflight import preflight
+
+    for folder, stem in sets:  # as a bake does: a dangling link, a file in the way, a read-only folder, up front
+        preflight(folder, stem)
 
 
 def _root_meta() -> dict[str, Any]:

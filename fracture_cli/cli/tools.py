@@ -275,7 +275,10 @@ def view_cmd(path: str, port: int, host: str, no_browser: bool) -> Processor:
         try:
             server.wait()
         except KeyboardInterrupt:
-            pass
+            # on first use: keeps `fracture` start-up light
+            from fracture_cli.system import interrupts
+
+            interrupts.forget()  # Ctrl-C is how the server is stopped: a normal end (exit 0), not an interrupt
         finally:
             server.stop()
 

@@ -19,11 +19,13 @@ set is replaced:
 2. **Lock** (:mod:`.stemlock`). ``.<stem>.fracture-lock`` is created with ``O_CREAT | O_EXCL``
    (atomic on local disks and on NFSv3+ and SMB shares, unlike ``fcntl``
    locks, which NFS honours only with a working lock daemon). It holds the
-   owner's host, pid and a random token; the owner touches it every
-   :data:`HEARTBEAT_SECONDS`. A lock is stale when its owner is on this host
-   and no longer running, or when its modification time has not changed for
-   :data:`STALE_SECONDS` while we watched it (the owner's machine died; only
-   our own monotonic clock is used, so machines need not agree on the time).
+   owner's host, pid, process start time and boot id and a random token; the
+   owner touches it every :data:`HEARTBEAT_SECONDS`. A lock is stale when its
+   owner is on this host and no longer running (pid gone, or reused: another
+   start time), never while it runs; a lock of another host when its
+   modification time has not changed for :data:`STALE_SECONDS` while we
+   watched it (the owner's machine died; only our own monotonic clock is used,
+   so machines need not agree on the time).
    A stale lock is removed under a second exclusive file,
    ``.<stem>.fracture-lock.break``, after checking that its token is still
    the stale one, so two waiters never remove a fresh lock. A live lock is

@@ -10,6 +10,7 @@ other than by republishing that set. Each failure is one
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import secrets
@@ -67,19 +68,33 @@ def preflight(out_dir: str, stem: str, inputs: Iterable[str] = (), estimate_byte
     _check_free_space(out_dir, stem, estimate_bytes, out_dir)
     # Complete or clear what a killed bake left now, so the folder holds one set even if this bake fails.
     lock = StemLock(out_dir, stem)
-    if lock.acquire(timeout=0):
-        try:
+    try:  # released whatever happens (a Ctrl-C right after acquire included); only our own lock is removed
+        if lock.acquire(timeout=0):
             recover(out_dir, stem)
-        except OSError as exc:
-            raise write_error(exc, out_dir) from None
-        finally:
-            lock.release()
+    except OSError as exc:
+        raise write_error(exc, out_dir) from None
+    finally:
+        lock.release()
+
+
+def check_folder_path(out_dir: str) -> None:
+    """Refuse a folder path no folder can be made at: a file, a dangling symbolic link or a link loop (on the way).
+
+    Raises
+    ------
+    OutputError
+        One line naming ``out_dir`` and what is in the way.
+    """
+    if not os.path.isdir(out_dir):
+        _existing_ancestor(out_dir)
 
 
 def _existing_ancestor(out_dir: str) -> str:
     """The nearest existing folder above a missing ``out_dir`` (refused if a file is in the way)."""
     path = os.path.abspath(out_dir)
     while not os.path.exists(path):
+        if os.path.lexists(path):  # a symlink that leads nowhere: makedirs would fail with "File exists" at the end
+            _refuse_broken_link(path, out_dir)
         parent = os.path.dirname(path)
         if parent == path:
             break
@@ -89,6 +104,19 @@ def _existing_ancestor(out_dir: str) -> str:
             f"cannot create the output folder: {printable(path)} is a file"
         raise OutputError(what, path=printable(out_dir))
     return path
+
+
+def _refuse_broken_link(link: str, out_dir: str) -> None:
+    """Refuse an output folder that is, or is inside, a dangling symbolic link or a symbolic link loop."""
+    try:
+        os.stat(link)
+        kind = "a symbolic link that cannot be followed"
+    except OSError as exc:
+        kind = "a symbolic link loop" if exc.errno == errno.ELOOP else \
+            f"a dangling symbolic link (to {printable(os.readlink(link))}, which does not exist)"
+    where = "the output folder is" if link == os.path.abspath(out_dir) else \
+        f"cannot create the output folder: {printable(link)} is"
+    raise OutputError(f"{where} {kind}; give a folder, or fix the link", path=printable(out_dir))
 
 
 def _check_writable(folder: str, *, for_new_folder: bool = False) -> None:

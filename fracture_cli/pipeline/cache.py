@@ -8,7 +8,10 @@ and the options of every stage up to and
 including that one (:class:`~fracture_cli.pipeline.Runner` chains the keys). A
 bake that only changes later options (smoothing, fragments, runtime) then skips
 the cage search and the modes solve. Entries are written atomically; an
-unreadable entry is reported and recomputed, never trusted.
+unreadable entry is reported and recomputed, never trusted. The cache only
+saves time: a folder that cannot be made, or that takes no new file (read-only,
+full), is reported by one warning line and the bake carries on without it
+(reading what it can, storing nothing).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fracture_cli import __version__
+from fracture_cli.errors import printable
 from fracture_cli.io.atomic import atomic_path
 from fracture_cli.io.inputs import file_sha256  # noqa: F401 (part of this module's API: the input hash)
 from fracture_cli.system import numeric_env
@@ -99,15 +103,25 @@ class StageCache:
 
     def __init__(self, directory: str):
         self.directory = directory
-        os.makedirs(directory, exist_ok=True)
         self.events: dict[str, str] = {}
+        self.readable = self.writable = True
+        try:
+            os.makedirs(directory, exist_ok=True)
+        except OSError as exc:
+            self.readable = self.writable = False
+            log.warning("%s: cannot use the cache folder (%s); baking without the cache", printable(directory),
+                        exc.strerror or exc)
 
     def _path(self, kind: str, key: str) -> str:
         return os.path.join(self.directory, f"{kind}-{key[:32]}.npz")
 
     def _load(self, kind: str, key: str) -> dict[str, np.ndarray] | None:
         path = self._path(kind, key)
-        if not os.path.exists(path):
+        if not self.readable or not os.path.exists(path):
+            self.events[kind] = "miss"
+            return None
+        if not os.path.isfile(path):  # a FIFO or a folder at an entry's name: never opened (it could block)
+            log.warning("cache: ignoring %s (not a regular file)", os.path.basename(path))
             self.events[kind] = "miss"
             return None
         try:
@@ -123,11 +137,18 @@ class StageCache:
         return arrays
 
     def _store(self, kind: str, key: str, arrays: dict[str, np.ndarray]) -> None:
+        if not self.writable:
+            return
         buf = io.BytesIO()
         np.savez(buf, **{"key": np.array(key), **arrays})  # type: ignore[arg-type]  # numpy's stub: any name
-        with atomic_path(self._path(kind, key)) as tmp:
-            with open(tmp, "wb") as fh:
-                fh.write(buf.getvalue())
+        try:
+            with atomic_path(self._path(kind, key)) as tmp:
+                with open(tmp, "wb") as fh:
+                    fh.write(buf.getvalue())
+        except OSError as exc:  # read-only, full, or not ours: the bake goes on, nothing more is stored
+            self.writable = False
+            log.warning("%s: cannot store in the cache folder (%s); this bake's results are not cached",
+                        printable(self.directory), exc.strerror or exc)
 
     def get(self, stage: str, key: str, state: PipelineState) -> PipelineState | None:
         """``state`` with the cached result of ``stage`` filled in, or None on a miss."""
@@ -136,7 +157,13 @@ class StageCache:
             return None
         field, decode, _ = _CODECS[stage]
         normalization = state.need("surface", stage).normalization
-        return dataclasses.replace(state, **{field: decode(arrays, normalization)})
+        try:
+            value = decode(arrays, normalization)
+        except (KeyError, ValueError, TypeError) as exc:  # an entry of the right key without the right arrays
+            log.warning("cache: ignoring unreadable entry %s (%s)", os.path.basename(self._path(stage, key)), exc)
+            self.events[stage] = "miss"
+            return None
+        return dataclasses.replace(state, **{field: value})
 
     def put(self, stage: str, key: str, state: PipelineState) -> None:
         """Store what ``stage`` produced in ``state``."""

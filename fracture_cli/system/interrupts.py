@@ -33,10 +33,13 @@ RETRY_SECONDS = 0.05
 # Frames in which an exception raised by a signal handler is lost or breaks a module: the import system (a native
 # library's initialisation fails with "ImportError: initialization failed", or the interpreter, after a
 # KeyboardInterrupt out of code an extension ran while initialising, ends by SIGINT whatever the exit code), and
-# numba/llvmlite compiling (a KeyboardInterrupt in llvmlite's ctypes callbacks is printed and dropped).
+# numba/llvmlite compiling (a KeyboardInterrupt in llvmlite's ctypes callbacks is printed and dropped), and
+# logging (its at-fork hooks run in the parent around every fork of a parallel map: an exception raised in one is
+# printed as "Exception ignored in: <function _releaseLock>" and dropped).
 _FRAGILE_FILES = ("<frozen importlib.",)
-_FRAGILE_PARTS = (f"{os.sep}numba{os.sep}", f"{os.sep}llvmlite{os.sep}")
+_FRAGILE_PARTS = (f"{os.sep}numba{os.sep}", f"{os.sep}llvmlite{os.sep}", f"{os.sep}logging{os.sep}__init__.py")
 
+_installed_by: list[int] = []  # the pid of the process that installed the handler (a forked child differs)
 _deferred_since: list[float] = []  # when the Ctrl-C waiting to be raised came (empty: none is waiting)
 _redelivered: list[int] = []  # set by the retry thread just before it sends the SIGINT again
 
@@ -59,7 +62,15 @@ def _on_sigint(signum: int, frame: FrameType | None) -> None:
     code has returned (for at most :data:`MAX_DEFERRAL_SECONDS`). A signal sent
     again after the interrupt was raised meanwhile (by :func:`check`) is dropped:
     one Ctrl-C raises one KeyboardInterrupt.
+
+    A process forked from the one that installed the handler (a parallel
+    worker before its initializer ignored SIGINT) ends at once with
+    :data:`EXIT_INTERRUPTED`, quietly: the installing process reports the
+    interrupt and tears its workers down; a KeyboardInterrupt here would print
+    the worker's traceback.
     """
+    if _installed_by and os.getpid() != _installed_by[0]:
+        os._exit(EXIT_INTERRUPTED)
     if _redelivered:
         _redelivered.clear()
         if not _deferred_since:
@@ -113,7 +124,9 @@ def install() -> None:
     Only Python's default handler is replaced: a SIGINT ignored by the parent
     (a background job) stays ignored, and a handler someone else set stays.
     """
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+    handler = signal.getsignal(signal.SIGINT)
+    if handler is signal.default_int_handler or handler is _on_sigint:
+        _installed_by[:] = [os.getpid()]  # this process reports a Ctrl-C (a process forked from it does not)
         signal.signal(signal.SIGINT, _on_sigint)
 
 

@@ -205,6 +205,7 @@ def _run_forked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T]
     size = max(1, len(items) // (8 * count))
     chunks = [range(i, min(i + size, len(items))) for i in range(0, len(items), size)]
     results: list[Any] = [None] * len(items)
+    others = set(multiprocessing.active_children())
     pool = ProcessPoolExecutor(max_workers=count, mp_context=multiprocessing.get_context("fork"),
                                initializer=_start_worker)
     stalled = False
@@ -227,13 +228,45 @@ def _run_forked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T]
         if stalled:
             log.warning("parallel workers stopped making progress (no CPU time for %g s); finishing %d item(s) in "
                         "this process", STALL_SECONDS, sum(len(c) for c in pending.values()))
-            for process in list(getattr(pool, "_processes", {}).values()):
-                process.kill()
+            _kill_workers(pool, others)
             for chunk in pending.values():
                 results[chunk.start:chunk.stop] = [function(shared, items[i]) for i in chunk]
+    except BaseException:
+        # Ctrl-C (the workers ignore SIGINT: this process handles it) or a worker's error: the workers would
+        # finish their chunks before shutdown() returned, so they are killed; the exception goes on as it is.
+        _kill_workers(pool, others)
+        raise
     finally:
-        pool.shutdown(wait=not stalled, cancel_futures=True)
+        try:
+            pool.shutdown(wait=not stalled, cancel_futures=True)
+        except BaseException:  # a Ctrl-C while shutdown() waits for the workers to stop (seen once in the sweep)
+            _kill_workers(pool, others)
+            raise
     return results
+
+
+def _kill_workers(pool: Any, others: set[Any]) -> None:
+    """Kill the pool's workers so that nothing waits for them: neither shutdown() nor the interpreter's exit.
+
+    Also a worker forked but not yet registered in the pool (Ctrl-C in the
+    middle of ``submit()``): with no manager thread to stop it, the exit would
+    wait for it forever. And a worker killed while it sends a result leaves
+    part of a message in the result pipe, whose rest the pool's manager thread
+    would wait for forever (shutdown() and the exit join that thread; seen in
+    9 of 10 Ctrl-Cs of a map with 20 MB results): this process holds the
+    pipe's write end too (it never writes to it), so that copy is closed and
+    the reader sees the end of the pipe once the workers are gone.
+    ``others``: the processes this one had started before the pool.
+    """
+    import multiprocessing
+
+    workers = set((getattr(pool, "_processes", None) or {}).values())
+    for process in workers | (set(multiprocessing.active_children()) - others):
+        process.kill()
+    writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
+    if writer is not None:
+        with contextlib.suppress(OSError):
+            writer.close()
 
 
 #: Seconds without a finished chunk and without any worker CPU time after which forked workers count as stalled
@@ -263,6 +296,9 @@ def _start_worker() -> None:
     import signal
 
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the parent's SIGTERM-as-Ctrl-C (cli.main) is not for workers
+    # Ctrl-C reaches the whole process group: the parent reports it and kills the pool (_run_forked); a worker
+    # raising KeyboardInterrupt would print multiprocessing's traceback (and its siblings an EOFError).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # on first use: start-up
     from fracture_cli.system import progress
 
