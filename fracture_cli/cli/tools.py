@@ -16,6 +16,7 @@ import click
 from fracture_cli.cli.group import Chain, Processor, TerminalCommand, active_recipe, cli
 from fracture_cli.cli.options import toml_text
 from fracture_cli.errors import FractureError, UsageError
+from fracture_cli.system import clock
 
 log = logging.getLogger("fracture_cli")
 
@@ -66,7 +67,7 @@ def bake_cmd(ctx: click.Context, inputs: tuple[str, ...], out_dir: str, recipe_n
         failures = []
         for item in bake_many(inputs, out_dir, recipe, cache_dir=cache_dir, keep_going=keep_going,
                               preview=preview, preview_size=preview_size or (1600, 1000),
-                              jobs=meta.get("fracture.jobs")):
+                              jobs=meta.get("fracture.jobs"), started=clock.process_origin()):
             if item.result is None:
                 click.echo(f"error: {item.error}", err=True)
                 failures.append(item.input_path)
@@ -79,7 +80,7 @@ def bake_cmd(ctx: click.Context, inputs: tuple[str, ...], out_dir: str, recipe_n
                 click.echo(
                     f"baked {item.input_path} with recipe '{recipe.name}': {c['fragments']} fragments, "
                     f"{c['modes']} modes, {c['tets']} tets, volume error "
-                    f"{r['checks'].get('volume_error', float('nan')):.2e}, {sum(r['seconds'].values()):.1f} s "
+                    f"{r['checks'].get('volume_error', float('nan')):.2e}, {r['seconds']['total']:.1f} s "
                     f"-> {out_dir}", err=True)
         if as_json:
             click.echo(json.dumps(reports[0] if len(reports) == 1 else reports, indent=2, sort_keys=True))

@@ -376,18 +376,23 @@ class Runner:
     jobs : int, optional
         How many processes a stage may use for its independent work (``--jobs``; default: every core).
         It never changes a result, so it is not part of the options the report and the cache keys record.
+    origin : float, optional
+        When the run began on the :func:`time.monotonic` clock (a CLI bake: the process's start); with it,
+        the first step also records ``startup``, the time from ``origin`` to that step.
 
     Attributes
     ----------
     seconds : dict of str -> float
-        Wall time of every step run, rounded to ms (the report's ``seconds``).
+        Wall time of every step run, rounded to ms (the report's ``seconds``), after ``startup`` when
+        ``origin`` was given.
     options : dict of str -> options dataclass
         The options each stage ran with (the report's recipe parameters).
     """
 
     def __init__(self, label: str, total: int | None = None, cache: StageCache | None = None,
-                 jobs: int | None = None):
+                 jobs: int | None = None, origin: float | None = None):
         self.label = label
+        self.origin = origin
         self.total = total
         self.cache = cache
         self.jobs = jobs
@@ -439,6 +444,8 @@ def _timed_step(runner: Runner, name: str) -> Iterator[progress.Task]:
     runner._step += 1
     where = f"[{runner._step}/{runner.total}] " if runner.total else ""
     log.info("%s: %s%s ...", runner.label, where, name)
+    if runner._step == 1 and runner.origin is not None:
+        runner.seconds["startup"] = round(time.monotonic() - runner.origin, 3)
     t0 = time.perf_counter()
     try:
         with progress.task(f"{runner.label}: {where}{name}") as task:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -39,7 +40,7 @@ from fracture_cli.system.interrupts import caused_by_interrupt
 from fracture_cli.types import Fragments
 
 __all__ = ["STAGES", "BakeResult", "BatchItem", "bake", "bake_many", "describe_error", "file_sha256",
-           "fragment_summary", "run_pipeline", "write_outputs"]
+           "fragment_summary", "run_pipeline", "step_seconds", "write_outputs"]
 
 log = logging.getLogger(__name__)
 
@@ -95,7 +96,8 @@ def stem_of(path: str) -> str:
 
 
 def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = None,
-         jobs: int | None = None, preview_size: tuple[int, int] | None = None) -> BakeResult:
+         jobs: int | None = None, preview_size: tuple[int, int] | None = None,
+         started: float | None = None) -> BakeResult:
     """Run the whole pipeline on one asset and write its outputs.
 
     Parameters
@@ -116,6 +118,10 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
         Also render ``<stem>.preview.png`` of this size (width, height) into the
         output set. Without it an older preview is removed when the new set is
         published (it would show other fragments than the files beside it).
+    started : float, optional (default None: this call)
+        When the bake began on the :func:`time.monotonic` clock; the CLI passes the process's start
+        (:func:`fracture_cli.system.clock.process_origin`) so that the report's ``startup`` (to the first
+        stage) and ``total`` (to the published outputs) count the interpreter and every import too.
 
     Returns
     -------
@@ -129,6 +135,7 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
         failed. Any other exception is a bug; it carries the input file and
         stage as attributes for :func:`describe_error`.
     """
+    origin = time.monotonic() if started is None else started
     try:
         stem = stem_of(input_path)
         depends = input_files(input_path)
@@ -139,7 +146,7 @@ def bake(input_path: str, out_dir: str, recipe: Recipe, cache_dir: str | None = 
             from fracture_cli.pipeline.cache import StageCache
 
             cache = StageCache(cache_dir)
-        runner = Runner(f"bake {stem}", total=len(STEPS), cache=cache, jobs=jobs)
+        runner = Runner(f"bake {stem}", total=len(STEPS), cache=cache, jobs=jobs, origin=origin)
         if not numeric_env.pinned():
             log.warning("%s: numeric kernels not pinned (%s): the outputs may differ from another machine's", stem,
                         numeric_env.unpinned_because())
@@ -236,6 +243,8 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
             render_preview(staging.file(f"{stem}.fracture.json"), staging.file(f"{stem}.preview.png"),
                            width=preview_size[0], height=preview_size[1], report=report)
             report["outputs"] = [*report["outputs"][:-1], f"{stem}.preview.png", report["outputs"][-1]]
+        if runner.origin is not None:  # up to the report: publishing the set is a few renames after it
+            runner.seconds["total"] = round(time.monotonic() - runner.origin, 3)
         report["seconds"] = dict(runner.seconds)
         if runner.cache is not None:
             report["cache"] = dict(runner.cache.events)
@@ -264,7 +273,8 @@ def check_batch(inputs: Sequence[str], out_dir: str) -> None:
 
 def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir: str | None = None,
               keep_going: bool = False, preview: bool = False,
-              preview_size: tuple[int, int] = (1600, 1000), jobs: int | None = None) -> Iterator[BatchItem]:
+              preview_size: tuple[int, int] = (1600, 1000), jobs: int | None = None,
+              started: float | None = None) -> Iterator[BatchItem]:
     """Bake several inputs into one folder, yielding each one's outcome as it finishes.
 
     Parameters
@@ -284,6 +294,8 @@ def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir:
         beside it).
     preview_size : (int, int), optional (default (1600, 1000))
         Width and height of the preview in pixels.
+    started : float, optional
+        As for :func:`bake`, for the first input (the others start when their bake is called).
 
     Yields
     ------
@@ -291,16 +303,21 @@ def bake_many(inputs: Sequence[str], out_dir: str, recipe: Recipe, *, cache_dir:
         One per input, in order.
     """
     check_batch(inputs, out_dir)
-    for path in inputs:
+    for index, path in enumerate(inputs):
         try:
             result = bake(path, out_dir, recipe, cache_dir=cache_dir, jobs=jobs,
-                          preview_size=preview_size if preview else None)
+                          preview_size=preview_size if preview else None, started=started if index == 0 else None)
         except Exception as exc:
             if not keep_going or len(inputs) == 1 or caused_by_interrupt(exc):  # Ctrl-C stops the whole batch
                 raise
             yield BatchItem(path, error=describe_error(exc, path), exception=exc)
             continue
         yield BatchItem(path, result=result)
+
+
+def step_seconds(report: dict[str, Any]) -> dict[str, float]:
+    """The ``seconds`` of every step (stages and ``export``) of a report, without ``startup`` and ``total``."""
+    return {name: value for name, value in report.get("seconds", {}).items() if name not in ("startup", "total")}
 
 
 def describe_error(exc: BaseException, path: str | None = None) -> str:
