@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from fracture_cli.errors import StageError
-from fracture_cli.stages.modes import ModesOptions, mode_pieces, modes
+from fracture_cli.stages.modes import ModesOptions, modes
+from fracture_cli.stages.modes.iccm import mode_pieces
 from fracture_cli.stages.modes.solver import (
     ConicSubproblemSolver,
     CutSubproblemSolver,

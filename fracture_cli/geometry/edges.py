@@ -5,8 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from fracture_cli.geometry.rows import unique_inverse, unique_rows, used_vertices
 
@@ -79,6 +77,10 @@ def edge_table(F: np.ndarray) -> EdgeTable:
 
 def components(num: int, pairs: np.ndarray) -> np.ndarray:
     """Connected component id (num,) of ``num`` nodes joined by ``pairs`` (k, 2), numbered by lowest member."""
+    # on first use: scipy.sparse costs 0.2-0.3 s to import, and resolving a recipe imports this module
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(num, num))
     _, labels = connected_components(graph, directed=False)

@@ -8,8 +8,6 @@ repair stage and by the solid building shared with the fragments stage.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from fracture_cli.geometry.edges import edge_table
 
@@ -37,6 +35,10 @@ def nonmanifold_edges(W: np.ndarray) -> int:
 
 def manifold_patches(W: np.ndarray):
     """Patch id (m,) of each face (faces joined across edges with exactly two faces), and edge data."""
+    # on first use: scipy.sparse costs 0.2-0.3 s to import, and resolving a recipe imports this module
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
     m = len(W)
     directed, edge_id, face = undirected_edges(W)
     counts = np.bincount(edge_id)
@@ -55,6 +57,10 @@ def boundary_edges(W: np.ndarray) -> np.ndarray:
 
 def components(W: np.ndarray, n: int) -> np.ndarray:
     """Component id (m,) of each face: faces sharing a welded vertex are connected."""
+    # on first use: as in manifold_patches
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
     m = len(W)
     incidence = sp.coo_matrix((np.ones(3 * m), (np.repeat(np.arange(m), 3), W.reshape(-1))), shape=(m, n))
     graph = sp.bmat([[None, incidence], [incidence.T, None]])

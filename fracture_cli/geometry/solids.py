@@ -14,8 +14,6 @@ from typing import TYPE_CHECKING
 
 import manifold3d
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from fracture_cli.errors import StageError
 from fracture_cli.geometry import trigeom
@@ -288,6 +286,10 @@ def shell_mask(mesh: manifold3d.Mesh64, min_volume: float) -> np.ndarray:
     m = len(tris)
     if m == 0:
         return np.zeros(0, dtype=bool)
+    # on first use: scipy.sparse costs 0.2-0.3 s to import, and resolving a recipe imports this module
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
     # Triangles sharing a vertex are connected: the vertices joined by two edges of every triangle form the same
     # groups as the triangle-vertex incidence graph, on a graph a third its size.
     graph = sp.coo_matrix((np.ones(2 * m), (corners[:, :2].reshape(-1), corners[:, 1:].reshape(-1))), shape=(n, n))

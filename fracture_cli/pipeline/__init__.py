@@ -31,7 +31,7 @@ if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help`
     from fracture_cli.pipeline.cache import StageCache
     from fracture_cli.runtime.format import RuntimeData
     from fracture_cli.stages.cage import CageOptions
-    from fracture_cli.stages.collision.convex import CollisionOptions
+    from fracture_cli.stages.collision import CollisionOptions
     from fracture_cli.stages.faults import FaultOptions
     from fracture_cli.stages.fragments import FragmentOptions
     from fracture_cli.stages.load import LoadOptions
@@ -343,7 +343,7 @@ STAGES: tuple[Stage, ...] = (
           "fracture_cli.stages.simplify:SimplifyOptions", _simplify, consumes=("surface", "fragments"),
           produces=("fragments", "checks")),
     Stage("collision", "Convex collision parts per fragment that do not overlap (GLB and runtime file).",
-          "fracture_cli.stages.collision.convex:CollisionOptions", _collision, consumes=("fragments",),
+          "fracture_cli.stages.collision:CollisionOptions", _collision, consumes=("fragments",),
           produces=("collision", "physics")),
     Stage("runtime", "Precompute the impact-projection data for the game (the runtime file).",
           "fracture_cli.stages.runtime:RuntimeOptions", _runtime,

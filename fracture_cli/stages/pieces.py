@@ -6,7 +6,6 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from fracture_cli.errors import StageError
 from fracture_cli.geometry.edges import components, renumber_by_first
@@ -192,6 +191,9 @@ def _piece_means(U: np.ndarray, tet_piece: np.ndarray, volumes_t: np.ndarray, p:
     largest ``||U[i, t] - W[i, P(t)]||`` relative to mode ``i``'s largest
     magnitude.
     """
+    # on first use: a recipe reads PiecesOptions from this module without loading scipy
+    import scipy.sparse as sp
+
     k, t, d = U.shape
     volumes = np.bincount(tet_piece, weights=volumes_t, minlength=p)
     average = sp.csr_matrix((volumes_t / volumes[tet_piece], (tet_piece, np.arange(t))), shape=(p, t))

@@ -10,15 +10,16 @@ parts and masses.
 from __future__ import annotations
 
 import logging
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fracture_cli.stages.collision.convex import CollisionOptions, collision_shapes, max_overlap_fraction
-from fracture_cli.types import Fragments
+from fracture_cli.stages.collision.options import STAGE, CollisionOptions
+
+if TYPE_CHECKING:
+    from fracture_cli.types import Fragments
 
 log = logging.getLogger(__name__)
-
-STAGE = "collision"
 
 # Parts per fragment (model space, asset units): the corners of each convex part.
 Parts = tuple[tuple[np.ndarray, ...], ...]
@@ -49,6 +50,9 @@ def collision(fragments: Fragments, options: CollisionOptions = CollisionOptions
     """
     if options.glb == "none":
         return tuple(() for _ in fragments.fragments), {}
+    # on first use: a recipe reads CollisionOptions from this package without loading manifold3d and scipy
+    from fracture_cli.stages.collision.convex import collision_shapes, max_overlap_fraction
+
     interior = fragments.interior_slot
     # Fragments touch through their fault faces only: the outer surface (most faces of a large input) is not matched.
     shapes = collision_shapes([(f.vertices, f.faces) for f in fragments.fragments], options,

@@ -52,8 +52,8 @@ from fracture_cli.geometry.hulls import (
 )
 from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.io.physics import COLLISION_FORMATS
-from fracture_cli.options import option
 from fracture_cli.stages.collision.decompose import convex_decomposition, decomposition_hulls
+from fracture_cli.stages.collision.options import STAGE, CollisionOptions
 from fracture_cli.stages.collision.separate import (
     hull_faces,
     overlapping_boxes,
@@ -66,11 +66,6 @@ from fracture_cli.system import parallel
 
 log = logging.getLogger(__name__)
 
-STAGE = "collision"
-
-# How the GLB carries the parts (fracture_cli.io.physics); "none" computes none.
-# PhysX and Chaos cook at most 255 vertices per convex mesh.
-ENGINE_MAX_VERTICES = 255
 # Overlap checks: a pair separated by a face plane of one part up to a slab this thin (fraction of the smaller
 # volume, over the larger area) overlaps by less than this fraction of the smaller part; it counts as 0.
 _NEGLIGIBLE = 1e-12
@@ -78,23 +73,6 @@ _NEGLIGIBLE = 1e-12
 __all__ = ["COLLISION_FORMATS", "CollisionOptions", "CollisionShapes", "collision_shapes", "convex_decomposition",
            "hull_corners", "hull_mesh", "max_overlap_fraction", "separate_parts", "simplify_hull", "volume_beyond"]
 _solid, _hull, _mesh = solid_of, hull_of, mesh_of
-
-
-@dataclass(frozen=True)
-class CollisionOptions:
-    """Options of :func:`collision_shapes`."""
-
-    max_parts: int = option(8, "convex parts per fragment at most", min=1, max=64)
-    max_vertices: int = option(64, "vertices per convex part at most (PhysX/Chaos accept 255)", min=8,
-                               max=ENGINE_MAX_VERTICES)
-    concavity: float = option(0.1, "a part is convex enough when its hull volume is within this fraction of its "
-                                   "volume", min=0.0, min_exclusive=True)
-    intrusion: float = option(0.0, "also cut a part while its hull reaches into other fragments by more than this "
-                                   "fraction of its volume (0: off; costs a boolean per part and neighbour)", min=0.0)
-    glb: str = option("omi", "how the GLB carries the parts: OMI_physics_shape/OMI_physics_body extensions (omi), "
-                             "'<fragment>_NN-convcolonly' child meshes (godot), 'UCX_<fragment>_NN' child meshes "
-                             "(unreal), or no parts at all (none; the runtime file then has none either)",
-                      choices=COLLISION_FORMATS)
 
 
 @dataclass(frozen=True)

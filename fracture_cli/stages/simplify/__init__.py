@@ -13,11 +13,14 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from fracture_cli.options import option
 from fracture_cli.stages.simplify.budget import BUDGET_PER_FRAGMENT, triangle_budget
-from fracture_cli.stages.simplify.faults import FaultReport, simplify_faults
-from fracture_cli.types import Fragments, SurfaceMesh
+
+if TYPE_CHECKING:
+    from fracture_cli.stages.simplify.faults import FaultReport
+    from fracture_cli.types import Fragments, SurfaceMesh
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +78,9 @@ def simplify(fragments: Fragments, surface: SurfaceMesh,
         Same fragments, order, pieces and materials, fewer triangles.
     report : FaultReport
     """
+    # on first use: a recipe reads SimplifyOptions from here without loading the collapse kernels
+    from fracture_cli.stages.simplify.faults import simplify_faults
+
     result, report = simplify_faults(fragments, surface, options.tolerance, options.max_triangles, options.fit_budget)
     if report.over_budget:
         log.warning("%s: %d fragment(s) stay above max_triangles = %d (their faults cannot go further within "

@@ -15,7 +15,8 @@ from fracture_cli.geometry import tetgeom, trigeom
 from fracture_cli.geometry.rows import group_rows
 from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask
 from fracture_cli.stages.smooth.field import forced_field
-from fracture_cli.stages.smooth.topology import SINGULAR_TOL, STAGE, combinations
+from fracture_cli.stages.smooth.options import STAGE
+from fracture_cli.stages.smooth.topology import SINGULAR_TOL, combinations
 
 log = logging.getLogger(__name__)
 

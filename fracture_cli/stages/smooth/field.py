@@ -11,7 +11,8 @@ import scipy.sparse.linalg as spla
 from fracture_cli.errors import StageError
 from fracture_cli.geometry import tetgeom, trigeom
 from fracture_cli.stages.smooth.marching import direct_regions
-from fracture_cli.stages.smooth.topology import STAGE, Topology
+from fracture_cli.stages.smooth.options import STAGE
+from fracture_cli.stages.smooth.topology import Topology
 from fracture_cli.types import Pieces, TetMesh
 
 log = logging.getLogger(__name__)

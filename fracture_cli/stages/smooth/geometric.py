@@ -12,8 +12,9 @@ from scipy.sparse.csgraph import connected_components
 
 from fracture_cli.geometry import tetgeom
 from fracture_cli.geometry.rows import unique_rows
+from fracture_cli.stages.smooth.options import STAGE
 from fracture_cli.stages.smooth.sliding import CageSurface, Containment
-from fracture_cli.stages.smooth.topology import FACE_EDGE_PAIRS, STAGE, Topology
+from fracture_cli.stages.smooth.topology import FACE_EDGE_PAIRS, Topology
 from fracture_cli.types import SurfaceMesh, TetMesh
 
 log = logging.getLogger(__name__)

@@ -6,7 +6,8 @@ import numpy as np
 
 from fracture_cli.errors import StageError
 from fracture_cli.geometry import tetgeom
-from fracture_cli.stages.smooth.topology import FACE_EDGE_PAIRS, STAGE, Topology
+from fracture_cli.stages.smooth.options import STAGE
+from fracture_cli.stages.smooth.topology import FACE_EDGE_PAIRS, Topology
 
 # Relative width of the spindle carved around an edge where a tet-aligned region
 # touches itself: its notches sit this fraction of the way from the edge's

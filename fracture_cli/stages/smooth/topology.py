@@ -8,7 +8,6 @@ import numpy as np
 
 from fracture_cli.geometry import tetgeom
 
-STAGE = "smooth"
 # Below this |det| (rows are O(1)) three planes are treated as not meeting in a point.
 SINGULAR_TOL = 1e-13
 
