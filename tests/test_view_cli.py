@@ -85,7 +85,7 @@ class _FakeBake:
     def __init__(self):
         self.previews = []
 
-    def bake(self, path, out_dir, recipe, cache_dir=None, jobs=None, preview_size=None):
+    def bake(self, path, out_dir, recipe, cache_dir=None, jobs=None, preview_size=None, started=None):
         from fracture_cli.pipeline.bake import BakeResult
 
         self.previews.append(preview_size)

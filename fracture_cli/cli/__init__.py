@@ -103,14 +103,14 @@ def console() -> None:
     every module's objects one by one only costs time: 0.4 s after a bake
     (numba, llvmlite, open3d and a few hundred MB of arrays), 6-7% of a small
     bake's wall time (issue 33). With another thread still running (none
-    should be) the normal exit waits for it instead.
+    should be; the progress clock is a daemon) the normal exit waits for it.
     """
     try:
         main()
         code: object = 0
     except SystemExit as exc:
         code = exc.code
-    if threading.active_count() > 1:
+    if any(t.is_alive() and not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
         raise SystemExit(code)
     if code is None:
         status = 0

@@ -28,6 +28,7 @@ from fracture_cli import __version__
 from fracture_cli.cli.options import build_options, configure_output, hoist_global_flags, stage_options, toml_text
 from fracture_cli.errors import EXIT_FAILURE, FractureError, exit_code_for
 from fracture_cli.pipeline import STAGE_NAMES, PipelineState, Runner, stage
+from fracture_cli.system import progress
 from fracture_cli.system.interrupts import EXIT_INTERRUPTED, caused_by_interrupt
 from fracture_cli.system.parallel import available_cores
 
@@ -229,6 +230,10 @@ class FractureGroup(click.Group):
                 traceback.print_exc()
             click.echo(f"error: {describe_error(exc)}", err=True)
             ctx.exit(exit_code_for(exc) if isinstance(exc, FractureError) else EXIT_FAILURE)
+        finally:
+            # the stream this command wrote progress to may close after it (a test runner's capture):
+            # library calls after the command are silent again, as the library default
+            progress.configure(None)
 
 
 def _interrupted() -> NoReturn:

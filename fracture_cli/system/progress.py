@@ -179,8 +179,9 @@ def _heartbeat() -> None:
             line = "progress: " + " > ".join(t.status(now) if t is _sink.stack[-1] else t.label
                                              for t in _sink.stack)
             _sink.last_line = now
-        stream.write(line + "\n")
-        stream.flush()
+            # under the lock: :func:`configure` cannot swap or close the stream between the check and the write
+            stream.write(line + "\n")
+            stream.flush()
 
 
 def _duration(seconds: float) -> str:
