@@ -96,9 +96,11 @@ def runtime_paths(name: str) -> tuple[str, str]:
     return (os.path.join(CONFORMANCE, f"{name}.fracture.json"), os.path.join(CONFORMANCE, f"{name}.fracture.bin"))
 
 
-def corrupt_cases() -> list[dict]:
+def corrupt_cases(features=()) -> list[dict]:
+    """The ``corrupt/`` cases a reader implementing ``features`` can run (cases of feature files list theirs)."""
     with open(os.path.join(CORRUPT, "index.json"), encoding="utf-8") as fh:
-        return json.load(fh)["cases"]
+        cases = json.load(fh)["cases"]
+    return [case for case in cases if set(case.get("features", ())) <= set(features)]
 
 
 def bits_to_float(bits: str) -> float:

@@ -14,6 +14,7 @@ from engine_support import CONFORMANCE, CORRUPT, corrupt_cases, impact_inputs, l
 from fracture_cli.errors import InputError
 from fracture_cli.runtime.format import load_runtime
 from fracture_cli.runtime.impact import project_impact
+from fracture_cli.runtime.stress import KNOWN_FEATURES
 
 
 def _files(folder: str) -> list[str]:
@@ -54,7 +55,7 @@ def _extreme(impact: dict) -> bool:
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")  # numpy on the "every distance overflows" point
-@pytest.mark.parametrize("name", vector_names(features=("stress",)))
+@pytest.mark.parametrize("name", vector_names(features=KNOWN_FEATURES))
 def test_python_reference_passes_the_vectors(name):
     vectors = load_vectors(name)
     data = load_runtime(os.path.join(CONFORMANCE, vectors["runtime"]))
@@ -76,6 +77,9 @@ def test_python_reference_passes_the_vectors(name):
         elif (result.site, result.groups.tolist(), result.broken.nonzero()[0].tolist()) != (
                 impact["site"], impact["groups"], impact["broken"]):
             problems.append(f"{impact['name']}: site/groups/broken differ")
+        elif "cracked" in impact and (result.cracked.nonzero()[0].tolist(), result.anchored.astype(int).tolist()) != (
+                impact["cracked"], impact["anchored"]):
+            problems.append(f"{impact['name']}: cracked/anchored differ")
     assert not problems, problems
     if skipped:
         pytest.skip(f"{skipped} extreme-magnitude / +inf-threshold impacts not compared: the Python reference "
@@ -83,7 +87,7 @@ def test_python_reference_passes_the_vectors(name):
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")  # numpy on the "every distance overflows" point
-@pytest.mark.parametrize("case", corrupt_cases(), ids=lambda c: c["name"])
+@pytest.mark.parametrize("case", corrupt_cases(KNOWN_FEATURES), ids=lambda c: c["name"])
 def test_python_reference_on_damaged_files(case):
     if "python_reference_bug" in case:
         pytest.skip(f"known gap in the Python reference: {case['python_reference_bug']}")

@@ -400,6 +400,7 @@ class Runner:
         self.options: dict[str, StageOptions] = {}
         self._step = 0
         self._key: str | None = None  # cache key of everything run so far
+        self._clock: dict[str, float] = {}  # perf_counter at the start of each step still running
 
     def run(self, name: str, state: PipelineState, options: StageOptions) -> PipelineState:
         """Run stage ``name`` on ``state`` with ``options``; returns the new state."""
@@ -425,6 +426,14 @@ class Runner:
         """A context that logs, times and shows progress of one step (a stage or ``export``)."""
         return _timed_step(self, name)
 
+    def stop_clock(self, name: str) -> None:
+        """Record the seconds of the running step ``name`` now; its end no longer changes them.
+
+        The export step stops its clock where the report's ``total`` is taken (before the report itself is
+        written), so that ``startup`` and the steps never add up to more than ``total``.
+        """
+        self.seconds[name] = round(time.perf_counter() - self._clock.pop(name), 3)
+
     def _cache_key(self, row: Stage, state: PipelineState, options: StageOptions) -> str | None:
         if self.cache is None:
             return None
@@ -446,7 +455,7 @@ def _timed_step(runner: Runner, name: str) -> Iterator[progress.Task]:
     log.info("%s: %s%s ...", runner.label, where, name)
     if runner._step == 1 and runner.origin is not None:
         runner.seconds["startup"] = round(time.monotonic() - runner.origin, 3)
-    t0 = time.perf_counter()
+    t0 = runner._clock[name] = time.perf_counter()
     try:
         with progress.task(f"{runner.label}: {where}{name}") as task:
             yield task
@@ -455,5 +464,6 @@ def _timed_step(runner: Runner, name: str) -> Iterator[progress.Task]:
         if not hasattr(exc, "fracture_stage"):
             exc.fracture_stage = name  # type: ignore[attr-defined]
         raise
-    runner.seconds[name] = round(time.perf_counter() - t0, 3)
+    if runner._clock.pop(name, None) is not None:  # not stopped early (Runner.stop_clock)
+        runner.seconds[name] = round(time.perf_counter() - t0, 3)
     log.info("%s: %s%s done in %.2f s", runner.label, where, name, runner.seconds[name])

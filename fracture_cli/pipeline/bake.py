@@ -244,6 +244,7 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
                            width=preview_size[0], height=preview_size[1], report=report)
             report["outputs"] = [*report["outputs"][:-1], f"{stem}.preview.png", report["outputs"][-1]]
         if runner.origin is not None:  # up to the report: publishing the set is a few renames after it
+            runner.stop_clock("export")  # the export's seconds end where the total is taken
             runner.seconds["total"] = round(time.monotonic() - runner.origin, 3)
         report["seconds"] = dict(runner.seconds)
         if runner.cache is not None:

@@ -16,195 +16,31 @@ import math
 import os
 import tempfile
 import zlib
-from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from fracture_cli.errors import RuntimeFileError
-from fracture_cli.runtime.gameready import GAMEREADY_LAYOUT, check_gameready
+from fracture_cli.runtime.data import (  # noqa: F401  (UNITS_NOTE, GAMEREADY_LAYOUT: re-exported, where callers look)
+    ALL_LAYOUTS,
+    ARRAY_LAYOUT,
+    FILE_DTYPES,
+    FORMAT_VERSION,
+    GAMEREADY_LAYOUT,
+    UNITS_NOTE,
+    RuntimeData,
+    check_runtime,
+)
 from fracture_cli.runtime.header import parse_header
-from fracture_cli.runtime.stress import CRITERIA, STRESS_LAYOUT, check_stress, header_features
+from fracture_cli.runtime.stress import STRESS_LAYOUT, header_features
+from fracture_cli.runtime.structure import ANCHOR_LAYOUT, CRACK_LAYOUT, DAMAGE_KEYS, check_damage
 
 FORMAT_NAME = "fracture-modes-runtime"
-FORMAT_VERSION = 1  # what a bake without any version-2 feature writes (byte-identical to before version 2)
 MAX_VERSION = 2  # the newest version this reader reads (docs/notes/runtime-format-v2.md)
 ALIGNMENT = 16
 JSON_SUFFIX = ".fracture.json"
 BIN_SUFFIX = ".fracture.bin"
-UNITS_NOTE = (
-    "sites are in the input asset's model space and units; edge_areas in those units squared; "
-    "impulse and threshold share one (any) unit; radius is a fraction of the bounding-box diagonal"
-)
-
-# name -> (dtype, number of dimensions); also the order of arrays in the .bin file.
-ARRAY_LAYOUT: dict[str, tuple[str, int]] = {
-    "sites": ("float32", 2),
-    "B": ("float32", 3),
-    "W": ("float32", 3),
-    "edges": ("int32", 2),
-    "edge_areas": ("float32", 1),
-}
-_DTYPES = {"float32": np.dtype("<f4"), "int32": np.dtype("<i4")}
-
-
-@dataclass(frozen=True, eq=False)
-class RuntimeData:
-    """Everything the realtime impact projection needs (ALGORITHM.md section 4).
-
-    Attributes
-    ----------
-    sites : (s, 3) float32
-        Contact sites (the tet mesh's boundary vertices), input asset units.
-    B : (s, k, d) float32
-        Site-to-mode coefficients; an impulse ``n`` at site ``v`` excites mode
-        ``i`` by ``alpha_i = B[v, i, 0] * |n|`` (d = 1) or ``B[v, i] . n`` (d = 3).
-    W : (k, p, d) float32
-        Piece modes: displacement of fragment ``j`` in mode ``i``.
-    edges : (e, 2) int32
-        Fragment-graph edges ``(P, Q)``, ``P < Q``, sorted.
-    edge_areas : (e,) float32
-        Interface area of each edge, input asset units squared.
-    fragment_names : tuple of str
-        Name of fragment ``j`` (``p`` names), as in the fragments file.
-    transform : (4, 4) float64
-        Map from the normalized bake coordinates to the asset's units
-        (``world = transform @ [x, y, z, 1]``); informational.
-    default_threshold : float
-        Toughness used when the caller gives none (same unit as the impulse).
-    radius : float
-        Impact radius baked into ``B``, as a fraction of the bounding-box diagonal.
-    units : str
-        Human-readable note on units.
-    gameready : dict of str -> array
-        The optional arrays of :data:`GAMEREADY_LAYOUT` (mass properties and
-        collision parts per fragment, model space), all or none.
-    criterion : str
-        ``"modes"`` (version 1) or ``"stress"`` (version 2 with feature ``"stress"``).
-    stress : dict of str -> array
-        The arrays of :data:`fracture_cli.runtime.stress.STRESS_LAYOUT` (criterion ``"stress"`` only).
-    stress_info : dict
-        The stress criterion's material parameters (header key ``stress``; informational).
-    """
-
-    sites: np.ndarray
-    B: np.ndarray
-    W: np.ndarray
-    edges: np.ndarray
-    edge_areas: np.ndarray
-    fragment_names: tuple[str, ...]
-    transform: np.ndarray = field(default_factory=lambda: np.eye(4))
-    default_threshold: float = 1.0
-    radius: float = 0.05
-    units: str = UNITS_NOTE
-    gameready: dict[str, np.ndarray] = field(default_factory=dict)
-    criterion: str = "modes"
-    stress: dict[str, np.ndarray] = field(default_factory=dict)
-    stress_info: dict = field(default_factory=dict)
-
-    @property
-    def features(self) -> tuple[str, ...]:
-        """The format-2 features the data needs (sorted; empty: a version-1 file)."""
-        return ("stress",) if self.stress else ()
-
-    @property
-    def version(self) -> int:
-        """The format version the data is written as: 1 without features, 2 with."""
-        return 2 if self.features else FORMAT_VERSION
-
-    @property
-    def dim(self) -> int:
-        """Displacement dimension ``d`` (1 or 3)."""
-        return int(self.W.shape[2])
-
-    @property
-    def k(self) -> int:
-        """Number of modes."""
-        return int(self.W.shape[0])
-
-    @property
-    def p(self) -> int:
-        """Number of fragments (atomic pieces)."""
-        return int(self.W.shape[1])
-
-    @property
-    def num_sites(self) -> int:
-        return int(self.sites.shape[0])
-
-    @property
-    def num_edges(self) -> int:
-        return int(self.edges.shape[0])
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """The binary arrays in file order, converted to their file dtypes."""
-        arrays = {name: np.ascontiguousarray(getattr(self, name), dtype=_DTYPES[dtype])
-                  for name, (dtype, _) in ARRAY_LAYOUT.items()}
-        for name, (dtype, _) in GAMEREADY_LAYOUT.items():
-            if name in self.gameready:
-                arrays[name] = np.ascontiguousarray(self.gameready[name], dtype=_DTYPES[dtype])
-        for name, (dtype, _) in STRESS_LAYOUT.items():
-            if name in self.stress:
-                arrays[name] = np.ascontiguousarray(self.stress[name], dtype=_DTYPES[dtype])
-        return arrays
-
-    def counts(self) -> dict[str, int]:
-        """The header's ``counts``."""
-        counts = {"sites": self.num_sites, "modes": self.k, "fragments": self.p, "edges": self.num_edges}
-        if self.gameready:
-            counts["collision_parts"] = int(len(self.gameready["collision_part_offsets"]) - 1)
-            counts["collision_vertices"] = int(len(self.gameready["collision_vertices"]))
-        if self.stress:
-            counts["site_bonds"] = int(len(self.stress["site_bonds"]))
-        return counts
-
-
-def check_runtime(data: RuntimeData) -> str | None:
-    """Return why ``data`` is inconsistent, or None if it is usable."""
-    W = np.asarray(data.W)
-    if W.ndim != 3 or W.shape[2] not in (1, 3):
-        return f"W must have shape (k, p, d) with d = 1 or 3, got {W.shape}"
-    k, p, d = W.shape
-    s = np.asarray(data.sites).shape[0] if np.asarray(data.sites).ndim == 2 else -1
-    expected = {
-        "sites": (s, 3),
-        "B": (s, k, d),
-        "W": (k, p, d),
-        "edges": (np.asarray(data.edges).shape[0] if np.asarray(data.edges).ndim == 2 else -1, 2),
-    }
-    expected["edge_areas"] = (expected["edges"][0],)
-    for name, shape in expected.items():
-        got = np.asarray(getattr(data, name)).shape
-        if got != shape or min(shape) < 0:
-            return f"array {name} has shape {list(got)}, expected {list(shape)}"
-    if s < 1:
-        return "there are no contact sites"
-    if k < 1 or p < 1:
-        return f"need at least one mode and one fragment, got k = {k}, p = {p}"
-    if len(data.fragment_names) != p:
-        return f"{len(data.fragment_names)} fragment names for {p} fragments"
-    edges = np.asarray(data.edges)
-    if len(edges) and (edges.min() < 0 or edges.max() >= p or np.any(edges[:, 0] >= edges[:, 1])):
-        return f"edges must be pairs (P, Q) with 0 <= P < Q < {p}"
-    for name in ("sites", "B", "W", "edge_areas"):
-        if not np.all(np.isfinite(getattr(data, name))):
-            return f"array {name} has non-finite values"
-    if not (np.isfinite(data.default_threshold) and data.default_threshold >= 0):
-        return f"default threshold must be a finite number >= 0, got {data.default_threshold!r}"
-    if np.asarray(data.transform).shape != (4, 4):
-        return "transform must be a 4x4 matrix"
-    if data.gameready:
-        problem = check_gameready(data.gameready, p)
-        if problem:
-            return problem
-    if not (np.all(np.isfinite(data.transform)) and np.isfinite(data.radius)):
-        return "transform and impact radius must be finite numbers"
-    if data.criterion not in CRITERIA:
-        return f"unknown criterion {data.criterion!r}"
-    if (data.criterion == "stress") != bool(data.stress):
-        return "the stress criterion and the stress arrays come together"
-    if data.stress:
-        return check_stress(data.stress, s, expected["edges"][0])
-    return None
 
 
 def bin_path_for(json_path: str | os.PathLike) -> Path:
@@ -235,7 +71,7 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
     for name, array in data.arrays().items():
         raw = array.tobytes(order="C")
         table[name] = {
-            "dtype": {**ARRAY_LAYOUT, **GAMEREADY_LAYOUT, **STRESS_LAYOUT}[name][0],
+            "dtype": ALL_LAYOUTS[name][0],
             "shape": list(array.shape),
             "byte_offset": offset,
             "byte_length": len(raw),
@@ -260,7 +96,12 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
     if data.features:  # version 2 (docs/FORMAT.md section 11); a version-1 header stays as it was
         header["features"] = list(data.features)
         header["criterion"] = data.criterion
-        header["stress"] = {key: data.stress_info[key] for key in sorted(data.stress_info)}
+        if data.stress:
+            header["stress"] = {key: data.stress_info[key] for key in sorted(data.stress_info)}
+        if data.damage:
+            header["damage"] = {key: float(data.damage[key]) for key in DAMAGE_KEYS}
+        if data.anchored is not None and data.anchors_info:
+            header["anchors"] = {key: data.anchors_info[key] for key in sorted(data.anchors_info)}
     text = json.dumps(header, sort_keys=True, indent=2, ensure_ascii=True, allow_nan=False) + "\n"
     return text.encode("ascii"), binary
 
@@ -364,9 +205,11 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     stress = ({name: _array(table, name, binary, path, STRESS_LAYOUT) for name in STRESS_LAYOUT}
               if "stress" in features else {})
     info: dict = header["stress"] if isinstance(header.get("stress"), dict) else {}
+    structure: dict[str, Any] = _decode_structure(header, features, table, binary, path) if version >= 2 else {}
     data = RuntimeData(fragment_names=names, transform=transform, default_threshold=threshold,
                        radius=radius, units=units, gameready=gameready, criterion=criterion, stress=stress,
-                       stress_info=dict(info), **arrays)
+                       stress_info=dict(info), sites=arrays["sites"], B=arrays["B"], W=arrays["W"],
+                       edges=arrays["edges"], edge_areas=arrays["edge_areas"], **structure)
     problem = check_runtime(data)
     if problem is None and data.dim != dim:
         problem = f"header says dim = {dim} but W has d = {data.dim}"
@@ -377,6 +220,26 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
     if problem:
         raise _fail(f"inconsistent runtime file: {problem}", path)
     return data
+
+
+def _decode_structure(header: dict, features: tuple[str, ...], table: dict, binary: bytes, path) -> dict:
+    """The ``RuntimeData`` fields of docs/FORMAT.md section 12 from a version-2 header and its binary."""
+    fields: dict = {}
+    if "anchors" in features:
+        fields["anchored"] = _array(table, "anchored", binary, path, ANCHOR_LAYOUT)
+        info = header.get("anchors")
+        fields["anchors_info"] = dict(info) if isinstance(info, dict) else {}
+    if "damage" in features:
+        damage = header.get("damage")
+        problem = ("the feature 'damage' needs a header object 'damage'" if not isinstance(damage, dict)
+                   else check_damage(damage))
+        if problem or not isinstance(damage, dict):
+            raise _fail(f"inconsistent runtime file: {problem}", path)
+        fields["damage"] = {key: float(damage[key]) for key in DAMAGE_KEYS}
+    if any(name in table for name in CRACK_LAYOUT):  # drawing only; check_runtime wants both
+        fields["cracks"] = {name: _array(table, name, binary, path, CRACK_LAYOUT) for name in CRACK_LAYOUT
+                            if name in table}
+    return fields
 
 
 def _array(table: dict, name: str, binary: bytes, path, layout: dict = ARRAY_LAYOUT) -> np.ndarray:
@@ -405,7 +268,7 @@ def _array(table: dict, name: str, binary: bytes, path, layout: dict = ARRAY_LAY
         raise _fail(f"array '{name}' has shape {list(shape)} and {length} bytes, which do not agree", path)
     if offset % ALIGNMENT or offset + length > len(binary):
         raise _fail(f"array '{name}' lies outside the binary file (offset {offset}, length {length})", path)
-    return np.frombuffer(binary, dtype=_DTYPES[dtype], count=nbytes // 4, offset=offset).reshape(shape)
+    return np.frombuffer(binary, dtype=FILE_DTYPES[dtype], count=nbytes // 4, offset=offset).reshape(shape)
 
 
 def load_runtime(path: str | os.PathLike) -> RuntimeData:

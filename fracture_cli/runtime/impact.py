@@ -15,6 +15,7 @@ import numpy as np
 from fracture_cli.errors import ImpactArgumentError
 from fracture_cli.runtime.format import RuntimeData
 from fracture_cli.runtime.stress import PreparedStress
+from fracture_cli.runtime.structure import damage_factor
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,11 +31,17 @@ class ImpactResult:
     displacement : (p, d) float64
         Projected displacement of every fragment (dimensionless, see docs/FORMAT.md).
     broken : (e,) bool
-        Which piece-graph edges broke.
+        Which piece-graph edges are broken (with a damage state: this hit's and earlier ones').
     site : int
         Index of the contact site nearest to the hit point.
     alpha : (k,) float64
         Mode coefficients of the impact.
+    cracked : (e,) bool
+        Bonds that are cracked but hold: loaded above the crack level by this hit, or weakened by an
+        earlier one (docs/FORMAT.md section 12.4; all False without feature ``"damage"``).
+    anchored : (p,) bool
+        Fragments whose group holds a fragment bonded to the world (all False without ``"anchors"``):
+        a game keeps those groups static.
     """
 
     groups: np.ndarray
@@ -42,6 +49,8 @@ class ImpactResult:
     broken: np.ndarray
     site: int
     alpha: np.ndarray
+    cracked: np.ndarray
+    anchored: np.ndarray
 
     @property
     def num_groups(self) -> int:
@@ -69,6 +78,11 @@ class _Prepared:
         self.split = p * d
         self.forest = _SpanningForest(p, self.edge_p, self.edge_q)
         self.stress = PreparedStress(data.stress, self.e) if data.criterion == "stress" else None
+        self.anchored = None if data.anchored is None else np.flatnonzero(np.asarray(data.anchored) == 1)
+        # (c, q) of docs/FORMAT.md section 12.4; a file without "damage" acts as c = 1, r = 0 (a state
+        # then only remembers broken bonds).
+        self.damage = damage_factor(data.damage) if data.damage else None
+        self.crack_level, self.rate = self.damage if self.damage is not None else (1.0, 0.0)
 
 
 _PREPARED: weakref.WeakKeyDictionary[RuntimeData, _Prepared] = weakref.WeakKeyDictionary()
@@ -302,6 +316,15 @@ def project_impact(data: RuntimeData, point, impulse, threshold: float | None = 
     impulses of 1e-170 or 1e200 give the same groups as any other impulse
     with the same ``impulse / threshold``; a zero impulse breaks nothing.
     """
+    return apply_hit(data, None, point, impulse, threshold)
+
+
+def apply_hit(data: RuntimeData, state: np.ndarray | None, point, impulse, threshold: float | None) -> ImpactResult:
+    """One hit on ``data`` with the damage ``state`` (updated in place; None: a fresh state thrown away).
+
+    Inputs are validated before ``state`` changes (an invalid hit leaves it as it was). Public entry points:
+    :func:`project_impact` (stateless) and :func:`fracture_cli.runtime.damage.hit`.
+    """
     prep = prepare(data)
     x, y, z = _vector3(point, "point")
     nx, ny, nz = _vector3(impulse, "impulse")
@@ -310,8 +333,8 @@ def project_impact(data: RuntimeData, point, impulse, threshold: float | None = 
     site = _nearest(prep, x, y, z)
     m = max(abs(nx), abs(ny), abs(nz))
     if m == 0.0:
-        return ImpactResult(groups=prep.forest.whole.astype(np.int32), displacement=np.zeros((prep.p, prep.d)),
-                            broken=np.zeros(prep.e, dtype=bool), site=site, alpha=np.zeros(prep.k))
+        no = np.zeros(prep.e, dtype=bool)
+        return _answer(prep, state, no, no, site, np.zeros((prep.p, prep.d)), np.zeros(prep.k))
     nx, ny, nz = nx / m, ny / m, nz / m
     if prep.d == 1:
         alpha = prep.B1[site] * math.sqrt(nx * nx + ny * ny + nz * nz)
@@ -319,16 +342,60 @@ def project_impact(data: RuntimeData, point, impulse, threshold: float | None = 
         alpha = prep.B[site] @ np.array((nx, ny, nz))
     out = alpha @ prep.WdW
     displacement = out[: prep.split].reshape(prep.p, prep.d)
-    jumps = out[prep.split:]
     limit = threshold / m  # Python floats: overflow gives inf (nothing breaks), underflow 0.0
-    if prep.stress is not None:  # criterion "stress" (docs/FORMAT.md section 11): tension over strength
-        broken = prep.stress.broken(site, nx, ny, nz, limit)
-    elif prep.d == 1:
-        broken = np.abs(jumps) > limit
+    measure, bound = _measure(prep, out[prep.split:], site, nx, ny, nz, limit)
+    now_broken = measure > bound
+    if prep.damage is None and state is None:  # version 1 and "stress" alone: nothing can crack
+        now_cracked = np.zeros(prep.e, dtype=bool)
     else:
-        j = jumps.reshape(prep.e, 3)
-        # The same order of operations as docs/FORMAT.md (and the engine readers): sqrt(j0^2 + j1^2 + j2^2).
-        broken = np.sqrt(j[:, 0] * j[:, 0] + j[:, 1] * j[:, 1] + j[:, 2] * j[:, 2]) > limit
-    labels = prep.forest.labels(broken)
-    return ImpactResult(groups=labels.astype(np.int32), displacement=m * displacement, broken=broken,
-                        site=site, alpha=m * alpha)
+        now_cracked = measure > prep.crack_level * bound  # one product (docs/FORMAT.md section 12.4)
+        if state is None:
+            state = np.ones(prep.e)
+        _damage(prep, state, measure, bound, now_broken, now_cracked)
+    return _answer(prep, state, now_broken, now_cracked, site, m * displacement, m * alpha)
+
+
+def _measure(prep: _Prepared, jumps: np.ndarray, site: int, nx: float, ny: float, nz: float,
+             limit: float) -> tuple[np.ndarray, np.ndarray | float]:
+    """Every bond's measure ``a`` (e,) and limit ``b`` (scalar or (e,)) of docs/FORMAT.md section 12.4, step 2."""
+    if prep.stress is not None:  # criterion "stress" (section 11): tension g against t * S, 0 off the site's list
+        bonds, g = prep.stress.gains(site, nx, ny, nz)
+        measure = np.zeros(prep.e)
+        measure[bonds] = g
+        return measure, limit * prep.stress.strength
+    if prep.d == 1:
+        return np.abs(jumps), limit
+    j = jumps.reshape(prep.e, 3)
+    # The same order of operations as docs/FORMAT.md (and the engine readers): sqrt(j0^2 + j1^2 + j2^2).
+    return np.sqrt(j[:, 0] * j[:, 0] + j[:, 1] * j[:, 1] + j[:, 2] * j[:, 2]), limit
+
+
+def _damage(prep: _Prepared, health: np.ndarray, measure: np.ndarray, bound: np.ndarray | float,
+            now_broken: np.ndarray, now_cracked: np.ndarray) -> None:
+    """Step 3 of docs/FORMAT.md section 12.4 on ``health`` (e,) float64, in place and in the spec's order."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        # a / b, minus c, times q, subtracted: evaluated everywhere, used only where a bond cracked
+        # (where 0 < b < inf, so the quotient is finite there).
+        weakened = health - prep.rate * (measure / bound - prep.crack_level)
+    updated = np.where(now_broken, 0.0, np.where(now_cracked, weakened, health))
+    updated = np.where(updated < 0.0, 0.0, updated)
+    alive = health > 0.0
+    health[alive] = updated[alive]
+
+
+def _answer(prep: _Prepared, health: np.ndarray | None, now_broken: np.ndarray, now_cracked: np.ndarray, site: int,
+            displacement: np.ndarray, alpha: np.ndarray) -> ImpactResult:
+    """Step 4 of docs/FORMAT.md section 12.4: broken, cracked, groups and anchored after the update."""
+    if health is None:
+        broken, cracked = now_broken, np.zeros(prep.e, dtype=bool)
+    else:
+        broken = health <= 0.0
+        cracked = ~broken & (now_cracked | (health < 1.0))
+    labels = prep.forest.labels(broken) if broken.any() else prep.forest.whole
+    anchored = np.zeros(prep.p, dtype=bool)
+    if prep.anchored is not None and len(prep.anchored):
+        held = np.zeros(prep.p, dtype=bool)
+        held[labels[prep.anchored]] = True
+        anchored = held[labels]
+    return ImpactResult(groups=labels.astype(np.int32), displacement=displacement, broken=broken, site=site,
+                        alpha=alpha, cracked=cracked, anchored=anchored)

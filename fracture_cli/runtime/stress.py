@@ -25,8 +25,8 @@ STRESS_LAYOUT: dict[str, tuple[str, int]] = {
     "site_bond_gain": ("float32", 2),
     "bond_strength": ("float32", 1),
 }
-KNOWN_FEATURES: tuple[str, ...] = ("stress",)
-"""The ``features`` this reader implements."""
+KNOWN_FEATURES: tuple[str, ...] = ("anchors", "damage", "stress")
+"""The ``features`` this reader implements (``"anchors"`` and ``"damage"``: :mod:`fracture_cli.runtime.structure`)."""
 CRITERIA: tuple[str, ...] = ("modes", "stress")
 
 

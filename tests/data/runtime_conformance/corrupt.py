@@ -320,14 +320,40 @@ CASES = [
         "wider, non-zero gaps between arrays",
     ),
     ("ok_dyadic", "dyadic", lambda h, b: (h, b), "ok", "the d = 3 base file itself"),
+    # docs/FORMAT.md section 12 (base: structure_dyadic, features "anchors" and "damage").
+    ("anchored_value_2", "structure", lambda h, b: _poke(h, b, "anchored", 1, "i", 2), "rejected",
+     "anchored holds a value other than 0 and 1"),
+    ("anchored_short", "structure", _edit(["arrays", "anchored", "shape"], [4]), "rejected",
+     "anchored has p - 1 entries (and a byte length that disagrees)"),
+    ("anchors_without_array", "structure", _edit(["arrays", "anchored"], ...), "rejected",
+     "feature 'anchors' without the anchored array"),
+    ("damage_missing", "structure", _edit(["damage"], ...), "rejected", "feature 'damage' without the damage object"),
+    ("damage_crack_level_0", "structure", _edit(["damage", "crack_level"], 0.0), "rejected", "crack_level 0"),
+    ("damage_crack_level_above_1", "structure", _edit(["damage", "crack_level"], 1.5), "rejected",
+     "crack_level above 1"),
+    ("damage_rate_negative", "structure", _edit(["damage", "damage_rate"], -0.25), "rejected", "damage_rate < 0"),
+    ("damage_rate_string", "structure", _edit(["damage", "damage_rate"], "0.5"), "rejected",
+     "damage_rate is a string"),
+    ("crack_ptr_decreasing", "structure", lambda h, b: _poke(h, b, "crack_ptr", 2, "i", 1), "rejected",
+     "crack_ptr decreases"),
+    ("crack_ptr_without_segments", "structure", _edit(["arrays", "crack_segments"], ...), "rejected",
+     "crack_ptr without crack_segments"),
+    ("crack_segment_nan", "structure", lambda h, b: _poke(h, b, "crack_segments", 7, "f", float("nan")), "rejected",
+     "NaN in crack_segments"),
+    ("feature_unknown", "structure", _edit(["features"], ["anchors", "damage", "levels"]), "rejected",
+     "a feature this reader does not implement ('levels')"),
+    ("ok_structure_without_cracks", "structure",
+     lambda h, b: _edit(["arrays", "crack_ptr"], ...)(*_edit(["arrays", "crack_segments"], ...)(h, b)),
+     "ok", "the crack arrays are optional (drawing only)"),
+    ("ok_structure", "structure", lambda h, b: (h, b), "ok", "the anchors + damage base file itself"),
 ]
 
 
-def generate(out: str, example_json: str, dyadic_json: str) -> list[str]:
+def generate(out: str, example_json: str, dyadic_json: str, structure_json: str) -> list[str]:
     """Write every case and ``index.json`` into ``out``; returns the paths written (relative to its parent)."""
     os.makedirs(out, exist_ok=True)
     bases = {}
-    for key, path in (("example", example_json), ("dyadic", dyadic_json)):
+    for key, path in (("example", example_json), ("dyadic", dyadic_json), ("structure", structure_json)):
         with open(path, encoding="utf-8") as fh:
             header = json.load(fh)
         with open(os.path.join(os.path.dirname(path), header["buffer"]["uri"]), "rb") as fh:
@@ -356,6 +382,8 @@ def generate(out: str, example_json: str, dyadic_json: str) -> list[str]:
         if expect == "ok":
             entry["vectors"] = vectors
             entry["fragment_names"] = UNICODE_NAMES if name == "ok_unicode_names" else header["fragment_names"]
+        if base == "structure":  # a reader without these features refuses every such file: skip, by name
+            entry["features"] = list(bases[base][0]["features"])
         if name == "crc_mismatch":
             entry["only_crc"] = True
         if name in PYTHON_REFERENCE_BUGS:

@@ -39,6 +39,8 @@ import numpy as np  # noqa: E402
 
 import corrupt  # noqa: E402
 import reference  # noqa: E402
+import reference_damage  # noqa: E402
+import structures  # noqa: E402
 
 from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime  # noqa: E402
 
@@ -331,8 +333,7 @@ def random_impacts(rt: reference.Runtime, count: int, seed: int) -> list[dict]:
         magnitude = rt.default_threshold / _typical_jump(rt, point, direction) * float(rng.choice([0.7, 1.3, 2.5, 6.0]))
         impulse = [c * magnitude for c in direction]
         threshold = None if len(impacts) % 3 else float(np.float32(rt.default_threshold * rng.uniform(0.5, 2)))
-        result = reference.project(rt, point, impulse, threshold)
-        if result.site_margin > reference.SAFE_MARGIN and result.edge_margin > reference.SAFE_MARGIN:
+        if reference_damage.safe(reference_damage.solve(rt, point, impulse, threshold)):
             impacts.append(
                 {"name": f"random hit {len(impacts)}", "point": point, "impulse": impulse, "threshold": threshold}
             )
@@ -427,8 +428,12 @@ def _bits(x: float) -> str:
     return struct.pack(">d", x).hex()
 
 
-def vector_entry(rt: reference.Runtime, impact: dict) -> dict:
-    """One impact with its expected outcome, as written to ``<name>.vectors.json``."""
+def vector_entry(rt: reference.Runtime, impact: dict, health: list | None = None) -> dict | None:
+    """One impact with its expected outcome, as written to ``<name>.vectors.json``.
+
+    With ``health`` (a hit of a sequence, docs/FORMAT.md section 12.5): the hit on that state, the new state
+    under the private key ``_health``, and None instead of an error when a decision is within rounding of a tie.
+    """
     point, impulse, threshold = impact["point"], impact["impulse"], impact["threshold"]
     entry = {
         "name": impact["name"],
@@ -442,12 +447,20 @@ def vector_entry(rt: reference.Runtime, impact: dict) -> dict:
         },
     }
     try:
-        result = reference.project(rt, point, impulse, threshold)
+        if health is None:
+            result = reference_damage.solve(rt, point, impulse, threshold)
+        else:
+            result = reference_damage.hit(rt, health, point, impulse, threshold)
     except reference.InvalidImpact as exc:
         entry.update(expect="error", error=exc.what)
         return entry
     exact = impact.get("exact", False)
     site_tie = exact or impact.get("site_tie", False)
+    if health is not None and not exact and not reference_damage.safe(result):
+        return None
+    if not exact and not (result.crack_margin > reference.SAFE_MARGIN
+                          and result.health_margin > reference_damage.HEALTH_MARGIN):
+        raise ValueError(f"{impact['name']}: a crack or a health is within rounding of a tie")
     if len(result.tied_sites) > 1 and not site_tie:
         raise ValueError(f"{impact['name']}: unplanned exact tie between sites {result.tied_sites}")
     if len(result.tied_sites) == 1 and result.site_margin <= reference.SAFE_MARGIN:
@@ -466,11 +479,17 @@ def vector_entry(rt: reference.Runtime, impact: dict) -> dict:
     )
     if result.loads is not None:
         entry["loads"] = [_number(x) for x in result.loads]
+    if result.cracked is not None:  # section 12: cracked bonds, anchored fragments
+        entry["cracked"] = [m for m, cut in enumerate(result.cracked) if cut]
+        entry["anchored"] = result.anchored
+    if health is not None:
+        entry["_health"] = result.health
     return entry
 
 
-def write_vectors(path: str, runtime_name: str, rt: reference.Runtime, impacts: list[dict]) -> None:
-    """``<name>.vectors.json``: one impact per line so diffs stay readable."""
+def write_vectors(path: str, runtime_name: str, rt: reference.Runtime, impacts: list[dict],
+                  sequences: list[dict] | None = None) -> None:
+    """``<name>.vectors.json``: one impact per line so diffs stay readable (one hit per line in sequences)."""
     head = {
         "format": VECTORS_FORMAT,
         "version": VECTORS_VERSION,
@@ -479,16 +498,20 @@ def write_vectors(path: str, runtime_name: str, rt: reference.Runtime, impacts: 
         "counts": {"sites": len(rt.sites), "modes": rt.k, "fragments": rt.p, "edges": len(rt.edges)},
         "default_threshold": rt.default_threshold,
     }
-    if rt.criterion != "modes":  # version 2: what a reader needs to run these vectors
-        head["features"] = ["stress"]
+    if rt.features:  # version 2: what a reader needs to run these vectors
+        head["features"] = rt.features
         head["criterion"] = rt.criterion
     lines = [json.dumps(vector_entry(rt, impact), allow_nan=False) for impact in impacts]
-    text = (
-        json.dumps(head, indent=2, allow_nan=False)[:-2]
-        + ',\n  "impacts": [\n    '
-        + ",\n    ".join(lines)
-        + "\n  ]\n}\n"
-    )
+    text = (json.dumps(head, indent=2, allow_nan=False)[:-2] + ',\n  "impacts": [\n    ' + ",\n    ".join(lines)
+            + "\n  ]")
+    if sequences is not None:
+        blocks = []
+        for seq in sequences:
+            hits = ",\n        ".join(json.dumps(h, allow_nan=False) for h in seq["hits"])
+            meta = json.dumps({"name": seq["name"], "start": seq["start"]}, allow_nan=False)[:-1]
+            blocks.append(meta + ', "hits": [\n        ' + hits + "\n    ]}")
+        text += ',\n  "sequences": [\n    ' + ",\n    ".join(blocks) + "\n  ]"
+    text += "\n}\n"
     with open(path, "w", encoding="ascii", newline="\n") as fh:
         fh.write(text)
 
@@ -516,7 +539,8 @@ def generate(out: str, rebake: bool = False) -> list[str]:
         if os.path.abspath(out) != HERE and not rebake:
             for suffix in (".fracture.json", ".fracture.bin"):
                 shutil.copyfile(os.path.join(HERE, stem + suffix), os.path.join(out, stem + suffix))
-    for seed, name in enumerate([*small, *stems, *stress_small, *stress_stems]):
+    structure = _structure_files(out, small, stress_small)
+    for seed, name in enumerate([*small, *stems, *stress_small, *stress_stems, *structure]):
         rt = reference.Runtime.from_data(load_runtime(os.path.join(out, f"{name}.fracture.json")))
         rng = np.random.default_rng(100 + seed)
         impacts = designed_impacts(rt, rng)
@@ -529,14 +553,33 @@ def generate(out: str, rebake: bool = False) -> list[str]:
         count = (SMALL_IMPACTS if name.startswith("random") else
                  SAMPLE_IMPACTS if name in stems + stress_stems else 8)
         impacts += random_impacts(rt, count, seed=200 + seed)
-        write_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", rt, impacts)
+        seqs = None
+        if name in structure:  # section 12.5: hits applied one after another to one state
+            seqs = structures.dyadic_sequences(rt, vector_entry) if name == "structure_dyadic" else []
+            seqs += structures.sequences(rt, 300 + seed, vector_entry)
+        write_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", rt, impacts, seqs)
         written.append(f"{name}.vectors.json")
+    written += [f"{name}{suffix}" for name in structure for suffix in (".fracture.json", ".fracture.bin")]
     written += corrupt.generate(
         os.path.join(out, "corrupt"),
         os.path.join(out, "example.fracture.json"),
         os.path.join(out, "dyadic_d3.fracture.json"),
+        os.path.join(out, "structure_dyadic.fracture.json"),
     )
     return written
+
+
+def _structure_files(out: str, small: dict, stress_small: dict) -> list[str]:
+    """Write the section-12 runtime files (structures.py) into ``out``; their names, in vector-seed order."""
+    files = {
+        "structure_dyadic": structures.structure_dyadic(),
+        "damage_stress": structures.damage_stress(stress_small["stress_dyadic"]),
+        "random_structure": structures.random_structure(small["random_d3"], seed=17),
+        "pillar_structure": structures.pillar_structure(load_runtime(os.path.join(out, "pillar.fracture.json"))),
+    }
+    for name, data in files.items():
+        write_runtime(data, os.path.join(out, f"{name}.fracture.json"))
+    return list(files)
 
 
 def _doc_cases() -> list[dict]:

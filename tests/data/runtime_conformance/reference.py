@@ -42,6 +42,10 @@ class Runtime:
         ``"modes"`` or ``"stress"`` (docs/FORMAT.md section 11).
     stress : tuple or None
         With the stress criterion: ``(ptr, bonds, gains, strength)`` as lists (gains of 3-tuples).
+    anchored : list or None
+        Feature ``"anchors"`` (docs/FORMAT.md section 12): 0/1 per fragment.
+    damage : tuple or None
+        Feature ``"damage"``: ``(c, r)``, the crack level and the damage rate.
     """
 
     sites: list
@@ -51,6 +55,15 @@ class Runtime:
     default_threshold: float
     criterion: str = "modes"
     stress: tuple | None = None
+    anchored: list | None = None
+    damage: tuple | None = None
+
+    @property
+    def features(self) -> list:
+        """The file's version-2 features, sorted."""
+        present = {"anchors": self.anchored is not None, "damage": self.damage is not None,
+                   "stress": self.criterion == "stress"}
+        return [name for name in sorted(present) if present[name]]
 
     @property
     def d(self) -> int:
@@ -72,12 +85,14 @@ class Runtime:
             arrays = data.stress
             stress = (arrays["site_bonds_ptr"].tolist(), arrays["site_bonds"].tolist(),
                       [tuple(g) for g in arrays["site_bond_gain"].tolist()], arrays["bond_strength"].tolist())
+        anchored = None if data.anchored is None else [int(x) for x in data.anchored.tolist()]
+        damage = (float(data.damage["crack_level"]), float(data.damage["damage_rate"])) if data.damage else None
         return cls(sites=[tuple(float(c) for c in s) for s in data.sites.tolist()],
                    B=[[tuple(m) for m in site] for site in data.B.tolist()],
                    W=[[tuple(f) for f in mode] for mode in data.W.tolist()],
                    edges=[tuple(e) for e in data.edges.tolist()],
                    default_threshold=float(data.default_threshold),
-                   criterion=getattr(data, "criterion", "modes"), stress=stress)
+                   criterion=getattr(data, "criterion", "modes"), stress=stress, anchored=anchored, damage=damage)
 
 
 @dataclass(frozen=True)
@@ -93,6 +108,11 @@ class Expected:
     site_margin: float  # relative gap to the runner-up site (inf: one site, 0: exact tie)
     edge_margin: float  # smallest relative gap between |jump'| and T/m over the edges (stress: g and t * S)
     loads: list | None = None  # stress criterion: L_e = g / (t * S_e) for listed bonds with g > 0, else 0
+    cracked: list | None = None  # section 12: cracked bonds (bool per bond)
+    anchored: list | None = None  # section 12: 0/1 per fragment (its group holds an anchored fragment)
+    health: list | None = None  # section 12: the state after the hit
+    crack_margin: float = math.inf  # smallest relative gap between a and c * b over the bonds
+    health_margin: float = math.inf  # smallest health left above 0 (a health within rounding of 0 is a tie)
 
 
 def squared_distance(site, x, y, z) -> float:
@@ -149,25 +169,31 @@ def components(p: int, edges, broken) -> list:
     return [find(j) for j in range(p)]
 
 
-def project(rt: Runtime, point, impulse, threshold) -> Expected:
-    """The answer docs/FORMAT.md section 4 prescribes, with the scale-invariant rule.
+@dataclass(frozen=True)
+class Response:
+    """Steps 1-5 of section 4 before any decision: the site, the scale and the unscaled response."""
 
-    Parameters
-    ----------
-    rt : Runtime
-    point, impulse : 3 floats
-    threshold : float or None (the file's default threshold)
-    """
+    v: int
+    tied: tuple
+    site_margin: float
+    m: float
+    n: list  # n' = n / m
+    t: float  # T / m
+    alpha: list  # of n' (unscaled)
+    alpha_scale: list  # magnitudes behind alpha (for tie margins)
+    disp: list  # of n' (unscaled), p rows of d
+
+
+def response(rt: Runtime, point, impulse, threshold) -> Response:
+    """:class:`Response` of one valid impact (``m == 0``: everything zero, ``t`` = inf)."""
     check_inputs(point, impulse, threshold)
     T = rt.default_threshold if threshold is None else threshold
     v, tied, site_margin = nearest(rt, point)
     k, p, d = rt.k, rt.p, rt.d
     m = max(abs(c) for c in impulse)
     if m == 0:
-        zero = [[0.0] * d for _ in range(p)]
-        broken = [False] * len(rt.edges)
-        return Expected(v, tied, [0.0] * k, zero, broken, components(p, rt.edges, broken),
-                        site_margin, math.inf)
+        return Response(v, tied, site_margin, 0.0, [0.0] * 3, math.inf, [0.0] * k, [0.0] * k,
+                        [[0.0] * d for _ in range(p)])
     n = [c / m for c in impulse]
     B = rt.B[v]
     if d == 1:
@@ -187,6 +213,27 @@ def project(rt: Runtime, point, impulse, threshold) -> Expected:
             row.append(acc)
         disp.append(row)
     t = T / m  # overflow -> inf (nothing breaks), underflow -> 0 (any nonzero jump breaks)
+    return Response(v, tied, site_margin, m, n, t, alpha, alpha_scale, disp)
+
+
+def project(rt: Runtime, point, impulse, threshold) -> Expected:
+    """The answer docs/FORMAT.md section 4 prescribes, with the scale-invariant rule (stateless, no damage).
+
+    Parameters
+    ----------
+    rt : Runtime
+    point, impulse : 3 floats
+    threshold : float or None (the file's default threshold)
+    """
+    r = response(rt, point, impulse, threshold)
+    v, tied, site_margin, m, n, t = r.v, r.tied, r.site_margin, r.m, r.n, r.t
+    alpha, alpha_scale, disp = r.alpha, r.alpha_scale, r.disp
+    p, k, d = rt.p, rt.k, rt.d
+    if m == 0:
+        zero = [[0.0] * d for _ in range(p)]
+        broken = [False] * len(rt.edges)
+        return Expected(v, tied, [0.0] * k, zero, broken, components(p, rt.edges, broken),
+                        site_margin, math.inf)
     if rt.criterion == "stress":
         broken, loads, edge_margin = stress_test(rt, v, n, t)
         return Expected(site=v, tied_sites=tied, alpha=[m * a for a in alpha],
@@ -194,16 +241,24 @@ def project(rt: Runtime, point, impulse, threshold) -> Expected:
                         groups=components(p, rt.edges, broken), site_margin=site_margin, edge_margin=edge_margin,
                         loads=loads)
     broken, edge_margin = [], math.inf
-    for P, Q in rt.edges:
-        jump = [disp[P][c] - disp[Q][c] for c in range(d)]
-        norm = abs(jump[0]) if d == 1 else math.sqrt(jump[0] * jump[0] + jump[1] * jump[1] + jump[2] * jump[2])
-        broken.append(norm > t)
-        scale = sum(alpha_scale[i] * (max(map(abs, rt.W[i][P])) + max(map(abs, rt.W[i][Q]))) for i in range(k))
+    for (norm, limit, scale) in modes_measures(rt, disp, alpha_scale, t):
+        broken.append(norm > limit)
         if math.isfinite(t) and scale > 0:
             edge_margin = min(edge_margin, abs(norm - t) / scale)
     return Expected(site=v, tied_sites=tied, alpha=[m * a for a in alpha],
                     displacement=[[m * x for x in row] for row in disp], broken=broken,
                     groups=components(p, rt.edges, broken), site_margin=site_margin, edge_margin=edge_margin)
+
+
+def modes_measures(rt: Runtime, disp, alpha_scale, t: float) -> list:
+    """``(a, b, scale)`` per bond, criterion ``"modes"``: ``|jump'|``, ``t`` and the magnitudes behind ``a``."""
+    out = []
+    for P, Q in rt.edges:
+        jump = [disp[P][c] - disp[Q][c] for c in range(rt.d)]
+        norm = abs(jump[0]) if rt.d == 1 else math.sqrt(jump[0] * jump[0] + jump[1] * jump[1] + jump[2] * jump[2])
+        scale = sum(alpha_scale[i] * (max(map(abs, rt.W[i][P])) + max(map(abs, rt.W[i][Q]))) for i in range(rt.k))
+        out.append((norm, t, scale))
+    return out
 
 
 def stress_gains(rt: Runtime, v: int, n) -> list:
