@@ -7,7 +7,6 @@ import subprocess
 
 import pytest
 from engine_support import (
-    READER_FEATURES,
     REPO,
     SAMPLE_ASSETS,
     check_answers,
@@ -21,7 +20,22 @@ from engine_support import (
     vector_names,
 )
 
+# Section 12's driver protocol (--structure, start lines) is the C driver's: its test has the helpers.
+from test_engine_c import (
+    RANDOM_SEQUENCE_FILES,
+    check_refused_hits,
+    check_round_trip,
+    check_sequences,
+    check_structure,
+    random_sequences,
+    refused_hits_input,
+    sequence_files,
+    sequence_input,
+)
+
 CS_DIR = os.path.join(REPO, "engines", "csharp")
+# The format-2 features the C# reader implements (engine_support.READER_FEATURES["csharp"] still lists "stress" only).
+FEATURES = ("anchors", "damage", "stress")
 SOURCES = [os.path.join(CS_DIR, "FractureRuntime.cs"), os.path.join(CS_DIR, "tools", "FractureCheck.cs")]
 
 
@@ -52,12 +66,51 @@ MODES = {"table": (), "compact": ("--compact",)}
 
 
 @pytest.mark.parametrize("mode", sorted(MODES))
-@pytest.mark.parametrize("name", vector_names(READER_FEATURES["csharp"]))
+@pytest.mark.parametrize("name", vector_names(FEATURES))
 def test_csharp_reader_passes_the_vectors(driver, name, mode):
     vectors = load_vectors(name)
-    result = run_driver(driver, *runtime_paths(name), protocol_input(vectors["impacts"]), *MODES[mode])
+    result = run_driver(driver, *runtime_paths(name), protocol_input(vectors["impacts"]), "--structure",
+                        *MODES[mode])
     assert result.returncode == 0, result.stdout + result.stderr
     assert check_answers(vectors, result.stdout) == []
+    assert check_structure(vectors, result.stdout) == []
+
+
+@pytest.mark.parametrize("mode", sorted(MODES))
+@pytest.mark.parametrize("name", sequence_files(FEATURES))
+def test_csharp_reader_runs_the_sequences_of_hits(driver, name, mode):
+    """Hits on a damage state (Hit), fresh or loaded from saved bytes: answers and healths of section 12.5."""
+    sequences = load_vectors(name)["sequences"]
+    result = run_driver(driver, *runtime_paths(name), sequence_input(sequences), "--structure", *MODES[mode])
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert check_sequences(sequences, result.stdout) == []
+
+
+@pytest.mark.parametrize("name", RANDOM_SEQUENCE_FILES)
+def test_csharp_reader_matches_the_reference_on_many_sequences(driver, name):
+    """Hundreds of random hits on states that add up: both paths give the Python reference's answers."""
+    sequences = list(random_sequences(name))
+    for mode in sorted(MODES):
+        result = run_driver(driver, *runtime_paths(name), sequence_input(sequences), "--structure", *MODES[mode])
+        assert result.returncode == 0, result.stdout + result.stderr
+        assert check_sequences(sequences, result.stdout) == [], mode
+
+
+@pytest.mark.parametrize("name", ["structure_dyadic", "damage_stress", "random_structure"])
+def test_csharp_reader_refused_hits_leave_the_state_unchanged(driver, name):
+    stdin, answers = refused_hits_input(name)
+    result = run_driver(driver, *runtime_paths(name), stdin, "--structure")
+    assert result.returncode == 0, result.stdout + result.stderr
+    check_refused_hits(result.stdout, answers)
+
+
+def test_csharp_reader_saves_and_loads_states(driver):
+    def run(name, stdin, *flags):
+        result = run_driver(driver, *runtime_paths(name), stdin, "--structure", *flags)
+        assert result.returncode == 0, result.stdout + result.stderr
+        return result.stdout
+
+    check_round_trip(run, MODES)
 
 
 @pytest.mark.parametrize("name", SAMPLE_ASSETS)
@@ -70,6 +123,6 @@ def test_csharp_reader_matches_the_reference_on_many_hits(driver, name):
         assert check_answers({"runtime": name, "impacts": impacts}, result.stdout) == [], mode
 
 
-@pytest.mark.parametrize("case", corrupt_cases(), ids=lambda c: c["name"])
+@pytest.mark.parametrize("case", corrupt_cases(FEATURES), ids=lambda c: c["name"])
 def test_csharp_reader_on_damaged_files(driver, case):
     check_damaged_file(case, lambda *args: run_driver(driver, *args))

@@ -71,6 +71,7 @@ const char *fr_status_string(fr_status status)
     case FR_ERR_DATA: return "invalid values in the binary file";
     case FR_ERR_MEMORY: return "out of memory";
     case FR_ERR_INPUT: return "invalid impact (non-finite point or impulse, NaN or negative threshold)";
+    case FR_ERR_STATE: return "invalid damage state (not e healths in [0, 1])";
     }
     return "unknown status";
 }
@@ -397,23 +398,33 @@ static int key_is(const char *key, size_t length, const char *name)
 
 /* ------------------------------------------------------------------ header */
 
-/* The five arrays of section 2, then the four of the stress criterion (section 11, only with feature "stress"). */
-enum { A_SITES, A_B, A_W, A_EDGES, A_AREAS, A_PTR, A_BONDS, A_GAIN, A_STRENGTH, A_COUNT };
+/*
+ * The five arrays of section 2, the four of the stress criterion (section 11, only with feature "stress"),
+ * then those of section 12: anchored (feature "anchors") and the optional crack arrays (version 2).
+ */
+enum {
+    A_SITES, A_B, A_W, A_EDGES, A_AREAS, A_PTR, A_BONDS, A_GAIN, A_STRENGTH, A_ANCHORED, A_CRACK_PTR, A_CRACK_SEGMENTS,
+    A_COUNT
+};
 #define A_REQUIRED 5
 enum { DT_NONE, DT_F32, DT_I32, DT_OTHER };
 static const char *const ARRAY_NAMES[A_COUNT] = {"sites", "B", "W", "edges", "edge_areas", "site_bonds_ptr",
-                                                 "site_bonds", "site_bond_gain", "bond_strength"};
-static const int ARRAY_RANK[A_COUNT] = {2, 3, 3, 2, 1, 1, 1, 2, 1};
-static const int ARRAY_DTYPE[A_COUNT] = {DT_F32, DT_F32, DT_F32, DT_I32, DT_F32, DT_I32, DT_I32, DT_F32, DT_F32};
-#define COUNT_KEYS 5 /* counts.site_bonds (index 4) only with the stress criterion */
-static const char *const COUNT_NAMES[COUNT_KEYS] = {"sites", "modes", "fragments", "edges", "site_bonds"};
+                                                 "site_bonds", "site_bond_gain", "bond_strength", "anchored",
+                                                 "crack_ptr", "crack_segments"};
+static const int ARRAY_RANK[A_COUNT] = {2, 3, 3, 2, 1, 1, 1, 2, 1, 1, 1, 3};
+static const int ARRAY_DTYPE[A_COUNT] = {DT_F32, DT_F32, DT_F32, DT_I32, DT_F32, DT_I32, DT_I32, DT_F32, DT_F32,
+                                         DT_I32, DT_I32, DT_F32};
+/* counts.site_bonds (index 4) only with the stress criterion, counts.crack_segments (5) with the crack arrays */
+#define COUNT_KEYS 6
+static const char *const COUNT_NAMES[COUNT_KEYS] = {"sites", "modes", "fragments", "edges", "site_bonds",
+                                                    "crack_segments"};
 #define NAME_MAX_SHOWN 64 /* bytes of an unknown feature or criterion name kept for the message */
 enum { CRIT_MODES, CRIT_STRESS, CRIT_OTHER };
 
 enum {
     K_FORMAT = 1, K_VERSION = 2, K_DIM = 4, K_COUNTS = 8, K_NAMES = 16, K_TRANSFORM = 32, K_THRESHOLD = 64,
     K_RADIUS = 128, K_BUFFER = 256, K_ARRAYS = 512, K_URI = 1024, K_LENGTH = 2048, K_CRC = 4096,
-    K_FEATURES = 8192, K_CRITERION = 16384
+    K_FEATURES = 8192, K_CRITERION = 16384, K_DAMAGE = 32768
 };
 
 typedef struct array_entry {
@@ -434,12 +445,17 @@ typedef struct header {
     array_entry arrays[A_COUNT];
     /* Version 2 (section 11): features and criterion. */
     int features_bad;     /* `features` is not a list of strings */
-    int feature_count, has_stress;
+    int feature_count, has_stress, has_anchors, has_damage;
+    int has_cracks;       /* version 2 and the table lists crack_ptr or crack_segments (set by check_arrays) */
     int feature_unknown;  /* a feature this reader does not implement; its name in unknown_name */
     char unknown_name[NAME_MAX_SHOWN + 1];
     int criterion;        /* CRIT_*; CRIT_MODES when absent */
     int criterion_bad;    /* `criterion` is not a string */
     char criterion_name[NAME_MAX_SHOWN + 1];
+    /* Section 12: the `damage` object (K_DAMAGE when seen). */
+    int damage_bad;       /* `damage` is not an object */
+    unsigned damage_keys; /* 1: crack_level is a number, 2: damage_rate is a number */
+    double crack_level, damage_rate;
 } header;
 
 /* A name read by j_string into a buffer of NAME_MAX_SHOWN bytes: NUL-terminated, truncated if longer. */
@@ -448,7 +464,7 @@ static void terminate_name(char *buf, size_t length)
     buf[length < NAME_MAX_SHOWN ? length : NAME_MAX_SHOWN] = 0;
 }
 
-/* "features": a list of strings; records whether it holds "stress" and the first name it does not know. */
+/* "features": a list of strings; records the ones this reader implements and the first name it does not know. */
 static int parse_features(jp *j, header *h)
 {
     int first = 1, more;
@@ -473,8 +489,12 @@ static int parse_features(jp *j, header *h)
             return 0;
         terminate_name(name, n);
         h->feature_count++;
-        if (!nul && n == 6 && memcmp(name, "stress", 6) == 0) {
+        if (!nul && key_is(name, n, "stress")) {
             h->has_stress = 1;
+        } else if (!nul && key_is(name, n, "anchors")) {
+            h->has_anchors = 1;
+        } else if (!nul && key_is(name, n, "damage")) {
+            h->has_damage = 1;
         } else if (!h->feature_unknown) {
             h->feature_unknown = 1;
             memcpy(h->unknown_name, name, sizeof name);
@@ -561,6 +581,35 @@ static int read_double(jp *j, double *value, unsigned *seen, unsigned bit)
     }
     j->p = save;
     return j_skip(j);
+}
+
+/* "damage" (section 12.1): an object with the numbers crack_level and damage_rate; checked by check_damage. */
+static int parse_damage(jp *j, header *h)
+{
+    int first = 1, more;
+    char key[16];
+    size_t n;
+    h->seen |= K_DAMAGE;
+    h->damage_bad = 0;
+    h->damage_keys = 0;
+    if (j_peek(j) != '{') {
+        h->damage_bad = 1;
+        return j_skip(j);
+    }
+    if (!j_open(j, '{'))
+        return 0;
+    while ((more = j_next_key(j, &first, key, sizeof key, &n)) == 1) {
+        int ok = 1;
+        if (key_is(key, n, "crack_level"))
+            ok = read_double(j, &h->crack_level, &h->damage_keys, 1);
+        else if (key_is(key, n, "damage_rate"))
+            ok = read_double(j, &h->damage_rate, &h->damage_keys, 2);
+        else
+            ok = j_skip(j);
+        if (!ok)
+            return 0;
+    }
+    return more == 0;
 }
 
 static int parse_array_entry(jp *j, array_entry *a)
@@ -665,9 +714,12 @@ static int parse_top_key(jp *j, header *h, const char *key, size_t n)
         return more == 0;
     }
     if (key_is(key, n, "features")) {
-        h->features_bad = h->feature_count = h->has_stress = h->feature_unknown = 0; /* duplicate keys: the last wins */
+        /* duplicate keys: the last wins */
+        h->features_bad = h->feature_count = h->has_stress = h->has_anchors = h->has_damage = h->feature_unknown = 0;
         return parse_features(j, h);
     }
+    if (key_is(key, n, "damage"))
+        return parse_damage(j, h);
     if (key_is(key, n, "criterion"))
         return parse_criterion(j, h);
     if (key_is(key, n, "counts"))
@@ -734,7 +786,7 @@ static int parse_object_of(jp *j, header *h, int which)
 static fr_status check_features(header *h, char *msg, size_t cap)
 {
     if (h->version < 2) {
-        h->has_stress = 0;
+        h->has_stress = h->has_anchors = h->has_damage = 0;
         h->criterion = CRIT_MODES;
         return FR_OK;
     }
@@ -859,6 +911,15 @@ struct fr_runtime {
     int32_t *bond_edge;     /* (nnz,) edge of each entry */
     float *bond_gain;       /* (nnz, 3) G: tensile force per unit impulse along x, y, z */
     float *bond_strength;   /* (e,) S */
+    /* Section 12. */
+    int32_t features;       /* FR_FEATURE_* */
+    int32_t *anchored;      /* (p,) 0/1; NULL without feature "anchors" */
+    double crack_level;     /* c; 1 without feature "damage" (a state then only remembers broken bonds) */
+    double damage_rate;     /* r; 0 without feature "damage" */
+    double damage_q;        /* q = r / (1 - c), once per file (0 when c == 1) */
+    int32_t segments;       /* crack segments n; 0 without the crack arrays */
+    int32_t *crack_ptr;     /* (e + 1,) bond m's segments are crack_ptr[m] .. crack_ptr[m+1]-1; NULL without */
+    float *crack_segments;  /* (n, 2, 3) */
     size_t bytes;      /* size of the block */
     void *scratch;     /* the built-in workspace */
 };
@@ -867,6 +928,9 @@ typedef struct dims {
     int64_t s, k, p, e, d;
     int64_t nnz;  /* site_bonds entries; 0 without the stress criterion */
     int stress;   /* criterion "stress" */
+    int anchors;  /* feature "anchors": the anchored array */
+    int cracks;   /* the crack arrays */
+    int64_t segments; /* crack_segments entries; 0 without the crack arrays */
 } dims;
 
 static uint32_t read_u32(const unsigned char *p)
@@ -917,13 +981,34 @@ static const char *missing_key(const header *h)
     return NULL;
 }
 
-/* Each array entry: present, right dtype and rank, byte_length = 4 * product(shape), inside the file. */
-static fr_status check_arrays(const header *h, size_t binary_size, char *msg, size_t cap)
+/* Whether the file must hold array i: the required five and those of the features it lists. */
+static int array_needed(const header *h, int i)
+{
+    if (i < A_REQUIRED)
+        return 1;
+    if (i <= A_STRENGTH)
+        return h->has_stress;
+    if (i == A_ANCHORED)
+        return h->has_anchors;
+    return h->has_cracks;
+}
+
+/*
+ * Each array entry the file needs: present, right dtype and rank, byte_length = 4 * product(shape), inside
+ * the file. The crack arrays (drawing only) come together: a version-2 table that lists one needs both.
+ */
+static fr_status check_arrays(header *h, size_t binary_size, char *msg, size_t cap)
 {
     int i, r;
-    for (i = 0; i < (h->has_stress ? A_COUNT : A_REQUIRED); i++) {
+    h->has_cracks = h->version >= 2 && (h->arrays[A_CRACK_PTR].present || h->arrays[A_CRACK_SEGMENTS].present);
+    if (h->has_cracks && !(h->arrays[A_CRACK_PTR].present && h->arrays[A_CRACK_SEGMENTS].present))
+        return fail(msg, cap, FR_ERR_HEADER, "the crack arrays come together: %s missing",
+                    h->arrays[A_CRACK_PTR].present ? "crack_segments" : "crack_ptr");
+    for (i = 0; i < A_COUNT; i++) {
         const array_entry *a = &h->arrays[i];
         uint64_t count = 1;
+        if (!array_needed(h, i))
+            continue;
         if (!a->present || a->dtype == DT_NONE || !a->has_offset || !a->has_length || a->rank < 0)
             return fail(msg, cap, FR_ERR_HEADER, "array '%s' entry is missing or malformed", ARRAY_NAMES[i]);
         if (a->dtype != ARRAY_DTYPE[i])
@@ -945,6 +1030,24 @@ static fr_status check_arrays(const header *h, size_t binary_size, char *msg, si
             return fail(msg, cap, FR_ERR_SIZE, "array '%s' lies outside the binary file or is not 16-byte aligned",
                         ARRAY_NAMES[i]);
     }
+    return FR_OK;
+}
+
+/* Section 12.1: with feature "damage", the object `damage` with 0 < crack_level <= 1 and a finite damage_rate >= 0. */
+static fr_status check_damage(const header *h, char *msg, size_t cap)
+{
+    if (!h->has_damage)
+        return FR_OK;
+    if (!(h->seen & K_DAMAGE) || h->damage_bad)
+        return fail(msg, cap, FR_ERR_HEADER, "the feature 'damage' needs a header object 'damage'");
+    if (!(h->damage_keys & 1u) || !isfinite(h->crack_level))
+        return fail(msg, cap, FR_ERR_HEADER, "damage.crack_level must be a finite number");
+    if (!(h->damage_keys & 2u) || !isfinite(h->damage_rate))
+        return fail(msg, cap, FR_ERR_HEADER, "damage.damage_rate must be a finite number");
+    if (!(h->crack_level > 0 && h->crack_level <= 1))
+        return fail(msg, cap, FR_ERR_HEADER, "damage.crack_level must be in (0, 1], got %g", h->crack_level);
+    if (h->damage_rate < 0)
+        return fail(msg, cap, FR_ERR_HEADER, "damage.damage_rate must be >= 0, got %g", h->damage_rate);
     return FR_OK;
 }
 
@@ -986,6 +1089,22 @@ static fr_status check_shapes(const header *h, dims *dm, char *msg, size_t cap)
         if (!(h->counts_seen & 16u) || h->counts[4] != dm->nnz)
             return fail(msg, cap, FR_ERR_SIZE, "header counts.site_bonds does not match the arrays");
     }
+    dm->anchors = h->has_anchors;
+    if (dm->anchors && h->arrays[A_ANCHORED].shape[0] != dm->p)
+        return fail(msg, cap, FR_ERR_SIZE, "array anchored has shape [%ld], expected [%ld]",
+                    (long)h->arrays[A_ANCHORED].shape[0], (long)dm->p);
+    dm->cracks = h->has_cracks;
+    dm->segments = 0;
+    if (dm->cracks) {
+        const int64_t *ptr = h->arrays[A_CRACK_PTR].shape, *segments = h->arrays[A_CRACK_SEGMENTS].shape;
+        dm->segments = segments[0];
+        if (dm->segments > INT32_MAX)
+            return fail(msg, cap, FR_ERR_SIZE, "counts beyond 2^31");
+        if (ptr[0] != dm->e + 1 || segments[1] != 2 || segments[2] != 3)
+            return fail(msg, cap, FR_ERR_SIZE, "crack arrays must be crack_ptr (e + 1) and crack_segments (n, 2, 3)");
+        if (!(h->counts_seen & 32u) || h->counts[5] != dm->segments)
+            return fail(msg, cap, FR_ERR_SIZE, "header counts.crack_segments does not match the arrays");
+    }
     if (h->name_bad || h->name_count != dm->p)
         return fail(msg, cap, FR_ERR_HEADER, "fragment_names must be %ld strings without U+0000", (long)dm->p);
     if (!isfinite(h->default_threshold) || h->default_threshold < 0)
@@ -995,7 +1114,7 @@ static fr_status check_shapes(const header *h, dims *dm, char *msg, size_t cap)
             return fail(msg, cap, FR_ERR_HEADER, "transform must be 16 finite numbers");
     if (!isfinite(h->impact_radius))
         return fail(msg, cap, FR_ERR_HEADER, "impact_radius must be finite");
-    return FR_OK;
+    return check_damage(h, msg, cap);
 }
 
 /*
@@ -1038,6 +1157,36 @@ static fr_status check_stress_data(const header *h, const unsigned char *bin, co
     return FR_OK;
 }
 
+/*
+ * Section 12.2's validation, read straight from the binary: anchored holds only 0 and 1; crack_ptr starts
+ * at 0, never decreases and ends at n; every crack_segments coordinate is finite.
+ */
+static fr_status check_structure_data(const header *h, const unsigned char *bin, const dims *dm, char *msg,
+                                      size_t cap)
+{
+    int64_t i;
+    if (dm->anchors)
+        for (i = 0; i < dm->p; i++) {
+            const int32_t flag = read_i32(bin + h->arrays[A_ANCHORED].offset + 4 * i);
+            if (flag != 0 && flag != 1)
+                return fail(msg, cap, FR_ERR_DATA, "array anchored must hold only 0 and 1");
+        }
+    if (dm->cracks) {
+        const unsigned char *ptr = bin + h->arrays[A_CRACK_PTR].offset;
+        const unsigned char *segments = bin + h->arrays[A_CRACK_SEGMENTS].offset;
+        int bad = read_i32(ptr) != 0 || read_i32(ptr + 4 * dm->e) != dm->segments;
+        for (i = 0; i < dm->e && !bad; i++)
+            bad = read_i32(ptr + 4 * (i + 1)) < read_i32(ptr + 4 * i);
+        if (bad)
+            return fail(msg, cap, FR_ERR_DATA, "crack_ptr must start at 0, never decrease and end at %ld",
+                        (long)dm->segments);
+        for (i = 0; i < 6 * dm->segments; i++)
+            if ((read_u32(segments + 4 * i) & 0x7F800000u) == 0x7F800000u)
+                return fail(msg, cap, FR_ERR_DATA, "array crack_segments must be finite");
+    }
+    return FR_OK;
+}
+
 /* Finite floats and edges with 0 <= P < Q < p, read straight from the binary. */
 static fr_status check_data(const header *h, const unsigned char *bin, const dims *dm, char *msg, size_t cap)
 {
@@ -1058,10 +1207,15 @@ static fr_status check_data(const header *h, const unsigned char *bin, const dim
             return fail(msg, cap, FR_ERR_DATA, "edge %ld is (%ld, %ld): edges must be (P, Q) with 0 <= P < Q < %ld",
                         (long)i, (long)P, (long)Q, (long)dm->p);
     }
-    return dm->stress ? check_stress_data(h, bin, dm, msg, cap) : FR_OK;
+    if (dm->stress) {
+        fr_status status = check_stress_data(h, bin, dm, msg, cap);
+        if (status != FR_OK)
+            return status;
+    }
+    return check_structure_data(h, bin, dm, msg, cap);
 }
 
-static fr_status check_header(const header *h, const void *binary, size_t binary_size, unsigned flags, dims *dm,
+static fr_status check_header(header *h, const void *binary, size_t binary_size, unsigned flags, dims *dm,
                               char *msg, size_t cap)
 {
     const char *missing = missing_key(h);
@@ -1109,7 +1263,7 @@ static uint64_t take(uint64_t *cursor, uint64_t bytes)
 }
 
 typedef struct workspace_layout {
-    uint64_t alpha, disp, cut, uf, size;
+    uint64_t alpha, disp, cut, uf, health, holding, size;
 } workspace_layout;
 
 static int64_t round_up(int64_t n, int64_t multiple) { return (n + multiple - 1) / multiple * multiple; }
@@ -1122,6 +1276,8 @@ static workspace_layout workspace_plan(int64_t k, int64_t p, int64_t e, int64_t 
     w.disp = take(&cursor, 8u * (uint64_t)round_up(p * d, 16));
     w.cut = take(&cursor, (uint64_t)e);
     w.uf = take(&cursor, 8u * (uint64_t)p); /* union-find parents, or table_groups' 2p labels */
+    w.health = take(&cursor, 8u * (uint64_t)e); /* fr_project's fresh damage state */
+    w.holding = take(&cursor, 4u * (uint64_t)e); /* fr_hit: the bonds that hold */
     w.size = take(&cursor, 0);
     return w;
 }
@@ -1140,7 +1296,7 @@ static int wants_table(const dims *dm, unsigned flags)
 typedef struct block_layout {
     uint64_t sites, B, W, areas, edges, names, name_offsets, kd_points, kd_index, kd_nodes, whole, identity;
     uint64_t jumps, jump_edge, merge_at, merge_child, merge_label, bond_ptr, bond_edge, bond_gain, bond_strength;
-    uint64_t scratch, size, kd_capacity;
+    uint64_t anchored, crack_ptr, crack_segments, scratch, size, kd_capacity;
 } block_layout;
 
 static block_layout block_plan(const dims *dm, int64_t name_bytes, int table)
@@ -1170,6 +1326,9 @@ static block_layout block_plan(const dims *dm, int64_t name_bytes, int table)
     b.bond_edge = take(&cursor, 4u * (uint64_t)dm->nnz);
     b.bond_gain = take(&cursor, 12u * (uint64_t)dm->nnz);
     b.bond_strength = take(&cursor, dm->stress ? 4u * e : 0u);
+    b.anchored = take(&cursor, dm->anchors ? 4u * p : 0u);
+    b.crack_ptr = take(&cursor, dm->cracks ? 4u * (e + 1) : 0u);
+    b.crack_segments = take(&cursor, 24u * (uint64_t)dm->segments);
     b.scratch = take(&cursor, workspace_plan(dm->k, dm->p, dm->e, dm->d).size);
     b.size = take(&cursor, 0);
     return b;
@@ -1203,6 +1362,15 @@ static void copy_arrays(fr_runtime *rt, const header *h, const unsigned char *bi
             rt->bond_gain[i] = read_f32(bin + h->arrays[A_GAIN].offset + 4 * i);
         for (i = 0; i < (int64_t)rt->e; i++)
             rt->bond_strength[i] = read_f32(bin + h->arrays[A_STRENGTH].offset + 4 * i);
+    }
+    if (rt->anchored != NULL)
+        for (i = 0; i < (int64_t)rt->p; i++)
+            rt->anchored[i] = read_i32(bin + h->arrays[A_ANCHORED].offset + 4 * i);
+    if (rt->crack_ptr != NULL) {
+        for (i = 0; i <= (int64_t)rt->e; i++)
+            rt->crack_ptr[i] = read_i32(bin + h->arrays[A_CRACK_PTR].offset + 4 * i);
+        for (i = 0; i < 6 * (int64_t)rt->segments; i++)
+            rt->crack_segments[i] = read_f32(bin + h->arrays[A_CRACK_SEGMENTS].offset + 4 * i);
     }
 }
 
@@ -1510,7 +1678,7 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
                   unsigned flags, const fr_allocator *allocator, fr_runtime **out, char *message, size_t message_size)
 {
     header h;
-    dims dm = {0, 0, 0, 0, 0, 0, 0};
+    dims dm;
     block_layout b;
     fr_allocator al;
     fr_status status;
@@ -1519,6 +1687,7 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     table_temp tt = {NULL, NULL, NULL, NULL, NULL, NULL};
     fr_runtime *rt;
     int table;
+    memset(&dm, 0, sizeof dm);
     if (message != NULL && message_size > 0)
         message[0] = 0;
     if (out == NULL || (binary == NULL && binary_size > 0) || header_data == NULL)
@@ -1572,6 +1741,15 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     rt->bond_edge = dm.stress ? (int32_t *)(block + b.bond_edge) : NULL;
     rt->bond_gain = dm.stress ? (float *)(block + b.bond_gain) : NULL;
     rt->bond_strength = dm.stress ? (float *)(block + b.bond_strength) : NULL;
+    rt->features = (dm.stress ? FR_FEATURE_STRESS : 0) | (dm.anchors ? FR_FEATURE_ANCHORS : 0)
+                 | (h.has_damage ? FR_FEATURE_DAMAGE : 0);
+    rt->anchored = dm.anchors ? (int32_t *)(block + b.anchored) : NULL;
+    rt->crack_level = h.has_damage ? h.crack_level : 1.0;
+    rt->damage_rate = h.has_damage ? h.damage_rate : 0.0;
+    rt->damage_q = rt->crack_level == 1.0 ? 0.0 : rt->damage_rate / (1.0 - rt->crack_level);
+    rt->segments = (int32_t)dm.segments;
+    rt->crack_ptr = dm.cracks ? (int32_t *)(block + b.crack_ptr) : NULL;
+    rt->crack_segments = dm.cracks ? (float *)(block + b.crack_segments) : NULL;
     rt->scratch = block + b.scratch;
     copy_arrays(rt, &h, (const unsigned char *)binary);
     decode_names(rt, &h, h.name_bytes);
@@ -1608,6 +1786,10 @@ fr_info fr_get_info(const fr_runtime *rt)
     info.dim = rt->d;
     info.criterion = rt->criterion;
     info.site_bonds = rt->nnz;
+    info.features = rt->features;
+    info.crack_segments = rt->segments;
+    info.crack_level = rt->crack_level;
+    info.damage_rate = rt->damage_rate;
     info.default_threshold = rt->default_threshold;
     info.impact_radius = rt->impact_radius;
     memcpy(info.transform, rt->transform, sizeof info.transform);
@@ -1624,6 +1806,20 @@ const char *fr_fragment_name(const fr_runtime *rt, int32_t fragment)
 const int32_t *fr_edges(const fr_runtime *rt) { return rt != NULL ? rt->edges : NULL; }
 const float *fr_edge_areas(const fr_runtime *rt) { return rt != NULL ? rt->areas : NULL; }
 const float *fr_sites(const fr_runtime *rt) { return rt != NULL ? rt->sites : NULL; }
+const int32_t *fr_anchored(const fr_runtime *rt) { return rt != NULL ? rt->anchored : NULL; }
+
+const float *fr_crack_segments(const fr_runtime *rt, int32_t bond, int32_t *count)
+{
+    int32_t n;
+    if (count != NULL)
+        *count = 0;
+    if (rt == NULL || rt->crack_ptr == NULL || bond < 0 || bond >= rt->e)
+        return NULL;
+    n = rt->crack_ptr[bond + 1] - rt->crack_ptr[bond];
+    if (count != NULL)
+        *count = n;
+    return n > 0 ? rt->crack_segments + 6 * (size_t)rt->crack_ptr[bond] : NULL;
+}
 
 /* ------------------------------------------------------------------ projection */
 
@@ -1714,21 +1910,25 @@ static int32_t table_holding(const fr_runtime *rt, int32_t site, double length, 
     return lo;
 }
 
-/* Step 5 from the displacements: cut[m] = |disp'[P] - disp'[Q]| > t (Euclidean norm when d = 3). */
+/* Step 5: |jump'| of edge m from the displacements, |disp'[P] - disp'[Q]| (Euclidean norm when d = 3). */
+static double edge_jump(const fr_runtime *rt, const double *disp, int32_t m)
+{
+    const int32_t P = rt->edges[2 * m], Q = rt->edges[2 * m + 1];
+    if (rt->d == 1)
+        return fabs(disp[P] - disp[Q]);
+    {
+        const double *a = disp + 3 * (size_t)P, *b = disp + 3 * (size_t)Q;
+        const double j0 = a[0] - b[0], j1 = a[1] - b[1], j2 = a[2] - b[2];
+        return sqrt(j0 * j0 + j1 * j1 + j2 * j2);
+    }
+}
+
+/* Step 5 from the displacements: cut[m] = |jump'| > t. */
 static void direct_cuts(const fr_runtime *rt, const double *disp, double t, uint8_t *cut)
 {
-    const int32_t *edges = rt->edges;
     int32_t m;
-    if (rt->d == 1) {
-        for (m = 0; m < rt->e; m++)
-            cut[m] = (uint8_t)(fabs(disp[edges[2 * m]] - disp[edges[2 * m + 1]]) > t);
-    } else {
-        for (m = 0; m < rt->e; m++) {
-            const double *a = disp + 3 * (size_t)edges[2 * m], *b = disp + 3 * (size_t)edges[2 * m + 1];
-            const double j0 = a[0] - b[0], j1 = a[1] - b[1], j2 = a[2] - b[2];
-            cut[m] = (uint8_t)(sqrt(j0 * j0 + j1 * j1 + j2 * j2) > t);
-        }
-    }
+    for (m = 0; m < rt->e; m++)
+        cut[m] = (uint8_t)(edge_jump(rt, disp, m) > t);
 }
 
 /* Pointers into the caller's (or the built-in) workspace. */
@@ -1736,6 +1936,8 @@ typedef struct scratch {
     double *alpha, *disp;
     uint8_t *cut;
     int32_t *uf;
+    double *health;   /* fr_project's fresh damage state */
+    int32_t *holding; /* fr_hit: indices of the bonds that hold */
 } scratch;
 
 /*
@@ -1746,36 +1948,52 @@ typedef struct scratch {
  * merge's parent comes later), each passes its label on to its two children.
  * Returns the number of groups.
  */
-static int32_t table_groups(const fr_runtime *rt, int32_t site, double length, double t, const scratch *w,
-                            fr_impact *out)
+/* The number of site v's merges whose edge lies in the first `holding` positions of its row (a prefix of them). */
+static int32_t merges_done(const fr_runtime *rt, int32_t site, int32_t holding)
 {
-    const size_t base = (size_t)site * (size_t)rt->p;
-    const uint16_t *at = rt->merge_at + base, *child = rt->merge_child + 2 * base;
-    const uint16_t *order = rt->jump_edge + (size_t)site * (size_t)rt->e;
-    const int32_t holding = table_holding(rt, site, length, t), p = rt->p;
-    int32_t *label = w->uf, lo = 0, hi = rt->merges, r, j;
-    while (lo < hi) { /* done = the number of merges with at[r] < holding */
+    const uint16_t *at = rt->merge_at + (size_t)site * (size_t)rt->p;
+    int32_t lo = 0, hi = rt->merges;
+    while (lo < hi) {
         const int32_t mid = lo + (hi - lo) / 2;
         if (at[mid] < holding)
             lo = mid + 1;
         else
             hi = mid;
     }
+    return lo;
+}
+
+/* The groups of site v's first `done` merges, labelled top-down (see table_groups); `label` holds 2p entries. */
+static int32_t merge_groups(const fr_runtime *rt, int32_t site, int32_t done, int32_t *label, int32_t *groups)
+{
+    const size_t base = (size_t)site * (size_t)rt->p;
+    const uint16_t *child = rt->merge_child + 2 * base;
+    const int32_t p = rt->p;
+    int32_t r;
     memcpy(label, rt->identity, sizeof(int32_t) * (size_t)p);
-    memcpy(label + p, rt->merge_label + base, sizeof(int32_t) * (size_t)lo);
-    for (r = lo - 1; r >= 0; r--) {
+    memcpy(label + p, rt->merge_label + base, sizeof(int32_t) * (size_t)done);
+    for (r = done - 1; r >= 0; r--) {
         const int32_t value = label[p + r];
         label[child[2 * r]] = value;
         label[child[2 * r + 1]] = value;
     }
-    memcpy(out->groups, label, sizeof(int32_t) * (size_t)p);
+    memcpy(groups, label, sizeof(int32_t) * (size_t)p);
+    return p - done;
+}
+
+static int32_t table_groups(const fr_runtime *rt, int32_t site, double length, double t, const scratch *w,
+                            fr_impact *out)
+{
+    const uint16_t *order = rt->jump_edge + (size_t)site * (size_t)rt->e;
+    const int32_t holding = table_holding(rt, site, length, t);
+    int32_t j;
     if (out->broken != NULL) {
         memset(out->broken, 1, (size_t)rt->e);
         for (j = 0; j < holding; j++)
             out->broken[order[j]] = 0;
     }
     out->num_broken = rt->e - holding;
-    return p - lo;
+    return merge_groups(rt, site, merges_done(rt, site, holding), w->uf, out->groups);
 }
 
 /* Steps 5-6 from the displacements. Returns the number of groups. */
@@ -1831,62 +2049,129 @@ static int32_t stress_groups(const fr_runtime *rt, int32_t site, const double n[
     return label(w->uf, rt->p, out->groups);
 }
 
-fr_status fr_project(const fr_runtime *rt, const double point[3], const double impulse[3], double threshold,
-                     void *workspace, fr_impact *out)
+/* A hit's inputs after section 4 steps 1-2 (section 12.4 step 1): n' = n / m, t = T / m, |n'|; all 0 when m == 0. */
+typedef struct scaled_hit {
+    double n[3], m, t, length;
+} scaled_hit;
+
+/* Validate the inputs (FR_ERR_INPUT: non-finite point or impulse, NaN or negative threshold) and scale them. */
+static fr_status scale_hit(const double point[3], const double impulse[3], double threshold, scaled_hit *s)
 {
-    workspace_layout layout;
-    unsigned char *base;
-    scratch w;
-    double n[3], m = 0.0, t = 0.0, length = 0.0;
-    int32_t i, c, breaks = 0, have_alpha = 0;
-    if (rt == NULL || point == NULL || impulse == NULL || out == NULL || out->groups == NULL)
-        return FR_ERR_ARGUMENT;
+    int c;
+    memset(s, 0, sizeof *s);
     for (c = 0; c < 3; c++) {
         if (!isfinite(point[c]) || !isfinite(impulse[c]))
             return FR_ERR_INPUT;
-        m = fabs(impulse[c]) > m ? fabs(impulse[c]) : m;
+        s->m = fabs(impulse[c]) > s->m ? fabs(impulse[c]) : s->m;
     }
     if (isnan(threshold) || threshold < 0)
         return FR_ERR_INPUT;
-    layout = workspace_plan(rt->k, rt->p, rt->e, rt->d);
-    base = workspace != NULL ? (unsigned char *)workspace : (unsigned char *)rt->scratch;
+    if (s->m != 0.0) { /* step 2: a zero impulse breaks nothing (everything stays 0) */
+        for (c = 0; c < 3; c++)
+            s->n[c] = impulse[c] / s->m;
+        s->t = threshold / s->m;
+        s->length = sqrt(s->n[0] * s->n[0] + s->n[1] * s->n[1] + s->n[2] * s->n[2]);
+    }
+    return FR_OK;
+}
+
+static scratch scratch_at(const fr_runtime *rt, void *workspace)
+{
+    const workspace_layout layout = workspace_plan(rt->k, rt->p, rt->e, rt->d);
+    unsigned char *base = workspace != NULL ? (unsigned char *)workspace : (unsigned char *)rt->scratch;
+    scratch w;
     w.alpha = (double *)(base + layout.alpha);
     w.disp = (double *)(base + layout.disp);
     w.cut = base + layout.cut;
     w.uf = (int32_t *)(base + layout.uf);
+    w.health = (double *)(base + layout.health);
+    w.holding = (int32_t *)(base + layout.holding);
+    return w;
+}
+
+/*
+ * The optional outputs alpha = m alpha' and displacement = m disp' (section 4, "Output"), computing
+ * alpha' and disp' unless the path that decided the groups already did (have_alpha, have_disp).
+ */
+static void mode_outputs(const fr_runtime *rt, int32_t site, const scaled_hit *s, const scratch *w, int have_alpha,
+                         int have_disp, fr_impact *out)
+{
+    int32_t i;
+    if (out->alpha == NULL && out->displacement == NULL)
+        return;
+    if (!have_alpha && s->m == 0.0)
+        memset(w->alpha, 0, sizeof(double) * (size_t)rt->k);
+    else if (!have_alpha)
+        mode_coefficients(rt, site, s->n, s->length, w->alpha);
+    if (out->displacement != NULL) {
+        if (!have_disp)
+            displacements(rt->Wd, (size_t)rt->row, (size_t)rt->k, w->alpha, w->disp);
+        for (i = 0; i < rt->p * rt->d; i++)
+            out->displacement[i] = s->m * w->disp[i];
+    }
+    if (out->alpha != NULL)
+        for (i = 0; i < rt->k; i++)
+            out->alpha[i] = s->m * w->alpha[i];
+}
+
+/*
+ * Section 12.4 step 4, `anchored`: 1 for the fragments whose group holds a fragment bonded to the world.
+ * A group id is its smallest fragment, so the first pass marks group ids and the second, in fragment
+ * order, copies each group's mark to its members (groups[j] <= j, and a group id keeps its own mark).
+ */
+static void anchored_groups(const fr_runtime *rt, const int32_t *groups, uint8_t *anchored)
+{
+    int32_t j;
+    memset(anchored, 0, (size_t)rt->p);
+    if (rt->anchored == NULL)
+        return;
+    for (j = 0; j < rt->p; j++)
+        if (rt->anchored[j])
+            anchored[groups[j]] = 1;
+    for (j = 0; j < rt->p; j++)
+        anchored[j] = anchored[groups[j]];
+}
+
+fr_status fr_project(const fr_runtime *rt, const double point[3], const double impulse[3], double threshold,
+                     void *workspace, fr_impact *out)
+{
+    scaled_hit s;
+    scratch w;
+    fr_status status;
+    int32_t i, breaks = 0, have_alpha = 0, have_disp = 0;
+    if (rt == NULL || point == NULL || impulse == NULL || out == NULL || out->groups == NULL)
+        return FR_ERR_ARGUMENT;
+    status = scale_hit(point, impulse, threshold, &s);
+    if (status != FR_OK)
+        return status;
+    w = scratch_at(rt, workspace);
+    if (rt->features & FR_FEATURE_DAMAGE) { /* section 12.4: a hit on a fresh state that is then thrown away */
+        fr_new_state(rt, w.health);
+        return fr_hit(rt, w.health, point, impulse, threshold, workspace, out);
+    }
     out->site = kd_nearest(rt, point[0], point[1], point[2]);
-    if (m == 0.0) { /* step 2: a zero impulse breaks nothing */
-        memset(w.alpha, 0, sizeof(double) * (size_t)rt->k);
-        have_alpha = 1;
-    } else {
-        for (c = 0; c < 3; c++)
-            n[c] = impulse[c] / m;
-        t = threshold / m;
-        length = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (s.m != 0.0) {
         if (rt->criterion == FR_CRITERION_STRESS) {
-            breaks = 0; /* decided by stress_groups below, not by the modes */
-            out->num_groups = stress_groups(rt, out->site, n, t, &w, out);
+            out->num_groups = stress_groups(rt, out->site, s.n, s.t, &w, out); /* the modes decide nothing */
         } else if (rt->jumps != NULL) {
-            breaks = !(length * rt->jumps[(size_t)out->site * (size_t)rt->e + (size_t)rt->e - 1] <= t);
+            breaks = !(s.length * rt->jumps[(size_t)out->site * (size_t)rt->e + (size_t)rt->e - 1] <= s.t);
         } else {
             double norm2 = 0.0;
-            mode_coefficients(rt, out->site, n, length, w.alpha);
+            mode_coefficients(rt, out->site, s.n, s.length, w.alpha);
             have_alpha = 1;
             for (i = 0; i < rt->k; i++)
                 norm2 += w.alpha[i] * w.alpha[i];
-            breaks = !(sqrt(norm2) * (1.0 + BOUND_SLACK) * rt->max_bound <= t);
+            breaks = !(sqrt(norm2) * (1.0 + BOUND_SLACK) * rt->max_bound <= s.t);
         }
     }
-    if (!have_alpha && (out->alpha != NULL || out->displacement != NULL))
-        mode_coefficients(rt, out->site, n, length, w.alpha);
-    if (out->displacement != NULL || (breaks && rt->jumps == NULL))
-        displacements(rt->Wd, (size_t)rt->row, (size_t)rt->k, w.alpha, w.disp);
-    if (rt->criterion == FR_CRITERION_STRESS && m != 0.0) {
+    if (rt->criterion == FR_CRITERION_STRESS && s.m != 0.0) {
         /* groups done by stress_groups */
     } else if (breaks && rt->jumps != NULL) {
-        out->num_groups = table_groups(rt, out->site, length, t, &w, out);
+        out->num_groups = table_groups(rt, out->site, s.length, s.t, &w, out);
     } else if (breaks) {
-        out->num_groups = direct_groups(rt, t, &w, out);
+        displacements(rt->Wd, (size_t)rt->row, (size_t)rt->k, w.alpha, w.disp);
+        have_disp = 1;
+        out->num_groups = direct_groups(rt, s.t, &w, out);
     } else { /* nothing breaks: the components of the whole graph */
         if (out->broken != NULL && rt->e > 0)
             memset(out->broken, 0, (size_t)rt->e);
@@ -1894,11 +2179,226 @@ fr_status fr_project(const fr_runtime *rt, const double point[3], const double i
         out->num_groups = rt->whole_groups;
         out->num_broken = 0;
     }
-    if (out->displacement != NULL)
-        for (i = 0; i < rt->p * rt->d; i++)
-            out->displacement[i] = m * w.disp[i];
-    if (out->alpha != NULL)
-        for (i = 0; i < rt->k; i++)
-            out->alpha[i] = m * w.alpha[i];
+    mode_outputs(rt, out->site, &s, &w, have_alpha, have_disp, out);
+    if (out->cracked != NULL && rt->e > 0) /* nothing cracks without feature "damage" */
+        memset(out->cracked, 0, (size_t)rt->e);
+    out->num_cracked = 0;
+    if (out->anchored != NULL)
+        anchored_groups(rt, out->groups, out->anchored);
+    return FR_OK;
+}
+
+/* ------------------------------------------------------------------ damage (section 12) */
+
+void fr_new_state(const fr_runtime *rt, double *health)
+{
+    int32_t m;
+    if (rt != NULL && health != NULL)
+        for (m = 0; m < rt->e; m++)
+            health[m] = 1.0;
+}
+
+fr_status fr_check_state(const fr_runtime *rt, const double *health, size_t count)
+{
+    int32_t m, ok = 1;
+    if (rt == NULL || (health == NULL && rt->e > 0))
+        return FR_ERR_ARGUMENT;
+    if (count != (size_t)rt->e)
+        return FR_ERR_STATE;
+    for (m = 0; m < rt->e; m++)
+        ok &= (health[m] >= 0.0) & (health[m] <= 1.0); /* NaN fails both */
+    return ok ? FR_OK : FR_ERR_STATE;
+}
+
+void fr_state_to_bytes(const fr_runtime *rt, const double *health, unsigned char *bytes)
+{
+    int32_t m, b;
+    if (rt == NULL || health == NULL || bytes == NULL)
+        return;
+    for (m = 0; m < rt->e; m++) {
+        uint64_t u;
+        memcpy(&u, health + m, sizeof u);
+        for (b = 0; b < 8; b++)
+            bytes[8 * (size_t)m + (size_t)b] = (unsigned char)(u >> (8 * b));
+    }
+}
+
+static double read_f64(const unsigned char *p)
+{
+    uint64_t u = 0;
+    double v;
+    int b;
+    for (b = 7; b >= 0; b--)
+        u = u << 8 | p[b];
+    memcpy(&v, &u, sizeof v);
+    return v;
+}
+
+fr_status fr_state_from_bytes(const fr_runtime *rt, const void *bytes, size_t size, double *health)
+{
+    const unsigned char *p = (const unsigned char *)bytes;
+    int32_t m;
+    if (rt == NULL || (rt->e > 0 && (bytes == NULL || health == NULL)))
+        return FR_ERR_ARGUMENT;
+    if (size != 8u * (size_t)rt->e)
+        return FR_ERR_STATE;
+    for (m = 0; m < rt->e; m++) { /* all checked before any is written: a refused state leaves `health` alone */
+        const double v = read_f64(p + 8 * (size_t)m);
+        if (!(v >= 0.0 && v <= 1.0))
+            return FR_ERR_STATE;
+    }
+    for (m = 0; m < rt->e; m++)
+        health[m] = read_f64(p + 8 * (size_t)m);
+    return FR_OK;
+}
+
+/*
+ * Section 12.4 step 3 for one bond whose measure a exceeds c times its limit b (now_cracked; a bond at or
+ * below that keeps its health, and a > b implies it): a > b breaks it (health 0), otherwise it loses
+ * q (a / b - c), never going below 0. A broken bond stays broken.
+ */
+static void crack_bond(const fr_runtime *rt, double *health, uint8_t *cracked, int32_t m, double a, double b)
+{
+    double h = health[m];
+    cracked[m] = 1;
+    if (h > 0) {
+        if (a > b)
+            h = 0;
+        else
+            h = h - rt->damage_q * (a / b - rt->crack_level); /* 0 < b < inf here: a / b is finite */
+        health[m] = h < 0 ? 0 : h;
+    }
+}
+
+/* Section 12.4 steps 2-3, criterion "stress": a = g for the bonds site v lists (0, never cracked, for the others), b = t S. */
+static void stress_damage(const fr_runtime *rt, int32_t site, const scaled_hit *s, uint8_t *cracked, double *health)
+{
+    int32_t j;
+    for (j = rt->bond_ptr[site]; j < rt->bond_ptr[site + 1]; j++) {
+        const float *G = rt->bond_gain + 3 * (size_t)j;
+        const int32_t m = rt->bond_edge[j];
+        const double g = (double)G[0] * s->n[0] + (double)G[1] * s->n[1] + (double)G[2] * s->n[2];
+        const double b = s->t * (double)rt->bond_strength[m];
+        if (g > rt->crack_level * b)
+            crack_bond(rt, health, cracked, m, g, b);
+    }
+}
+
+/*
+ * Section 12.4 steps 2-3, criterion "modes" with the jump table (d = 1): a = |n'| |J[v, m]|, b = t. The
+ * bonds with a <= c t are a prefix of the site's row (as for t in table_holding): only the rest crack.
+ */
+static void table_damage(const fr_runtime *rt, int32_t site, const scaled_hit *s, uint8_t *cracked, double *health)
+{
+    const double *row = rt->jumps + (size_t)site * (size_t)rt->e;
+    const uint16_t *order = rt->jump_edge + (size_t)site * (size_t)rt->e;
+    int32_t pos;
+    for (pos = table_holding(rt, site, s->length, rt->crack_level * s->t); pos < rt->e; pos++)
+        crack_bond(rt, health, cracked, order[pos], s->length * row[pos], s->t);
+}
+
+/* Section 12.4 steps 2-3, criterion "modes" from the displacements: a = |jump'| (section 4 step 5), b = t. */
+static void direct_damage(const fr_runtime *rt, const double *disp, double t, uint8_t *cracked, double *health)
+{
+    const double ct = rt->crack_level * t;
+    int32_t m;
+    for (m = 0; m < rt->e; m++) {
+        const double a = edge_jump(rt, disp, m);
+        if (a > ct)
+            crack_bond(rt, health, cracked, m, a, t);
+    }
+}
+
+/*
+ * Section 12.4 step 4 after every bond is updated: broken = health <= 0, cracked = holds and (cracked by
+ * this hit or health < 1), then the groups over the bonds that hold. w->cut holds now_cracked on entry; it
+ * gets broken in bit 0 and cracked in bit 1. Returns the number of groups.
+ *
+ * With the jump table the bonds that hold all lie in the prefix of site v's row that this hit leaves
+ * standing (the others broke now). When none of the merges done in that prefix is broken (by an earlier
+ * hit or by cracks), the other broken bonds of the prefix only close cycles: the groups are the merges'
+ * (as in table_groups). Otherwise a union-find over the bonds that hold.
+ */
+static int32_t damage_answers(const fr_runtime *rt, int32_t site, const scaled_hit *s, const double *restrict health,
+                              const scratch *w, fr_impact *out)
+{
+    /* Locals: a store through a uint8_t pointer may alias anything, which would reload every field per bond. */
+    uint8_t *restrict cut = w->cut, *restrict cracked_out = out->cracked, *restrict broken_out = out->broken;
+    int32_t *restrict holding = w->holding;
+    const int32_t e = rt->e;
+    int32_t m, broken = 0, cracked = 0, count = 0;
+    for (m = 0; m < e; m++) {
+        const int is_broken = health[m] <= 0, is_cracked = (is_broken ^ 1) & (cut[m] | (health[m] < 1));
+        cut[m] = (uint8_t)(is_broken | is_cracked << 1);
+        broken += is_broken;
+        cracked += is_cracked;
+    }
+    if (cracked_out != NULL)
+        for (m = 0; m < e; m++)
+            cracked_out[m] = (uint8_t)(cut[m] >> 1);
+    if (broken_out != NULL)
+        for (m = 0; m < e; m++)
+            broken_out[m] = (uint8_t)(cut[m] & 1);
+    out->num_broken = broken;
+    out->num_cracked = cracked;
+    if (broken == 0) {
+        memcpy(out->groups, rt->whole, sizeof(int32_t) * (size_t)rt->p);
+        return rt->whole_groups;
+    }
+    if (rt->jumps != NULL) {
+        const uint16_t *at = rt->merge_at + (size_t)site * (size_t)rt->p;
+        const uint16_t *order = rt->jump_edge + (size_t)site * (size_t)rt->e;
+        const int32_t done = merges_done(rt, site, table_holding(rt, site, s->length, s->t));
+        int32_t r;
+        for (r = 0; r < done && health[order[at[r]]] > 0; r++)
+            continue;
+        if (r == done)
+            return merge_groups(rt, site, done, w->uf, out->groups);
+    }
+    for (m = 0; m < e; m++) { /* the bonds that hold, without a branch on an unpredictable flag */
+        holding[count] = m;
+        count += ~cut[m] & 1;
+    }
+    memcpy(w->uf, rt->identity, sizeof(int32_t) * (size_t)rt->p);
+    for (m = 0; m < count; m++)
+        unite(w->uf, rt->edges[2 * holding[m]], rt->edges[2 * holding[m] + 1]);
+    return label(w->uf, rt->p, out->groups);
+}
+
+fr_status fr_hit(const fr_runtime *rt, double *health, const double point[3], const double impulse[3],
+                 double threshold, void *workspace, fr_impact *out)
+{
+    scaled_hit s;
+    scratch w;
+    fr_status status;
+    int have_alpha = 0, have_disp = 0;
+    if (rt == NULL || (health == NULL && rt->e > 0) || point == NULL || impulse == NULL || out == NULL
+        || out->groups == NULL)
+        return FR_ERR_ARGUMENT;
+    status = scale_hit(point, impulse, threshold, &s);
+    if (status == FR_OK)
+        status = fr_check_state(rt, health, (size_t)rt->e);
+    if (status != FR_OK) /* before any change: a refused hit leaves the state as it was */
+        return status;
+    w = scratch_at(rt, workspace);
+    out->site = kd_nearest(rt, point[0], point[1], point[2]);
+    if (rt->e > 0)
+        memset(w.cut, 0, (size_t)rt->e); /* now_cracked */
+    if (s.m != 0.0) { /* m == 0: nothing changes (step 1) */
+        if (rt->criterion == FR_CRITERION_STRESS) {
+            stress_damage(rt, out->site, &s, w.cut, health);
+        } else if (rt->jumps != NULL) {
+            table_damage(rt, out->site, &s, w.cut, health);
+        } else {
+            mode_coefficients(rt, out->site, s.n, s.length, w.alpha);
+            displacements(rt->Wd, (size_t)rt->row, (size_t)rt->k, w.alpha, w.disp);
+            have_alpha = have_disp = 1;
+            direct_damage(rt, w.disp, s.t, w.cut, health);
+        }
+    }
+    out->num_groups = damage_answers(rt, out->site, &s, health, &w, out);
+    mode_outputs(rt, out->site, &s, &w, have_alpha, have_disp, out);
+    if (out->anchored != NULL)
+        anchored_groups(rt, out->groups, out->anchored);
     return FR_OK;
 }

@@ -4,8 +4,10 @@
  * Loads `<stem>.fracture.json` + `<stem>.fracture.bin` from memory (the engine owns
  * file I/O), validates them, and answers "which fragments break off" for a hit in
  * about a microsecond, without allocating. Specification: docs/FORMAT.md of the
- * fracture repository (format version 1, and version 2 with feature "stress": the
- * stress criterion of section 11). Usable from C and C++.
+ * fracture repository (format version 1, and version 2 with the features "stress":
+ * the stress criterion of section 11, "anchors" and "damage": structures and damage
+ * that adds up over hits, section 12, with the optional crack arrays). Usable from C
+ * and C++.
  *
  * MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
  *
@@ -20,6 +22,12 @@
  *       // fragments j with equal groups[j] move together; groups[j] == j starts a group
  *   }
  *   fr_free(rt);
+ *
+ * With damage that adds up (section 12), keep one state per object and hit it instead:
+ *
+ *   double *health = malloc(sizeof(double) * fr_get_info(rt).edges);  // e bond healths
+ *   fr_new_state(rt, health);                                            // all 1.0
+ *   if (fr_hit(rt, health, point, impulse, threshold, NULL, &out) == FR_OK) { ... }
  */
 #ifndef FRACTURE_RUNTIME_H
 #define FRACTURE_RUNTIME_H
@@ -31,7 +39,7 @@
 extern "C" {
 #endif
 
-#define FR_FORMAT_VERSION 2  /* highest file format version this reader understands (2: feature "stress") */
+#define FR_FORMAT_VERSION 2  /* highest file format version this reader understands (2: the features below) */
 #define FR_MESSAGE_SIZE 192  /* enough for any message fr_load writes */
 
 typedef enum fr_status {
@@ -44,7 +52,8 @@ typedef enum fr_status {
     FR_ERR_CRC,       /* the binary's CRC-32 differs from the header's */
     FR_ERR_DATA,      /* a non-finite value or an edge index out of range in the binary */
     FR_ERR_MEMORY,    /* the allocator returned NULL */
-    FR_ERR_INPUT      /* fr_project: non-finite point or impulse, NaN or negative threshold */
+    FR_ERR_INPUT,     /* fr_project, fr_hit: non-finite point or impulse, NaN or negative threshold */
+    FR_ERR_STATE      /* fr_hit and the state functions: a damage state that is not e values in [0, 1] */
 } fr_status;
 
 /* A short English name of a status ("ok", "invalid JSON header", ...). */
@@ -100,10 +109,19 @@ fr_status fr_header_uri(const void *header, size_t header_size, char *uri, size_
 #define FR_CRITERION_MODES 0   /* the jumps of the fracture modes (version 1) */
 #define FR_CRITERION_STRESS 1  /* the stress criterion (version 2, feature "stress") */
 
+/* fr_info.features: the version-2 features the file lists (docs/FORMAT.md sections 11 and 12). */
+#define FR_FEATURE_STRESS 1   /* criterion "stress" */
+#define FR_FEATURE_ANCHORS 2  /* fragments bonded to the world (fr_anchored) */
+#define FR_FEATURE_DAMAGE 4   /* hits below a bond's strength crack it and lower its health (fr_hit) */
+
 typedef struct fr_info {
     int32_t sites, modes, fragments, edges, dim;  /* s, k, p, e, d */
     int32_t criterion;   /* FR_CRITERION_MODES or FR_CRITERION_STRESS, from the file */
     int32_t site_bonds;  /* stress criterion: entries of the per-site bond lists (counts.site_bonds); else 0 */
+    int32_t features;    /* FR_FEATURE_* bits; 0 for a version-1 file */
+    int32_t crack_segments; /* n: segments of the optional crack arrays (fr_crack_segments); 0 without them */
+    double crack_level;  /* feature "damage": c in (0, 1]; 1 without it */
+    double damage_rate;  /* feature "damage": r >= 0; 0 without it */
     double default_threshold;
     double impact_radius;
     double transform[16];  /* row-major, normalized bake coordinates -> model space (informational) */
@@ -114,6 +132,16 @@ const char *fr_fragment_name(const fr_runtime *rt, int32_t fragment);  /* UTF-8;
 const int32_t *fr_edges(const fr_runtime *rt);    /* (e, 2): P < Q */
 const float *fr_edge_areas(const fr_runtime *rt); /* (e,) */
 const float *fr_sites(const fr_runtime *rt);      /* (s, 3), model space */
+
+/* (p,) 1 where the fragment is bonded to the world, else 0; NULL without feature "anchors". */
+const int32_t *fr_anchored(const fr_runtime *rt);
+
+/*
+ * Where bond `bond`'s fault meets the outer surface, for drawing a cracked bond: *count
+ * line segments of 2 points x 3 coordinates (model space), i.e. 6 * *count floats. NULL
+ * and *count = 0 when the file has no crack arrays, the bond has no segment or is out of range.
+ */
+const float *fr_crack_segments(const fr_runtime *rt, int32_t bond, int32_t *count);
 
 /* Index of the contact site nearest to `point` (smallest index on exact ties); -1 if not finite. */
 int32_t fr_nearest_site(const fr_runtime *rt, const double point[3]);
@@ -127,9 +155,12 @@ typedef struct fr_impact {
     uint8_t *broken;       /* [e] optional: 1 if edge m broke */
     double *alpha;         /* [k] optional: mode coefficients */
     double *displacement;  /* [p * d] optional: fragment displacements (row-major, model axes) */
+    uint8_t *cracked;      /* [e] optional: 1 if bond m holds but is cracked (always 0 without "damage" or a state) */
+    uint8_t *anchored;     /* [p] optional: 1 if fragment j's group holds an anchored fragment (keep it static) */
     int32_t site;          /* out: nearest contact site */
     int32_t num_groups;    /* out: number of groups */
     int32_t num_broken;    /* out: number of broken edges */
+    int32_t num_cracked;   /* out: number of cracked bonds (counted whether or not `cracked` is given) */
 } fr_impact;
 
 /* Bytes of scratch memory fr_project needs (align it to 16 bytes). */
@@ -144,10 +175,42 @@ size_t fr_workspace_size(const fr_runtime *rt);
  * The file's criterion decides which bonds break: the modes' jumps (section 4) or, for a
  * version-2 file with criterion "stress", each bond the nearest site lists breaks when its
  * tensile gain exceeds its strength (section 11); alpha and displacement are the modes'
- * either way. The groups follow from the broken bonds in both cases.
+ * either way. The groups follow from the broken bonds in both cases. On a file with
+ * feature "damage" this is fr_hit on a fresh state that is then thrown away (it lives in
+ * the workspace), so it also answers `cracked`; `anchored` is answered for every file.
  */
 fr_status fr_project(const fr_runtime *rt, const double point[3], const double impulse[3], double threshold,
                      void *workspace, fr_impact *out);
+
+/*
+ * Damage state (docs/FORMAT.md section 12.3): `health`, e doubles owned by the game, one
+ * array per object. A bond is broken when its health is 0; a valid state holds e finite
+ * values in [0, 1]. Save it as e little-endian doubles (fr_state_to_bytes) to load it on
+ * any reader and machine (fr_state_from_bytes).
+ */
+void fr_new_state(const fr_runtime *rt, double *health);  /* all 1.0: no bond damaged */
+/* FR_ERR_STATE unless count == e and every value is in [0, 1] (NaN is not). */
+fr_status fr_check_state(const fr_runtime *rt, const double *health, size_t count);
+/* health -> 8 e bytes (little-endian doubles). */
+void fr_state_to_bytes(const fr_runtime *rt, const double *health, unsigned char *bytes);
+/* 8 e bytes -> health, checked: FR_ERR_STATE (health untouched) for another size or invalid values. */
+fr_status fr_state_from_bytes(const fr_runtime *rt, const void *bytes, size_t size, double *health);
+
+/*
+ * One hit on an object whose damage state is `health` (section 12.4), updated in place; the
+ * arguments and answers are fr_project's. Every bond the hit loads above the crack level
+ * c times its limit is cracked and loses q (load - c) of its health (q = r / (1 - c); load
+ * = its measure over its limit, 1 = at its strength); above its limit it breaks (health 0).
+ * `broken` then lists every broken bond (this hit's and earlier ones'), `cracked` the bonds
+ * that hold but were loaded above c by this hit or weakened before, and the groups are
+ * those of the bonds that hold. Bonds to the world never break; `anchored` says which
+ * fragments stay held by it. Refused hits leave `health` as it was: FR_ERR_INPUT as
+ * fr_project, FR_ERR_STATE for an invalid state. On a file without feature "damage" a state
+ * only remembers broken bonds (c = 1, r = 0). Does not allocate; same workspace rules as
+ * fr_project.
+ */
+fr_status fr_hit(const fr_runtime *rt, double *health, const double point[3], const double impulse[3],
+                 double threshold, void *workspace, fr_impact *out);
 
 #ifdef __cplusplus
 }

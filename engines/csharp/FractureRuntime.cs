@@ -3,8 +3,9 @@
 // C# 7.2 subset, so it builds with Unity (.NET Standard 2.1 / C# 8 and later), .NET and Mono's mcs.
 // Loads `<stem>.fracture.json` + `<stem>.fracture.bin` from bytes, validates them, and answers
 // "which fragments break off" for a hit without allocating. Specification: docs/FORMAT.md of the
-// fracture repository (format version 1, and version 2 with feature "stress": the stress criterion of
-// section 11).
+// fracture repository (format version 1, and version 2 with the features "stress": the stress criterion
+// of section 11, "anchors" and "damage": structures and damage that adds up over hits, section 12, with
+// the optional crack arrays).
 //
 // MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
 //
@@ -12,6 +13,11 @@
 //   var impact = new FractureImpact(runtime);          // reusable result + scratch, one per thread
 //   runtime.Project(px, py, pz, nx, ny, nz, runtime.DefaultThreshold, impact);
 //   // fragments j with equal impact.Groups[j] move together; impact.Groups[j] == j starts a group
+//
+// With damage that adds up (section 12), keep one state per object and hit it instead:
+//
+//   double[] health = runtime.NewState();              // one per object: e bond healths, all 1
+//   runtime.Hit(health, px, py, pz, nx, ny, nz, runtime.DefaultThreshold, impact);
 
 using System;
 using System.Collections.Generic;
@@ -32,7 +38,8 @@ namespace Fracture
         Size,      // binary size, array sizes, offsets or shapes disagree
         Crc,       // the binary's CRC-32 differs from the header's
         Data,      // a non-finite value or an edge index out of range in the binary
-        Input,     // Project: non-finite point or impulse, NaN or negative threshold
+        Input,     // Project, Hit: non-finite point or impulse, NaN or negative threshold
+        State,     // Hit and the state methods: a damage state that is not e values in [0, 1]
     }
 
     /// <summary>A runtime file that cannot be used; <see cref="Status"/> says which check failed.</summary>
@@ -60,13 +67,19 @@ namespace Fracture
         public readonly double[] Alpha;
         /// <summary>[p * d] fragment displacements, row-major, model axes (dimensionless).</summary>
         public readonly double[] Displacement;
-        public int Site, NumGroups, NumBroken;
+        /// <summary>[e] whether each bond holds but is cracked (all false from Project without feature "damage").</summary>
+        public readonly bool[] Cracked;
+        /// <summary>[p] whether each fragment's group holds a fragment bonded to the world (keep it static).</summary>
+        public readonly bool[] Anchored;
+        public int Site, NumGroups, NumBroken, NumCracked;
         /// <summary>Fill <see cref="Displacement"/> (k*p*d multiply-adds; the groups do not need them).</summary>
         public bool ComputeDisplacement = true;
 
         internal readonly FractureRuntime Owner;
         internal readonly double[] ScaledAlpha, ScaledDisp;
         internal readonly int[] Labels; // [2p] union-find parents, or the merge labels of the jump table
+        internal readonly double[] FreshHealth; // [e] Project's damage state on a file with feature "damage"
+        internal readonly byte[] Cut;           // [e] Hit: the bonds this hit cracks
         internal readonly int[] KdIds = new int[FractureRuntime.KdStack];
         internal readonly double[] KdBounds = new double[FractureRuntime.KdStack];
 
@@ -82,16 +95,20 @@ namespace Fracture
             ScaledAlpha = new double[runtime.Modes];
             ScaledDisp = new double[runtime.Fragments * runtime.Dim];
             Labels = new int[2 * runtime.Fragments];
+            Cracked = new bool[runtime.Edges];
+            Anchored = new bool[runtime.Fragments];
+            FreshHealth = new double[runtime.Edges];
+            Cut = new byte[runtime.Edges];
         }
     }
 
     /// <summary>A loaded, validated runtime file (immutable: Project may run on several threads).</summary>
     public sealed class FractureRuntime
     {
-        /// <summary>Highest file format version this reader reads (2: feature "stress", docs/FORMAT.md section 11).</summary>
+        /// <summary>Highest file format version this reader reads (2: the features of docs/FORMAT.md sections 11-12).</summary>
         public const int FormatVersion = 2;
         /// <summary>The version-2 features this reader implements.</summary>
-        public static readonly string[] KnownFeatures = { "stress" };
+        public static readonly string[] KnownFeatures = { "anchors", "damage", "stress" };
         const double BoundSlack = 1e-9;
         const int KdLeaf = 16;
         /// <summary>Largest d = 1 jump table Load builds, in bytes (see <see cref="Load"/>).</summary>
@@ -126,6 +143,40 @@ namespace Fracture
         public readonly string Criterion;
         /// <summary>Stress criterion: entries of the per-site bond lists (counts.site_bonds); 0 otherwise.</summary>
         public readonly int SiteBonds;
+
+        // Section 12: anchored flags (null without "anchors"), the damage parameters, the crack arrays (null without).
+        readonly int[] anchored, crackPtr;
+        readonly float[] crackSegments;
+        readonly double damageQ;
+        /// <summary>Feature "anchors": some fragments are bonded to the world (<see cref="IsAnchored"/>).</summary>
+        public readonly bool HasAnchors;
+        /// <summary>Feature "damage": hits below a bond's strength crack it and lower its health (<see cref="Hit"/>).</summary>
+        public readonly bool HasDamage;
+        /// <summary>Feature "damage": the crack level c in (0, 1]; 1 without it (a state then only remembers broken bonds).</summary>
+        public readonly double CrackLevel = 1.0;
+        /// <summary>Feature "damage": the damage rate r >= 0; 0 without it.</summary>
+        public readonly double DamageRate;
+        /// <summary>Segments of the optional crack arrays (<see cref="CrackSegments"/>); 0 without them.</summary>
+        public readonly int CrackSegmentCount;
+
+        /// <summary>Whether the fragment is bonded to the world (false for every fragment without feature "anchors").</summary>
+        public bool IsAnchored(int fragment) { return anchored != null && anchored[fragment] == 1; }
+
+        /// <summary>
+        /// Where a bond's fault meets the outer surface, for drawing a cracked bond: segments
+        /// <paramref name="first"/> .. first + count - 1 of <see cref="CrackSegmentCoordinate"/>; returns the
+        /// count (0 without the crack arrays).
+        /// </summary>
+        public int CrackSegments(int bond, out int first)
+        {
+            if (bond < 0 || bond >= Edges)
+                throw new ArgumentOutOfRangeException("bond");
+            first = crackPtr != null ? crackPtr[bond] : 0;
+            return crackPtr != null ? crackPtr[bond + 1] - crackPtr[bond] : 0;
+        }
+
+        /// <summary>Coordinate <paramref name="axis"/> (0-2) of end <paramref name="end"/> (0-1) of a crack segment, model space.</summary>
+        public float CrackSegmentCoordinate(int segment, int end, int axis) { return crackSegments[6 * segment + 3 * end + axis]; }
 
         /// <summary>Whether Load built the d = 1 jump table (the fast path; see <see cref="Load"/>).</summary>
         public bool HasJumpTable { get { return jumps != null; } }
@@ -263,6 +314,43 @@ namespace Fracture
                     if (bondStrength[m] < 0)
                         throw Fail(FractureStatus.Data, "bond_strength must be >= 0");
             }
+            HasAnchors = h.Anchors;
+            if (HasAnchors)
+            {
+                if (h.Arrays[9].Shape[0] != Fragments)
+                    throw Fail(FractureStatus.Size, "array anchored has shape [" + h.Arrays[9].Shape[0] +
+                                                    "], expected [" + Fragments + "]");
+                anchored = ReadInts(binary, h.Arrays[9]);
+                foreach (int flag in anchored)
+                    if (flag != 0 && flag != 1)
+                        throw Fail(FractureStatus.Data, "array anchored must hold only 0 and 1");
+            }
+            if (h.Cracks)
+            {
+                long[] ptrShape = h.Arrays[10].Shape, segmentShape = h.Arrays[11].Shape;
+                if (segmentShape[0] > int.MaxValue)
+                    throw Fail(FractureStatus.Size, "counts beyond 2^31");
+                if (ptrShape[0] != Edges + 1L || segmentShape[1] != 2 || segmentShape[2] != 3)
+                    throw Fail(FractureStatus.Size, "crack arrays must be crack_ptr (e + 1) and crack_segments (n, 2, 3)");
+                if (h.CrackSegmentsCount != segmentShape[0])
+                    throw Fail(FractureStatus.Size, "header counts.crack_segments does not match the arrays");
+                CrackSegmentCount = (int)segmentShape[0];
+                crackPtr = ReadInts(binary, h.Arrays[10]);
+                bool bad = crackPtr[0] != 0 || crackPtr[Edges] != CrackSegmentCount;
+                for (int m = 0; m < Edges && !bad; m++)
+                    bad = crackPtr[m + 1] < crackPtr[m];
+                if (bad)
+                    throw Fail(FractureStatus.Data, "crack_ptr must start at 0, never decrease and end at " + CrackSegmentCount);
+                crackSegments = ReadFloats(binary, h.Arrays[11], "crack_segments");
+            }
+            HasDamage = h.Damage;
+            if (HasDamage)
+            {
+                h.CheckDamage();
+                CrackLevel = h.CrackLevel;
+                DamageRate = h.DamageRate;
+            }
+            damageQ = CrackLevel == 1.0 ? 0.0 : DamageRate / (1.0 - CrackLevel); // q = r / (1 - c), once per file
             kdIndex = new int[Sites];
             kdPoints = new double[3 * Sites];
             int kdCapacity = 4 * (Sites / KdLeaf) + 2; // a leaf holds at least KdLeaf / 2 sites
@@ -611,7 +699,9 @@ namespace Fracture
         /// Project a hit (docs/FORMAT.md section 4): point in model space, impulse in model axes (any
         /// unit), threshold in the impulse's unit (double.PositiveInfinity: unbreakable). Fills
         /// <paramref name="result"/> without allocating; returns Input for a non-finite point or
-        /// impulse or a NaN or negative threshold (result untouched).
+        /// impulse or a NaN or negative threshold (result untouched). On a file with feature "damage"
+        /// this is <see cref="Hit"/> on a fresh state that is then thrown away (so it also answers
+        /// Cracked); Anchored is answered for every file.
         /// </summary>
         public FractureStatus Project(double px, double py, double pz, double nx, double ny, double nz, double threshold,
                                       FractureImpact result)
@@ -622,6 +712,22 @@ namespace Fracture
                 return FractureStatus.Input;
             if (double.IsNaN(threshold) || threshold < 0)
                 return FractureStatus.Input;
+            if (HasDamage) // section 12.4: a hit on a fresh state
+            {
+                ResetState(result.FreshHealth);
+                HitCore(result.FreshHealth, px, py, pz, nx, ny, nz, threshold, result);
+                return FractureStatus.Ok;
+            }
+            Array.Clear(result.Cracked, 0, Edges); // nothing cracks without feature "damage"
+            result.NumCracked = 0;
+            ProjectCore(px, py, pz, nx, ny, nz, threshold, result);
+            AnchoredGroups(result);
+            return FractureStatus.Ok;
+        }
+
+        void ProjectCore(double px, double py, double pz, double nx, double ny, double nz, double threshold,
+                         FractureImpact result)
+        {
             double m = Math.Max(Math.Abs(nx), Math.Max(Math.Abs(ny), Math.Abs(nz))), t = 0, length = 0;
             double[] alpha = result.ScaledAlpha, disp = result.ScaledDisp;
             result.Site = NearestSiteCore(px, py, pz, result.KdIds, result.KdBounds);
@@ -646,7 +752,7 @@ namespace Fracture
                             result.Displacement[i] = m * disp[i];
                     for (int i = 0; i < Modes; i++)
                         result.Alpha[i] = m * alpha[i];
-                    return FractureStatus.Ok;
+                    return;
                 }
                 if (jumps != null)
                 {
@@ -682,7 +788,6 @@ namespace Fracture
                     result.Displacement[i] = m * disp[i];
             for (int i = 0; i < Modes; i++)
                 result.Alpha[i] = m * alpha[i];
-            return FractureStatus.Ok;
         }
 
         void ModeCoefficients(int site, double n0, double n1, double n2, double length, double[] alpha)
@@ -714,31 +819,41 @@ namespace Fracture
             }
         }
 
-        // Steps 5-6 with the jump table: the edges that hold are the row's first `holding`, the merges done
-        // the first `done` (those inside that prefix). labels[0, p) start as each fragment's own index and
-        // labels[p + r] as merge r's smallest fragment; top-down over the done merges (a merge's parent comes
-        // later), each passes its label on to its two children.
-        int TableGroups(int site, double length, double t, FractureImpact result)
+        // Step 5 from the jump table (d = 1): the number of edges that hold, |n'| |J[v, m]| <= t (a prefix of the row).
+        int TableHolding(int site, double length, double t)
         {
-            int e = Edges, p = Fragments, lo = 0, hi = e;
-            long row = (long)site * e, at = (long)site * p;
-            while (lo < hi) // holding: the edges with |n'| |J| <= t
+            long row = (long)site * Edges;
+            int lo = 0, hi = Edges;
+            while (lo < hi)
             {
                 int mid = lo + (hi - lo) / 2;
                 if (length * jumps[row + mid] <= t) lo = mid + 1;
                 else hi = mid;
             }
-            int holding = lo;
-            lo = 0;
-            hi = merges;
-            while (lo < hi) // done: the merges whose edge holds
+            return lo;
+        }
+
+        // The number of the site's merges whose edge lies in the first `holding` positions of its row (a prefix).
+        int MergesDone(int site, int holding)
+        {
+            long at = (long)site * Fragments;
+            int lo = 0, hi = merges;
+            while (lo < hi)
             {
                 int mid = lo + (hi - lo) / 2;
                 if (mergeAt[at + mid] < holding) lo = mid + 1;
                 else hi = mid;
             }
-            int done = lo;
-            int[] labels = result.Labels;
+            return lo;
+        }
+
+        // The groups of the site's first `done` merges: labels[0, p) start as each fragment's own index and
+        // labels[p + r] as merge r's smallest fragment; top-down over the done merges (a merge's parent comes
+        // later), each passes its label on to its two children. Returns the number of groups.
+        int MergeGroups(int site, int done, int[] labels, int[] groups)
+        {
+            int p = Fragments;
+            long at = (long)site * p;
             Array.Copy(identity, labels, p);
             Array.Copy(mergeLabel, at, labels, p, done);
             for (int r = done - 1; r >= 0; r--)
@@ -747,13 +862,22 @@ namespace Fracture
                 labels[mergeChild[2 * (at + r)]] = value;
                 labels[mergeChild[2 * (at + r) + 1]] = value;
             }
-            Array.Copy(labels, result.Groups, p);
+            Array.Copy(labels, groups, p);
+            return p - done;
+        }
+
+        // Steps 5-6 with the jump table: the edges that hold are the row's first `holding`, the groups those of
+        // the merges inside that prefix.
+        int TableGroups(int site, double length, double t, FractureImpact result)
+        {
+            int e = Edges, holding = TableHolding(site, length, t);
+            long row = (long)site * e;
             bool[] broken = result.Broken;
             Array.Copy(allBroken, broken, e); // a block copy: much faster than a loop in Mono
             for (int i = 0; i < holding; i++)
                 broken[jumpEdge[row + i]] = false;
             result.NumBroken = e - holding;
-            return p - done;
+            return MergeGroups(site, MergesDone(site, holding), result.Labels, result.Groups);
         }
 
         // Criterion "stress" (docs/FORMAT.md section 11): bond e of the site's list breaks when
@@ -798,25 +922,280 @@ namespace Fracture
             Array.Copy(identity, uf, Fragments);
             for (int m = 0; m < Edges; m++)
             {
-                int P = edges[2 * m], Q = edges[2 * m + 1];
-                double jump;
-                if (Dim == 1)
-                {
-                    jump = Math.Abs(disp[P] - disp[Q]);
-                }
-                else
-                {
-                    double j0 = disp[3 * P] - disp[3 * Q], j1 = disp[3 * P + 1] - disp[3 * Q + 1];
-                    double j2 = disp[3 * P + 2] - disp[3 * Q + 2];
-                    jump = Math.Sqrt(j0 * j0 + j1 * j1 + j2 * j2);
-                }
-                broken[m] = jump > t;
+                broken[m] = EdgeJump(disp, m) > t;
                 if (broken[m])
                     count++;
                 else
-                    Unite(uf, P, Q);
+                    Unite(uf, edges[2 * m], edges[2 * m + 1]);
             }
             result.NumBroken = count;
+            return Label(uf, Fragments, result.Groups);
+        }
+
+        // Step 5: |jump'| of edge m from the displacements, |disp'[P] - disp'[Q]| (Euclidean norm when d = 3).
+        double EdgeJump(double[] disp, int m)
+        {
+            int P = edges[2 * m], Q = edges[2 * m + 1];
+            if (Dim == 1)
+                return Math.Abs(disp[P] - disp[Q]);
+            double j0 = disp[3 * P] - disp[3 * Q], j1 = disp[3 * P + 1] - disp[3 * Q + 1];
+            double j2 = disp[3 * P + 2] - disp[3 * Q + 2];
+            return Math.Sqrt(j0 * j0 + j1 * j1 + j2 * j2);
+        }
+
+        // Section 12.4 step 4, Anchored: true for the fragments whose group holds a fragment bonded to the world.
+        // A group id is its smallest fragment, so the first pass marks group ids and the second, in fragment
+        // order, copies each group's mark to its members (Groups[j] <= j, and a group id keeps its own mark).
+        void AnchoredGroups(FractureImpact result)
+        {
+            bool[] held = result.Anchored;
+            int[] groups = result.Groups;
+            Array.Clear(held, 0, Fragments);
+            if (anchored == null)
+                return;
+            for (int j = 0; j < Fragments; j++)
+                if (anchored[j] == 1)
+                    held[groups[j]] = true;
+            for (int j = 0; j < Fragments; j++)
+                held[j] = held[groups[j]];
+        }
+
+        // ------------------------------------------------------------------ damage (docs/FORMAT.md section 12)
+
+        /// <summary>A fresh damage state for one object: e bond healths, all 1 (no bond damaged).</summary>
+        public double[] NewState()
+        {
+            var health = new double[Edges];
+            ResetState(health);
+            return health;
+        }
+
+        /// <summary>Set every health of a state back to 1, as <see cref="NewState"/> without allocating.</summary>
+        public void ResetState(double[] health)
+        {
+            for (int m = 0; m < health.Length; m++)
+                health[m] = 1.0;
+        }
+
+        /// <summary>Ok when <paramref name="health"/> is a state of this file: e values in [0, 1] (NaN is not); else State.</summary>
+        public FractureStatus CheckState(double[] health)
+        {
+            if (health == null)
+                return FractureStatus.Argument;
+            if (health.Length != Edges)
+                return FractureStatus.State;
+            foreach (double h in health)
+                if (!(h >= 0.0 && h <= 1.0))
+                    return FractureStatus.State;
+            return FractureStatus.Ok;
+        }
+
+        /// <summary>A state as a game saves it: e little-endian doubles (8 e bytes), for any machine and reader.</summary>
+        public static byte[] StateToBytes(double[] health)
+        {
+            var bytes = new byte[8 * health.Length];
+            for (int m = 0; m < health.Length; m++)
+            {
+                long bits = BitConverter.DoubleToInt64Bits(health[m]);
+                for (int b = 0; b < 8; b++)
+                    bytes[8 * m + b] = (byte)(bits >> (8 * b));
+            }
+            return bytes;
+        }
+
+        /// <summary>
+        /// A saved state (<see cref="StateToBytes"/>) into <paramref name="health"/> (e entries), checked: State, with
+        /// <paramref name="health"/> untouched, for another size or values outside [0, 1].
+        /// </summary>
+        public FractureStatus StateFromBytes(byte[] bytes, double[] health)
+        {
+            if (bytes == null || health == null)
+                return FractureStatus.Argument;
+            if (bytes.Length != 8L * Edges || health.Length != Edges)
+                return FractureStatus.State;
+            for (int m = 0; m < Edges; m++) // all checked before any is written
+            {
+                double h = ReadDouble(bytes, 8 * m);
+                if (!(h >= 0.0 && h <= 1.0))
+                    return FractureStatus.State;
+            }
+            for (int m = 0; m < Edges; m++)
+                health[m] = ReadDouble(bytes, 8 * m);
+            return FractureStatus.Ok;
+        }
+
+        static double ReadDouble(byte[] bytes, int at)
+        {
+            long bits = 0;
+            for (int b = 7; b >= 0; b--)
+                bits = bits << 8 | bytes[at + b];
+            return BitConverter.Int64BitsToDouble(bits);
+        }
+
+        /// <summary>
+        /// One hit on an object whose damage state is <paramref name="health"/> (docs/FORMAT.md section 12.4),
+        /// updated in place; arguments and answers as <see cref="Project"/>. Every bond the hit loads above the
+        /// crack level c times its limit is cracked and loses q (load - c) of its health (q = r / (1 - c); load =
+        /// its measure over its limit, 1 = at its strength); above its limit it breaks (health 0). Broken then
+        /// holds every broken bond (this hit's and earlier ones'), Cracked the bonds that hold but were loaded
+        /// above c by this hit or weakened before, and the groups are those of the bonds that hold; Anchored says
+        /// which fragments stay held by the world (bonds to it never break). Refused hits leave the state as it
+        /// was: Input as Project, State for an invalid state. On a file without feature "damage" a state only
+        /// remembers broken bonds (c = 1, r = 0). Does not allocate.
+        /// </summary>
+        public FractureStatus Hit(double[] health, double px, double py, double pz, double nx, double ny, double nz,
+                                  double threshold, FractureImpact result)
+        {
+            if (result == null || result.Owner != this || health == null)
+                return FractureStatus.Argument;
+            if (!IsFinite(px) || !IsFinite(py) || !IsFinite(pz) || !IsFinite(nx) || !IsFinite(ny) || !IsFinite(nz))
+                return FractureStatus.Input;
+            if (double.IsNaN(threshold) || threshold < 0)
+                return FractureStatus.Input;
+            FractureStatus status = CheckState(health);
+            if (status != FractureStatus.Ok) // before any change: a refused hit leaves the state as it was
+                return status;
+            HitCore(health, px, py, pz, nx, ny, nz, threshold, result);
+            return FractureStatus.Ok;
+        }
+
+        void HitCore(double[] health, double px, double py, double pz, double nx, double ny, double nz, double threshold,
+                     FractureImpact result)
+        {
+            double m = Math.Max(Math.Abs(nx), Math.Max(Math.Abs(ny), Math.Abs(nz))), t = 0, length = 0;
+            double[] alpha = result.ScaledAlpha, disp = result.ScaledDisp;
+            byte[] cut = result.Cut;
+            bool haveDisp = false;
+            result.Site = NearestSiteCore(px, py, pz, result.KdIds, result.KdBounds);
+            Array.Clear(cut, 0, Edges);
+            if (m == 0) // step 1: nothing changes
+            {
+                Array.Clear(alpha, 0, Modes);
+            }
+            else
+            {
+                double n0 = nx / m, n1 = ny / m, n2 = nz / m;
+                t = threshold / m;
+                length = Math.Sqrt(n0 * n0 + n1 * n1 + n2 * n2);
+                ModeCoefficients(result.Site, n0, n1, n2, length, alpha);
+                if (bondPtr != null)
+                {
+                    StressDamage(result.Site, n0, n1, n2, t, cut, health);
+                }
+                else if (jumps != null)
+                {
+                    TableDamage(result.Site, length, t, cut, health);
+                }
+                else
+                {
+                    Displacements(alpha, disp);
+                    haveDisp = true;
+                    DirectDamage(disp, t, cut, health);
+                }
+            }
+            result.NumGroups = DamageAnswers(result.Site, length, t, health, result);
+            if (result.ComputeDisplacement)
+            {
+                if (!haveDisp)
+                    Displacements(alpha, disp);
+                for (int i = 0; i < disp.Length; i++)
+                    result.Displacement[i] = m * disp[i];
+            }
+            for (int i = 0; i < Modes; i++)
+                result.Alpha[i] = m * alpha[i];
+            AnchoredGroups(result);
+        }
+
+        // Section 12.4 step 3 for one bond whose measure a exceeds c times its limit b (now cracked; a bond at or
+        // below that keeps its health, and a > b implies it): a > b breaks it (health 0), otherwise it loses
+        // q (a / b - c), never going below 0. A broken bond stays broken.
+        void CrackBond(double[] health, byte[] cut, int m, double a, double b)
+        {
+            double h = health[m];
+            cut[m] = 1;
+            if (h > 0)
+            {
+                if (a > b)
+                    h = 0;
+                else
+                    h = h - damageQ * (a / b - CrackLevel); // 0 < b < inf here: a / b is finite
+                health[m] = h < 0 ? 0 : h;
+            }
+        }
+
+        // Criterion "stress": a = g for the bonds the site lists (0, never cracked, for the others), b = t S.
+        void StressDamage(int site, double n0, double n1, double n2, double t, byte[] cut, double[] health)
+        {
+            for (int j = bondPtr[site]; j < bondPtr[site + 1]; j++)
+            {
+                int e = bondEdge[j];
+                double g = (double)bondGain[3 * j] * n0 + (double)bondGain[3 * j + 1] * n1 + (double)bondGain[3 * j + 2] * n2;
+                double b = t * (double)bondStrength[e];
+                if (g > CrackLevel * b)
+                    CrackBond(health, cut, e, g, b);
+            }
+        }
+
+        // Criterion "modes" with the jump table (d = 1): a = |n'| |J[v, m]|, b = t. The bonds with a <= c t are a
+        // prefix of the site's row (as for t in TableHolding): only the rest crack.
+        void TableDamage(int site, double length, double t, byte[] cut, double[] health)
+        {
+            long row = (long)site * Edges;
+            for (int pos = TableHolding(site, length, CrackLevel * t); pos < Edges; pos++)
+                CrackBond(health, cut, jumpEdge[row + pos], length * jumps[row + pos], t);
+        }
+
+        // Criterion "modes" from the displacements: a = |jump'| (section 4 step 5), b = t.
+        void DirectDamage(double[] disp, double t, byte[] cut, double[] health)
+        {
+            double ct = CrackLevel * t;
+            for (int m = 0; m < Edges; m++)
+            {
+                double a = EdgeJump(disp, m);
+                if (a > ct)
+                    CrackBond(health, cut, m, a, t);
+            }
+        }
+
+        // Section 12.4 step 4 after every bond is updated: Broken = health <= 0, Cracked = holds and (cracked by
+        // this hit or health < 1), then the groups over the bonds that hold. With the jump table the bonds that
+        // hold all lie in the prefix of the site's row that this hit leaves standing; when none of the merges
+        // done in that prefix is broken (by an earlier hit or by cracks), the other broken bonds of the prefix
+        // only close cycles and the groups are the merges' (as in TableGroups). Otherwise a union-find.
+        int DamageAnswers(int site, double length, double t, double[] health, FractureImpact result)
+        {
+            byte[] cut = result.Cut;
+            bool[] broken = result.Broken, cracked = result.Cracked;
+            int brokenCount = 0, crackedCount = 0;
+            for (int m = 0; m < Edges; m++)
+            {
+                bool isBroken = health[m] <= 0, isCracked = !isBroken && (cut[m] != 0 || health[m] < 1);
+                broken[m] = isBroken;
+                cracked[m] = isCracked;
+                brokenCount += isBroken ? 1 : 0;
+                crackedCount += isCracked ? 1 : 0;
+            }
+            result.NumBroken = brokenCount;
+            result.NumCracked = crackedCount;
+            if (brokenCount == 0)
+            {
+                Array.Copy(whole, result.Groups, Fragments);
+                return wholeGroups;
+            }
+            if (jumps != null)
+            {
+                int done = MergesDone(site, TableHolding(site, length, t)), r = 0;
+                long row = (long)site * Edges, at = (long)site * Fragments;
+                while (r < done && health[jumpEdge[row + mergeAt[at + r]]] > 0)
+                    r++;
+                if (r == done)
+                    return MergeGroups(site, done, result.Labels, result.Groups);
+            }
+            int[] uf = result.Labels;
+            Array.Copy(identity, uf, Fragments);
+            for (int m = 0; m < Edges; m++)
+                if (!broken[m])
+                    Unite(uf, edges[2 * m], edges[2 * m + 1]);
             return Label(uf, Fragments, result.Groups);
         }
 
@@ -830,23 +1209,30 @@ namespace Fracture
             public bool ShapeOk = true;
         }
 
-        // The five arrays of section 2, then the four of the stress criterion (section 11, with feature "stress").
+        // The five arrays of section 2, the four of the stress criterion (section 11, with feature "stress"), then
+        // those of section 12: anchored (feature "anchors") and the optional crack arrays (version 2).
         static readonly string[] ArrayNames = { "sites", "B", "W", "edges", "edge_areas", "site_bonds_ptr", "site_bonds",
-                                                "site_bond_gain", "bond_strength" };
-        static readonly int[] ArrayRanks = { 2, 3, 3, 2, 1, 1, 1, 2, 1 };
-        static readonly bool[] ArrayIsInt = { false, false, false, true, false, true, true, false, false };
+                                                "site_bond_gain", "bond_strength", "anchored", "crack_ptr",
+                                                "crack_segments" };
+        static readonly int[] ArrayRanks = { 2, 3, 3, 2, 1, 1, 1, 2, 1, 1, 1, 3 };
+        static readonly bool[] ArrayIsInt = { false, false, false, true, false, true, true, false, false, true, true,
+                                              false };
 
         internal sealed class Header
         {
             public bool HasDim, HasThreshold, HasRadius, HasTransform, HasLength, HasCrc, HasBuffer, HasArrays;
             public bool Stress; // version 2 with feature "stress" and criterion "stress"
-            public long Dim, ByteLength, Crc, SiteBondsCount = -1;
+            public bool Anchors, Damage; // version 2 with feature "anchors", "damage"
+            public bool Cracks; // version 2 whose table lists crack_ptr or crack_segments
+            public object DamageObject; // the header's "damage" value (checked by CheckDamage)
+            public double CrackLevel, DamageRate;
+            public long Dim, ByteLength, Crc, SiteBondsCount = -1, CrackSegmentsCount = -1;
             public long[] Counts;
             public string[] Names;
             public string Uri;
             public double DefaultThreshold, ImpactRadius;
             public readonly double[] Transform = new double[16];
-            public readonly ArrayEntry[] Arrays = new ArrayEntry[9];
+            public readonly ArrayEntry[] Arrays = new ArrayEntry[12];
 
             public static Header Parse(byte[] bytes)
             {
@@ -872,18 +1258,23 @@ namespace Fracture
                     throw Fail(FractureStatus.Format, "runtime file version is not supported (this reader knows 1.." +
                                                       FormatVersion + ")");
                 var h = new Header();
-                h.Stress = CheckFeatures(top, version);
-                h.Read(top);
+                List<object> features = CheckFeatures(top, version);
+                h.Stress = features.Contains("stress");
+                h.Anchors = features.Contains("anchors");
+                h.Damage = features.Contains("damage");
+                if (h.Damage)
+                    top.TryGetValue("damage", out h.DamageObject);
+                h.Read(top, version);
                 return h;
             }
 
             // Section 11: version 2 lists the features it needs (refused by name when unknown) and a criterion;
             // version 1 ignores both keys. Like the reference reader, a file that lists "stress" must use
-            // criterion "stress" (the stress arrays come with the criterion). Returns whether it does.
-            static bool CheckFeatures(Dictionary<string, object> top, long version)
+            // criterion "stress" (the stress arrays come with the criterion). Returns the features.
+            static List<object> CheckFeatures(Dictionary<string, object> top, long version)
             {
                 if (version < 2)
-                    return false;
+                    return new List<object>();
                 object value;
                 var features = top.TryGetValue("features", out value) ? value as List<object> : new List<object>();
                 if (features == null || features.Exists(f => !(f is string)))
@@ -907,10 +1298,32 @@ namespace Fracture
                 if ((string)criterion != "stress" && stress)
                     throw Fail(FractureStatus.Format, "runtime file lists feature 'stress' but its criterion is 'modes' " +
                                                       "(the stress arrays come with criterion 'stress')");
-                return stress;
+                return features;
             }
 
-            void Read(Dictionary<string, object> top)
+            // Section 12.1: with feature "damage", the object `damage` with 0 < crack_level <= 1 and a finite
+            // damage_rate >= 0.
+            public void CheckDamage()
+            {
+                var damage = DamageObject as Dictionary<string, object>;
+                if (damage == null)
+                    throw Fail(FractureStatus.Header, "the feature 'damage' needs a header object 'damage'");
+                object value;
+                if (!damage.TryGetValue("crack_level", out value) || !Json.AsNumber(value, out CrackLevel) ||
+                    !IsFinite(CrackLevel))
+                    throw Fail(FractureStatus.Header, "damage.crack_level must be a finite number");
+                if (!damage.TryGetValue("damage_rate", out value) || !Json.AsNumber(value, out DamageRate) ||
+                    !IsFinite(DamageRate))
+                    throw Fail(FractureStatus.Header, "damage.damage_rate must be a finite number");
+                if (!(CrackLevel > 0 && CrackLevel <= 1))
+                    throw Fail(FractureStatus.Header, "damage.crack_level must be in (0, 1], got " +
+                                                      CrackLevel.ToString(CultureInfo.InvariantCulture));
+                if (DamageRate < 0)
+                    throw Fail(FractureStatus.Header, "damage.damage_rate must be >= 0, got " +
+                                                      DamageRate.ToString(CultureInfo.InvariantCulture));
+            }
+
+            void Read(Dictionary<string, object> top, long version)
             {
                 object value;
                 HasDim = top.TryGetValue("dim", out value) && Json.AsInteger(value, out Dim);
@@ -930,6 +1343,8 @@ namespace Fracture
                             Counts = null;
                     if (Stress && (!counts.TryGetValue("site_bonds", out value) || !Json.AsInteger(value, out SiteBondsCount)))
                         SiteBondsCount = -1;
+                    if (!counts.TryGetValue("crack_segments", out value) || !Json.AsInteger(value, out CrackSegmentsCount))
+                        CrackSegmentsCount = -1;
                 }
                 var names = top.TryGetValue("fragment_names", out value) ? value as List<object> : null;
                 if (names != null)
@@ -951,12 +1366,19 @@ namespace Fracture
                 }
                 var arrays = top.TryGetValue("arrays", out value) ? value as Dictionary<string, object> : null;
                 HasArrays = arrays != null;
-                for (int i = 0; HasArrays && i < (Stress ? 9 : 5); i++)
+                for (int i = 0; HasArrays && i < Arrays.Length; i++)
                 {
                     var entry = arrays.TryGetValue(ArrayNames[i], out value) ? value as Dictionary<string, object> : null;
                     if (entry != null)
                         Arrays[i] = ReadEntry(entry);
                 }
+                Cracks = HasArrays && version >= 2 && (arrays.ContainsKey("crack_ptr") || arrays.ContainsKey("crack_segments"));
+            }
+
+            // The arrays the file must hold: the required five and those of the features it lists.
+            bool Needed(int i)
+            {
+                return i < 5 || (i < 9 ? Stress : i == 9 ? Anchors : Cracks);
             }
 
             static ArrayEntry ReadEntry(Dictionary<string, object> entry)
@@ -997,8 +1419,14 @@ namespace Fracture
 
             public void CheckArrays(long binarySize)
             {
-                for (int i = 0; i < (Stress ? 9 : 5); i++)
+                // The crack arrays (drawing only) come together: a table that lists one needs both.
+                if (Cracks && (Arrays[10] == null) != (Arrays[11] == null))
+                    throw Fail(FractureStatus.Header, "the crack arrays come together: " +
+                                                      (Arrays[10] == null ? "crack_ptr" : "crack_segments") + " missing");
+                for (int i = 0; i < Arrays.Length; i++)
                 {
+                    if (!Needed(i))
+                        continue;
                     ArrayEntry a = Arrays[i];
                     string name = ArrayNames[i];
                     if (a == null || a.DType == null || a.Shape == null)

@@ -1,13 +1,17 @@
 /*
  * fracture_bench - time fr_project on a list of hits (used by bench/bench_runtime.py).
  *
- *   fracture_bench HEADER BINARY ROUNDS [--compact] [--all] < hits
+ *   fracture_bench HEADER BINARY ROUNDS [--compact] [--all] [--state] < hits
  *
  * Hits use fracture_check's line protocol (7 hex doubles, "-" for the default
  * threshold). Every hit is timed on its own with CLOCK_MONOTONIC, ROUNDS times
  * over the whole list; the clock's own cost (measured around an empty call) is
  * subtracted. --compact loads with FR_LOAD_COMPACT (no jump table); --all also asks
- * for the broken edges, alpha and the displacements (by default only the groups).
+ * for the broken edges, alpha and the displacements (by default only the groups);
+ * --state times fr_hit on a damage state instead of fr_project, also asking for the
+ * cracked bonds and the anchored fragments (what a game draws and keeps static). Each
+ * hit gets a fresh state (a copy outside the timed call, inside cpu_mean_ns), so every
+ * hit tests and unites every bond that holds, as on an undamaged object.
  * Prints one line:
  *   median_ns <x> p99_ns <x> cpu_mean_ns <x> clock_ns <x> calls <n> groups_median <x> load_ms <x> memory_kib <x>
  * where cpu_mean_ns is the thread CPU time of all calls divided by their number, load_ms
@@ -49,17 +53,19 @@ int main(int argc, char **argv)
     fr_info info;
     fr_impact out;
     char line[4096], message[FR_MESSAGE_SIZE];
-    int n = 0, rounds, r, i, calls = 0, all = 0;
+    int n = 0, rounds, r, i, calls = 0, all = 0, stateful = 0;
     unsigned flags = 0;
     double *times, *groups_count, clock_cost = 0, cpu0, cpu1, load0, load_ms;
+    double *health, *fresh;
     void *workspace;
     for (i = 4; i < argc; i++) {
         if (strcmp(argv[i], "--compact") == 0) flags |= FR_LOAD_COMPACT;
         else if (strcmp(argv[i], "--all") == 0) all = 1;
+        else if (strcmp(argv[i], "--state") == 0) stateful = 1;
         else argc = 0;
     }
     if (argc < 4 || (rounds = atoi(argv[3])) < 1) {
-        fprintf(stderr, "usage: fracture_bench HEADER BINARY ROUNDS [--compact] [--all] < hits\n");
+        fprintf(stderr, "usage: fracture_bench HEADER BINARY ROUNDS [--compact] [--all] [--state] < hits\n");
         return 64;
     }
     h = read_file(argv[1], &hn);
@@ -82,6 +88,13 @@ int main(int argc, char **argv)
     workspace = malloc(fr_workspace_size(rt) + 16);
     memset(&out, 0, sizeof out);
     out.groups = (int32_t *)malloc(sizeof(int32_t) * (size_t)info.fragments);
+    health = (double *)malloc(sizeof(double) * (size_t)info.edges + 1);
+    fresh = (double *)malloc(sizeof(double) * (size_t)info.edges + 1);
+    fr_new_state(rt, fresh);
+    if (stateful) {
+        out.cracked = (uint8_t *)malloc((size_t)info.edges + 1);
+        out.anchored = (uint8_t *)malloc((size_t)info.fragments);
+    }
     if (all) {
         out.broken = (uint8_t *)malloc((size_t)info.edges + 1);
         out.alpha = (double *)malloc(sizeof(double) * (size_t)info.modes);
@@ -94,8 +107,14 @@ int main(int argc, char **argv)
     cpu0 = now_ns(CLOCK_THREAD_CPUTIME_ID);
     for (r = 0; r < rounds; r++)
         for (i = 0; i < n; i++) {
-            double t0 = now_ns(CLOCK_MONOTONIC), t1;
-            (void)fr_project(rt, hits[i], hits[i] + 3, hits[i][6], workspace, &out);
+            double t0, t1;
+            if (stateful)
+                memcpy(health, fresh, sizeof(double) * (size_t)info.edges);
+            t0 = now_ns(CLOCK_MONOTONIC);
+            if (stateful)
+                (void)fr_hit(rt, health, hits[i], hits[i] + 3, hits[i][6], workspace, &out);
+            else
+                (void)fr_project(rt, hits[i], hits[i] + 3, hits[i][6], workspace, &out);
             t1 = now_ns(CLOCK_MONOTONIC);
             times[calls++] = t1 - t0 - clock_cost;
             groups_count[i] = out.num_groups;
@@ -109,6 +128,7 @@ int main(int argc, char **argv)
            calls, n > 0 ? groups_count[n / 2] : 0.0, load_ms, (double)fr_memory_size(rt) / 1024.0);
     fr_free(rt);
     free(h), free(b), free(times), free(groups_count), free(workspace), free(out.groups);
-    free(out.broken), free(out.alpha), free(out.displacement);
+    free(out.broken), free(out.alpha), free(out.displacement), free(out.cracked), free(out.anchored);
+    free(health), free(fresh);
     return 0;
 }

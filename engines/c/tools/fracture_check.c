@@ -1,7 +1,7 @@
 /*
  * fracture_check - conformance driver of the C reader (used by the fracture tests).
  *
- *   fracture_check HEADER BINARY [--names] [--skip-crc] [--compact] < impacts
+ *   fracture_check HEADER BINARY [--names] [--skip-crc] [--compact] [--structure] < impacts
  *   fracture_check --sweep HEADER BINARY
  *
  * Impacts, one per line: the IEEE-754 bits of point x y z, impulse x y z and the
@@ -12,6 +12,14 @@
  * Each impact is projected twice, once asking for every output and once for the groups
  * only (with a caller workspace): an answer that differs prints "error inconsistent".
  * --compact loads with FR_LOAD_COMPACT (no jump table: the other projection path).
+ *
+ * Damage states (docs/FORMAT.md section 12): the line "start new" (fr_new_state) or "start
+ * <e health bits...>" (loaded through fr_state_from_bytes) sets the state; every impact
+ * after it is an fr_hit on that state instead of an fr_project. A state that does not load
+ * prints "start-error <status>" and the previous one stays. --structure prints after every
+ * answer the line
+ *   structure c <cracked bonds...> y <anchored flag of each fragment...> h <health bits...>
+ * (c and y empty for a refused impact, h only with a state, saved through fr_state_to_bytes).
  *
  * --sweep loads every truncation of the header, many of the binary, and thousands of deterministic
  * mutations (31 in 32 with FR_LOAD_COMPACT), projecting a few hits on whatever loads: run under AddressSanitizer
@@ -34,26 +42,93 @@ static void print_bits(double v)
     printf(" %016" PRIx64, u);
 }
 
-/* Whether a groups-only projection (caller workspace, no optional output) agrees with `full`. */
+/*
+ * Whether a groups-only projection (caller workspace, no optional output) agrees with `full`; with a
+ * state, a groups-only hit on a copy of the state before the hit (`before`) must also leave `after`.
+ */
 static int same_groups(const fr_runtime *rt, const double point[3], const double impulse[3], double threshold,
-                       const fr_impact *full)
+                       const fr_impact *full, const double *before, const double *after)
 {
     fr_info info = fr_get_info(rt);
     int32_t *groups = (int32_t *)malloc(sizeof(int32_t) * (size_t)info.fragments);
+    double *copy = (double *)malloc(sizeof(double) * (size_t)info.edges + 1);
     void *workspace = malloc(fr_workspace_size(rt) + 1);
     fr_impact out;
-    int same;
+    int same = groups != NULL && copy != NULL && workspace != NULL;
     memset(&out, 0, sizeof out);
     out.groups = groups;
-    same = groups != NULL && workspace != NULL && fr_project(rt, point, impulse, threshold, workspace, &out) == FR_OK &&
-           out.site == full->site && out.num_groups == full->num_groups && out.num_broken == full->num_broken &&
+    if (same && before != NULL) {
+        memcpy(copy, before, sizeof(double) * (size_t)info.edges);
+        same = fr_hit(rt, copy, point, impulse, threshold, workspace, &out) == FR_OK &&
+               memcmp(copy, after, sizeof(double) * (size_t)info.edges) == 0;
+    } else if (same) {
+        same = fr_project(rt, point, impulse, threshold, workspace, &out) == FR_OK;
+    }
+    same = same && out.site == full->site && out.num_groups == full->num_groups &&
+           out.num_broken == full->num_broken && out.num_cracked == full->num_cracked &&
            memcmp(groups, full->groups, sizeof(int32_t) * (size_t)info.fragments) == 0;
     free(groups);
+    free(copy);
     free(workspace);
     return same;
 }
 
-static int answer(const fr_runtime *rt, char *line)
+/* The --structure line of an answer (`out` NULL for a refused impact); the state as its saved bytes. */
+static void print_structure(const fr_runtime *rt, const fr_impact *out, const double *health)
+{
+    fr_info info = fr_get_info(rt);
+    unsigned char *bytes = (unsigned char *)malloc(8 * (size_t)info.edges + 1);
+    int j, b;
+    printf("structure c");
+    for (j = 0; out != NULL && j < info.edges; j++)
+        if (out->cracked[j])
+            printf(" %d", j);
+    printf(" y");
+    for (j = 0; out != NULL && j < info.fragments; j++)
+        printf(" %d", out->anchored[j]);
+    if (health != NULL && bytes != NULL) {
+        printf(" h");
+        fr_state_to_bytes(rt, health, bytes);
+        for (j = 0; j < info.edges; j++) {
+            uint64_t u = 0;
+            for (b = 7; b >= 0; b--)
+                u = u << 8 | bytes[8 * j + b];
+            printf(" %016" PRIx64, u);
+        }
+    }
+    printf("\n");
+    free(bytes);
+}
+
+/* A "start" line: a fresh state, or e health bits loaded as the little-endian bytes a game saves. */
+static void start_state(const fr_runtime *rt, char *line, double *health)
+{
+    fr_info info = fr_get_info(rt);
+    size_t n = 0, capacity = 8 * (size_t)info.edges + 8;
+    unsigned char *bytes = (unsigned char *)malloc(capacity);
+    char *token = strtok(line + 5, " \t\r\n");
+    fr_status status = FR_ERR_MEMORY;
+    if (token != NULL && strcmp(token, "new") == 0) {
+        fr_new_state(rt, health);
+        status = FR_OK;
+    } else if (bytes != NULL) {
+        for (; token != NULL; token = strtok(NULL, " \t\r\n"), n += 8) {
+            double v = from_bits(token);
+            uint64_t u;
+            int b;
+            memcpy(&u, &v, sizeof u);
+            for (b = 0; b < 8 && n + 8 <= capacity; b++)
+                bytes[n + (size_t)b] = (unsigned char)(u >> (8 * b));
+        }
+        status = n <= capacity ? fr_state_from_bytes(rt, bytes, n, health) : FR_ERR_STATE;
+    }
+    if (status != FR_OK)
+        printf("start-error %s\n", fr_status_string(status));
+    free(bytes);
+}
+
+/* One impact line: fr_project, or fr_hit on `health` when a state was started. */
+static int answer(const fr_runtime *rt, char *line, double *health, int structure)
 {
     fr_info info = fr_get_info(rt);
     char *tokens[7];
@@ -63,13 +138,17 @@ static int answer(const fr_runtime *rt, char *line)
     fr_status status;
     int32_t *groups = (int32_t *)malloc(sizeof(int32_t) * (size_t)info.fragments);
     uint8_t *broken = (uint8_t *)malloc((size_t)info.edges + 1);
+    uint8_t *cracked = (uint8_t *)malloc((size_t)info.edges + 1);
+    uint8_t *anchored = (uint8_t *)malloc((size_t)info.fragments);
     double *alpha = (double *)malloc(sizeof(double) * (size_t)info.modes);
     double *disp = (double *)malloc(sizeof(double) * (size_t)info.fragments * (size_t)info.dim);
+    double *before = (double *)malloc(sizeof(double) * (size_t)info.edges + 1);
     char *token;
     for (token = strtok(line, " \t\r\n"); token != NULL && n < 7; token = strtok(NULL, " \t\r\n"))
         tokens[n++] = token;
-    if (n < 7 || groups == NULL || broken == NULL || alpha == NULL || disp == NULL) {
-        free(groups), free(broken), free(alpha), free(disp);
+    if (n < 7 || groups == NULL || broken == NULL || cracked == NULL || anchored == NULL || alpha == NULL
+        || disp == NULL || before == NULL) {
+        free(groups), free(broken), free(cracked), free(anchored), free(alpha), free(disp), free(before);
         return n == 0 ? 0 : -1;
     }
     for (j = 0; j < 3; j++) {
@@ -82,8 +161,15 @@ static int answer(const fr_runtime *rt, char *line)
     out.broken = broken;
     out.alpha = alpha;
     out.displacement = disp;
-    status = fr_project(rt, point, impulse, threshold, NULL, &out);
-    if (status == FR_OK && !same_groups(rt, point, impulse, threshold, &out)) {
+    out.cracked = cracked;
+    out.anchored = anchored;
+    if (health != NULL) {
+        memcpy(before, health, sizeof(double) * (size_t)info.edges);
+        status = fr_hit(rt, health, point, impulse, threshold, NULL, &out);
+    } else {
+        status = fr_project(rt, point, impulse, threshold, NULL, &out);
+    }
+    if (status == FR_OK && !same_groups(rt, point, impulse, threshold, &out, health != NULL ? before : NULL, health)) {
         printf("error inconsistent\n");
     } else if (status != FR_OK) {
         printf("error %s\n", fr_status_string(status));
@@ -103,7 +189,9 @@ static int answer(const fr_runtime *rt, char *line)
             print_bits(disp[j]);
         printf("\n");
     }
-    free(groups), free(broken), free(alpha), free(disp);
+    if (structure)
+        print_structure(rt, status == FR_OK ? &out : NULL, health);
+    free(groups), free(broken), free(cracked), free(anchored), free(alpha), free(disp), free(before);
     return 1;
 }
 
@@ -124,6 +212,7 @@ static fr_status load_copy(const unsigned char *h, size_t hn, const unsigned cha
     return status;
 }
 
+/* A few projections and hits on whatever loaded, with every optional output, and every bond's crack segments. */
 static void poke_projections(const fr_runtime *rt)
 {
     static const double POINTS[3][3] = {{0, 0, 0}, {1e6, -1e6, 3}, {0.25, -0.5, 0.125}};
@@ -131,16 +220,31 @@ static void poke_projections(const fr_runtime *rt)
     fr_info info = fr_get_info(rt);
     int32_t *groups = (int32_t *)malloc(sizeof(int32_t) * (size_t)info.fragments);
     double *disp = (double *)malloc(sizeof(double) * (size_t)info.fragments * (size_t)info.dim);
-    int i;
-    for (i = 0; i < 3 && groups != NULL && disp != NULL; i++) {
+    double *health = (double *)malloc(sizeof(double) * (size_t)info.edges + 1);
+    uint8_t *cracked = (uint8_t *)malloc((size_t)info.edges + 1), *anchored = (uint8_t *)malloc((size_t)info.fragments);
+    volatile float sink = 0;
+    int32_t i, count, c;
+    fr_new_state(rt, health);
+    for (i = 0; i < 6 && groups != NULL && disp != NULL && health != NULL && cracked != NULL && anchored != NULL; i++) {
         fr_impact out;
         memset(&out, 0, sizeof out);
         out.groups = groups;
         out.displacement = disp;
-        (void)fr_project(rt, POINTS[i], IMPULSES[i], i == 2 ? 1e-171 : info.default_threshold, NULL, &out);
+        out.cracked = cracked;
+        out.anchored = anchored;
+        if (i < 3)
+            (void)fr_project(rt, POINTS[i], IMPULSES[i], i == 2 ? 1e-171 : info.default_threshold, NULL, &out);
+        else
+            (void)fr_hit(rt, health, POINTS[i - 3], IMPULSES[i - 3], i == 5 ? 1e-171 : info.default_threshold, NULL,
+                         &out);
     }
-    free(groups);
-    free(disp);
+    for (i = 0; i < info.edges; i++) {
+        const float *segments = fr_crack_segments(rt, i, &count);
+        for (c = 0; c < 6 * count; c++)
+            sink += segments[c];
+    }
+    (void)sink;
+    free(groups), free(disp), free(health), free(cracked), free(anchored);
 }
 
 static unsigned long long rng_state = 0x9E3779B97F4A7C15ull;
@@ -195,21 +299,25 @@ static int sweep(const unsigned char *h, size_t hn, const unsigned char *b, size
 int main(int argc, char **argv)
 {
     const char *paths[2] = {NULL, NULL};
-    int i, names = 0, do_sweep = 0, count = 0;
+    int i, names = 0, do_sweep = 0, count = 0, structure = 0, stateful = 0;
     unsigned flags = 0;
     unsigned char *h, *b;
     size_t hn = 0, bn = 0;
     fr_runtime *rt;
-    char message[FR_MESSAGE_SIZE], line[4096];
+    double *health;
+    static char line[1 << 16]; /* a start line holds e * 17 characters */
+    char message[FR_MESSAGE_SIZE];
     for (i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--names") == 0) names = 1;
         else if (strcmp(argv[i], "--skip-crc") == 0) flags |= FR_LOAD_SKIP_CRC;
         else if (strcmp(argv[i], "--sweep") == 0) do_sweep = 1;
         else if (strcmp(argv[i], "--compact") == 0) flags |= FR_LOAD_COMPACT;
+        else if (strcmp(argv[i], "--structure") == 0) structure = 1;
         else if (count < 2) paths[count++] = argv[i];
     }
     if (count != 2) {
-        fprintf(stderr, "usage: fracture_check [--names] [--skip-crc] [--compact] [--sweep] HEADER BINARY < impacts\n");
+        fprintf(stderr, "usage: fracture_check [--names] [--skip-crc] [--compact] [--structure] [--sweep] HEADER "
+                        "BINARY < impacts\n");
         return 64;
     }
     h = read_file(paths[0], &hn);
@@ -240,11 +348,18 @@ int main(int argc, char **argv)
         }
         printf("\n");
     }
-    while (fgets(line, sizeof line, stdin) != NULL)
-        if (answer(rt, line) < 0) {
+    health = (double *)malloc(sizeof(double) * (size_t)fr_get_info(rt).edges + 1);
+    fr_new_state(rt, health); /* until a "start" line loads another */
+    while (health != NULL && fgets(line, sizeof line, stdin) != NULL) {
+        if (strncmp(line, "start", 5) == 0) {
+            start_state(rt, line, health);
+            stateful = 1;
+        } else if (answer(rt, line, stateful ? health : NULL, structure) < 0) {
             fprintf(stderr, "bad impact line\n");
             return 64;
         }
+    }
+    free(health);
     fr_free(rt);
     free(h);
     free(b);

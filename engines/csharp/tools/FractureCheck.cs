@@ -1,6 +1,6 @@
 // FractureCheck - conformance driver of the C# reader (used by the fracture tests).
 //
-//   mono FractureCheck.exe HEADER BINARY [--names] [--skip-crc] [--compact] < impacts
+//   mono FractureCheck.exe HEADER BINARY [--names] [--skip-crc] [--compact] [--structure] < impacts
 //   mono FractureCheck.exe --bench ROUNDS HEADER BINARY [--compact] < impacts
 //
 // Same line protocol as engines/c/tools/fracture_check.c: impacts are 7 hex IEEE-754 doubles
@@ -8,6 +8,10 @@
 // or "error <status>"; a file that does not load prints "load-error <message>" and exits with 2.
 // Each impact is also projected without displacements: an answer that differs prints "error
 // inconsistent". --compact loads without the jump table (the other projection path).
+// Damage states (docs/FORMAT.md section 12), as the C driver: "start new" or "start <e health bits>"
+// (loaded through StateFromBytes; "start-error <status>" keeps the previous state) makes every later
+// impact a Hit on that state; --structure prints after every answer
+// "structure c <cracked bonds> y <anchored flags> h <health bits, saved through StateToBytes>".
 // --bench times every impact ROUNDS times (Stopwatch around each Project call, groups only) and
 // prints "median_ns <x> p99_ns <x> calls <n>", like fracture_bench.c.
 //
@@ -65,28 +69,62 @@ static class FractureCheck
             }
             output.Append('\n');
         }
+        bool structure = Array.IndexOf(args, "--structure") >= 0;
         var impact = new FractureImpact(runtime);
         var groupsOnly = new FractureImpact(runtime) { ComputeDisplacement = false };
+        double[] health = null, copy = runtime.NewState();
         string line;
         while ((line = Console.In.ReadLine()) != null)
         {
             string[] t = line.Split(new[] { ' ', '\t' }, StringSplitOptions.RemoveEmptyEntries);
             if (t.Length == 0)
                 continue;
+            if (t[0] == "start")
+            {
+                health = health ?? runtime.NewState();
+                if (t.Length == 2 && t[1] == "new")
+                {
+                    runtime.ResetState(health);
+                    continue;
+                }
+                var bytes = new byte[8 * (t.Length - 1)];
+                for (int i = 1; i < t.Length; i++)
+                {
+                    ulong bits = Convert.ToUInt64(t[i], 16);
+                    for (int b = 0; b < 8; b++) // little-endian, as a game saves a state
+                        bytes[8 * (i - 1) + b] = (byte)(bits >> (8 * b));
+                }
+                FractureStatus loaded = runtime.StateFromBytes(bytes, health);
+                if (loaded != FractureStatus.Ok)
+                    output.Append("start-error ").Append(loaded).Append('\n');
+                continue;
+            }
             double threshold = t[6] == "-" ? runtime.DefaultThreshold : FromBits(t[6]);
-            FractureStatus status = runtime.Project(FromBits(t[0]), FromBits(t[1]), FromBits(t[2]), FromBits(t[3]),
-                                                    FromBits(t[4]), FromBits(t[5]), threshold, impact);
+            double px = FromBits(t[0]), py = FromBits(t[1]), pz = FromBits(t[2]);
+            double nx = FromBits(t[3]), ny = FromBits(t[4]), nz = FromBits(t[5]);
+            if (health != null)
+                Array.Copy(health, copy, health.Length);
+            FractureStatus status = health != null ? runtime.Hit(health, px, py, pz, nx, ny, nz, threshold, impact)
+                                                   : runtime.Project(px, py, pz, nx, ny, nz, threshold, impact);
             if (status != FractureStatus.Ok)
             {
                 output.Append("error ").Append(status).Append('\n');
+                if (structure)
+                    AppendStructure(output, null, health);
                 continue;
             }
-            runtime.Project(FromBits(t[0]), FromBits(t[1]), FromBits(t[2]), FromBits(t[3]), FromBits(t[4]),
-                            FromBits(t[5]), threshold, groupsOnly);
+            // The same hit asking for less (and on a copy of the state before it): the same answer and state.
+            if (health != null)
+                runtime.Hit(copy, px, py, pz, nx, ny, nz, threshold, groupsOnly);
+            else
+                runtime.Project(px, py, pz, nx, ny, nz, threshold, groupsOnly);
             if (groupsOnly.Site != impact.Site || groupsOnly.NumGroups != impact.NumGroups ||
-                groupsOnly.NumBroken != impact.NumBroken || !Same(groupsOnly.Groups, impact.Groups))
+                groupsOnly.NumBroken != impact.NumBroken || groupsOnly.NumCracked != impact.NumCracked ||
+                !Same(groupsOnly.Groups, impact.Groups) || (health != null && !SameBits(copy, health)))
             {
                 output.Append("error inconsistent\n");
+                if (structure)
+                    AppendStructure(output, null, health);
                 continue;
             }
             output.Append("ok ").Append(impact.Site).Append(' ').Append(impact.NumGroups).Append(" g");
@@ -103,9 +141,44 @@ static class FractureCheck
             foreach (double x in impact.Displacement)
                 output.Append(' ').Append(Bits(x));
             output.Append('\n');
+            if (structure)
+                AppendStructure(output, impact, health);
         }
         Console.Out.Write(output.ToString());
         return 0;
+    }
+
+    // The --structure line (impact null for a refused one); the state as the bytes a game saves.
+    static void AppendStructure(StringBuilder output, FractureImpact impact, double[] health)
+    {
+        output.Append("structure c");
+        for (int m = 0; impact != null && m < impact.Cracked.Length; m++)
+            if (impact.Cracked[m])
+                output.Append(' ').Append(m);
+        output.Append(" y");
+        for (int j = 0; impact != null && j < impact.Anchored.Length; j++)
+            output.Append(impact.Anchored[j] ? " 1" : " 0");
+        if (health != null)
+        {
+            output.Append(" h");
+            byte[] bytes = FractureRuntime.StateToBytes(health);
+            for (int m = 0; m < health.Length; m++)
+            {
+                ulong bits = 0;
+                for (int b = 7; b >= 0; b--)
+                    bits = bits << 8 | bytes[8 * m + b];
+                output.Append(' ').Append(bits.ToString("x16"));
+            }
+        }
+        output.Append('\n');
+    }
+
+    static bool SameBits(double[] a, double[] b)
+    {
+        for (int i = 0; i < a.Length; i++)
+            if (BitConverter.DoubleToInt64Bits(a[i]) != BitConverter.DoubleToInt64Bits(b[i]))
+                return false;
+        return true;
     }
 
     static bool Same(int[] a, int[] b)
