@@ -7,7 +7,7 @@ cage's boundary vertices, k modes, p fragments, e graph edges; Python only). The
 synthetic threshold is calibrated per file so a typical hit breaks a few edges (3% of
 the jumps exceed it), like a game's ordinary hits. Targets: Python median under 100
 microseconds (aim 50; paper: 1-2 ms); C reader median under 2 microseconds on every
-sample asset.
+sample asset, also per hit on a damage state (docs/FORMAT.md section 12).
 
     python bench/bench_runtime.py [--quick] [--no-bake]
 
@@ -97,12 +97,49 @@ def run(quick: bool = False, bake: bool = True) -> str:
             "compact: `FR_LOAD_COMPACT`), the C# reader (engines/csharp, Mono), the JavaScript reader (engines/web, "
             "Node.js, with `jumpTable: true`) and the GDScript reader (engines/godot, Godot 3 headless); the engine "
             "readers compute the groups and broken edges only (no displacements, as a game that only spawns bodies), "
-            "the Python reference everything. Then the Python reference on synthetic files of larger sizes. "
-            "Targets: Python < 100 us (aim 50 us), C < 2 us median; paper 1-2 ms.\n\n"
-            + _sample_assets(hits, rng, bake) + "\n" + _stress_rows(hits, rng) + "\n" + "\n".join(rows) + "\n")
+            "the Python reference everything; \"C with state\": `fr_hit` on a damage state (docs/FORMAT.md section "
+            "12), also answering the cracked bonds and anchored fragments, each hit on a fresh state (a version-1 "
+            "file's state only remembers broken bonds). Then the Python reference on synthetic files of larger sizes. "
+            "Targets: Python < 100 us (aim 50 us), C < 2 us median (also with state); paper 1-2 ms.\n\n"
+            + _sample_assets(hits, rng, bake) + "\n" + _stress_rows(hits, rng) + "\n" + _damage_rows(hits, rng)
+            + "\n" + "\n".join(rows) + "\n")
 
 
 STRESS_FILES = (("chair.glb", "chair_stress"),)  # (sample asset, conformance runtime file with criterion "stress")
+DAMAGE_FILES = (("pillar.glb", "pillar_structure"),)  # (sample asset, conformance file with "anchors" and "damage")
+
+
+def _damage_rows(hits: int, rng) -> str:
+    """The C reader per hit on a damage state (docs/FORMAT.md section 12) of the committed structure files."""
+    from fracture_cli.stages.load import load_surface
+
+    rows = ["| asset | runtime file | features | crack level, rate | sites | fragments | bonds | impulse | "
+            "groups (median) | C median / p99 (us) | C with state median / p99 (us) | C with state mean CPU (us) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    with tempfile.TemporaryDirectory() as tmp:
+        c_bench = _build_c_bench(tmp, [])
+        if c_bench is None:
+            return "C reader, damage state: not measured (no C compiler).\n"
+        for asset, name in DAMAGE_FILES:
+            points, impulses = _surface_hits(load_surface(os.path.join(REPO, "sample_assets", asset)), hits, rng)
+            json_path = os.path.join(CONFORMANCE, f"{name}.fracture.json")
+            data = load_runtime(json_path)
+            for magnitude in (4, 40):
+                hits_file = os.path.join(tmp, f"{name}.{magnitude}.hits.txt")
+                with open(hits_file, "w") as fh:
+                    fh.writelines(" ".join(_bits(c) for c in (*p, *(n * magnitude / 4))) + " -\n"
+                                  for p, n in zip(points, impulses))
+                c = _run_c_bench(c_bench, json_path, hits_file)
+                state = _run_c_bench(c_bench, json_path, hits_file, "--state")
+                rows.append(f"| {asset} | {name} | {', '.join(data.features)} | {data.damage['crack_level']:g}, "
+                            f"{data.damage['damage_rate']:g} | {data.num_sites} | {data.p} | {data.num_edges} | "
+                            f"{magnitude} | {state['groups_median']} | {_cell(c)} | {_cell(state)} | "
+                            f"{float(state['cpu_mean_ns']) / 1e3:.2f} |")
+    return ("C reader per hit on a damage state (docs/FORMAT.md section 12, `fr_hit`: cracks, health, anchored "
+            f"groups) beside the stateless call on the same committed file: {hits} random surface hits of magnitude "
+            f"4 and 40 in random directions, the file's default threshold, groups, cracked bonds and anchored "
+            f"fragments, each hit on a fresh state, {ROUNDS} rounds (the stateless call on a \"damage\" file is a hit "
+            "on a fresh state too).\n\n" + "\n".join(rows) + "\n")
 
 
 def _stress_rows(hits: int, rng) -> str:
@@ -149,9 +186,9 @@ def _sample_assets(hits: int, rng, bake: bool = True) -> str:
 
     with open(os.path.join(REPO, "sample_assets", "manifest.toml"), "rb") as fh:
         assets = sorted(tomllib.load(fh)["assets"].items())
-    rows = [("| asset | recipe | sites | k | fragments | bonds | groups (median) | Python | C | C compact | C# | "
-             "JavaScript | GDScript | C jump table (MiB, load ms) |"),
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    rows = [("| asset | recipe | sites | k | fragments | bonds | groups (median) | Python | C | C compact | "
+             "C with state | C# | JavaScript | GDScript | C jump table (MiB, load ms) |"),
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     notes: list[str] = []
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
@@ -181,11 +218,12 @@ def _sample_assets(hits: int, rng, bake: bool = True) -> str:
                 fh.writelines(" ".join(_bits(c) for c in (*p, *n)) + " -\n" for p, n in zip(points, impulses))
             c_table = _run_c_bench(c_bench, json_path, hits_file) if c_bench else {}
             c_compact = _run_c_bench(c_bench, json_path, hits_file, "--compact") if c_bench else {}
+            c_state = _run_c_bench(c_bench, json_path, hits_file, "--state") if c_bench else {}
             table = (f"{float(c_table['memory_kib']) / 1024:.1f}, {float(c_table['load_ms']):.0f}"
                      if c_table else "n/a")
             rows.append(f"| {asset} | {recipe} | {data.num_sites} | {data.k} | {data.p} | {data.num_edges} | "
                         f"{np.median(groups):.0f} | {_us(np.median(times) * 1e9, np.percentile(times, 99) * 1e9)} | "
-                        f"{_cell(c_table)} | {_cell(c_compact)} | "
+                        f"{_cell(c_table)} | {_cell(c_compact)} | {_cell(c_state)} | "
                         f"{_cell(_run_csharp_bench(cs_bench, json_path, hits_file) if cs_bench else {})} | "
                         f"{_cell(_run_js_bench(json_path, hits_file, notes))} | "
                         f"{_run_gdscript_bench(os.path.join(tmp, 'godot'), json_path, hits_file, notes)} | {table} |")

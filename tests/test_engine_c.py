@@ -122,6 +122,32 @@ def random_sequences(name: str, count: int = 300, length: int = 12) -> tuple:
 RANDOM_SEQUENCE_FILES = ("pillar_structure", "random_structure", "vase", "chair_stress")
 
 
+def described_files() -> list[tuple[str, str]]:
+    """(header, binary) of every conformance runtime file and of the damaged files that load with section 12's data."""
+    files = [runtime_paths(name) for name in vector_names(FEATURES)]
+    return files + [(os.path.join(CORRUPT, case["header"]), os.path.join(CORRUPT, case["binary"]))
+                    for case in corrupt_cases(FEATURES) if case["expect"] == "ok" and "features" in case]
+
+
+def check_description(header: str, output: str) -> None:
+    """A driver's ``--describe`` line against the Python reader: features, damage, anchored, crack segments."""
+    import numpy as np
+
+    from fracture_cli.runtime.format import load_runtime
+    from fracture_cli.runtime.structure import crack_segments_of
+
+    data = load_runtime(header)
+    line = next(line for line in output.splitlines() if line.startswith("describe "))
+    bits = {"stress": 1, "anchors": 2, "damage": 4}
+    counts = [len(crack_segments_of(data.cracks, m)) for m in range(data.num_edges)]
+    segments = np.asarray(data.cracks.get("crack_segments", np.zeros((0, 2, 3))), dtype=np.float64).ravel()
+    c, r = data.damage.get("crack_level", 1.0), data.damage.get("damage_rate", 0.0)
+    want = (f"describe f {sum(bits[f] for f in data.features)} c {float_to_bits(c)} r {float_to_bits(r)} "
+            f"y {' '.join(str(int(a)) for a in data.anchored) if data.anchored is not None else '-'} "
+            f"n {' '.join(map(str, counts))} s {' '.join(float_to_bits(x) for x in segments.tolist())}")
+    assert line.split() == want.split(), header
+
+
 def sequence_input(sequences: list[dict]) -> str:
     """Driver input for sequences of hits: a ``start`` line (fresh or saved state), then the hits."""
     lines = []
@@ -234,6 +260,13 @@ def test_c_reader_matches_the_reference_on_many_sequences(driver, name):
         result = run_driver(driver, *runtime_paths(name), sequence_input(sequences), "--structure", *MODES[mode])
         _assert_clean(result)
         assert check_sequences(sequences, result.stdout) == [], mode
+
+
+@pytest.mark.parametrize("files", described_files(), ids=lambda f: os.path.basename(f[0]))
+def test_c_reader_gives_anchors_damage_and_cracks(driver, files):
+    result = run_driver(driver, *files, "", "--describe")
+    _assert_clean(result)
+    check_description(files[0], result.stdout)
 
 
 def refused_hits_input(name: str) -> tuple[str, int]:

@@ -23,10 +23,12 @@ from engine_support import (
 # Section 12's driver protocol (--structure, start lines) is the C driver's: its test has the helpers.
 from test_engine_c import (
     RANDOM_SEQUENCE_FILES,
+    check_description,
     check_refused_hits,
     check_round_trip,
     check_sequences,
     check_structure,
+    described_files,
     random_sequences,
     refused_hits_input,
     sequence_files,
@@ -94,6 +96,13 @@ def test_csharp_reader_matches_the_reference_on_many_sequences(driver, name):
         result = run_driver(driver, *runtime_paths(name), sequence_input(sequences), "--structure", *MODES[mode])
         assert result.returncode == 0, result.stdout + result.stderr
         assert check_sequences(sequences, result.stdout) == [], mode
+
+
+@pytest.mark.parametrize("files", described_files(), ids=lambda f: os.path.basename(f[0]))
+def test_csharp_reader_gives_anchors_damage_and_cracks(driver, files):
+    result = run_driver(driver, *files, "", "--describe")
+    assert result.returncode == 0, result.stdout + result.stderr
+    check_description(files[0], result.stdout)
 
 
 @pytest.mark.parametrize("name", ["structure_dyadic", "damage_stress", "random_structure"])

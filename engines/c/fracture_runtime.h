@@ -14,11 +14,11 @@
  *   fr_runtime *rt;
  *   char why[FR_MESSAGE_SIZE];
  *   if (fr_load(json, json_size, bin, bin_size, 0, NULL, &rt, why, sizeof why) != FR_OK) { log(why); }
- *   int32_t groups[...];                      // fr_info(rt).fragments entries
+ *   int32_t groups[...];                      // fr_get_info(rt).fragments entries
  *   fr_impact out = {0};
  *   out.groups = groups;
  *   double point[3] = {...}, impulse[3] = {...};
- *   if (fr_project(rt, point, impulse, fr_info(rt).default_threshold, NULL, &out) == FR_OK) {
+ *   if (fr_project(rt, point, impulse, fr_get_info(rt).default_threshold, NULL, &out) == FR_OK) {
  *       // fragments j with equal groups[j] move together; groups[j] == j starts a group
  *   }
  *   fr_free(rt);
@@ -155,7 +155,7 @@ typedef struct fr_impact {
     uint8_t *broken;       /* [e] optional: 1 if edge m broke */
     double *alpha;         /* [k] optional: mode coefficients */
     double *displacement;  /* [p * d] optional: fragment displacements (row-major, model axes) */
-    uint8_t *cracked;      /* [e] optional: 1 if bond m holds but is cracked (always 0 without "damage" or a state) */
+    uint8_t *cracked;      /* [e] optional: 1 if bond m holds but is cracked (fr_project: 0 without "damage") */
     uint8_t *anchored;     /* [p] optional: 1 if fragment j's group holds an anchored fragment (keep it static) */
     int32_t site;          /* out: nearest contact site */
     int32_t num_groups;    /* out: number of groups */

@@ -1,7 +1,7 @@
 /*
  * fracture_check - conformance driver of the C reader (used by the fracture tests).
  *
- *   fracture_check HEADER BINARY [--names] [--skip-crc] [--compact] [--structure] < impacts
+ *   fracture_check HEADER BINARY [--names] [--describe] [--skip-crc] [--compact] [--structure] < impacts
  *   fracture_check --sweep HEADER BINARY
  *
  * Impacts, one per line: the IEEE-754 bits of point x y z, impulse x y z and the
@@ -20,6 +20,9 @@
  * answer the line
  *   structure c <cracked bonds...> y <anchored flag of each fragment...> h <health bits...>
  * (c and y empty for a refused impact, h only with a state, saved through fr_state_to_bytes).
+ * --describe prints, after the names, what fr_get_info, fr_anchored and fr_crack_segments give:
+ *   describe f <features bits> c <crack_level bits> r <damage_rate bits> y <anchored flags, or -> n <segments
+ *   of each bond...> s <coordinates of every bond's segments, as double bits...>
  *
  * --sweep loads every truncation of the header, many of the binary, and thousands of deterministic
  * mutations (31 in 32 with FR_LOAD_COMPACT), projecting a few hits on whatever loads: run under AddressSanitizer
@@ -195,6 +198,33 @@ static int answer(const fr_runtime *rt, char *line, double *health, int structur
     return 1;
 }
 
+/* The --describe line: section 12's data through the accessors. */
+static void describe(const fr_runtime *rt)
+{
+    fr_info info = fr_get_info(rt);
+    const int32_t *anchored = fr_anchored(rt);
+    int32_t j, count, c;
+    printf("describe f %d c", (int)info.features);
+    print_bits(info.crack_level);
+    printf(" r");
+    print_bits(info.damage_rate);
+    printf(anchored != NULL ? " y" : " y -");
+    for (j = 0; anchored != NULL && j < info.fragments; j++)
+        printf(" %d", (int)anchored[j]);
+    printf(" n");
+    for (j = 0; j < info.edges; j++) {
+        (void)fr_crack_segments(rt, j, &count);
+        printf(" %d", (int)count);
+    }
+    printf(" s");
+    for (j = 0; j < info.edges; j++) {
+        const float *segments = fr_crack_segments(rt, j, &count);
+        for (c = 0; c < 6 * count; c++)
+            print_bits((double)segments[c]);
+    }
+    printf("\n");
+}
+
 /* Load a private, exactly sized copy (so a sanitizer sees any read past its end). */
 static fr_status load_copy(const unsigned char *h, size_t hn, const unsigned char *b, size_t bn, unsigned flags,
                            fr_runtime **rt)
@@ -299,7 +329,7 @@ static int sweep(const unsigned char *h, size_t hn, const unsigned char *b, size
 int main(int argc, char **argv)
 {
     const char *paths[2] = {NULL, NULL};
-    int i, names = 0, do_sweep = 0, count = 0, structure = 0, stateful = 0;
+    int i, names = 0, do_sweep = 0, count = 0, structure = 0, stateful = 0, do_describe = 0;
     unsigned flags = 0;
     unsigned char *h, *b;
     size_t hn = 0, bn = 0;
@@ -313,11 +343,12 @@ int main(int argc, char **argv)
         else if (strcmp(argv[i], "--sweep") == 0) do_sweep = 1;
         else if (strcmp(argv[i], "--compact") == 0) flags |= FR_LOAD_COMPACT;
         else if (strcmp(argv[i], "--structure") == 0) structure = 1;
+        else if (strcmp(argv[i], "--describe") == 0) do_describe = 1;
         else if (count < 2) paths[count++] = argv[i];
     }
     if (count != 2) {
-        fprintf(stderr, "usage: fracture_check [--names] [--skip-crc] [--compact] [--structure] [--sweep] HEADER "
-                        "BINARY < impacts\n");
+        fprintf(stderr, "usage: fracture_check [--names] [--describe] [--skip-crc] [--compact] [--structure] [--sweep] "
+                        "HEADER BINARY < impacts\n");
         return 64;
     }
     h = read_file(paths[0], &hn);
@@ -348,6 +379,8 @@ int main(int argc, char **argv)
         }
         printf("\n");
     }
+    if (do_describe)
+        describe(rt);
     health = (double *)malloc(sizeof(double) * (size_t)fr_get_info(rt).edges + 1);
     fr_new_state(rt, health); /* until a "start" line loads another */
     while (health != NULL && fgets(line, sizeof line, stdin) != NULL) {

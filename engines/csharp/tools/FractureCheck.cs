@@ -1,6 +1,6 @@
 // FractureCheck - conformance driver of the C# reader (used by the fracture tests).
 //
-//   mono FractureCheck.exe HEADER BINARY [--names] [--skip-crc] [--compact] [--structure] < impacts
+//   mono FractureCheck.exe HEADER BINARY [--names] [--describe] [--skip-crc] [--compact] [--structure] < impacts
 //   mono FractureCheck.exe --bench ROUNDS HEADER BINARY [--compact] < impacts
 //
 // Same line protocol as engines/c/tools/fracture_check.c: impacts are 7 hex IEEE-754 doubles
@@ -12,6 +12,9 @@
 // (loaded through StateFromBytes; "start-error <status>" keeps the previous state) makes every later
 // impact a Hit on that state; --structure prints after every answer
 // "structure c <cracked bonds> y <anchored flags> h <health bits, saved through StateToBytes>".
+// --describe prints section 12's data as the C driver does: "describe f <features bits: stress 1, anchors 2,
+// damage 4> c <CrackLevel bits> r <DamageRate bits> y <anchored flags, or -> n <segments of each bond> s
+// <coordinates of every bond's segments>".
 // --bench times every impact ROUNDS times (Stopwatch around each Project call, groups only) and
 // prints "median_ns <x> p99_ns <x> calls <n>", like fracture_bench.c.
 //
@@ -69,6 +72,8 @@ static class FractureCheck
             }
             output.Append('\n');
         }
+        if (Array.IndexOf(args, "--describe") >= 0)
+            Describe(output, runtime);
         bool structure = Array.IndexOf(args, "--structure") >= 0;
         var impact = new FractureImpact(runtime);
         var groupsOnly = new FractureImpact(runtime) { ComputeDisplacement = false };
@@ -146,6 +151,29 @@ static class FractureCheck
         }
         Console.Out.Write(output.ToString());
         return 0;
+    }
+
+    static void Describe(StringBuilder output, FractureRuntime runtime)
+    {
+        int features = (runtime.Criterion == "stress" ? 1 : 0) | (runtime.HasAnchors ? 2 : 0) | (runtime.HasDamage ? 4 : 0);
+        output.Append("describe f ").Append(features).Append(" c ").Append(Bits(runtime.CrackLevel));
+        output.Append(" r ").Append(Bits(runtime.DamageRate)).Append(runtime.HasAnchors ? " y" : " y -");
+        for (int j = 0; runtime.HasAnchors && j < runtime.Fragments; j++)
+            output.Append(runtime.IsAnchored(j) ? " 1" : " 0");
+        output.Append(" n");
+        int first;
+        for (int m = 0; m < runtime.Edges; m++)
+            output.Append(' ').Append(runtime.CrackSegments(m, out first));
+        output.Append(" s");
+        for (int m = 0; m < runtime.Edges; m++)
+        {
+            int count = runtime.CrackSegments(m, out first);
+            for (int segment = first; segment < first + count; segment++)
+                for (int end = 0; end < 2; end++)
+                    for (int axis = 0; axis < 3; axis++)
+                        output.Append(' ').Append(Bits(runtime.CrackSegmentCoordinate(segment, end, axis)));
+        }
+        output.Append('\n');
     }
 
     // The --structure line (impact null for a refused one); the state as the bytes a game saves.
