@@ -154,7 +154,7 @@ namespace Fracture
         public readonly bool HasDamage;
         /// <summary>Feature "damage": the crack level c in (0, 1]; 1 without it (a state then only remembers broken bonds).</summary>
         public readonly double CrackLevel = 1.0;
-        /// <summary>Feature "damage": the damage rate r >= 0; 0 without it.</summary>
+        /// <summary>Feature "damage": the damage rate r &gt;= 0; 0 without it.</summary>
         public readonly double DamageRate;
         /// <summary>Segments of the optional crack arrays (<see cref="CrackSegments"/>); 0 without them.</summary>
         public readonly int CrackSegmentCount;
@@ -993,6 +993,8 @@ namespace Fracture
         /// <summary>A state as a game saves it: e little-endian doubles (8 e bytes), for any machine and reader.</summary>
         public static byte[] StateToBytes(double[] health)
         {
+            if (health == null)
+                throw new ArgumentNullException("health");
             var bytes = new byte[8 * health.Length];
             for (int m = 0; m < health.Length; m++)
             {

@@ -1,5 +1,5 @@
 /*
- * fracture_bench - time fr_project on a list of hits (used by bench/bench_runtime.py).
+ * fracture_bench - time fr_project (or fr_hit) on a list of hits (used by bench/bench_runtime.py).
  *
  *   fracture_bench HEADER BINARY ROUNDS [--compact] [--all] [--state] < hits
  *
