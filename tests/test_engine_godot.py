@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import os
 import subprocess
 import sys
@@ -24,7 +26,9 @@ from engine_support import (
     vector_names,
 )
 from godot_harness import GodotProject
+from test_view_runtime_js import check_structure_answers, structure_input
 
+from fracture_cli.runtime.damage import hit, new_state, state_to_bytes
 from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime
 from fracture_cli.runtime.impact import project_impact
 
@@ -34,19 +38,20 @@ RANDOM_HITS = 100  # per sample asset
 
 @pytest.fixture(scope="module")
 def conformance_output(tmp_path_factory) -> dict[str, list[str]]:
-    """Every vector file and damaged file through the GDScript reader, in one Godot run."""
+    """Every vector file (with its damage-state sequences) and damaged file through the GDScript reader, in one
+    Godot run."""
     root = tmp_path_factory.mktemp("godot_conformance")
     project = GodotProject(root / "project")
     jobs = []
     for name in vector_names(READER_FEATURES["gdscript"]):
         impacts = root / f"{name}.impacts"
-        impacts.write_text(protocol_input(load_vectors(name)["impacts"]))
+        impacts.write_text(structure_input(load_vectors(name)))
         jobs.append((name, *runtime_paths(name), str(impacts), ""))
     for name in SAMPLE_ASSETS:
         impacts = root / f"{name}.random"
         impacts.write_text(protocol_input(random_impacts(name, RANDOM_HITS)))
         jobs.append((f"random-{name}", *runtime_paths(name), str(impacts), ""))
-    for case in corrupt_cases():
+    for case in corrupt_cases(READER_FEATURES["gdscript"]):
         header, binary = os.path.join(CORRUPT, case["header"]), os.path.join(CORRUPT, case["binary"])
         jobs.append((case["name"], header, binary, "-", ""))
         if case.get("only_crc"):
@@ -73,7 +78,7 @@ def conformance_output(tmp_path_factory) -> dict[str, list[str]]:
 @pytest.mark.parametrize("name", vector_names(READER_FEATURES["gdscript"]))
 def test_gdscript_reader_passes_the_vectors(conformance_output, name):
     vectors = load_vectors(name)
-    assert check_answers(vectors, "\n".join(conformance_output[name])) == []
+    assert check_structure_answers(vectors, "\n".join(conformance_output[name])) == []
 
 
 @pytest.mark.parametrize("name", SAMPLE_ASSETS)
@@ -83,18 +88,91 @@ def test_gdscript_reader_matches_the_reference_on_many_hits(conformance_output, 
     assert check_answers({"runtime": name, "impacts": impacts}, "\n".join(conformance_output[f"random-{name}"])) == []
 
 
-@pytest.mark.parametrize("case", corrupt_cases(), ids=lambda c: c["name"])
+@pytest.mark.parametrize("case", corrupt_cases(READER_FEATURES["gdscript"]), ids=lambda c: c["name"])
 def test_gdscript_reader_on_damaged_files(conformance_output, case):
     lines = conformance_output[case["name"]]
     if case["expect"] == "rejected":
         assert lines and lines[0].startswith("load-error "), lines
         if case.get("only_crc"):
             assert not conformance_output[case["name"] + "+skip-crc"], "loads with the CRC check off"
+        if case["name"] == "feature_unknown":
+            assert "'levels'" in lines[0]
     else:
         assert lines == [], lines
         answers = conformance_output[case["name"] + "+vectors"]
         assert answers[0].split()[1:] == hex_names(case["fragment_names"])
-        assert check_answers(load_vectors(case["vectors"][: -len(".vectors.json")]), "\n".join(answers)) == []
+        vectors = load_vectors(case["vectors"][: -len(".vectors.json")])
+        assert check_structure_answers(vectors, "\n".join(answers)) == []
+
+
+STATE_SCRIPT = """extends SceneTree
+const HexBits = preload("res://hex_bits.gd")
+
+
+func _read(path: String) -> PoolByteArray:
+	var file := File.new()
+	file.open(path, File.READ)
+	var data := file.get_buffer(file.get_len())
+	file.close()
+	return data
+
+
+func _init() -> void:
+	var args := OS.get_cmdline_args()
+	var rt = load("res://addons/fracture/fracture_runtime.gd").new()
+	if rt.load_bytes(_read(args[args.size() - 2]), _read(args[args.size() - 1])) != OK:
+		print("load-error " + rt.error_message)
+	var state: Array = rt.new_state()
+	print("fresh ", state)
+	print("nan-impulse ", rt.hit(state, 0.0, 0.0, 0.0, NAN, 0.0, 0.0, 1.0)["ok"], " ", state == rt.new_state())
+	var pool := PoolRealArray(state)
+	var short := state.duplicate()
+	short.pop_back()
+	var above := state.duplicate()
+	above[0] = 1.5
+	var nan := state.duplicate()
+	nan[0] = NAN
+	for bad in [pool, short, above, nan]:
+		print("refused ", rt.hit(bad, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0)["ok"])
+	var res: Dictionary = rt.hit(state, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.78125)
+	print("cracked ", res["cracked"])
+	print("bytes ", rt.state_to_bytes(state).hex_encode())
+	print("round-trip ", rt.state_from_bytes(rt.state_to_bytes(state)) == state)
+	print("bad-bytes ", rt.state_from_bytes(PoolByteArray([1, 2, 3])) == null)
+	print("segments ", rt.crack_segments_of(3))
+	print("numbers ", HexBits.to_bits(rt.default_threshold), " ", HexBits.to_bits(rt.impact_radius), " ",
+			HexBits.to_bits(rt.crack_level), " ", HexBits.to_bits(rt.damage_rate))
+	print("done")
+	quit()
+"""
+
+
+def test_gdscript_damage_state_api(tmp_path):
+    """new_state, refused states and hits (the state unchanged), the saved bytes as the Python reader's, cracks,
+    and header numbers parsed to the nearest double (Godot 3's String.to_float() rounds to 32 bits)."""
+    header, binary = runtime_paths("structure_dyadic")
+    with open(header, encoding="utf-8") as fh:
+        edited = json.load(fh)
+    edited.update(default_threshold=0.7, impact_radius=1e-05, damage={"crack_level": 0.6, "damage_rate": 0.3})
+    (tmp_path / "s.fracture.json").write_text(json.dumps(edited))
+    project = GodotProject(tmp_path / "project")
+    run = project.run_script(STATE_SCRIPT, str(tmp_path / "s.fracture.json"), binary, name="state.gd")
+    out = {line.split(" ", 1)[0]: line.split(" ", 1)[1] for line in run.lines() if " " in line}
+    assert "load-error" not in out, out
+    data = load_runtime(header)
+    state = new_state(data)
+    assert out["fresh"] == "[" + ", ".join(["1"] * data.num_edges) + "]"
+    assert out["nan-impulse"] == "False True"
+    assert run.lines("refused ") == ["refused False"] * 4
+    edited_data = dataclasses.replace(data, damage={"crack_level": 0.6, "damage_rate": 0.3})
+    reference = hit(edited_data, state, (0, 0, 0), (1, 0, 0), 0.78125)
+    assert out["cracked"] == str(reference.cracked.tolist())  # Godot prints booleans as Python does
+    assert out["bytes"] == state_to_bytes(state).hex()
+    assert out["round-trip"] == "True" and out["bad-bytes"] == "True"
+    segments = data.cracks["crack_segments"][3:5].reshape(-1, 3).tolist()
+    vectors = ["(" + ", ".join(f"{c:g}" for c in v) + ")" for v in segments]  # Godot prints Vector3 as (x, y, z)
+    assert out["segments"] == "[" + ", ".join(vectors) + "]"
+    assert out["numbers"].split() == [float_to_bits(x) for x in (0.7, 1e-05, 0.6, 0.3)]
 
 
 # ---------------------------------------------------------------- FractureBody in a scene
