@@ -19,6 +19,7 @@ from engine_support import (
     corrupt_cases,
     float_to_bits,
     hex_names,
+    impact_inputs,
     load_vectors,
     protocol_input,
     random_impacts,
@@ -181,26 +182,29 @@ BREAK_SCRIPT = os.path.join(REPO, "engines", "godot", "tests", "break_scene.gd")
 
 
 def _hits_file(path, hits) -> str:
-    """Write hits (point, impulse, body index) in break_scene.gd's format."""
-    lines = [
-        " ".join([float_to_bits(float(c)) for c in (*point, *impulse)] + [str(body)]) for point, impulse, body in hits
-    ]
+    """Write hits (point, impulse, body index[, threshold]) in break_scene.gd's format."""
+    lines = []
+    for point, impulse, body, *threshold in hits:
+        tokens = [float_to_bits(float(c)) for c in (*point, *impulse)] + [str(body)]
+        lines.append(" ".join(tokens + [float_to_bits(float(t)) for t in threshold if t is not None]))
     path.write_text("\n".join(lines) + "\n")
     return str(path)
 
 
 def _bodies_after_each_step(run) -> list[dict]:
-    """Parse break_scene.gd's report: per step, {body index: (class, fragment names, shape counts)}."""
+    """Parse break_scene.gd's report: per step, {body index: (class, fragment names, shape counts, cracks drawn)}."""
     steps: list[dict] = []
     current: dict = {}
     for line in run.stdout.splitlines():
         fields = line.split()
         if fields[:1] == ["body"]:
-            current[int(fields[1])] = (fields[2], fields[3:], {})
+            current[int(fields[1])] = (fields[2], fields[3:], {}, 0)
         elif fields[:1] == ["shapes"]:
             current[int(fields[1])][2].update(
                 {name: int(count) for name, count in (field.rsplit(":", 1) for field in fields[2:])}
             )
+        elif fields[:1] == ["cracks"]:
+            current[int(fields[1])] = (*current[int(fields[1])][:3], int(fields[2]))
         elif fields[:1] == ["step"]:
             steps.append(current)
             current = {}
@@ -263,7 +267,7 @@ def _godot_break(tmp_path, glb, json_path, hits):
 def test_fracture_body_uses_exported_collision_parts(tmp_path):
     glb, json_path = _row_of_boxes(tmp_path)
     steps = _godot_break(tmp_path, glb, json_path, [((0.0, 0.5, 0.0), (0.0, -1.0, 0.0), 0)])
-    intact_class, names, shapes = steps[0][0]
+    intact_class, names, shapes, _cracks = steps[0][0]
     assert intact_class == "StaticBody" and names == [f"fragment_{j:03d}" for j in range(4)]
     # -convcolonly child, two numbered -convcolonly parts, a UCX mesh, and the hull fallback.
     assert shapes == {"fragment_000": 1, "fragment_001": 2, "fragment_002": 1, "fragment_003": 1}
@@ -356,3 +360,65 @@ def test_fracture_body_breaks_a_baked_asset_like_the_reference(tmp_path):
         assert [got[i][1] for i in sorted(got)] == [[names[j] for j in body] for body in want]
         assert [got[i][0] for i in sorted(got)] == ["StaticBody"] + ["RigidBody"] * (len(want) - 1)
         assert all(count >= 1 for body in got.values() for count in body[2].values())
+
+
+def _boxes(tmp_path, names, centres, size: float):
+    """A fragments GLB with one box of edge ``size`` per fragment, centred at ``centres[j]`` and named ``names[j]``."""
+    trimesh = pytest.importorskip("trimesh")
+    scene = trimesh.Scene()
+    for j, (name, centre) in enumerate(zip(names, centres)):
+        at = np.eye(4)
+        at[:3, 3] = centre
+        scene.add_geometry(trimesh.creation.box(extents=(size, size, size)), node_name=name, geom_name=f"mesh_{j}",
+                           transform=at)
+    glb = tmp_path / "boxes.glb"
+    scene.export(glb)
+    return glb
+
+
+def test_fracture_body_keeps_anchored_groups_static_and_draws_cracks(tmp_path):
+    """structure_dyadic (a column of five, the foot anchored, crack segments): its designed sequence in a scene.
+
+    The first hit cracks bond 3 (fragments 3-4; two crack segments drawn, nothing breaks); the second
+    breaks bonds 2, 3 and 4: the top two fragments fall, the foot's group stays static.
+    """
+    header, _ = runtime_paths("structure_dyadic")
+    data = load_runtime(header)
+    glb = _boxes(tmp_path, data.fragment_names, [(0.5, j + 0.5, 0.5) for j in range(data.p)], 1.0)
+    hits = [((0.0, 4.0, 0.0), (0.0, 1.0, 0.0), 0, 1.125), ((0.0, 4.0, 0.0), (0.0, 8.0, 0.0), 0, 2.0)]
+    steps = _godot_break(tmp_path, glb, header, hits)
+    names = list(data.fragment_names)
+    assert [(body[0], body[1], body[3]) for body in steps[0].values()] == [("StaticBody", names, 0)]
+    assert [(body[0], body[1], body[3]) for body in steps[1].values()] == [("StaticBody", names, 2)]
+    assert [(body[0], body[1], body[3]) for body in steps[2].values()] == [
+        ("StaticBody", names[:3], 0), ("RigidBody", [names[3]], 0), ("RigidBody", [names[4]], 0)]
+
+
+def test_fracture_body_keeps_a_pillars_anchored_base_static(tmp_path):
+    """pillar_structure's "random hits" sequence (a refused hit and a zero impulse among them) in a scene.
+
+    After every hit the bodies are the groups of the damage state and exactly the anchored ones are
+    static; the first hit leaves the anchored base smaller than the free piece that falls (the rule is
+    anchoring, not size), a later one splits that falling piece again.
+    """
+    header, _ = runtime_paths("pillar_structure")
+    data = load_runtime(header)
+    sequence = next(s for s in load_vectors("pillar_structure")["sequences"] if s["name"] == "random hits")
+    centres = np.asarray(data.gameready["fragment_center_of_mass"], np.float64)
+    glb = _boxes(tmp_path, data.fragment_names, centres, 0.02 * float(np.ptp(data.sites, axis=0).max()))
+    hits = [(point, impulse, 0, threshold) for point, impulse, threshold in map(impact_inputs, sequence["hits"])]
+    steps = _godot_break(tmp_path, glb, header, hits)
+    assert len(steps) == len(hits) + 1
+    expected, groups, anchored = [], [0] * data.p, [1] * data.p
+    for h in sequence["hits"]:
+        if h["expect"] == "ok":
+            groups, anchored = h["groups"], h["anchored"]
+        members: dict[int, list[str]] = {}
+        for j, g in enumerate(groups):
+            members.setdefault(g, []).append(data.fragment_names[j])
+        expected.append(sorted((names, "StaticBody" if anchored[g] else "RigidBody") for g, names in members.items()))
+    got = [sorted((body[1], body[0]) for body in step.values()) for step in steps[1:]]
+    assert got == expected
+    sizes = {kind: len(names) for names, kind in expected[0]}
+    assert sizes["StaticBody"] < sizes["RigidBody"]  # the first hit: the anchored base is the smaller piece
+

@@ -75,6 +75,7 @@ var _max_bound := 0.0  # largest per-edge bound, see _edge_bounds()
 var _identity := []   # 0, 1, ..., p - 1
 var _no_edges := []   # e times false
 var _zero_modes := [] # k times 0.0
+var _no_anchors := [] # p times 0
 # Criterion "stress": site v's bonds are entries _bond_ptr[v] .. _bond_ptr[v + 1] - 1 of _bond_edge and
 # _bond_gain (G, 3 per entry, float32 values); _bond_strength (S) per edge.
 var _bond_ptr := PoolIntArray()
@@ -913,6 +914,9 @@ func _whole_graph() -> void:
 	_zero_modes = []
 	for i in range(modes):
 		_zero_modes.append(0.0)
+	_no_anchors = []
+	for j in range(fragments):
+		_no_anchors.append(0)
 	_whole = components(_no_edges)
 	_whole_groups = 0
 	for j in range(fragments):
@@ -1209,6 +1213,8 @@ func _stress_damage(state: Array, site: int, n0: float, n1: float, n2: float, t:
 
 # Per fragment: 1 when its group holds a fragment with anchored = 1 (all 0 without feature "anchors").
 func _anchored_of(groups: PoolIntArray) -> Array:
+	if anchored.empty():
+		return _no_anchors.duplicate()
 	var held := {}
 	for j in range(anchored.size()):
 		if anchored[j] == 1:
