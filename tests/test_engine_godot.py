@@ -27,7 +27,7 @@ from engine_support import (
     vector_names,
 )
 from godot_harness import GodotProject
-from test_view_runtime_js import check_structure_answers, structure_input
+from test_view_runtime_js import VARIANTS, check_structure_answers, structure_input, variant_vectors
 
 from fracture_cli.runtime.damage import hit, new_state, state_to_bytes
 from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime
@@ -48,6 +48,11 @@ def conformance_output(tmp_path_factory) -> dict[str, list[str]]:
         impacts = root / f"{name}.impacts"
         impacts.write_text(structure_input(load_vectors(name)))
         jobs.append((name, *runtime_paths(name), str(impacts), ""))
+    for name, drop in VARIANTS:
+        header, binary, vectors = variant_vectors(name, drop, root)
+        impacts = root / f"{name}_no_{drop}.impacts"
+        impacts.write_text(structure_input(vectors))
+        jobs.append((f"{name}_no_{drop}", header, binary, str(impacts), ""))
     for name in SAMPLE_ASSETS:
         impacts = root / f"{name}.random"
         impacts.write_text(protocol_input(random_impacts(name, RANDOM_HITS)))
@@ -80,6 +85,13 @@ def conformance_output(tmp_path_factory) -> dict[str, list[str]]:
 def test_gdscript_reader_passes_the_vectors(conformance_output, name):
     vectors = load_vectors(name)
     assert check_structure_answers(vectors, "\n".join(conformance_output[name])) == []
+
+
+@pytest.mark.parametrize(("name", "drop"), VARIANTS)
+def test_gdscript_reader_on_files_with_one_structure_feature(conformance_output, tmp_path, name, drop):
+    """Anchors without damage (stateless hits crack nothing; a state only remembers breaks), damage without anchors."""
+    vectors = variant_vectors(name, drop, tmp_path)[2]
+    assert check_structure_answers(vectors, "\n".join(conformance_output[f"{name}_no_{drop}"])) == []
 
 
 @pytest.mark.parametrize("name", SAMPLE_ASSETS)

@@ -26,7 +26,7 @@ from engine_support import (
     runtime_paths,
     vector_names,
 )
-from test_view_runtime_js import check_structure_answers, structure_input
+from test_view_runtime_js import VARIANTS, check_structure_answers, structure_input, variant_vectors
 
 DRIVER = JS_DRIVER
 pytestmark = requires_node
@@ -43,6 +43,16 @@ def _answers(name: str, stdin: str) -> str:
 def test_js_jump_table_passes_the_vectors(name):
     vectors = load_vectors(name)
     assert check_structure_answers(vectors, _answers(name, structure_input(vectors))) == []
+
+
+@pytest.mark.parametrize(("name", "drop"), VARIANTS)
+def test_js_jump_table_on_files_with_one_structure_feature(tmp_path, name, drop):
+    """Anchors without damage build the table (d = 1, modes): its groups then give the anchored fragments."""
+    header, binary, vectors = variant_vectors(name, drop, tmp_path)
+    result = subprocess.run([NODE, DRIVER, "--jump-table", header, binary], input=structure_input(vectors),
+                            capture_output=True, text=True, timeout=300, check=False)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert check_structure_answers(vectors, result.stdout) == []
 
 
 @pytest.mark.parametrize("name", SAMPLE_ASSETS)

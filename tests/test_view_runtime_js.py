@@ -16,6 +16,7 @@ of engine_support, whose helpers skip the extra lines.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -33,6 +34,7 @@ from engine_support import (
     corrupt_cases,
     float_to_bits,
     hex_names,
+    impact_inputs,
     load_vectors,
     parse_answer,
     protocol_input,
@@ -41,6 +43,7 @@ from engine_support import (
     vector_names,
 )
 
+from fracture_cli.errors import ImpactArgumentError
 from fracture_cli.runtime.damage import hit, new_state, state_to_bytes
 from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime
 from fracture_cli.runtime.impact import project_impact
@@ -110,6 +113,44 @@ def check_structure_answers(vectors: dict, output: str) -> list[str]:
     return problems
 
 
+# Files with one of section 12's features: a conformance file without the other (name, the field dropped).
+VARIANTS = [("structure_dyadic", "damage"), ("structure_dyadic", "anchored"), ("damage_stress", "damage"),
+            ("random_structure", "anchored")]
+
+
+def variant_vectors(name: str, drop: str, folder) -> tuple[str, str, dict]:
+    """Conformance file ``name`` without its damage or anchors, written to ``folder``, and vectors for it: the
+    impacts and sequences of ``name`` with the Python reader's answers (tie-safe: the measures are the file's)."""
+    data = load_runtime(os.path.join(CONFORMANCE, f"{name}.fracture.json"))
+    data = dataclasses.replace(data, **({"damage": {}} if drop == "damage" else {"anchored": None, "anchors_info": {}}))
+    header, binary = write_runtime(data, os.path.join(folder, f"{name}_no_{drop}.fracture.json"))
+    source = load_vectors(name)
+
+    def answer(impact: dict, state) -> dict:
+        entry = {key: impact[key] for key in ("name", "bits")}
+        try:
+            result = hit(data, state, *impact_inputs(impact)) if state is not None else project_impact(
+                data, *impact_inputs(impact))
+        except ImpactArgumentError:
+            entry["expect"] = "error"
+        else:
+            entry.update(expect="ok", site=result.site, groups=result.groups.tolist(), num_groups=result.num_groups,
+                         broken=np.flatnonzero(result.broken).tolist(), alpha=result.alpha.tolist(),
+                         displacement=result.displacement.tolist(), cracked=np.flatnonzero(result.cracked).tolist(),
+                         anchored=result.anchored.astype(int).tolist())
+        if state is not None:
+            entry["health"] = [float_to_bits(h) for h in state]
+        return entry
+
+    sequences = []
+    for seq in source["sequences"]:
+        state = new_state(data) if seq["start"] is None else np.array([bits_to_float(b) for b in seq["start"]])
+        sequences.append({"name": seq["name"], "start": seq["start"], "hits": [answer(h, state) for h in seq["hits"]]})
+    vectors = {"runtime": os.path.basename(header), "impacts": [answer(i, None) for i in source["impacts"]],
+               "sequences": sequences}
+    return str(header), str(binary), vectors
+
+
 def run_driver(header: str, binary: str, stdin: str = "", *flags: str) -> subprocess.CompletedProcess:
     return subprocess.run([NODE, DRIVER, *flags, header, binary], input=stdin, capture_output=True, text=True,
                           timeout=300, check=False)
@@ -119,6 +160,15 @@ def run_driver(header: str, binary: str, stdin: str = "", *flags: str) -> subpro
 def test_js_reader_passes_the_vectors(name):
     vectors = load_vectors(name)
     result = run_driver(*runtime_paths(name), structure_input(vectors))
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert check_structure_answers(vectors, result.stdout) == []
+
+
+@pytest.mark.parametrize(("name", "drop"), VARIANTS)
+def test_js_reader_on_files_with_one_structure_feature(tmp_path, name, drop):
+    """Anchors without damage (stateless hits crack nothing; a state only remembers breaks), damage without anchors."""
+    header, binary, vectors = variant_vectors(name, drop, tmp_path)
+    result = run_driver(header, binary, structure_input(vectors))
     assert result.returncode == 0, result.stdout + result.stderr
     assert check_structure_answers(vectors, result.stdout) == []
 
