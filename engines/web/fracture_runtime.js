@@ -338,12 +338,9 @@ function readStructure(h, arrays, view, shapes) {
     if (!anchored.every((a) => a === 0 || a === 1)) fail('array anchored must hold only 0 and 1');
     arrays.anchored = anchored;
   }
-  const present = CRACK_LAYOUT.filter(([name]) => h.arrays[name] !== undefined);
-  if (present.length === 0) return;
-  if (present.length !== CRACK_LAYOUT.length) {
-    const missing = CRACK_LAYOUT.filter(([name]) => h.arrays[name] === undefined).map(([name]) => name);
-    fail(`the crack arrays come together: ${missing.join(', ')} missing`);
-  }
+  const missing = CRACK_LAYOUT.filter(([name]) => h.arrays[name] === undefined).map(([name]) => name);
+  if (missing.length === CRACK_LAYOUT.length) return;
+  if (missing.length) fail(`the crack arrays come together: ${missing.join(', ')} missing`);
   for (const [name, dtype, ndim] of CRACK_LAYOUT) arrays[name] = readArray(name, dtype, ndim, h.arrays[name], view, shapes);
   const ptr = arrays.crack_ptr;
   const n = arrays.crack_segments.length / 6;
@@ -412,7 +409,7 @@ export class FractureRuntime {
     this.siteBondGain = arrays.site_bond_gain || null;  // (nnz, 3) G: tensile force per unit impulse along x, y, z
     this.bondStrength = arrays.bond_strength || null;   // (e,) S
     // Section 12: the version-2 features, the fragments bonded to the world, the damage parameters and the
-    // crack segments (drawing only). All null when the file does not have them.
+    // crack segments (drawing only). Null (features: empty) when the file does not have them.
     this.features = featuresOf(header).slice();
     this.anchored = arrays.anchored || null;            // (p,) Int32Array, 1: bonded to the world
     this.damage = this.features.includes('damage')
@@ -761,12 +758,11 @@ export class FractureRuntime {
     const site = this._nearest(x, y, z);
     const m = Math.max(Math.abs(n[0]), Math.abs(n[1]), Math.abs(n[2]));
     const keep = options.displacement !== false;
-    const nowBroken = new Uint8Array(e);
-    const nowCracked = new Uint8Array(e);
     if (m === 0) {  // a zero impulse breaks and cracks nothing
+      const none = new Uint8Array(e);
       return { site, alpha: new Float64Array(this.numModes), displacement: keep ? new Float64Array(this.numFragments * d) : null,
         jumps: keep && this.criterion === 'modes' ? new Float64Array(e * d) : null,
-        ...(this.criterion === 'stress' ? { loads: new Float64Array(e) } : {}), ...this._answer(state, nowBroken, nowCracked) };
+        ...(this.criterion === 'stress' ? { loads: new Float64Array(e) } : {}), ...this._answer(state, none, none) };
     }
     const nUnit = [n[0] / m, n[1] / m, n[2] / m];
     const alpha = this._alpha(site, nUnit);
@@ -775,7 +771,7 @@ export class FractureRuntime {
       const length = Math.sqrt(nUnit[0] * nUnit[0] + nUnit[1] * nUnit[1] + nUnit[2] * nUnit[2]);
       for (let i = 0; i < alpha.length; i++) alpha[i] *= m;
       const { broken, groups, numGroups } = this._tableGroups(site, length, limit);
-      return { site, alpha, displacement: null, jumps: null, broken, cracked: nowCracked, groups, numGroups,
+      return { site, alpha, displacement: null, jumps: null, broken, cracked: new Uint8Array(e), groups, numGroups,
         anchored: this._anchoredOf(groups) };
     }
     // Each bond's measure a and limit b (section 12.4 step 2).
@@ -790,26 +786,28 @@ export class FractureRuntime {
     } else {
       disp = this._displacement(alpha);
       jumps = new Float64Array(e * d);
-      for (let q = 0; q < e; q++) {
-        const P = edges[2 * q] * d;
-        const Q = edges[2 * q + 1] * d;
+      for (let r = 0; r < e; r++) {
+        const P = edges[2 * r] * d;
+        const Q = edges[2 * r + 1] * d;
         if (d === 1) {
           const jump = disp[P] - disp[Q];
-          jumps[q] = jump;
-          measure[q] = Math.abs(jump);
+          jumps[r] = jump;
+          measure[r] = Math.abs(jump);
         } else {
           const j0 = disp[P] - disp[Q];
           const j1 = disp[P + 1] - disp[Q + 1];
           const j2 = disp[P + 2] - disp[Q + 2];
-          jumps[3 * q] = j0;
-          jumps[3 * q + 1] = j1;
-          jumps[3 * q + 2] = j2;
-          measure[q] = Math.sqrt(j0 * j0 + j1 * j1 + j2 * j2);
+          jumps[3 * r] = j0;
+          jumps[3 * r + 1] = j1;
+          jumps[3 * r + 2] = j2;
+          measure[r] = Math.sqrt(j0 * j0 + j1 * j1 + j2 * j2);
         }
-        bound[q] = limit;
+        bound[r] = limit;
       }
     }
     // Step 3, per bond in the spec's order: the stateless decision, the crack test (one product), the health.
+    const nowBroken = new Uint8Array(e);
+    const nowCracked = new Uint8Array(e);
     const c = this.crackLevel;
     const q = this.damageFactor;
     for (let b = 0; b < e; b++) {
