@@ -53,8 +53,8 @@ def require_tool(name: str, package: str) -> str:
 READER_FEATURES: dict[str, tuple[str, ...]] = {
     "c": ("stress",),
     "csharp": ("stress",),
-    "gdscript": ("stress",),
-    "js": ("stress",),
+    "gdscript": ("anchors", "damage", "stress"),
+    "js": ("anchors", "damage", "stress"),
 }
 
 

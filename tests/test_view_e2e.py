@@ -2,8 +2,10 @@
 
 Needs Node.js, Debian's chromium (/usr/bin/chromium; `.ci/run` installs it) and the
 web build (`make web`: three.js in the package, playwright-core in build/web/);
-skipped with the reason when one is missing. One browser session does everything,
-so the suite pays Chromium's start-up once.
+skipped with the reason when one is missing. Two browser sessions: a baked chair (hits,
+reloads, collision parts) and a structure (docs/FORMAT.md section 12: the conformance file
+``structure_dyadic``, a column anchored at its foot with crack segments, served with a box
+per fragment until bakes write anchors).
 """
 
 from __future__ import annotations
@@ -22,17 +24,22 @@ from click.testing import CliRunner
 
 from fracture_cli.cli import cli
 from fracture_cli.io.gltf import glb_meshes, pack_glb, read_glb_chunks
+from fracture_cli.runtime.damage import hit as damage_hit
+from fracture_cli.runtime.damage import new_state
 from fracture_cli.runtime.format import load_runtime, write_runtime
 from fracture_cli.runtime.impact import project_impact
 from fracture_cli.view.server import VENDOR_DIR, VENDOR_FILES
 
 from conftest import REPO, SAMPLE_ASSETS
 
+CONFORMANCE = os.path.join(REPO, "tests", "data", "runtime_conformance")
+
 NODE = shutil.which("node")
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if os.path.exists("/usr/bin/chromium") else None)
 MODULES = os.path.join(REPO, "build", "web", "node_modules")
 DRIVER = os.path.join(REPO, "web", "e2e.cjs")
 FAST = ["--set", "cage.target_faces=600", "--set", "modes.num_modes=4"]
+STRUCTURE = "structure_dyadic"  # a conformance runtime file with anchors, damage and crack segments
 
 
 def _missing_tool() -> str | None:
@@ -60,9 +67,23 @@ def _add_collision_part(glb_path: str, out_path: str) -> None:
         fh.write(pack_glb(doc, binary))
 
 
+def _add_structure(out) -> None:
+    """The conformance file STRUCTURE with a GLB of unit boxes, fragment j centred at (0.5, j + 0.5, 0.5)."""
+    trimesh = pytest.importorskip("trimesh")
+    for suffix in (".fracture.json", ".fracture.bin"):
+        shutil.copyfile(os.path.join(CONFORMANCE, STRUCTURE + suffix), out / (STRUCTURE + suffix))
+    scene = trimesh.Scene()
+    for j, name in enumerate(load_runtime(out / f"{STRUCTURE}.fracture.json").fragment_names):
+        at = np.eye(4)
+        at[:3, 3] = (0.5, j + 0.5, 0.5)
+        scene.add_geometry(trimesh.creation.box(extents=(1, 1, 1)), node_name=name, geom_name=f"box_{j}", transform=at)
+    scene.export(out / f"{STRUCTURE}.glb")
+
+
 @pytest.fixture(scope="module")
 def bake_folder(tmp_path_factory):
-    """A FAST chair bake (no collision parts) plus two derived assets: a renamed copy and one with a UCX_ part."""
+    """A FAST chair bake (no collision parts), two derived assets (a renamed copy and one with a UCX_ part), and
+    the structure file."""
     out = tmp_path_factory.mktemp("view")
     result = CliRunner().invoke(cli, ["bake", os.path.join(SAMPLE_ASSETS, "chair.glb"), "-o", str(out), *FAST,
                                       "--set", "collision.glb=none", "--quiet"])
@@ -70,6 +91,7 @@ def bake_folder(tmp_path_factory):
     data = load_runtime(out / "chair.fracture.json")
     write_runtime(data, out / "chair_ucx.fracture.json")
     _add_collision_part(str(out / "chair.glb"), str(out / "chair_ucx.glb"))
+    _add_structure(out)
     return out
 
 
@@ -169,5 +191,76 @@ def test_click_breaks_like_the_python_reference(bake_folder, server, tmp_path):
     reloaded, switched, final = result["results"][11], result["results"][13], result["results"][14]
     assert reloaded["asset"] == "chair" and reloaded["reloads"] == 2
     assert switched["asset"] == "chair_ucx"
-    assert final["options"] == ["chair", "chair_ucx"]
+    assert final["options"] == ["chair", "chair_ucx", STRUCTURE]
     assert final["model"]["collisionShapes"] == 1 and final["row"]
+
+
+def _same_hit(got: dict, data, state) -> None:
+    """The page's hit (its point, impulse and threshold) is the Python reader's on the same state, which it updates."""
+    want = damage_hit(data, state, got["point"], got["impulse"], got["threshold"])
+    assert (got["site"], got["groups"], got["broken"], got["cracked"], got["anchored"]) == (
+        want.site, want.groups.tolist(), want.broken.tolist(), want.cracked.tolist(),
+        want.anchored.astype(int).tolist())
+    np.testing.assert_allclose(got["health"], state, rtol=0, atol=1e-9)
+
+
+def test_structure_shows_anchors_cracks_and_health(bake_folder, server, tmp_path):
+    """The column: the foot (bonded to the world) in the anchor colour; a first hit cracks bonds (lines along
+    their segments, fragments tinted, the lowest health in the panel), a second on the same damage state breaks
+    the top off: it falls, the anchored group stays still. Reset gives a fresh state."""
+    data = load_runtime(bake_folder / f"{STRUCTURE}.fracture.json")
+    point = [0.5, 4.5, 1.0]  # the top box's front face: nearest contact site 4
+    structure = {"do": "eval", "expr": "fractureTest.structure()"}
+    result = drive([
+        {"do": "wait_ready"},
+        structure,
+        {"do": "set", "id": "threshold", "value": 1},
+        {"do": "check", "id": "accumulate", "value": True},
+        {"do": "set", "id": "magnitude", "value": 1.2},  # loads up to 0.825: cracks, no break
+        {"do": "click_model", "point": point},
+        {"do": "wait_animation"},
+        structure,
+        {"do": "set", "id": "magnitude", "value": 2},  # with the cracks: the top two fragments break off
+        {"do": "click_model", "point": point},
+        {"do": "wait_animation"},
+        structure,
+        {"do": "mouse", "x": 10, "y": 10},
+        {"do": "eval", "expr": "document.getElementById('reset').click(), fractureTest.structure()"},
+    ], server + "#" + STRUCTURE, tmp_path)
+    assert result["console_errors"] == [], result["console_errors"]
+    results = result["results"]
+    before, first, cracked, second, broken, after_reset = (results[1], results[5]["hit"], results[7], results[9]["hit"],
+                                                           results[11], results[13])
+    anchor = before["anchorColor"]
+    assert before["colorMode"] == "structure" and before["anchored"] == data.anchored.tolist()
+    assert [c == anchor for c in before["colors"]] == [a == 1 for a in data.anchored]
+    assert len(set(before["colors"])) == 2 and before["crackLines"] == [] and max(before["moved"]) == 0
+
+    state = new_state(data)
+    _same_hit(first, data, state)
+    assert any(first["cracked"]) and not any(first["broken"])
+    segments = data.cracks["crack_segments"]
+    ptr = data.cracks["crack_ptr"]
+    want_lines = [(int(data.edges[m][0]), segments[i].reshape(-1).tolist())
+                  for m in np.flatnonzero(first["cracked"]) for i in range(ptr[m], ptr[m + 1])]
+    assert [(line["fragment"], line["points"]) for line in cracked["crackLines"]] == want_lines
+    weakened = {int(j) for m in np.flatnonzero(first["cracked"]) for j in data.edges[m]} - {0}
+    assert {j for j, c in enumerate(cracked["colors"]) if c not in (anchor, before["colors"][1])} == weakened
+    assert cracked["colors"][0] == anchor
+    assert cracked["lowestHealth"] == pytest.approx(min(first["health"]), rel=1e-3)
+    assert max(cracked["moved"]) == 0  # nothing broke, the column is held: no shudder either
+
+    _same_hit(second, data, state)
+    assert broken["health"] == second["health"] == pytest.approx(state.tolist(), abs=1e-9)
+    held = [j for j, a in enumerate(second["anchored"]) if a == 1]
+    free = [j for j, a in enumerate(second["anchored"]) if a == 0]
+    assert held and free and any(second["broken"])
+    assert all(broken["moved"][j] == 0 for j in held)
+    assert all(broken["moved"][j] > 0.1 for j in free)
+    assert broken["colors"][0] == anchor
+    lines = {line["fragment"] for line in broken["crackLines"]}
+    assert lines == {int(data.edges[m][0]) for m in np.flatnonzero(second["cracked"])}
+
+    assert after_reset["health"] == [1.0] * data.num_edges and after_reset["crackLines"] == []
+    assert max(after_reset["moved"]) == 0 and after_reset["colors"] == before["colors"]
+

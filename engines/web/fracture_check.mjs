@@ -14,6 +14,13 @@
 // prints "names" and the hex of each fragment name's UTF-8 bytes ("-" for an empty name).
 // Each impact is also projected with { displacement: false } (the jump table's path when
 // --jump-table built one): an answer that differs prints "error inconsistent".
+//
+// Damage states (docs/FORMAT.md section 12): an input line "state -" starts a sequence on a fresh
+// state, "state <e healths as 16 hex digits>" on that state ("state-error <reason>" if it is refused);
+// the impacts after it are hits on the state, each answered as above and followed by
+//   health <e healths as 16 hex digits>     (after a refused hit too: the state it left)
+// On a file with feature "anchors" or "damage", and in a sequence, every "ok" line is followed by
+//   more c <cracked bond indices...> n <anchored flag of each fragment...>
 // --bench=ROUNDS times every impact ROUNDS times (process.hrtime around each project call with
 // { displacement: false }, after one untimed round) and prints "median_ns <x> p99_ns <x> calls <n>".
 
@@ -38,26 +45,67 @@ function hexName(name) {
   return Buffer.from(name, 'utf-8').toString('hex') || '-';
 }
 
-function answer(runtime, line) {
+function indices(flags) {
+  const out = [];
+  flags.forEach((flag, m) => { if (flag) out.push(m); });
+  return out;
+}
+
+function same(a, b) {
+  return a.site === b.site && a.numGroups === b.numGroups && a.groups.join() === b.groups.join() &&
+    a.broken.join() === b.broken.join() && a.cracked.join() === b.cracked.join() && a.anchored.join() === b.anchored.join();
+}
+
+// The answer lines of one impact: stateless (state null) or a hit on `state`, checked against the
+// same call with { displacement: false } (on a copy of the state for a hit).
+function answer(runtime, line, state, structured) {
   const tokens = line.trim().split(/\s+/);
-  if (tokens.length !== 7) return `error expected 7 tokens, got ${tokens.length}`;
+  if (tokens.length !== 7) return [`error expected 7 tokens, got ${tokens.length}`];
   let result;
   try {
     const values = tokens.slice(0, 6).map(fromBits);
     const threshold = tokens[6] === '-' ? undefined : fromBits(tokens[6]);
-    result = runtime.project(values.slice(0, 3), values.slice(3, 6), threshold);
-    const quick = runtime.project(values.slice(0, 3), values.slice(3, 6), threshold, { displacement: false });
-    if (quick.site !== result.site || quick.numGroups !== result.numGroups ||
-        quick.groups.join() !== result.groups.join() || quick.broken.join() !== result.broken.join()) {
-      return 'error inconsistent';
+    const [point, impulse] = [values.slice(0, 3), values.slice(3, 6)];
+    let quick;
+    if (state === null) {
+      result = runtime.project(point, impulse, threshold);
+      quick = runtime.project(point, impulse, threshold, { displacement: false });
+    } else {
+      quick = runtime.hit(Float64Array.from(state), point, impulse, threshold, { displacement: false });
+      result = runtime.hit(state, point, impulse, threshold);
     }
+    if (!same(quick, result)) return ['error inconsistent'];
   } catch (err) {
-    return `error ${err.message}`;
+    return [`error ${err.message}`];
   }
-  const broken = [];
-  result.broken.forEach((b, m) => { if (b) broken.push(m); });
-  return ['ok', result.site, result.numGroups, 'g', ...result.groups, 'b', ...broken,
-    'a', ...Array.from(result.alpha, toBits), 'd', ...Array.from(result.displacement, toBits)].join(' ');
+  const lines = [['ok', result.site, result.numGroups, 'g', ...result.groups, 'b', ...indices(result.broken),
+    'a', ...Array.from(result.alpha, toBits), 'd', ...Array.from(result.displacement, toBits)].join(' ')];
+  if (structured) lines.push(['more', 'c', ...indices(result.cracked), 'n', ...result.anchored].join(' '));
+  return lines;
+}
+
+// Every input line's answers; "state" lines switch to hits on a damage state.
+function answerAll(runtime, input) {
+  const structured = runtime.anchored !== null || runtime.damage !== null;
+  const out = [];
+  let state = null;
+  for (const line of input.split('\n')) {
+    const tokens = line.trim().split(/\s+/).filter(Boolean);
+    if (!tokens.length) continue;
+    if (tokens[0] === 'state') {
+      try {
+        state = tokens[1] === '-' ? runtime.newState() : Float64Array.from(tokens.slice(1), fromBits);
+        runtime.checkState(state);
+      } catch (err) {
+        state = null;
+        out.push(`state-error ${err.message}`);
+      }
+      continue;
+    }
+    out.push(...answer(runtime, line, state, structured || state !== null));
+    if (state !== null) out.push(['health', ...Array.from(state, toBits)].join(' '));
+  }
+  return out;
 }
 
 function bench(runtime, rounds, input) {
@@ -103,8 +151,7 @@ function main(argv) {
   }
   const out = [];
   if (flags.includes('--names')) out.push(['names', ...runtime.fragmentNames.map(hexName)].join(' '));
-  const input = readFileSync(0, 'utf-8');
-  for (const line of input.split('\n')) if (line.trim()) out.push(answer(runtime, line));
+  out.push(...answerAll(runtime, readFileSync(0, 'utf-8')));
   process.stdout.write(out.map((l) => `${l}\n`).join(''));
   return 0;
 }

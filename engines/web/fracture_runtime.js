@@ -1,6 +1,7 @@
 // fracture_runtime.js: a reader of the fracture-modes runtime file (version 1, and version 2
-// with feature "stress": the stress criterion of docs/FORMAT.md section 11) and the realtime
-// impact projection, written from docs/FORMAT.md alone.
+// with features "stress", the stress criterion of docs/FORMAT.md section 11, "anchors" and
+// "damage", structures and damage that adds up, section 12) and the realtime impact projection,
+// written from docs/FORMAT.md alone.
 //
 // A standalone ES module with no dependencies; it runs in browsers and in Node.js (>= 18).
 // MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
@@ -9,6 +10,11 @@
 //   const rt = parseRuntime(headerJsonTextOrObject, binaryArrayBufferOrUint8Array);
 //   const hit = rt.project([x, y, z], [nx, ny, nz], threshold);  // threshold optional
 //   hit.groups  // Int32Array(p): smallest fragment index of each fragment's group
+//
+// Damage that adds up (feature "damage"): keep one state per object and hit it.
+//   const state = rt.newState();                             // Float64Array(e), every bond at health 1
+//   const res = rt.hit(state, [x, y, z], [nx, ny, nz]);      // updates state in place
+//   res.broken, res.cracked (per bond), res.anchored (per fragment: its group holds on to the world)
 //
 // For many hits per second (a game rather than a viewer): parseRuntime(..., { jumpTable: true })
 // tabulates the d = 1 jumps per contact site (docs/FORMAT.md section 4, "Cost"; about 10 * (e + p)
@@ -22,8 +28,8 @@
 
 export const FORMAT_NAME = 'fracture-modes-runtime';
 export const FORMAT_VERSION = 2;  // the newest version this reader reads
-/** The version-2 features this reader implements (docs/FORMAT.md section 11). */
-export const KNOWN_FEATURES = ['stress'];
+/** The version-2 features this reader implements (docs/FORMAT.md sections 11 and 12). */
+export const KNOWN_FEATURES = ['anchors', 'damage', 'stress'];
 
 // name -> [dtype, number of dimensions]; also the order of the arrays in the binary file.
 const ARRAY_LAYOUT = [
@@ -40,6 +46,10 @@ const STRESS_LAYOUT = [
   ['site_bond_gain', 'float32', 2],
   ['bond_strength', 'float32', 1],
 ];
+// Structures (docs/FORMAT.md section 12): the anchored flags with feature "anchors"; the crack
+// segments (drawing only, optional in any version-2 file) both or neither.
+const ANCHOR_LAYOUT = [['anchored', 'int32', 1]];
+const CRACK_LAYOUT = [['crack_ptr', 'int32', 1], ['crack_segments', 'float32', 3]];
 
 /** A runtime file that is malformed, truncated, of another format or inconsistent. */
 export class RuntimeFileError extends Error {
@@ -158,6 +168,22 @@ function checkHeader(h) {
   checkUri(b.uri);
   if (!h.arrays || typeof h.arrays !== 'object') fail('the header has no arrays table');
   if (stressOf(h) && !isCount(c.site_bonds)) fail('counts.site_bonds must be a non-negative integer');
+  if (featuresOf(h).includes('damage')) checkDamage(h.damage);
+}
+
+/** The (checked) header's features; none in version 1. */
+function featuresOf(h) {
+  return h.version >= 2 ? h.features : [];
+}
+
+// Section 12.1: crack level c in (0, 1], damage rate r finite and >= 0.
+function checkDamage(damage) {
+  if (!damage || typeof damage !== 'object' || Array.isArray(damage)) {
+    fail("runtime file lists feature 'damage' but has no header object 'damage'");
+  }
+  const { crack_level: c, damage_rate: r } = damage;
+  if (!Number.isFinite(c) || !(c > 0 && c <= 1)) fail(`damage.crack_level must be a number in (0, 1], got ${JSON.stringify(c)}`);
+  if (!Number.isFinite(r) || r < 0) fail(`damage.damage_rate must be a finite number >= 0, got ${JSON.stringify(r)}`);
 }
 
 // Section 11: version 2 lists the features it needs (refused by name when unknown) and a criterion;
@@ -201,8 +227,12 @@ function expectedShapes(h) {
   const { sites: s, modes: k, fragments: p, edges: e } = h.counts;
   const d = h.dim;
   const nnz = h.counts.site_bonds;
+  // The number of crack segments is the array's own (counts.crack_segments is optional).
+  const segments = h.arrays.crack_segments;
+  const n = segments && Array.isArray(segments.shape) ? segments.shape[0] : -1;
   return { sites: [s, 3], B: [s, k, d], W: [k, p, d], edges: [e, 2], edge_areas: [e],
-    site_bonds_ptr: [s + 1], site_bonds: [nnz], site_bond_gain: [nnz, 3], bond_strength: [e] };
+    site_bonds_ptr: [s + 1], site_bonds: [nnz], site_bond_gain: [nnz, 3], bond_strength: [e],
+    anchored: [p], crack_ptr: [e + 1], crack_segments: [n, 2, 3] };
 }
 
 function readArray(name, dtype, ndim, entry, view, shapes) {
@@ -273,9 +303,11 @@ export function parseRuntime(header, binary, options = {}) {
     for (const [name, dtype, ndim] of STRESS_LAYOUT) arrays[name] = readArray(name, dtype, ndim, h.arrays[name], view, shapes);
     checkStress(arrays, h.counts.sites, h.counts.edges);
   }
+  readStructure(h, arrays, view, shapes);
   const runtime = new FractureRuntime(h, arrays);
-  if (options.jumpTable && runtime.criterion === 'modes' && runtime.dim === 1 && runtime.numEdges > 0 && runtime.numEdges <= 0xffff &&
-      runtime.numFragments <= 0x7fff) runtime._buildJumpTable();
+  // Not with "damage": every hit then updates a state from each bond's measure, which the table does not keep.
+  if (options.jumpTable && runtime.criterion === 'modes' && runtime.dim === 1 && !runtime.damage && runtime.numEdges > 0 &&
+      runtime.numEdges <= 0xffff && runtime.numFragments <= 0x7fff) runtime._buildJumpTable();
   return runtime;
 }
 
@@ -294,6 +326,29 @@ function checkStress(arrays, s, e) {
     }
   }
   if (!strength.every((x) => x >= 0)) fail('bond_strength must be >= 0');
+}
+
+// Section 12.2: anchored (p,) of 0/1 with feature "anchors"; crack_ptr (e + 1) from 0, never decreasing,
+// to n and crack_segments (n, 2, 3), finite, both or neither (read in any version-2 file: drawing data).
+function readStructure(h, arrays, view, shapes) {
+  if (h.version < 2) return;
+  if (featuresOf(h).includes('anchors')) {
+    const [name, dtype, ndim] = ANCHOR_LAYOUT[0];
+    const anchored = readArray(name, dtype, ndim, h.arrays[name], view, shapes);
+    if (!anchored.every((a) => a === 0 || a === 1)) fail('array anchored must hold only 0 and 1');
+    arrays.anchored = anchored;
+  }
+  const missing = CRACK_LAYOUT.filter(([name]) => h.arrays[name] === undefined).map(([name]) => name);
+  if (missing.length === CRACK_LAYOUT.length) return;
+  if (missing.length) fail(`the crack arrays come together: ${missing.join(', ')} missing`);
+  for (const [name, dtype, ndim] of CRACK_LAYOUT) arrays[name] = readArray(name, dtype, ndim, h.arrays[name], view, shapes);
+  const ptr = arrays.crack_ptr;
+  const n = arrays.crack_segments.length / 6;
+  let ok = ptr[0] === 0 && ptr[ptr.length - 1] === n;
+  for (let m = 1; ok && m < ptr.length; m++) ok = ptr[m] >= ptr[m - 1];
+  if (!ok) fail(`crack_ptr must start at 0, never decrease and end at ${n}`);
+  const count = h.counts.crack_segments;
+  if (count !== undefined && count !== n) fail(`counts.crack_segments is ${JSON.stringify(count)} but crack_segments has ${n}`);
 }
 
 /**
@@ -353,6 +408,18 @@ export class FractureRuntime {
     this.siteBonds = arrays.site_bonds || null;         // (nnz,) Int32Array: the bond (edge) of each entry
     this.siteBondGain = arrays.site_bond_gain || null;  // (nnz, 3) G: tensile force per unit impulse along x, y, z
     this.bondStrength = arrays.bond_strength || null;   // (e,) S
+    // Section 12: the version-2 features, the fragments bonded to the world, the damage parameters and the
+    // crack segments (drawing only). Null (features: empty) when the file does not have them.
+    this.features = featuresOf(header).slice();
+    this.anchored = arrays.anchored || null;            // (p,) Int32Array, 1: bonded to the world
+    this.damage = this.features.includes('damage')
+      ? { crackLevel: header.damage.crack_level, damageRate: header.damage.damage_rate } : null;
+    this.crackPtr = arrays.crack_ptr || null;           // (e + 1,) Int32Array: bond e's segments ptr[e] .. ptr[e+1]-1
+    this.crackSegments = arrays.crack_segments || null; // (n, 2, 3): segment i is [6i .. 6i+5], model space
+    // c and q = r / (1 - c) of section 12.4, once per file (q = 0 when c = 1); a file without "damage"
+    // acts as c = 1, r = 0, so a state given to hit() only remembers broken bonds.
+    this.crackLevel = this.damage ? this.damage.crackLevel : 1;
+    this.damageFactor = this.damage && this.crackLevel !== 1 ? this.damage.damageRate / (1 - this.crackLevel) : 0;
     this.hasJumpTable = false;
     this._buildKdTree();
   }
@@ -600,93 +667,213 @@ export class FractureRuntime {
   /**
    * Project an impact and group the fragments (docs/FORMAT.md section 4).
    *
+   * On a file with feature "damage" this is a hit on a fresh state that is then thrown away (section
+   * 12.4), so a bond may also crack; use hit() with a state the game keeps to let damage add up.
+   *
    * @param {ArrayLike<number>|{x,y,z}} point  hit point, model space (finite)
    * @param {ArrayLike<number>|{x,y,z}} impulse  impulse vector (finite); same unit as threshold
    * @param {number} [threshold]  toughness >= 0 (+Infinity allowed); default: the file's default_threshold
    * @param {{displacement?: boolean}} [options]  displacement (default true): false leaves displacement
    *   and jumps null, and uses the jump table when parseRuntime built one (much faster on big files)
    * @returns {{site: number, alpha: Float64Array, displacement: Float64Array|null, jumps: Float64Array|null,
-   *            broken: Uint8Array, groups: Int32Array, numGroups: number}}
+   *            broken: Uint8Array, cracked: Uint8Array, anchored: Uint8Array, groups: Int32Array, numGroups: number}}
    *   displacement is (p, d) row-major and jumps (e, d); both, like alpha, for the impulse as given.
+   *   cracked (per bond) and anchored (per fragment: 1 when its group holds a fragment bonded to the
+   *   world) are all 0 without features "damage" and "anchors".
    */
   project(point, impulse, threshold, options = {}) {
+    return this._respond(this.damage ? this.newState() : null, point, impulse, threshold, options);
+  }
+
+  /** A fresh damage state (section 12.3): one health per bond, all 1 (Float64Array(e)). */
+  newState() {
+    return new Float64Array(this.numEdges).fill(1);
+  }
+
+  /** Throw unless state is a damage state of this file: a Float64Array of e healths, each finite in [0, 1]. */
+  checkState(state) {
+    if (!(state instanceof Float64Array) || state.length !== this.numEdges) {
+      throw new TypeError(`a damage state must be a Float64Array of ${this.numEdges} bond healths`);
+    }
+    for (let e = 0; e < state.length; e++) {
+      if (!(state[e] >= 0 && state[e] <= 1)) {  // also refuses NaN
+        throw new RangeError(`a damage state holds healths in [0, 1]; bond ${e} has ${state[e]}`);
+      }
+    }
+  }
+
+  /**
+   * One hit on a damage state (docs/FORMAT.md section 12.4): updates state in place and answers like
+   * project() for the state after the hit: broken lists every broken bond (this hit's and earlier ones'),
+   * cracked the bonds that hold but are cracked (loaded above the crack level by this hit, or weakened
+   * earlier), groups and anchored follow from the bonds that are not broken. World bonds never break.
+   * Invalid inputs or state throw and leave the state as it was. Works on any file: without feature
+   * "damage" a state only remembers which bonds broke.
+   *
+   * @param {Float64Array} state  from newState() or stateFromBytes(); updated in place
+   * @param point, impulse, threshold, options  as project()
+   */
+  hit(state, point, impulse, threshold, options = {}) {
+    this.checkState(state);
+    return this._respond(state, point, impulse, threshold, options);
+  }
+
+  /** A state as the bytes a game saves: e little-endian doubles. */
+  stateToBytes(state) {
+    this.checkState(state);
+    const bytes = new Uint8Array(8 * state.length);
+    const view = new DataView(bytes.buffer);
+    for (let e = 0; e < state.length; e++) view.setFloat64(8 * e, state[e], true);
+    return bytes;
+  }
+
+  /** A state saved by stateToBytes() (or any reader's e little-endian doubles), checked. */
+  stateFromBytes(binary) {
+    const bytes = asBytes(binary);
+    if (bytes.byteLength !== 8 * this.numEdges) {
+      throw new RangeError(`a saved damage state of this file has ${8 * this.numEdges} bytes, got ${bytes.byteLength}`);
+    }
+    const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+    const state = new Float64Array(this.numEdges);
+    for (let e = 0; e < state.length; e++) state[e] = view.getFloat64(8 * e, true);
+    this.checkState(state);
+    return state;
+  }
+
+  /** The crack segments of bond e as a Float64Array of 6 numbers per segment (empty without crack arrays). */
+  crackSegmentsOf(bond) {
+    if (!this.crackPtr) return new Float64Array(0);
+    return this.crackSegments.subarray(6 * this.crackPtr[bond], 6 * this.crackPtr[bond + 1]);
+  }
+
+  // Sections 4, 11 and 12.4 in one pass: the inputs are checked before `state` (null: stateless) changes.
+  _respond(state, point, impulse, threshold, options) {
     const [x, y, z] = vector3(point, 'point');
     const n = vector3(impulse, 'impulse');
-    let T = threshold === undefined || threshold === null ? this.defaultThreshold : threshold;
+    const T = threshold === undefined || threshold === null ? this.defaultThreshold : threshold;
     if (typeof T !== 'number' || Number.isNaN(T) || T < 0) {
       throw new RangeError(`threshold must be a number >= 0 (Infinity allowed), got ${JSON.stringify(threshold)}`);
     }
     const { numEdges: e, dim: d, edges } = this;
     const site = this._nearest(x, y, z);
     const m = Math.max(Math.abs(n[0]), Math.abs(n[1]), Math.abs(n[2]));
-    const broken = new Uint8Array(e);
-    if (m === 0) {  // a zero impulse breaks nothing
-      const groups = this.groups(broken);
-      return { site, alpha: new Float64Array(this.numModes), displacement: new Float64Array(this.numFragments * d),
-        jumps: new Float64Array(e * d), broken, groups, numGroups: countGroups(groups) };
+    const keep = options.displacement !== false;
+    if (m === 0) {  // a zero impulse breaks and cracks nothing
+      const none = new Uint8Array(e);
+      return { site, alpha: new Float64Array(this.numModes), displacement: keep ? new Float64Array(this.numFragments * d) : null,
+        jumps: keep && this.criterion === 'modes' ? new Float64Array(e * d) : null,
+        ...(this.criterion === 'stress' ? { loads: new Float64Array(e) } : {}), ...this._answer(state, none, none) };
     }
     const nUnit = [n[0] / m, n[1] / m, n[2] / m];
     const alpha = this._alpha(site, nUnit);
-    const limit = T / m;  // +Infinity: nothing breaks; 0 (underflow or T = 0): any nonzero jump breaks
-    if (this.criterion === 'stress') return this._projectStress(site, nUnit, m, limit, alpha, options);
-    if (options.displacement === false && this.hasJumpTable) {
+    const limit = T / m;  // +Infinity: nothing breaks; 0 (underflow or T = 0): any nonzero measure breaks
+    if (state === null && !keep && this.hasJumpTable) {  // no damage to apply: the table's groups are the answer
       const length = Math.sqrt(nUnit[0] * nUnit[0] + nUnit[1] * nUnit[1] + nUnit[2] * nUnit[2]);
       for (let i = 0; i < alpha.length; i++) alpha[i] *= m;
       const { broken, groups, numGroups } = this._tableGroups(site, length, limit);
-      return { site, alpha, displacement: null, jumps: null, broken, groups, numGroups };
+      return { site, alpha, displacement: null, jumps: null, broken, cracked: new Uint8Array(e), groups, numGroups,
+        anchored: this._anchoredOf(groups) };
     }
-    const disp = this._displacement(alpha);
-    const jumps = new Float64Array(e * d);
-    for (let q = 0; q < e; q++) {
-      const P = edges[2 * q] * d;
-      const Q = edges[2 * q + 1] * d;
-      if (d === 1) {
-        const jump = disp[P] - disp[Q];
-        jumps[q] = jump;
-        broken[q] = Math.abs(jump) > limit ? 1 : 0;
-      } else {
-        const j0 = disp[P] - disp[Q];
-        const j1 = disp[P + 1] - disp[Q + 1];
-        const j2 = disp[P + 2] - disp[Q + 2];
-        jumps[3 * q] = j0;
-        jumps[3 * q + 1] = j1;
-        jumps[3 * q + 2] = j2;
-        broken[q] = Math.sqrt(j0 * j0 + j1 * j1 + j2 * j2) > limit ? 1 : 0;
+    // Each bond's measure a and limit b (section 12.4 step 2).
+    const measure = new Float64Array(e);
+    const bound = new Float64Array(e);
+    let disp = null;
+    let jumps = null;
+    let loads = null;
+    if (this.criterion === 'stress') {
+      loads = this._stressMeasures(site, nUnit, limit, measure, bound);
+      if (keep) disp = this._displacement(alpha);
+    } else {
+      disp = this._displacement(alpha);
+      jumps = new Float64Array(e * d);
+      for (let r = 0; r < e; r++) {
+        const P = edges[2 * r] * d;
+        const Q = edges[2 * r + 1] * d;
+        if (d === 1) {
+          const jump = disp[P] - disp[Q];
+          jumps[r] = jump;
+          measure[r] = Math.abs(jump);
+        } else {
+          const j0 = disp[P] - disp[Q];
+          const j1 = disp[P + 1] - disp[Q + 1];
+          const j2 = disp[P + 2] - disp[Q + 2];
+          jumps[3 * r] = j0;
+          jumps[3 * r + 1] = j1;
+          jumps[3 * r + 2] = j2;
+          measure[r] = Math.sqrt(j0 * j0 + j1 * j1 + j2 * j2);
+        }
+        bound[r] = limit;
+      }
+    }
+    // Step 3, per bond in the spec's order: the stateless decision, the crack test (one product), the health.
+    const nowBroken = new Uint8Array(e);
+    const nowCracked = new Uint8Array(e);
+    const c = this.crackLevel;
+    const q = this.damageFactor;
+    for (let b = 0; b < e; b++) {
+      const a = measure[b];
+      const limitB = bound[b];
+      nowBroken[b] = a > limitB ? 1 : 0;
+      if (state === null) continue;  // stateless without "damage": nothing cracks
+      nowCracked[b] = a > c * limitB ? 1 : 0;
+      let h = state[b];
+      if (h > 0) {
+        if (nowBroken[b]) h = 0;
+        else if (nowCracked[b]) h = h - q * (a / limitB - c);  // a / b: one division, finite here
+        if (h < 0) h = 0;
+        state[b] = h;
       }
     }
     for (let i = 0; i < alpha.length; i++) alpha[i] *= m;
-    for (let i = 0; i < disp.length; i++) disp[i] *= m;
-    for (let i = 0; i < jumps.length; i++) jumps[i] *= m;
-    const groups = this.groups(broken);
-    const keep = options.displacement !== false;
-    return { site, alpha, displacement: keep ? disp : null, jumps: keep ? jumps : null, broken, groups,
-      numGroups: countGroups(groups) };
+    if (disp) for (let i = 0; i < disp.length; i++) disp[i] *= m;
+    if (jumps) for (let i = 0; i < jumps.length; i++) jumps[i] *= m;
+    return { site, alpha, displacement: keep ? disp : null, jumps: keep ? jumps : null,
+      ...(loads ? { loads } : {}), ...this._answer(state, nowBroken, nowCracked) };
   }
 
-  // Criterion "stress" (docs/FORMAT.md section 11): bond e of site v's list breaks when
-  // g = (G0 n'0 + G1 n'1) + G2 n'2 > t * S[e] (in this order, strictly); every other bond holds. Also
-  // gives loads: L_e = g / (t * S_e) for listed bonds with g > 0, else 0. alpha and the displacements
-  // are the modes' (as in section 4), the jumps are not computed (null).
-  _projectStress(site, nUnit, m, limit, alpha, options) {
+  // Criterion "stress" (docs/FORMAT.md section 11): the measure of bond e of site v's list is
+  // g = (G0 n'0 + G1 n'1) + G2 n'2 (in this order) against the limit t * S[e]; every other bond has
+  // measure 0. Fills measure and bound; returns loads: L_e = g / (t * S_e) for listed bonds with g > 0, else 0.
+  _stressMeasures(site, nUnit, limit, measure, bound) {
     const { siteBondsPtr: ptr, siteBonds: bonds, siteBondGain: G, bondStrength: S, numEdges: e } = this;
-    const broken = new Uint8Array(e);
     const loads = new Float64Array(e);
+    for (let b = 0; b < e; b++) bound[b] = limit * S[b];
     const [n0, n1, n2] = nUnit;
     for (let j = ptr[site]; j < ptr[site + 1]; j++) {
       const edge = bonds[j];
       const g = G[3 * j] * n0 + G[3 * j + 1] * n1 + G[3 * j + 2] * n2;
-      const bound = limit * S[edge];
-      broken[edge] = g > bound ? 1 : 0;
-      if (g > 0) loads[edge] = bound > 0 ? g / bound : bound === 0 ? Infinity : 0;
+      measure[edge] = g;
+      const b = bound[edge];
+      if (g > 0) loads[edge] = b > 0 ? g / b : b === 0 ? Infinity : 0;
     }
-    let disp = null;
-    if (options.displacement !== false) {
-      disp = this._displacement(alpha);
-      for (let i = 0; i < disp.length; i++) disp[i] *= m;
+    return loads;
+  }
+
+  // Section 12.4 step 4: broken, cracked, groups and anchored after the update (stateless: this hit's breaks).
+  _answer(state, nowBroken, nowCracked) {
+    let broken = nowBroken;
+    let cracked = nowCracked;
+    if (state !== null) {
+      broken = new Uint8Array(state.length);
+      cracked = new Uint8Array(state.length);
+      for (let b = 0; b < state.length; b++) {
+        broken[b] = state[b] <= 0 ? 1 : 0;
+        cracked[b] = !broken[b] && (nowCracked[b] || state[b] < 1) ? 1 : 0;
+      }
     }
-    for (let i = 0; i < alpha.length; i++) alpha[i] *= m;
     const groups = this.groups(broken);
-    return { site, alpha, displacement: disp, jumps: null, broken, loads, groups, numGroups: countGroups(groups) };
+    return { broken, cracked, groups, numGroups: countGroups(groups), anchored: this._anchoredOf(groups) };
+  }
+
+  /** Per fragment: 1 when its group holds a fragment with anchored = 1 (all 0 without feature "anchors"). */
+  _anchoredOf(groups) {
+    const p = this.numFragments;
+    const out = new Uint8Array(p);
+    if (!this.anchored) return out;
+    const held = new Uint8Array(p);
+    for (let j = 0; j < p; j++) if (this.anchored[j] === 1) held[groups[j]] = 1;
+    for (let j = 0; j < p; j++) out[j] = held[groups[j]];
+    return out;
   }
 }
 

@@ -3,9 +3,10 @@
 #   godot3-server --path PROJECT --script res://break_scene.gd -- SCENE.glb RUNTIME.json HITS
 #
 # HITS has one hit per line: point x y z and impulse x y z as 16-hex-digit IEEE-754 doubles, then
-# the index of the body hit (0: the intact object, then detached pieces in creation order). After
-# setup and after each hit it prints every body: "body <index> <class> <fragment names...>" and
-# "shapes <index> <fragment>:<number of collision shapes>...", then "step"; "done" at the end.
+# the index of the body hit (0: the intact object, then detached pieces in creation order), then
+# optionally the threshold (16 hex digits; default: the file's). After setup and after each hit it
+# prints every body: "body <index> <class> <fragment names...>", "shapes <index> <fragment>:<number
+# of collision shapes>..." and "cracks <index> <crack segments drawn>", then "step"; "done" at the end.
 #
 # MIT licence, Copyright (c) fracture developers.
 extends SceneTree
@@ -48,7 +49,8 @@ func _idle(_delta: float) -> bool:
 				var v := []
 				for i in range(6):
 					v.append(HexBits.from_bits(t[i]))
-				body.hit(Vector3(v[0], v[1], v[2]), Vector3(v[3], v[4], v[5]), target)
+				var threshold: float = HexBits.from_bits(t[7]) if t.size() > 7 else -1.0
+				body.hit(Vector3(v[0], v[1], v[2]), Vector3(v[3], v[4], v[5]), target, threshold)
 				_report(body)
 	print("done")
 	quit()
@@ -67,6 +69,8 @@ func _report(body) -> void:
 				if child is CollisionShape and child.get_meta("fragment") == j:
 					count += 1
 			shapes.append("%s:%d" % [body.runtime.fragment_names[j], count])
+		var lines = all[index].get_node_or_null("cracks")
 		print(names.join(" "))
 		print(shapes.join(" "))
+		print("cracks %d %d" % [index, lines.get_meta("segments") if lines != null else 0])
 	print("step")

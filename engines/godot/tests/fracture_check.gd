@@ -8,6 +8,12 @@
 # "names ..." line and one answer per impact), then "end"; "done" after the last job. One Godot
 # start for all jobs: starting the engine costs more than the jobs.
 #
+# Damage states (docs/FORMAT.md section 12), as engines/web/fracture_check.mjs: an impacts line "state -"
+# starts a sequence on a fresh state, "state <e healths as 16 hex digits>" on that state ("state-error
+# <reason>" if refused); the impacts after it are hits on the state, each answer followed by
+# "health <e hex healths>". On a file with "anchors" or "damage", and in a sequence, every "ok" line is
+# followed by "more c <cracked bond indices...> n <anchored flag of each fragment...>".
+#
 # MIT licence, Copyright (c) fracture developers.
 extends SceneTree
 
@@ -55,24 +61,64 @@ func _run_job(header: String, binary: String, impacts_path: String, flags: PoolS
 			var hex: String = (name as String).to_utf8().hex_encode()
 			names += " " + (hex if hex != "" else "-")
 		lines.append(names)
+	var structured: bool = runtime.has_damage or not runtime.anchored.empty()
+	var state = null  # an Array during a sequence
 	var impacts := File.new()
 	if impacts_path != "-" and impacts.open(impacts_path, File.READ) == OK:
 		while not impacts.eof_reached():
 			var t: PoolStringArray = impacts.get_line().split(" ", false)
+			if t.size() >= 2 and t[0] == "state":
+				state = runtime.new_state() if t[1] == "-" else _doubles(t, 1, t.size())
+				var problem: String = runtime.check_state(state)
+				if problem != "":
+					lines.append("state-error " + problem)
+					state = null
+				continue
 			if t.size() < 7:
 				continue
 			var threshold: float = runtime.default_threshold if t[6] == "-" else HexBits.from_bits(t[6])
-			var v := []
-			for i in range(6):
-				v.append(HexBits.from_bits(t[i]))
-			var hit: Dictionary = runtime.project(v[0], v[1], v[2], v[3], v[4], v[5], threshold)
-			var quick: Dictionary = runtime.project(v[0], v[1], v[2], v[3], v[4], v[5], threshold, false)
+			var v := _doubles(t, 0, 6)
+			var hit: Dictionary
+			var quick: Dictionary
+			if state == null:
+				hit = runtime.project(v[0], v[1], v[2], v[3], v[4], v[5], threshold)
+				quick = runtime.project(v[0], v[1], v[2], v[3], v[4], v[5], threshold, false)
+			else:
+				quick = runtime.hit(state.duplicate(), v[0], v[1], v[2], v[3], v[4], v[5], threshold, false)
+				hit = runtime.hit(state, v[0], v[1], v[2], v[3], v[4], v[5], threshold)
 			if hit["ok"] and not (quick["ok"] and quick["site"] == hit["site"] and quick["groups"] == hit["groups"]
-					and quick["broken"] == hit["broken"] and quick["num_groups"] == hit["num_groups"]):
+					and quick["broken"] == hit["broken"] and quick["num_groups"] == hit["num_groups"]
+					and quick["cracked"] == hit["cracked"] and quick["anchored"] == hit["anchored"]):
 				lines.append("error inconsistent")
 			else:
 				lines.append(_answer(hit))
+				if hit["ok"] and (structured or state != null):
+					lines.append(_more(hit))
+			if state != null:
+				var health := PoolStringArray(["health"])
+				for h in state:
+					health.append(HexBits.to_bits(h))
+				lines.append(health.join(" "))
 	return lines
+
+
+# The doubles of the hex tokens t[begin] .. t[end - 1].
+func _doubles(t: PoolStringArray, begin: int, end: int) -> Array:
+	var out := []
+	for i in range(begin, end):
+		out.append(HexBits.from_bits(t[i]))
+	return out
+
+
+func _more(hit: Dictionary) -> String:
+	var parts := PoolStringArray(["more", "c"])
+	for m in range(hit["cracked"].size()):
+		if hit["cracked"][m]:
+			parts.append(str(m))
+	parts.append("n")
+	for a in hit["anchored"]:
+		parts.append(str(a))
+	return parts.join(" ")
 
 
 func _answer(hit: Dictionary) -> String:

@@ -1,5 +1,6 @@
 // `fracture view`: the page. Polls /api/state, loads the chosen asset (runtime file with the
-// JavaScript reader, GLB with three.js, report), wires the panel, and runs hits.
+// JavaScript reader, GLB with three.js, report), wires the panel, and runs hits on the object's
+// damage state (docs/FORMAT.md section 12: one per loaded object, fresh after a reset or a load).
 // window.fractureTest exposes what the end-to-end test reads back (tests/test_view_e2e.py).
 
 import * as THREE from 'three';
@@ -12,7 +13,7 @@ const $ = (id) => document.getElementById(id);
 const scene = new FragmentScene($('canvas'));
 const state = {
   assets: [], stem: null, version: null, runtime: null, report: null, loading: false,
-  hit: null, earlier: null, flight: null, flightStart: 0, thresholdTouched: false, reloads: 0, error: null,
+  hit: null, damage: null, flight: null, flightStart: 0, thresholdTouched: false, reloads: 0, error: null,
 };
 
 function setStatus(text, isError = false) {
@@ -55,6 +56,25 @@ function palette(n) {
   return Array.from({ length: n }, (_, i) => new THREE.Color().setHSL((i * 0.61803398875) % 1, 0.55, 0.58));
 }
 
+// Colour mode "structure": fragments bonded to the world, and the others from healthy to weak.
+const ANCHOR_COLOR = new THREE.Color(0x3d7be0);
+const HEALTHY_COLOR = new THREE.Color(0xc8c8c8);
+const WEAK_COLOR = new THREE.Color(0xd2402a);
+
+/** Per fragment: the lowest health of its bonds that still hold (1 without any, or before a hit). */
+function fragmentHealth(runtime, health) {
+  const lowest = new Array(runtime.numFragments).fill(1);
+  for (let m = 0; m < runtime.numEdges; m++) {
+    if (health[m] <= 0) continue;
+    for (const j of [runtime.edges[2 * m], runtime.edges[2 * m + 1]]) lowest[j] = Math.min(lowest[j], health[m]);
+  }
+  return lowest;
+}
+
+function isStructure(runtime) {
+  return runtime.anchored !== null || runtime.damage !== null;
+}
+
 function coolwarm(t) {  // t in [-1, 1]: blue, grey, red; square-root ramp so small values still show
   const a = new THREE.Color(0x3b4cc0);
   const mid = new THREE.Color(0xc8c8c8);
@@ -81,7 +101,11 @@ function applyColors() {
     scene.setFragmentColors(null);
     return;
   }
-  if (mode === 'fragments') {
+  if (mode === 'structure') {
+    const health = fragmentHealth(rt, state.damage);
+    scene.setFragmentColors(health.map((h, j) => (rt.anchored && rt.anchored[j] === 1
+      ? ANCHOR_COLOR.clone() : HEALTHY_COLOR.clone().lerp(WEAK_COLOR, 1 - h))));
+  } else if (mode === 'fragments') {
     scene.setFragmentColors(palette(rt.numFragments));
   } else if (mode === 'groups') {
     const groups = state.hit ? state.hit.groups : Array.from(rt.groups());
@@ -95,13 +119,16 @@ function applyColors() {
   }
 }
 
-function fillColorModes(runtime) {
+// A structure (anchors or damage) starts in its own colours: what holds to the world and what is weakened.
+function fillColorModes(runtime, newAsset) {
   const select = $('color-mode');
   const previous = select.value;
   const options = [['materials', 'baked materials'], ['fragments', 'fragments'], ['groups', 'groups (last hit)']];
+  if (isStructure(runtime)) options.push(['structure', 'structure (anchored, health)']);
   for (let i = 0; i < runtime.numModes; i++) options.push([`mode-${i}`, `mode ${i + 1} of ${runtime.numModes}`]);
   select.innerHTML = options.map(([value, label]) => `<option value="${value}">${label}</option>`).join('');
-  select.value = options.some(([value]) => value === previous) ? previous : 'materials';
+  const fallback = isStructure(runtime) && newAsset ? 'structure' : 'materials';
+  select.value = !newAsset && options.some(([value]) => value === previous) ? previous : fallback;
 }
 
 // ---------------------------------------------------------------- loading and reloading
@@ -120,7 +147,8 @@ async function loadAsset(asset, { keepCamera = false } = {}) {
     }
     const info = await scene.load(`files/${encodeURIComponent(asset.files.glb)}${query}`, runtime.fragmentNames, { keepCamera });
     const sameAsset = state.stem === asset.stem;
-    Object.assign(state, { stem: asset.stem, version, runtime, report, hit: null, earlier: null, flight: null, error: null });
+    Object.assign(state, { stem: asset.stem, version, runtime, report, hit: null, damage: runtime.newState(), flight: null,
+      error: null });
     if (!sameAsset || !state.thresholdTouched) {
       state.thresholdTouched = false;
       setLogValue('threshold-range', 'threshold', runtime.defaultThreshold);
@@ -131,7 +159,7 @@ async function loadAsset(asset, { keepCamera = false } = {}) {
     $('collision-row').hidden = info.collisionCount === 0;
     $('collision-count').textContent = info.collisionCount ? `(${info.collisionCount})` : '';
     scene.setCollisionVisible($('collision').checked && info.collisionCount > 0);
-    fillColorModes(runtime);
+    fillColorModes(runtime, !sameAsset);
     applyColors();
     $('report').innerHTML = reportHtml(asset.stem, runtime, report);
     $('hit-info').textContent = 'click on the object to hit it';
@@ -187,10 +215,12 @@ $('asset').addEventListener('change', () => {
 
 // ---------------------------------------------------------------- hits
 
+// Back to the object as loaded: a fresh damage state, nothing moved, no cracks.
 function resetHit() {
-  Object.assign(state, { hit: null, earlier: null, flight: null });
+  Object.assign(state, { hit: null, damage: state.runtime ? state.runtime.newState() : null, flight: null });
   scene.setGroupMotion(null);
   scene.setBrokenBonds(null);
+  scene.setCracks([]);
   scene.clearHit();
   applyColors();
   $('hit-info').textContent = 'click on the object to hit it';
@@ -205,22 +235,37 @@ function hitAt(clientX, clientY) {
   const direction = (byView ? pick.rayDirection : pick.normal.clone().negate()).normalize();
   const magnitude = readNumber('magnitude', 1);
   const threshold = readNumber('threshold', rt.defaultThreshold);
-  const earlier = $('accumulate').checked && state.hit ? Uint8Array.from(state.hit.broken, Number) : null;
-  const hit = projectHit(rt, pick.point, direction.clone().multiplyScalar(magnitude), threshold, earlier);
+  // Successive hits damage the object's state; otherwise each hit starts from a fresh one (which the
+  // next successive hit then continues).
+  const damage = $('accumulate').checked ? state.damage : rt.newState();
+  const hit = projectHit(rt, damage, pick.point, direction.clone().multiplyScalar(magnitude), threshold);
   hit.fragment = rt.fragmentNames[pick.fragment];
-  state.hit = hit;
+  Object.assign(state, { hit, damage });
   const site = new THREE.Vector3(rt.sites[3 * hit.site], rt.sites[3 * hit.site + 1], rt.sites[3 * hit.site + 2]);
   scene.setGroupMotion(null);
   scene.showHit(pick.point, direction, site);
-  scene.setBrokenBonds(hit.broken);
+  scene.setBrokenBonds(hit.broken, hit.health);
+  scene.setCracks(crackLines(rt, hit.cracked));
   const masses = state.report && state.report.fragments && state.report.fragments.length === rt.numFragments
     ? state.report.fragments.map((f) => Math.abs(f.volume)) : scene.fragments.map((f) => f.boxVolume);
-  state.flight = launch(hit.groups, scene.explodedCentroids(), scene.explodedBottoms(), masses, hit.displacement, rt.dim, direction, scene.diagonal);
+  state.flight = launch(hit.groups, hit.anchored, scene.explodedCentroids(), scene.explodedBottoms(), masses, hit.displacement, rt.dim,
+    direction, scene.diagonal);
   state.flightStart = performance.now() / 1000;
   state.flightDone = false;
   applyColors();
-  $('hit-info').innerHTML = hitHtml(hit, rt.fragmentNames);
+  $('hit-info').innerHTML = hitHtml(hit, rt.fragmentNames, rt);
   return hit;
+}
+
+/** The crack segments of the cracked bonds, each with the fragment it moves with (empty without crack arrays). */
+function crackLines(runtime, cracked) {
+  const lines = [];
+  cracked.forEach((isCracked, m) => {
+    if (!isCracked) return;
+    const points = runtime.crackSegmentsOf(m);
+    for (let i = 0; i < points.length; i += 6) lines.push({ fragment: runtime.edges[2 * m], points: points.subarray(i, i + 6) });
+  });
+  return lines;
 }
 
 scene.onFrame.push((now) => {
@@ -259,6 +304,10 @@ canvas.addEventListener('pointermove', (event) => {
   let text = state.runtime.fragmentNames[j];
   if (state.hit) text += ` · group_${String(state.hit.groups[j]).padStart(3, '0')}`;
   const mode = $('color-mode').value;
+  if (mode === 'structure') {
+    const held = state.runtime.anchored && state.runtime.anchored[j] === 1 ? ' · anchored' : '';
+    text += `${held} · health ${formatNumber(fragmentHealth(state.runtime, state.damage)[j])}`;
+  }
   if (mode.startsWith('mode-')) text += ` · W = ${formatNumber(modeValues(state.runtime, Number(mode.slice(5)))[j])}`;
   tooltip.textContent = text;
   const rect = canvas.getBoundingClientRect();
@@ -282,6 +331,19 @@ window.fractureTest = {
   model: () => ({ center: scene.center.toArray(), diagonal: scene.diagonal, fragments: state.runtime.fragmentNames.slice(),
     collisionShapes: scene.collisionObjects.length }),
   hitAtScreen: (x, y) => hitAt(x, y),
+  // A structure's state as drawn: colour per fragment (hex), crack lines, how far each fragment moved,
+  // the damage state and the panel's lowest health.
+  structure: () => ({
+    features: state.runtime.features.slice(),
+    anchored: state.runtime.anchored ? Array.from(state.runtime.anchored) : null,
+    colorMode: $('color-mode').value,
+    colors: scene.colors ? scene.colors.map((c) => c.getHex()) : null,
+    anchorColor: ANCHOR_COLOR.getHex(),
+    crackLines: scene.crackSegments.map(({ fragment, points }) => ({ fragment, points: Array.from(points) })),
+    moved: scene.movedDistances(),
+    health: Array.from(state.damage),
+    lowestHealth: $('lowest-health') ? Number($('lowest-health').textContent) : null,
+  }),
 };
 
 poll();

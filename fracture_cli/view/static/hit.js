@@ -1,7 +1,8 @@
 // Hits: project an impact with the runtime reader and fly the groups apart.
 //
 // The flight is a simple ballistic animation for judging a break, not a physics simulation:
-// the heaviest group stays put, every other group leaves along a blend of the impulse
+// groups held by the world (feature "anchors") stay put, or without anchors the heaviest group
+// does; every other group leaves along a blend of the impulse
 // direction and the direction away from the heaviest group, faster when its projected
 // displacement differs more from the heaviest group's, spins, falls under gravity and
 // stops where its lowest point reaches the floor (the object's lowest point at rest).
@@ -13,32 +14,29 @@ const GRAVITY = 2.0;  // object diagonals per second squared
 const UP = new THREE.Vector3(0, 1, 0);  // glTF is +Y up
 
 /**
- * Project one hit.
+ * One hit on a damage state (docs/FORMAT.md section 12.4; on a file without "damage" the state only
+ * remembers broken bonds, so successive hits keep earlier breaks).
  * @param runtime  a FractureRuntime (fracture_runtime.js)
+ * @param {Float64Array} damage  the state, updated in place: the object's (successive hits) or a fresh one
  * @param {THREE.Vector3} point  model space
  * @param {THREE.Vector3} impulse
  * @param {number} threshold
- * @param {Uint8Array|null} earlier  broken bonds of earlier hits to keep broken (successive hits), or null
  */
-export function projectHit(runtime, point, impulse, threshold, earlier) {
-  const result = runtime.project([point.x, point.y, point.z], [impulse.x, impulse.y, impulse.z], threshold);
-  let broken = result.broken;
-  let groups = result.groups;
-  if (earlier) {
-    broken = Uint8Array.from(broken, (b, m) => b | earlier[m]);
-    groups = runtime.groups(broken);
-  }
-  let numGroups = 0;
-  for (let j = 0; j < groups.length; j++) if (groups[j] === j) numGroups++;
+export function projectHit(runtime, damage, point, impulse, threshold) {
+  const before = Float64Array.from(damage);
+  const result = runtime.hit(damage, [point.x, point.y, point.z], [impulse.x, impulse.y, impulse.z], threshold);
   return {
     point: [point.x, point.y, point.z],
     impulse: [impulse.x, impulse.y, impulse.z],
     threshold,
     site: result.site,
-    siteBroken: Array.from(result.broken, (b) => b === 1),
-    broken: Array.from(broken, (b) => b === 1),
-    groups: Array.from(groups),
-    numGroups,
+    siteBroken: Array.from(result.broken, (b, m) => b === 1 && before[m] > 0),  // by this hit
+    broken: Array.from(result.broken, (b) => b === 1),  // by this hit and the state's earlier ones
+    cracked: Array.from(result.cracked, (c) => c === 1),
+    anchored: Array.from(result.anchored),
+    health: Array.from(damage),
+    groups: Array.from(result.groups),
+    numGroups: result.numGroups,
     displacement: result.displacement,
   };
 }
@@ -54,6 +52,7 @@ function hashUnit(seed) {
 /**
  * Initial motion of every group.
  * @param {number[]} groups  group id per fragment
+ * @param {number[]} anchored  per fragment: 1 when its group is held by the world (stays put)
  * @param {THREE.Vector3[]} centroids  (exploded) fragment centroids
  * @param {number[]} bottoms  lowest y of every (exploded) fragment; the lowest of all is the floor
  * @param {number[]} masses  per fragment (volume)
@@ -62,7 +61,7 @@ function hashUnit(seed) {
  * @param {THREE.Vector3} direction  unit impulse direction
  * @param {number} diagonal  object size
  */
-export function launch(groups, centroids, bottoms, masses, displacement, dim, direction, diagonal) {
+export function launch(groups, anchored, centroids, bottoms, masses, displacement, dim, direction, diagonal) {
   const ids = [...new Set(groups)].sort((a, b) => a - b);
   const info = new Map(ids.map((g) => [g, { centre: new THREE.Vector3(), mass: 0, disp: new Array(dim).fill(0), count: 0, bottom: Infinity }]));
   const floor = Math.min(...bottoms);
@@ -78,13 +77,20 @@ export function launch(groups, centroids, bottoms, masses, displacement, dim, di
     entry.centre.divideScalar(entry.mass || 1);
     entry.disp = entry.disp.map((v) => v / entry.count);
   }
-  const anchor = ids.reduce((best, g) => (info.get(g).mass > info.get(best).mass ? g : best), ids[0]);
+  const held = new Set(groups.filter((g, j) => anchored[j] === 1));
+  // The group others fly away from: the heaviest held one, or without anchors the heaviest.
+  const candidates = held.size ? ids.filter((g) => held.has(g)) : ids;
+  const anchor = candidates.reduce((best, g) => (info.get(g).mass > info.get(best).mass ? g : best), candidates[0]);
   const base = info.get(anchor);
   const gap = (g) => Math.hypot(...info.get(g).disp.map((v, c) => v - base.disp[c]));
   const largest = Math.max(1e-300, ...ids.map(gap));
   const motion = new Map();
   for (const g of ids) {
     const entry = info.get(g);
+    if (held.has(g)) {  // held by the world: never moves
+      motion.set(g, { centre: entry.centre, fixed: true });
+      continue;
+    }
     if (ids.length === 1) {
       motion.set(g, { centre: entry.centre, shudder: true });
       continue;

@@ -16,6 +16,7 @@ function cell(value) {
   if (value === true) return '<span class="ok">true</span>';
   if (value === false) return '<span class="bad">false</span>';
   if (Array.isArray(value)) return escape(value.map(formatNumber).join(' '));
+  if (typeof value === 'string') return escape(value);
   return formatNumber(value);
 }
 
@@ -32,6 +33,10 @@ export function reportHtml(stem, runtime, report) {
     ['bonds', runtime.numEdges], ['contact sites', runtime.numSites],
     ['default threshold', runtime.defaultThreshold], ['impact radius', runtime.impactRadius],
   ];
+  if (runtime.features.length) runtimeRows.push(['features', runtime.features.join(' ')]);
+  if (runtime.anchored) runtimeRows.push(['anchored fragments', runtime.anchored.reduce((n, a) => n + a, 0)]);
+  if (runtime.damage) runtimeRows.push(['crack level', runtime.damage.crackLevel], ['damage rate', runtime.damage.damageRate]);
+  if (runtime.crackSegments) runtimeRows.push(['crack segments', runtime.crackSegments.length / 6]);
   if (!report) {
     parts.push(`<div>${escape(stem)}: no ${escape(stem)}.report.json next to the runtime file</div>`);
     parts.push(table('runtime file', runtimeRows));
@@ -53,8 +58,32 @@ export function reportHtml(stem, runtime, report) {
   return parts.join('');
 }
 
-/** HTML for the last hit: groups with their fragment names, broken bonds, site. */
-export function hitHtml(hit, fragmentNames) {
+/** The weakest bond that holds: {bond, health}, or null when every bond is broken. */
+export function weakestBond(hit) {
+  let weakest = null;
+  hit.health.forEach((h, m) => {
+    if (!hit.broken[m] && (weakest === null || h < weakest.health)) weakest = { bond: m, health: h };
+  });
+  return weakest;
+}
+
+/** HTML for a structure's state after a hit: cracked bonds, the lowest health, what stays and what falls. */
+function structureHtml(hit, runtime) {
+  const cracked = hit.cracked.filter(Boolean).length;
+  const weakest = weakestBond(hit);
+  const lowest = weakest ? `lowest health <b id="lowest-health">${formatNumber(weakest.health)}</b> (bond ${weakest.bond})` : 'every bond broken';
+  const parts = [`<div><b>${cracked}</b> bond${cracked === 1 ? '' : 's'} cracked · ${lowest}</div>`];
+  if (runtime.anchored) {
+    const groups = new Set(hit.groups);
+    const held = new Set(hit.groups.filter((g, j) => hit.anchored[j] === 1));
+    const still = hit.anchored.filter((a) => a === 1).length;
+    parts.push(`<div class="sub">held by the world: ${still} fragment${still === 1 ? '' : 's'} in ${held.size} group${held.size === 1 ? '' : 's'} (stay still) · ${groups.size - held.size} group${groups.size - held.size === 1 ? '' : 's'} fall</div>`);
+  }
+  return parts.join('');
+}
+
+/** HTML for the last hit: groups with their fragment names, broken bonds, site (and a structure's damage). */
+export function hitHtml(hit, fragmentNames, runtime) {
   const members = new Map();
   hit.groups.forEach((g, j) => {
     if (!members.has(g)) members.set(g, []);
@@ -62,7 +91,8 @@ export function hitHtml(hit, fragmentNames) {
   });
   const brokenCount = hit.broken.filter(Boolean).length;
   const lines = [...members.entries()].map(([g, names]) => `<tr><td>group_${String(g).padStart(3, '0')}</td><td>${escape(names.length)} fragment${names.length > 1 ? 's' : ''}</td></tr>`);
-  return `<div><b>${hit.numGroups}</b> group(s), <b>${brokenCount}</b> of ${hit.broken.length} bonds broken</div>`
+  const structure = runtime.anchored || runtime.damage ? structureHtml(hit, runtime) : '';
+  return `<div><b>${hit.numGroups}</b> group(s), <b>${brokenCount}</b> of ${hit.broken.length} bonds broken</div>${structure}`
     + `<div class="sub">point ${hit.point.map(formatNumber).join(' ')} · |impulse| ${formatNumber(Math.hypot(...hit.impulse))} · threshold ${formatNumber(hit.threshold)} · site ${hit.site}</div>`
     + `<table>${lines.join('')}</table>`;
 }

@@ -1,5 +1,5 @@
 // The 3D side of `fracture view`: the fragments of one bake, their poses, colours, picking,
-// the bond lines, collision shapes and the hit markers. Knows nothing about the runtime file.
+// the bond lines, crack lines, collision shapes and the hit markers. Knows nothing about the runtime file.
 //
 // Coordinates: a bake's GLB places every fragment node at its pivot in the asset's model
 // space, and the page adds no transform, so "rest" world coordinates are model coordinates.
@@ -14,6 +14,9 @@ const INTERIOR_MATERIAL = 'interior';
 const COLLISION_NAME = /-convcolonly$|^UCX_/;
 const BOND_INTACT = new THREE.Color(0xffe28a);
 const BOND_BROKEN = new THREE.Color(0xff4030);
+const CRACK_COLOR = 0x101010;
+// Fragment surfaces are drawn a little behind their depth so that crack lines lying on them stay visible.
+const SURFACE_OFFSET = { polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1 };
 
 export class FragmentScene {
   constructor(canvas) {
@@ -38,6 +41,9 @@ export class FragmentScene {
     this.fragments = [];
     this.collisionObjects = [];
     this.bonds = null;
+    this.cracks = null;
+    this.crackSegments = [];  // [{fragment, points: 6 numbers}] drawn now, model space at rest
+    this.colors = null;  // the fragments' colours (THREE.Color each) or null for the baked materials
     this.explode = 0;
     this.groupMotion = null;  // per fragment Matrix4 (group motion) or null at rest
     this.showInterior = true;
@@ -89,6 +95,7 @@ export class FragmentScene {
     this.diagonal = box.getSize(new THREE.Vector3()).length() || 1;
     this._makeFloor(box);
     this._makeBonds(null);
+    this.setCracks([]);
     this.groupMotion = null;
     this.setInterior(this.showInterior);
     this.setCollisionVisible(false);
@@ -107,7 +114,7 @@ export class FragmentScene {
       mesh.userData.fragment = index;
       mesh.userData.restWorld = mesh.matrixWorld.clone();
       // Two-sided: with the interior faces hidden, the inside of the shell shows instead of holes.
-      if (mesh.material) mesh.material.side = THREE.DoubleSide;
+      if (mesh.material) Object.assign(mesh.material, { side: THREE.DoubleSide, ...SURFACE_OFFSET });
       mesh.userData.original = mesh.material;
       // 'interior', or '<stem>_interior' since bakes prefix names with the asset's stem.
       const material = mesh.material ? mesh.material.name || '' : '';
@@ -184,6 +191,19 @@ export class FragmentScene {
     }
     this.root.updateMatrixWorld(true);
     this._updateBonds(centres);
+    this._updateCracks();
+  }
+
+  /** Where fragment j's point `rest` (model space) is drawn now: explode offset, then group motion. */
+  _posed(j, rest) {
+    const f = this.fragments[j];
+    const out = rest.clone().add(f.offset);
+    return this.groupMotion ? out.applyMatrix4(this.groupMotion[j]) : out;
+  }
+
+  /** How far each fragment's centre is from where it rests (after the explode offset): 0 for a still one. */
+  movedDistances() {
+    return this.fragments.map((f) => this._posed(f.index, f.centroid).distanceTo(f.centroid.clone().add(f.offset)));
   }
 
   setGroupMotion(matrices) {
@@ -202,13 +222,14 @@ export class FragmentScene {
 
   /** Colour each fragment (array of THREE.Color, one per fragment), or null for the baked materials. */
   setFragmentColors(colors) {
+    this.colors = colors;
     for (const f of this.fragments) {
       let outer = null;
       let inner = null;
       if (colors) {
         const side = THREE.DoubleSide;
-        outer = new THREE.MeshStandardMaterial({ color: colors[f.index], roughness: 0.75, metalness: 0, side });
-        inner = new THREE.MeshStandardMaterial({ color: colors[f.index].clone().multiplyScalar(0.55), roughness: 0.9, side });
+        outer = new THREE.MeshStandardMaterial({ color: colors[f.index], roughness: 0.75, metalness: 0, side, ...SURFACE_OFFSET });
+        inner = new THREE.MeshStandardMaterial({ color: colors[f.index].clone().multiplyScalar(0.55), roughness: 0.9, side, ...SURFACE_OFFSET });
       }
       for (const mesh of f.meshes) {
         const old = mesh.material;
@@ -249,15 +270,52 @@ export class FragmentScene {
     if (this.bonds) this.bonds.visible = visible;
   }
 
-  setBrokenBonds(broken) {
+  /** Colour the bond lines: broken ones red, the others from intact yellow towards red as health (0..1) drops. */
+  setBrokenBonds(broken, health = null) {
     if (!this.bonds) return;
     const colors = this.bonds.geometry.getAttribute('color');
+    const c = new THREE.Color();
     for (let m = 0; m < this.edges.length / 2; m++) {
-      const c = broken && broken[m] ? BOND_BROKEN : BOND_INTACT;
+      if (broken && broken[m]) c.copy(BOND_BROKEN);
+      else c.copy(BOND_INTACT).lerp(BOND_BROKEN, health ? 1 - health[m] : 0);
       colors.setXYZ(2 * m, c.r, c.g, c.b);
       colors.setXYZ(2 * m + 1, c.r, c.g, c.b);
     }
     colors.needsUpdate = true;
+  }
+
+  /**
+   * Draw crack lines: segments [{fragment, points}] with 6 model-space numbers each (two ends at rest),
+   * moving with their fragment (explode offset and group motion). An empty list removes them.
+   */
+  setCracks(segments) {
+    if (this.cracks) {
+      this.scene.remove(this.cracks);
+      this.cracks.geometry.dispose();
+      this.cracks = null;
+    }
+    this.crackSegments = segments;
+    if (!segments.length) return;
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(segments.length * 6), 3));
+    this.cracks = new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ color: CRACK_COLOR }));
+    this.cracks.frustumCulled = false;
+    this.cracks.renderOrder = 9;
+    this.scene.add(this.cracks);
+    this._updateCracks();
+  }
+
+  _updateCracks() {
+    if (!this.cracks) return;
+    const positions = this.cracks.geometry.getAttribute('position');
+    this.crackSegments.forEach(({ fragment, points }, i) => {
+      for (let end = 0; end < 2; end++) {
+        const rest = new THREE.Vector3(points[3 * end], points[3 * end + 1], points[3 * end + 2]);
+        const at = this._posed(fragment, rest);
+        positions.setXYZ(2 * i + end, at.x, at.y, at.z);
+      }
+    });
+    positions.needsUpdate = true;
   }
 
   _updateBonds(centres) {

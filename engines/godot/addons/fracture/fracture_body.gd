@@ -6,6 +6,12 @@
 # collision shapes; the largest remaining piece stays static (or, with static_rest off, becomes
 # one more RigidBody). Hitting a detached piece again breaks that piece further.
 #
+# Structures and damage (runtime format version 2, features "anchors" and "damage"): the body keeps
+# one damage state for the whole object and every hit goes through FractureRuntime.hit(), so damage
+# adds up and a bond broken by any hit stays broken (every body splits where its bonds broke). Pieces
+# whose group holds an anchored fragment (bonded to the world) stay StaticBodies, only free pieces
+# become RigidBodies; cracked bonds are drawn as lines along the file's crack segments.
+#
 # Collision shapes per fragment, first match wins: the fragment's imported "-convcolonly" parts
 # (StaticBody children Godot's importer makes from nodes named "<fragment>-convcolonly" or
 # "<fragment>_<nn>-convcolonly"), then Unreal-style "UCX_<fragment>_<nn>" meshes, then a convex
@@ -25,9 +31,14 @@ export(bool) var static_rest := true  # the largest piece of the intact object s
 export(float) var density := 1000.0  # mass per cubic unit (bounding boxes of the fragment meshes)
 export(float) var impulse_scale := 1.0  # physics impulse per unit of hit impulse for detached pieces
 export(NodePath) var scene_path := NodePath("")  # the fragments scene; default: the first Spatial child
+export(Color) var crack_color := Color(0.12, 0.08, 0.06)  # lines drawn along cracked bonds
 
 var runtime = null  # FractureRuntime
 var error_message := ""
+# The damage state of a file with "anchors" or "damage" (an Array of bond healths, see FractureRuntime.hit);
+# null for other files, whose hits are judged one by one. Save it with runtime.state_to_bytes(state) and
+# restore it with runtime.state_from_bytes() before the first hit (bodies split at the next hit).
+var state = null
 
 var _scene: Spatial
 var _meshes := []  # MeshInstance of each fragment
@@ -68,7 +79,9 @@ func setup() -> int:
 		_volumes.append(box.size.x * box.size.y * box.size.z)
 		_body_of.append(0)
 	_remove_collision_helpers(_scene)
-	var intact: PhysicsBody = StaticBody.new() if static_rest else RigidBody.new()
+	var anchors: bool = not runtime.anchored.empty()
+	state = runtime.new_state() if anchors or runtime.has_damage else null
+	var intact: PhysicsBody = StaticBody.new() if static_rest or anchors else RigidBody.new()
 	intact.name = "intact"
 	_add_body(intact, _scene.global_transform, _scene.global_transform, range(_meshes.size()))
 	return OK
@@ -192,7 +205,8 @@ func bodies() -> Array:
 
 
 # Break where hit: world point and impulse (any unit; the threshold's). `body` is the piece that
-# was hit (default: the intact object). Returns the new RigidBodies (empty when nothing breaks).
+# was hit (default: the intact object). Returns the new bodies (empty when nothing breaks): RigidBodies,
+# and with "anchors" StaticBodies for pieces that broke apart but are each still held by the world.
 func hit(world_point: Vector3, world_impulse: Vector3, body: PhysicsBody = null, hit_threshold := -1.0) -> Array:
 	if runtime == null:
 		return []
@@ -205,28 +219,93 @@ func hit(world_point: Vector3, world_impulse: Vector3, body: PhysicsBody = null,
 	var point: Vector3 = to_model.xform(world_point)
 	var impulse: Vector3 = model_frame.basis.orthonormalized().xform_inv(world_impulse)  # rotate only
 	var t: float = hit_threshold if hit_threshold >= 0.0 else (threshold if threshold >= 0.0 else runtime.default_threshold)
-	var result: Dictionary = runtime.project(point.x, point.y, point.z, impulse.x, impulse.y, impulse.z, t, false)
+	var result: Dictionary
+	if state != null:
+		result = runtime.hit(state, point.x, point.y, point.z, impulse.x, impulse.y, impulse.z, t, false)
+	else:
+		result = runtime.project(point.x, point.y, point.z, impulse.x, impulse.y, impulse.z, t, false)
 	if not result["ok"]:
 		error_message = result["error"]
 		return []
-	var pieces := _split(index, result["broken"])
 	var new_bodies := []
-	for k in range(1, pieces.size()):
-		_detach(index, pieces[k])
-		var piece_body := RigidBody.new()
-		piece_body.name = "piece_%d" % _bodies.size()
-		_add_body(piece_body, target.global_transform, model_frame, pieces[k])
-		piece_body.apply_impulse(world_point - piece_body.global_transform.origin,
-				world_impulse * impulse_scale / float(pieces.size() - 1))
-		new_bodies.append(piece_body)
-	if target is RigidBody and not new_bodies.empty():
-		var volume := 0.0
-		for j in pieces[0]:
-			volume += _volumes[j]
-		target.mass = max(volume * density, 0.001)
+	# Without a state only the hit body can split (other bodies' bonds broken by this hit are forgotten);
+	# with one, any body whose bonds are now broken splits, so bodies stay the groups of the state.
+	for i in range(_bodies.size()):
+		if i == index or state != null:
+			var pieces := _split(i, result["broken"])
+			if pieces.size() > 1:
+				var shared: Vector3 = world_impulse * impulse_scale if i == index else Vector3.ZERO
+				new_bodies += _break_body(i, pieces, result["anchored"], world_point, shared)
+	if state != null:
+		_draw_cracks(result["cracked"])
 	if not new_bodies.empty():
 		emit_signal("fractured", new_bodies)
 	return new_bodies
+
+
+# Split body `index` into `pieces` (from _split(): the largest first). A static body keeps its largest
+# anchored piece (without anchors: its largest piece); every other piece gets a new body: a StaticBody
+# when anchored, else a RigidBody, and the free ones share `impulse` at `world_point`.
+func _break_body(index: int, pieces: Array, anchored: Array, world_point: Vector3, impulse: Vector3) -> Array:
+	var target: PhysicsBody = _bodies[index]
+	var model_frame: Transform = target.global_transform * _model_to_body[index]
+	var keep := 0
+	if target is StaticBody:
+		for k in range(pieces.size()):
+			if anchored[pieces[k][0]] == 1:
+				keep = k
+				break
+	var free := 0
+	for k in range(pieces.size()):
+		if k != keep and anchored[pieces[k][0]] == 0:
+			free += 1
+	var out := []
+	for k in range(pieces.size()):
+		if k == keep:
+			continue
+		_detach(index, pieces[k])
+		var held: bool = anchored[pieces[k][0]] == 1
+		var piece_body: PhysicsBody = StaticBody.new() if held else RigidBody.new()
+		piece_body.name = "piece_%d" % _bodies.size()
+		_add_body(piece_body, target.global_transform, model_frame, pieces[k])
+		if not held and impulse != Vector3.ZERO:
+			piece_body.apply_impulse(world_point - piece_body.global_transform.origin, impulse / float(free))
+		out.append(piece_body)
+	if target is RigidBody:
+		var volume := 0.0
+		for j in pieces[keep]:
+			volume += _volumes[j]
+		target.mass = max(volume * density, 0.001)
+	return out
+
+
+# Lines along the crack segments of every cracked bond, in the body that holds the bond (a cracked bond
+# holds, so both its fragments are in one body), drawn by a "cracks" child in the model frame whose
+# "segments" metadata says how many it drew. Nothing without the file's crack arrays.
+func _draw_cracks(cracked: Array) -> void:
+	if runtime.crack_ptr.empty():
+		return
+	var material := SpatialMaterial.new()
+	material.flags_unshaded = true
+	material.albedo_color = crack_color
+	for i in range(_bodies.size()):
+		var lines: ImmediateGeometry = _bodies[i].get_node_or_null("cracks")
+		if lines == null:
+			lines = ImmediateGeometry.new()
+			lines.name = "cracks"
+			_bodies[i].add_child(lines)
+		lines.transform = _model_to_body[i]
+		lines.material_override = material
+		lines.clear()
+		var count := 0
+		lines.begin(Mesh.PRIMITIVE_LINES)
+		for m in range(runtime.edges_count):
+			if cracked[m] and _body_of[runtime.edges[2 * m]] == i:
+				for v in runtime.crack_segments_of(m):
+					lines.add_vertex(v)
+				count += runtime.crack_ptr[m + 1] - runtime.crack_ptr[m]
+		lines.end()
+		lines.set_meta("segments", count)
 
 
 # Fragments of body `index` grouped by the unbroken edges between them; the largest group first

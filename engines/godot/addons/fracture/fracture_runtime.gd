@@ -2,7 +2,8 @@
 #
 # Loads `<stem>.fracture.json` + `<stem>.fracture.bin`, validates them and answers "which
 # fragments break off" for a hit (docs/FORMAT.md of the fracture repository, format version 1, and
-# version 2 with feature "stress": the stress criterion of section 11).
+# version 2 with features "stress", the stress criterion of section 11, "anchors" and "damage",
+# structures and damage that adds up, section 12).
 # All arithmetic in GDScript floats (64-bit doubles); never through Vector3 (32-bit floats).
 #
 #   var runtime = FractureRuntime.new()
@@ -11,17 +12,27 @@
 #   var hit = runtime.project(x, y, z, nx, ny, nz, runtime.default_threshold)
 #   # hit.groups[j]: fragments with equal values move together; hit.groups[j] == j starts a group
 #
+# Damage that adds up (feature "damage"): keep one state per object, an Array of floats (doubles;
+# never a PoolRealArray, whose values are 32-bit in Godot 3), and hit it:
+#   var state: Array = runtime.new_state()
+#   var res = runtime.hit(state, x, y, z, nx, ny, nz, runtime.default_threshold)  # updates state
+#   # res.broken, res.cracked (per bond), res.anchored (per fragment: its group holds on to the world)
+#
 # MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
 extends Reference
 class_name FractureRuntime
 
 const FORMAT_VERSION := 2  # the newest version this reader reads
-const KNOWN_FEATURES := ["stress"]  # the version-2 features this reader implements
-# The five arrays of section 2, then the four of the stress criterion (section 11, with feature "stress").
+const KNOWN_FEATURES := ["anchors", "damage", "stress"]  # the version-2 features this reader implements
+# The five arrays of section 2, the four of the stress criterion (section 11, with feature "stress"),
+# then those of section 12: anchored (feature "anchors") and the optional crack arrays.
 const ARRAY_NAMES := ["sites", "B", "W", "edges", "edge_areas", "site_bonds_ptr", "site_bonds", "site_bond_gain",
-		"bond_strength"]
-const ARRAY_RANKS := [2, 3, 3, 2, 1, 1, 1, 2, 1]
-const INT_ARRAYS := [3, 5, 6]
+		"bond_strength", "anchored", "crack_ptr", "crack_segments"]
+const ARRAY_RANKS := [2, 3, 3, 2, 1, 1, 1, 2, 1, 1, 1, 3]
+const INT_ARRAYS := [3, 5, 6, 9, 10]
+const ANCHORED := 9
+const CRACK_PTR := 10
+const CRACK_SEGMENTS := 11
 const KD_LEAF := 16
 const MAX_DEPTH := 64
 const BOUND_SLACK := 1e-9  # far above the rounding of a k-term sum in double
@@ -42,6 +53,15 @@ var error_message := ""
 # How a hit decides which bonds break: "modes" (section 4) or "stress" (section 11, with the arrays below).
 var criterion := "modes"
 var site_bonds_count := 0  # stress criterion: entries of the per-site bond lists (counts.site_bonds)
+# Section 12 (version 2): the file's features, the fragments bonded to the world (1) or not (0), the damage
+# parameters, and where each bond's fault meets the surface (drawing only). Empty or defaults without them.
+var features := []
+var anchored := PoolIntArray()  # (p,) with feature "anchors", else empty
+var has_damage := false
+var crack_level := 1.0  # c; a file without "damage" acts as c = 1, r = 0 (a state only remembers breaks)
+var damage_rate := 0.0  # r
+var crack_ptr := PoolIntArray()  # (e + 1,): bond e's segments are crack_ptr[e] .. crack_ptr[e + 1] - 1
+var crack_segments := PoolRealArray()  # (n, 2, 3): segment i is values 6 i .. 6 i + 5, model space (float32)
 
 var _B := PoolRealArray()
 var _W := PoolRealArray()
@@ -55,6 +75,7 @@ var _max_bound := 0.0  # largest per-edge bound, see _edge_bounds()
 var _identity := []   # 0, 1, ..., p - 1
 var _no_edges := []   # e times false
 var _zero_modes := [] # k times 0.0
+var _no_anchors := [] # p times 0
 # Criterion "stress": site v's bonds are entries _bond_ptr[v] .. _bond_ptr[v + 1] - 1 of _bond_edge and
 # _bond_gain (G, 3 per entry, float32 values); _bond_strength (S) per edge.
 var _bond_ptr := PoolIntArray()
@@ -62,6 +83,8 @@ var _bond_edge := PoolIntArray()
 var _bond_gain := PoolRealArray()
 var _bond_strength := PoolRealArray()
 var _stress := false  # set by _parse_header for the file being loaded
+var _features := []  # set by _parse_header for the file being loaded
+var _damage_factor := 0.0  # q = r / (1 - c) of section 12.4, once per file (0 when c = 1)
 
 # JSON parsing state (a strict RFC 8259 parser over the header's bytes).
 var _json := PoolByteArray()
@@ -152,6 +175,7 @@ func _parse_header(header: PoolByteArray):
 # criterion "stress" (the stress arrays come with the criterion). Sets _stress; null on failure.
 func _check_features(top: Dictionary, version: int):
 	_stress = false
+	_features = []
 	if version < 2:
 		return true
 	var features = top.get("features", [])
@@ -177,6 +201,7 @@ func _check_features(top: Dictionary, version: int):
 		return _fail("runtime file lists feature 'stress' but its criterion is 'modes' (the stress arrays come " +
 				"with criterion 'stress')")
 	_stress = has_stress
+	_features = features
 	return true
 
 
@@ -189,7 +214,7 @@ func _number(value):
 	if value is float:
 		return value
 	var i = _integer(value)
-	return float(i) if i != null else null
+	return i * 1.0 if i != null else null  # not float(i): Godot 3 rounds that to 32 bits
 
 
 func _check(top: Dictionary, binary: PoolByteArray, check_crc: bool):
@@ -223,7 +248,7 @@ func _check(top: Dictionary, binary: PoolByteArray, check_crc: bool):
 		if shape == null:
 			return null
 		shapes.append(shape)
-	return _check_shapes(shapes, counts, names, header_dim, threshold, radius, transform, table, binary)
+	return _check_shapes(top, shapes, counts, names, header_dim, threshold, radius, transform, table, binary)
 
 
 # One arrays entry: dtype, rank, byte_length = 4 * product(shape), inside the file, 16-byte aligned.
@@ -252,7 +277,7 @@ func _check_array(entry, i: int, size: int):
 	return shape
 
 
-func _check_shapes(shapes, counts, names, header_dim, threshold, radius, transform, table, binary):
+func _check_shapes(top, shapes, counts, names, header_dim, threshold, radius, transform, table, binary):
 	var s = shapes[0]
 	var b = shapes[1]
 	var w = shapes[2]
@@ -300,6 +325,17 @@ func _check_shapes(shapes, counts, names, header_dim, threshold, radius, transfo
 			return _fail("edge %d is (%d, %d): edges must be (P, Q) with 0 <= P < Q < %d" % [m, P, Q, w[1]])
 	if _stress and _check_stress(shapes, counts, table, peer, arrays) == null:
 		return null
+	var structure = _check_structure(top, table, counts, peer, binary.size(), e[0], w[1])
+	if structure == null:
+		return null
+	features = _features.duplicate()
+	anchored = structure["anchored"]
+	has_damage = structure["damage"] != null
+	crack_level = structure["damage"][0] if has_damage else 1.0
+	damage_rate = structure["damage"][1] if has_damage else 0.0
+	_damage_factor = damage_rate / (1.0 - crack_level) if has_damage and crack_level != 1.0 else 0.0
+	crack_ptr = structure["crack_ptr"]
+	crack_segments = structure["crack_segments"]
 	criterion = "stress" if _stress else "modes"
 	site_bonds_count = shapes[6][0] if _stress else 0
 	_bond_ptr = arrays[5] if _stress else PoolIntArray()
@@ -361,6 +397,68 @@ func _check_stress(shapes: Array, counts: Dictionary, table: Dictionary, peer: S
 		if x < 0.0:
 			return _fail("bond_strength must be >= 0")
 	return true
+
+
+# Section 12.2: anchored (p,) of 0/1 with "anchors"; the damage object (0 < c <= 1, finite r >= 0) with
+# "damage"; crack_ptr (e + 1, from 0, never decreasing, to n) and crack_segments (n, 2, 3, finite), both or
+# neither, in any version-2 file. A Dictionary of what was read, or null on failure.
+func _check_structure(top: Dictionary, table: Dictionary, counts: Dictionary, peer: StreamPeerBuffer, size: int,
+		e: int, p: int):
+	var out := {"anchored": PoolIntArray(), "damage": null, "crack_ptr": PoolIntArray(),
+			"crack_segments": PoolRealArray()}
+	if "anchors" in _features:
+		var shape = _check_array(table.get("anchored"), ANCHORED, size)
+		if shape == null:
+			return null
+		if shape[0] != p:
+			return _fail("array 'anchored' must have %d entries, one per fragment" % p)
+		var flags = _read_entry(peer, table, ANCHORED)
+		for flag in flags:
+			if flag != 0 and flag != 1:
+				return _fail("array anchored must hold only 0 and 1")
+		out["anchored"] = flags
+	if "damage" in _features:
+		var damage = top.get("damage")
+		if not damage is Dictionary:
+			return _fail("runtime file lists feature 'damage' but has no header object 'damage'")
+		var c = _number(damage.get("crack_level"))
+		var r = _number(damage.get("damage_rate"))
+		if c == null or not _finite(c) or not (c > 0.0 and c <= 1.0):
+			return _fail("damage.crack_level must be a number in (0, 1]")
+		if r == null or not _finite(r) or r < 0.0:
+			return _fail("damage.damage_rate must be a finite number >= 0")
+		out["damage"] = [c, r]
+	if _features.empty() or (not table.has("crack_ptr") and not table.has("crack_segments")):
+		return out
+	if not table.has("crack_ptr") or not table.has("crack_segments"):
+		return _fail("the crack arrays come together: crack_ptr and crack_segments")
+	var ptr_shape = _check_array(table.get("crack_ptr"), CRACK_PTR, size)
+	var segment_shape = _check_array(table.get("crack_segments"), CRACK_SEGMENTS, size) if ptr_shape != null else null
+	if segment_shape == null:
+		return null
+	var n: int = segment_shape[0]
+	if ptr_shape[0] != e + 1 or segment_shape[1] != 2 or segment_shape[2] != 3:
+		return _fail("crack arrays must be crack_ptr (e + 1) and crack_segments (n, 2, 3)")
+	if counts.has("crack_segments") and _integer(counts.get("crack_segments")) != n:
+		return _fail("header counts.crack_segments does not match the arrays")
+	var ptr = _read_entry(peer, table, CRACK_PTR)
+	if ptr[0] != 0 or ptr[e] != n:
+		return _fail("crack_ptr must start at 0, never decrease and end at %d" % n)
+	for m in range(e):
+		if ptr[m + 1] < ptr[m]:
+			return _fail("crack_ptr must start at 0, never decrease and end at %d" % n)
+	var segments = _read_entry(peer, table, CRACK_SEGMENTS)
+	if segments == null:
+		return _fail("array 'crack_segments' has non-finite values")
+	out["crack_ptr"] = ptr
+	out["crack_segments"] = segments
+	return out
+
+
+# The values of array ARRAY_NAMES[i] (checked by _check_array), or null if a float is not finite.
+func _read_entry(peer: StreamPeerBuffer, table: Dictionary, i: int):
+	var entry: Dictionary = table[ARRAY_NAMES[i]]
+	return _read_array(peer, _integer(entry["byte_offset"]), _integer(entry["byte_length"]) / 4, i in INT_ARRAYS)
 
 
 func _read_array(peer: StreamPeerBuffer, offset: int, count: int, integers: bool):
@@ -612,7 +710,48 @@ func _number_token():
 	if integer:
 		# Up to 18 digits fit a 64-bit int exactly; longer integers are out of any valid range.
 		return {"int": int(text)} if text.trim_prefix("-").length() <= 18 else {"int": -1 << 62}
-	return text.to_float()
+	return _decimal(text)
+
+
+# The double of a JSON number with a fraction or an exponent. Godot 3's String.to_float() and float()
+# round to 32 bits, so: an integer mantissa below 2^53 scaled by a power of ten up to 1e22 (both exact in
+# double) is one correctly rounded operation (Clinger's fast path; it covers what writers emit, "0.6",
+# "1e-05"); any other spelling goes through str2var(), which computes in double (within an ulp).
+func _decimal(text: String) -> float:
+	var negative := text.begins_with("-")
+	var mantissa := 0
+	var digits := 0
+	var scale := 0
+	var fraction := false
+	var at := 1 if negative else 0
+	while at < text.length() and not text[at] in ["e", "E"]:
+		var c := text.ord_at(at)
+		at += 1
+		if c == 46:  # .
+			fraction = true
+			continue
+		if fraction:
+			scale -= 1
+		if mantissa == 0 and c == 48:
+			continue
+		if digits == 18:
+			return str2var(text.to_lower()) * 1.0
+		mantissa = mantissa * 10 + (c - 48)
+		digits += 1
+	if at < text.length():
+		var exponent := text.substr(at + 1, text.length() - at - 1).trim_prefix("+")
+		if exponent.trim_prefix("-").length() > 4:
+			return str2var(text.to_lower()) * 1.0
+		scale += int(exponent)
+	if mantissa == 0:
+		return -0.0 if negative else 0.0
+	if mantissa > (1 << 53) or scale < -22 or scale > 22:
+		return str2var(text.to_lower()) * 1.0
+	var power := 1.0
+	for _k in range(-scale if scale < 0 else scale):
+		power *= 10.0
+	var value: float = mantissa * power if scale >= 0 else mantissa / power
+	return -value if negative else value
 
 
 func _digits() -> bool:
@@ -775,6 +914,9 @@ func _whole_graph() -> void:
 	_zero_modes = []
 	for i in range(modes):
 		_zero_modes.append(0.0)
+	_no_anchors = []
+	for j in range(fragments):
+		_no_anchors.append(0)
 	_whole = components(_no_edges)
 	_whole_groups = 0
 	for j in range(fragments):
@@ -810,16 +952,29 @@ func _finite(x: float) -> bool:
 	return not is_nan(x) and not is_inf(x)
 
 
+# Why a hit's inputs are invalid (section 4), or "".
+func _input_error(px: float, py: float, pz: float, nx: float, ny: float, nz: float, threshold: float) -> String:
+	if not (_finite(px) and _finite(py) and _finite(pz) and _finite(nx) and _finite(ny) and _finite(nz)):
+		return "point and impulse must be finite"
+	if is_nan(threshold) or threshold < 0:
+		return "threshold must not be NaN or negative"
+	return ""
+
+
 # Project a hit (docs/FORMAT.md section 4). Point in model space, impulse in model axes (any unit),
 # threshold in the impulse's unit (INF: unbreakable). Returns a Dictionary: ok (bool), error (String),
-# site, groups (PoolIntArray), num_groups, broken (Array of bool), alpha (Array), displacement (Array,
-# p*d; empty when with_displacement is false, which skips the displacements when nothing can break).
+# site, groups (PoolIntArray), num_groups, broken (Array of bool), cracked (Array of bool, all false
+# without "damage"), anchored (Array of 0/1 per fragment: 1 when its group holds a fragment bonded to the
+# world; all 0 without "anchors"), alpha (Array), displacement (Array, p*d; empty when with_displacement
+# is false, which skips the displacements when nothing can break). On a file with feature "damage" this
+# is hit() on a fresh state that is then thrown away (section 12.4), so bonds may also crack.
 func project(px: float, py: float, pz: float, nx: float, ny: float, nz: float, threshold: float,
 		with_displacement := true) -> Dictionary:
-	if not (_finite(px) and _finite(py) and _finite(pz) and _finite(nx) and _finite(ny) and _finite(nz)):
-		return {"ok": false, "error": "point and impulse must be finite"}
-	if is_nan(threshold) or threshold < 0:
-		return {"ok": false, "error": "threshold must not be NaN or negative"}
+	if has_damage:
+		return _respond(new_state(), px, py, pz, nx, ny, nz, threshold, with_displacement)
+	var problem := _input_error(px, py, pz, nx, ny, nz, threshold)
+	if problem != "":
+		return {"ok": false, "error": problem}
 	var site := nearest_site(px, py, pz)
 	# Not max(): Godot 3's max() and min() compute in 32-bit floats (1e155 would become INF).
 	var m: float = abs(nx)
@@ -877,7 +1032,200 @@ func project(px: float, py: float, pz: float, nx: float, ny: float, nz: float, t
 		for j in range(disp.size()):
 			disp[j] *= m
 	return {"ok": true, "site": site, "groups": groups, "num_groups": num_groups, "broken": broken,
-			"alpha": alpha, "displacement": disp}
+			"cracked": _no_edges.duplicate(), "anchored": _anchored_of(groups), "alpha": alpha, "displacement": disp}
+
+
+# ---------------------------------------------------------------- damage states (section 12)
+
+# A fresh damage state (section 12.3): an Array of e floats (doubles), every bond at health 1.0.
+func new_state() -> Array:
+	var state := []
+	state.resize(edges_count)
+	for m in range(edges_count):
+		state[m] = 1.0
+	return state
+
+
+# Why `state` is not a damage state of this file, or "": an Array (not a PoolRealArray, whose values are
+# 32-bit) of e numbers, each finite and in [0, 1].
+func check_state(state) -> String:
+	if typeof(state) != TYPE_ARRAY or state.size() != edges_count:
+		return "a damage state must be an Array of %d bond healths" % edges_count
+	for h in state:
+		if not typeof(h) in [TYPE_REAL, TYPE_INT] or not (h >= 0 and h <= 1):  # NaN fails both comparisons
+			return "a damage state holds numbers in [0, 1]; this one has %s" % str(h)
+	return ""
+
+
+# One hit on `state` (docs/FORMAT.md section 12.4), updated in place. Answers like project() for the state
+# after the hit: broken is every broken bond (this hit's and earlier ones'), cracked the bonds that hold
+# but were loaded above the crack level now or weakened earlier; groups and anchored follow from the bonds
+# that hold (world bonds never break). An invalid state or input: {"ok": false, "error": ...} and the state
+# is unchanged. Works on any file: without "damage" the state only remembers which bonds broke.
+func hit(state, px: float, py: float, pz: float, nx: float, ny: float, nz: float, threshold: float,
+		with_displacement := true) -> Dictionary:
+	var problem := check_state(state)
+	if problem != "":
+		return {"ok": false, "error": problem}
+	return _respond(state, px, py, pz, nx, ny, nz, threshold, with_displacement)
+
+
+# The state as the bytes a game saves: e little-endian doubles (the same in every reader).
+func state_to_bytes(state: Array) -> PoolByteArray:
+	var peer := StreamPeerBuffer.new()  # little-endian unless told otherwise
+	for h in state:
+		peer.put_double(h)
+	return peer.data_array
+
+
+# A state saved by state_to_bytes() (or by another reader), checked; null when invalid (error_message says why).
+func state_from_bytes(bytes: PoolByteArray):
+	if bytes.size() != 8 * edges_count:
+		return _fail("a saved damage state of this file has %d bytes, got %d" % [8 * edges_count, bytes.size()])
+	var peer := StreamPeerBuffer.new()
+	peer.data_array = bytes
+	var state := []
+	for _m in range(edges_count):
+		state.append(peer.get_double())
+	var problem := check_state(state)
+	return _fail(problem) if problem != "" else state
+
+
+# Bond `bond`'s crack segments (where its fault meets the surface), two Vector3 per segment, model space
+# (exact: the file's values are 32-bit); empty when the file has no crack arrays.
+func crack_segments_of(bond: int) -> Array:
+	var out := []
+	if crack_ptr.empty():
+		return out
+	for i in range(crack_ptr[bond], crack_ptr[bond + 1]):
+		out.append(Vector3(crack_segments[6 * i], crack_segments[6 * i + 1], crack_segments[6 * i + 2]))
+		out.append(Vector3(crack_segments[6 * i + 3], crack_segments[6 * i + 4], crack_segments[6 * i + 5]))
+	return out
+
+
+# Section 12.4 on a checked `state`: steps 1-3 update it, step 4 answers.
+func _respond(state: Array, px: float, py: float, pz: float, nx: float, ny: float, nz: float, threshold: float,
+		with_displacement: bool) -> Dictionary:
+	var problem := _input_error(px, py, pz, nx, ny, nz, threshold)
+	if problem != "":
+		return {"ok": false, "error": problem}
+	var site := nearest_site(px, py, pz)
+	var m: float = abs(nx)  # not max(): 32-bit in Godot 3
+	if abs(ny) > m:
+		m = abs(ny)
+	if abs(nz) > m:
+		m = abs(nz)
+	var alpha: Array = _zero_modes.duplicate()
+	var now_cracked: Array = _no_edges.duplicate()
+	var disp := []
+	if m > 0.0:  # a zero impulse changes nothing
+		var n0 := nx / m
+		var n1 := ny / m
+		var n2 := nz / m
+		var base := site * modes * dim
+		var norm2 := 0.0
+		if dim == 1:
+			var length := sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+			for i in range(modes):
+				alpha[i] = _B[base + i] * length
+				norm2 += alpha[i] * alpha[i]
+		else:
+			for i in range(modes):
+				alpha[i] = _B[base + 3 * i] * n0 + _B[base + 3 * i + 1] * n1 + _B[base + 3 * i + 2] * n2
+				norm2 += alpha[i] * alpha[i]
+		var t := threshold / m  # overflow: INF, nothing breaks; underflow: 0, any nonzero measure breaks
+		if _stress:
+			_stress_damage(state, site, n0, n1, n2, t, now_cracked)
+			if with_displacement:
+				disp = _displacements(alpha)
+		else:
+			# No bond cracks when every jump's bound is at most c t (the crack test is a > c * b with b = t).
+			var crackable := not (sqrt(norm2) * (1.0 + BOUND_SLACK) * _max_bound <= crack_level * t)
+			if crackable or with_displacement:
+				disp = _displacements(alpha)
+			if crackable:
+				_modes_damage(state, disp, t, now_cracked)
+	elif with_displacement:
+		disp.resize(fragments * dim)
+		for j in range(fragments * dim):
+			disp[j] = 0.0
+	var broken: Array = _no_edges.duplicate()
+	var cracked: Array = _no_edges.duplicate()
+	for r in range(edges_count):
+		broken[r] = state[r] <= 0.0
+		cracked[r] = not broken[r] and (now_cracked[r] or state[r] < 1.0)
+	var groups := components(broken)
+	var num_groups := 0
+	for j in range(fragments):
+		if groups[j] == j:
+			num_groups += 1
+	for i in range(modes):
+		alpha[i] *= m
+	for j in range(disp.size()):
+		disp[j] *= m
+	return {"ok": true, "site": site, "groups": groups, "num_groups": num_groups, "broken": broken,
+			"cracked": cracked, "anchored": _anchored_of(groups), "alpha": alpha, "displacement": disp}
+
+
+# Step 3 for criterion "modes": measure a = |jump'| (d = 3: sqrt(j0 j0 + j1 j1 + j2 j2)), limit t. A bond
+# that does not crack (a <= c t) cannot break either (c <= 1), so only cracked bonds change.
+func _modes_damage(state: Array, disp: Array, t: float, now_cracked: Array) -> void:
+	var c := crack_level
+	var q := _damage_factor
+	var limit := c * t  # one product
+	var E := edges
+	for r in range(edges_count):
+		var P: int = E[2 * r]
+		var Q: int = E[2 * r + 1]
+		var a: float
+		if dim == 1:
+			a = abs(disp[P] - disp[Q])
+		else:
+			var j0: float = disp[3 * P] - disp[3 * Q]
+			var j1: float = disp[3 * P + 1] - disp[3 * Q + 1]
+			var j2: float = disp[3 * P + 2] - disp[3 * Q + 2]
+			a = sqrt(j0 * j0 + j1 * j1 + j2 * j2)
+		if a > limit:
+			now_cracked[r] = true
+			var h: float = state[r]
+			if h > 0.0:
+				h = 0.0 if a > t else h - q * (a / t - c)  # a / b: one division
+				state[r] = h if h > 0.0 else 0.0
+
+
+# Step 3 for criterion "stress": the site's listed bonds, measure g = (G0 n'0 + G1 n'1) + G2 n'2 against
+# the limit b = t * S[e]; every other bond has measure 0 and neither cracks nor breaks.
+func _stress_damage(state: Array, site: int, n0: float, n1: float, n2: float, t: float, now_cracked: Array) -> void:
+	var c := crack_level
+	var q := _damage_factor
+	var G := _bond_gain
+	for j in range(_bond_ptr[site], _bond_ptr[site + 1]):
+		var g: float = G[3 * j] * n0 + G[3 * j + 1] * n1 + G[3 * j + 2] * n2
+		var edge: int = _bond_edge[j]
+		var b: float = t * _bond_strength[edge]
+		if g > c * b:
+			now_cracked[edge] = true
+			var h: float = state[edge]
+			if h > 0.0:
+				h = 0.0 if g > b else h - q * (g / b - c)
+				state[edge] = h if h > 0.0 else 0.0
+
+
+# Per fragment: 1 when its group holds a fragment with anchored = 1 (all 0 without feature "anchors").
+func _anchored_of(groups: PoolIntArray) -> Array:
+	if anchored.empty():
+		return _no_anchors.duplicate()
+	var held := {}
+	for j in range(anchored.size()):
+		if anchored[j] == 1:
+			held[groups[j]] = true
+	var out := []
+	out.resize(fragments)
+	for j in range(fragments):
+		out[j] = 1 if held.has(groups[j]) else 0
+	return out
+
+
 
 
 # Criterion "stress" (docs/FORMAT.md section 11): bond e of the site's list breaks when
