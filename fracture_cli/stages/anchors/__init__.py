@@ -101,8 +101,8 @@ class AnchorOptions:
                                  "along 'up' (the ground a structure stands on)")
     up: str = option("+y", "the asset's up axis for 'ground' (glTF: +y; -y anchors the top, e.g. a lamp on a "
                            "ceiling)", choices=UP_AXES)
-    tolerance: float = option(0.01, "ground: how far above the lowest plane an outer face may lie, fraction of the "
-                                    "bounding-box diagonal", min=0.0, max=1.0)
+    tolerance: float = option(0.01, "ground: how far above the lowest plane all three corners of an outer face may "
+                                    "lie, fraction of the bounding-box diagonal", min=0.0, max=1.0)
     boxes: list = option([], "named boxes {name, min = [x, y, z], max = [x, y, z]} in input units: a fragment "
                              "whose solid shares volume with one is anchored")
     color: str = option("none", "vertex-colour channel: a fragment whose outer surface carries it above 0.5 is "

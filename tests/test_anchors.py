@@ -1,4 +1,4 @@
-"""Structures on the bake side (docs/FORMAT.md section 12): anchors, damage parameters, crack lines, ``impact``.
+"""The anchors stage and the rest of a structure's bake (docs/FORMAT.md section 12): damage, crack lines, ``impact``.
 
 Tiny fragments built in code: unit cubes with their shared faces in the interior material.
 The pillar baked as a structure, in a physics engine, is tests/test_structure_physics.py.
