@@ -435,3 +435,28 @@ class Fragments:
         """Index of the ``interior`` material (the fault faces'); the last slot when none is named so."""
         names = [m.name for m in self.materials]
         return names.index(INTERIOR_MATERIAL_NAME) if INTERIOR_MATERIAL_NAME in names else len(names) - 1
+
+
+@dataclass(frozen=True, eq=False)
+class Anchors:
+    """The fragments held by the world (the ``anchors`` stage; docs/FORMAT.md section 12).
+
+    Attributes
+    ----------
+    anchored : (p,) int32
+        1 where the fragment is bonded to the world, in the fragments' order; all 0 when no rule picked one.
+    info : dict
+        How they were chosen, as the runtime header's ``anchors`` object records it (``ground``, ``up``,
+        ``tolerance``, ``boxes``, ``color``: only the rules in use).
+    rules : dict of str -> (p,) bool
+        Which fragments each rule picked (``ground``, ``box <name>``, ``color``), for the report.
+    """
+
+    anchored: np.ndarray
+    info: dict = field(default_factory=dict)
+    rules: dict = field(default_factory=dict)
+
+    @property
+    def any(self) -> bool:
+        """Whether at least one fragment is anchored (only then does the runtime file get feature ``anchors``)."""
+        return bool(np.any(self.anchored == 1))

@@ -4,8 +4,8 @@ The commands run in README order from the root of a scratch copy of the checkout
 tracked files (what a fresh clone has), with this environment's ``fracture`` first
 on ``PATH`` (the README's "activate .venv"), so later commands find what earlier
 ones wrote (``build/chair``). Each must exit 0 without an internal error, and write what
-:data:`WRITES` says. The sections run in three independent groups (:data:`GROUPS`,
-each in its own copy), so ``pytest -n 2`` spreads the ten or so bakes over its
+:data:`WRITES` says. The sections run in four independent groups (:data:`GROUPS`,
+each in its own copy), so ``pytest -n 2`` spreads the dozen or so bakes over its
 workers. The commands left out are in :data:`LEFT_OUT`, each with the reason; a
 left-out command that the README no longer shows fails the test, so the list cannot
 go stale.
@@ -30,6 +30,7 @@ GROUPS = {
     "Batch": "batch",
     "The command chain": "chain",
     "In a game": "chain",  # reads build/chair/chair.fracture.json, which the chain exports
+    "Structures": "structures",  # bakes the pillar as a structure, hits it, and runs the game loop on it
 }
 
 # Files a command writes (relative to the copy's root), checked right after it.
@@ -47,6 +48,9 @@ WRITES = {
     "fracture impact build/chair/chair.fracture.json --point 0.45 0.85 -0.45 --impulse 0 -5 0 -o build/broken.glb": [
         "build/broken.glb"],
     "fracture preview build/chair/chair.fracture.json -o build/chair.png": ["build/chair.png"],
+    "fracture bake sample_assets/pillar.glb -o build/pillar -r stone_structure": ["build/pillar/pillar.fracture.json"],
+    "fracture bake sample_assets/chair.glb -o build/chair-floor -r wood --set anchors.ground=true --set "
+    "runtime.damage=true": ["build/chair-floor/chair.fracture.json"],
 }
 
 LEFT_OUT = {
@@ -116,7 +120,7 @@ def test_readme_blocks_are_found():
     commands = _commands(blocks)
     assert len(commands) >= 15 and "fracture recipes show wood" in commands
     assert any(c.startswith("dask worker") for c in commands)  # the indented block in the cluster steps
-    assert [language for _, language, _ in blocks].count("python") == 1
+    assert [language for _, language, _ in blocks].count("python") == 2  # In a game, Structures
     stale = (set(LEFT_OUT) | set(WRITES)) - set(commands)
     assert not stale, f"LEFT_OUT or WRITES name commands the README no longer shows: {sorted(stale)}"
     # A section outside GROUPS has nothing to run (a new block there needs a group, or a reason to be left out).

@@ -104,9 +104,11 @@ def recipes_cmd(action: str, name: str | None, overrides: tuple[str, ...]) -> Pr
         meta = click.get_current_context().find_root().meta
         search = search_path(meta.get("fracture.recipes_dir"))
         if action == "list":
-            for recipe_name in list_recipes(search):
+            names = list_recipes(search)
+            width = max([12, *map(len, names)])  # one column of descriptions, however long a name
+            for recipe_name in names:
                 recipe = load_recipe(recipe_name, search=search)
-                click.echo(f"{recipe_name:<12} {recipe.description}")
+                click.echo(f"{recipe_name:<{width}} {recipe.description}")
             return
         if not name:
             raise UsageError("'recipes show' needs a recipe name, e.g. 'fracture recipes show glass'")
@@ -124,57 +126,73 @@ def recipes_cmd(action: str, name: str | None, overrides: tuple[str, ...]) -> Pr
 
 @cli.command("impact", cls=TerminalCommand)
 @click.argument("runtime_file", type=click.Path(dir_okay=False, path_type=str))
-@click.option("--point", nargs=3, type=float, required=True, metavar="X Y Z", help="Hit point, asset units.")
-@click.option("--impulse", nargs=3, type=float, required=True, metavar="X Y Z", help="Impulse vector.")
+@click.option("--point", nargs=3, type=float, default=None, metavar="X Y Z", help="Hit point, asset units.")
+@click.option("--impulse", nargs=3, type=float, default=None, metavar="X Y Z", help="Impulse vector.")
+@click.option("--hit", "more_hits", nargs=6, type=float, multiple=True, metavar="X Y Z IX IY IZ",
+              help="Another hit (point, then impulse) after --point/--impulse, on the same damage state "
+                   "(repeatable, in order).")
+@click.option("--repeat", type=click.IntRange(min=1, max=100000), default=1, show_default=True, metavar="N",
+              help="Apply the hits N times over to one damage state: on a file with damage, light hits crack "
+                   "bonds and wear them down until they break.")
 @click.option("--threshold", type=float, default=None, help="Toughness (default: the file's).")
 @click.option("-o", "--out", "out_glb", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Write a GLB with one node per group, named group_### like the printed groups, holding its "
-                   "fragments (as child nodes, or one merged mesh when they share a transform).")
+              help="Write a GLB with one node per group, named group_### like the printed groups (after the last "
+                   "hit), holding its fragments (as child nodes, or one merged mesh when they share a transform).")
 @click.option("--warn-distance", type=click.FloatRange(min=0), default=0.1, show_default=True,
               help="Warn when the point is farther than this fraction of the bounding-box diagonal from the "
                    "nearest contact site (probably not on the asset, or in other units).")
 @click.option("--png", "out_png", type=click.Path(dir_okay=False, path_type=str), default=None,
-              help="Render a preview picture of this impact.")
+              help="Render a preview picture of this impact (one hit).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
-def impact_cmd(runtime_file: str, point: tuple[float, float, float], impulse: tuple[float, float, float],
+def impact_cmd(runtime_file: str, point: tuple[float, float, float] | None,
+               impulse: tuple[float, float, float] | None, more_hits: tuple[tuple[float, ...], ...], repeat: int,
                threshold: float | None, out_glb: str | None, out_png: str | None, as_json: bool,
                warn_distance: float) -> Processor:
     """Project an impact on a baked asset and print which fragments move together.
 
     Each group is named group_### after its smallest fragment index, as in the
-    GLB that -o writes.
+    GLB that -o writes; a group held by the world (a structure's anchored base)
+    ends with "(anchored)", and a bond that holds but is cracked gets a
+    "cracked:" line with its health. Several hits (--hit, --repeat) act on one
+    damage state, as in a game: a line per hit, then the groups after the last.
     """
+    if (point is None) != (impulse is None):
+        raise UsageError("--point and --impulse come together (one hit); more hits: --hit X Y Z IX IY IZ")
+    hits = ([(point, impulse)] if point is not None and impulse is not None else []) + [
+        ((h[0], h[1], h[2]), (h[3], h[4], h[5])) for h in more_hits]
+    if not hits:
+        raise UsageError("give a hit: --point X Y Z --impulse X Y Z (or --hit X Y Z IX IY IZ)")
+    hits = hits * repeat
+    if out_png and len(hits) > 1:
+        raise UsageError("--png pictures one hit; give a single hit (no --hit or --repeat) with it")
 
     def process(chain: Chain) -> None:
         # on first use: keeps `fracture` start-up light
         import numpy as np
 
-        from fracture_cli.io.regroup import group_name
+        from fracture_cli.cli.hits import apply_hits, json_body, text_lines
         from fracture_cli.runtime.format import load_runtime
-        from fracture_cli.runtime.impact import project_impact
 
         guard_beside(runtime_file, [p for p in (out_glb, out_png) if p], glb=bool(out_glb or out_png),
                      report=bool(out_png))
         data = load_runtime(runtime_file)
-        result = project_impact(data, point, impulse, threshold)
+        outcomes = apply_hits(data, hits, threshold)
         sites = np.asarray(data.sites, dtype=np.float64)
         diagonal = float(np.linalg.norm(sites.max(axis=0) - sites.min(axis=0))) or 1.0
-        distance = float(np.linalg.norm(sites[result.site] - np.asarray(point, dtype=np.float64)))
-        if distance > warn_distance * diagonal:
-            log.warning("the point is %.4g units from the nearest contact site, %.2g times the asset's %.4g-unit "
-                        "diagonal: is it on the asset, in model space and the asset's units?", distance,
-                        distance / diagonal, diagonal)
-        groups: dict[str, list[str]] = {}
-        for j, g in enumerate(result.groups):
-            groups.setdefault(group_name(int(g)), []).append(data.fragment_names[j])
+        distances, warned = [], set()
+        for (where, _), outcome in zip(hits, outcomes):
+            distance = float(np.linalg.norm(sites[outcome.result.site] - np.asarray(where, dtype=np.float64)))
+            distances.append(distance)
+            if distance > warn_distance * diagonal and where not in warned:  # once per point of a sequence
+                warned.add(where)
+                log.warning("the point is %.4g units from the nearest contact site, %.2g times the asset's %.4g-unit "
+                            "diagonal: is it on the asset, in model space and the asset's units?", distance,
+                            distance / diagonal, diagonal)
         if as_json:
-            click.echo(json.dumps({"site": int(result.site), "site_distance": distance,
-                                   "broken_bonds": int(result.broken.sum()), "group_names": list(groups),
-                                   "groups": list(groups.values())}, indent=2))
+            click.echo(json.dumps(json_body(data, outcomes, distances), indent=2))
         else:
-            click.echo(f"{len(groups)} group(s), {int(result.broken.sum())} of {len(result.broken)} bonds broken")
-            for name, members in groups.items():
-                click.echo(f"{name}: {' '.join(members)}")
+            for line in text_lines(data, outcomes):
+                click.echo(line)
         if out_glb:
             # on first use: keeps `fracture` start-up light
             from fracture_cli.io.regroup import write_groups_glb
@@ -182,12 +200,12 @@ def impact_cmd(runtime_file: str, point: tuple[float, float, float], impulse: tu
             glb = runtime_file[: -len(".fracture.json")] + ".glb" if runtime_file.endswith(".fracture.json") else None
             if glb is None or not os.path.exists(glb):
                 raise UsageError(f"cannot find the fragments file next to {runtime_file} (expected <stem>.glb)")
-            write_groups_glb(glb, result.groups, out_glb, fragment_names=data.fragment_names)
+            write_groups_glb(glb, outcomes[-1].result.groups, out_glb, fragment_names=data.fragment_names)
         if out_png:
             # on first use: keeps `fracture` start-up light
             from fracture_cli.view.preview import render_preview
 
-            render_preview(runtime_file, out_png, impact=(point, impulse, threshold))
+            render_preview(runtime_file, out_png, impact=(hits[0][0], hits[0][1], threshold))
 
     return process
 

@@ -30,6 +30,7 @@ if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help`
     from fracture_cli.options import StageOptions
     from fracture_cli.pipeline.cache import StageCache
     from fracture_cli.runtime.format import RuntimeData
+    from fracture_cli.stages.anchors import AnchorOptions
     from fracture_cli.stages.cage import CageOptions
     from fracture_cli.stages.collision import CollisionOptions
     from fracture_cli.stages.faults import FaultOptions
@@ -45,7 +46,7 @@ if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help`
     from fracture_cli.stages.simplify import SimplifyOptions
     from fracture_cli.stages.smooth import SmoothOptions
     from fracture_cli.stages.tetra import TetraOptions
-    from fracture_cli.types import Cage, Fragments, Modes, Pieces, Regions, SurfaceMesh, TetMesh
+    from fracture_cli.types import Anchors, Cage, Fragments, Modes, Pieces, Regions, SurfaceMesh, TetMesh
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +73,7 @@ class PipelineState:
     collision: tuple | None = None  # convex parts of every fragment, model space (stages.collision.Parts)
     physics: tuple | None = None  # (io.physics.FragmentPhysics, ...): mass, pivot and parts of every fragment
     checks: dict[str, CheckValue] | None = None  # what the report says of the fragments
+    anchors: Anchors | None = None  # the fragments held by the world (none unless the recipe's [anchors] asks)
     runtime: RuntimeData | None = None
 
     # One overload per field kind: a stage gets its input with its type (no Any on the spine).
@@ -107,7 +109,8 @@ class PipelineState:
 
 
 _NOUNS = {"surface": "a surface", "cage": "a cage", "tet_mesh": "a tet mesh", "modes": "modes",
-          "pieces": "pieces", "regions": "piece regions", "fragments": "fragments", "runtime": "runtime data"}
+          "pieces": "pieces", "regions": "piece regions", "fragments": "fragments", "anchors": "anchors",
+          "runtime": "runtime data"}
 
 StageFunction = Callable[[PipelineState, Any], PipelineState]
 
@@ -282,12 +285,19 @@ def _collision(state: PipelineState, options: CollisionOptions) -> PipelineState
     return dataclasses.replace(state, collision=parts, physics=physics, checks={**(state.checks or {}), **checks})
 
 
+def _anchors(state: PipelineState, options: AnchorOptions) -> PipelineState:
+    # on first use: `fracture --help` loads no stage
+    from fracture_cli.stages.anchors import anchors
+
+    return dataclasses.replace(state, anchors=anchors(state.need("fragments", "anchors"), state.surface, options))
+
+
 def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     # on first use: `fracture --help` loads no stage
     from fracture_cli.io.physics import fragment_physics, runtime_arrays
     from fracture_cli.io.write import fragment_name
     from fracture_cli.stages.fragments.bodies import fragments_graph
-    from fracture_cli.stages.runtime import runtime
+    from fracture_cli.stages.runtime import runtime, with_structure
 
     frags = state.need("fragments", "runtime")
     order = [int(f.piece) for f in frags.fragments]
@@ -306,6 +316,9 @@ def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     # Mass properties and collision parts for engines that read the runtime file only (FORMAT.md section 8).
     physics = state.physics if state.physics is not None else fragment_physics(frags, state.collision, frags.pivot)
     data = dataclasses.replace(data, gameready=runtime_arrays(physics))
+    # Format version 2's structures (docs/FORMAT.md section 12): only what the recipe asks for, so that every
+    # other bake keeps its bytes.
+    data = with_structure(data, state.anchors, frags, options)
     return dataclasses.replace(state, runtime=data)
 
 
@@ -345,9 +358,13 @@ STAGES: tuple[Stage, ...] = (
     Stage("collision", "Convex collision parts per fragment that do not overlap (GLB and runtime file).",
           "fracture_cli.stages.collision:CollisionOptions", _collision, consumes=("fragments",),
           produces=("collision", "physics")),
+    Stage("anchors", "Choose the fragments held by the world: on the ground, in boxes, painted (none by default).",
+          "fracture_cli.stages.anchors:AnchorOptions", _anchors, consumes=("fragments",), uses=("surface",),
+          produces=("anchors",)),
     Stage("runtime", "Precompute the impact-projection data for the game (the runtime file).",
           "fracture_cli.stages.runtime:RuntimeOptions", _runtime,
-          consumes=("tet_mesh", "modes", "pieces", "fragments"), uses=("collision", "physics"), produces=("runtime",)),
+          consumes=("tet_mesh", "modes", "pieces", "fragments"), uses=("collision", "physics", "anchors"),
+          produces=("runtime",)),
 )
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
 # The steps a bake reports seconds for: every stage, then writing the outputs.

@@ -25,6 +25,8 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from fracture_cli import __version__
 from fracture_cli.errors import FractureError, UsageError
 from fracture_cli.geometry import trigeom
@@ -40,7 +42,7 @@ from fracture_cli.system.interrupts import caused_by_interrupt
 from fracture_cli.types import Fragments
 
 __all__ = ["STAGES", "BakeResult", "BatchItem", "bake", "bake_many", "describe_error", "file_sha256",
-           "fragment_summary", "run_pipeline", "step_seconds", "write_outputs"]
+           "fragment_summary", "run_pipeline", "step_seconds", "structure_summary", "write_outputs"]
 
 log = logging.getLogger(__name__)
 
@@ -88,6 +90,30 @@ def fragment_summary(fragments: Fragments, stem: str | None = None) -> list[dict
             "bbox_max": [float(x) for x in world.max(axis=0)],
         })
     return out
+
+
+def structure_summary(state: PipelineState, stem: str | None = None) -> dict[str, Any]:
+    """What the report says of a structure (docs/FORMAT.md section 12): anchored fragments, damage, cracks.
+
+    ``anchored`` names the fragments bonded to the world (as the GLB's nodes), ``anchor_rules`` which rule
+    picked which, ``anchors`` is the runtime header's object, ``damage`` its ``crack_level`` and
+    ``damage_rate`` (None: hits are judged alone), ``crack_segments`` and ``bonds_with_cracks`` count the
+    crack lines written.
+    """
+    data = state.need("runtime", "export")
+    names = [fragment_name(i, stem) for i in range(data.p)]
+    anchored = [] if data.anchored is None else [names[j] for j in np.flatnonzero(data.anchored == 1).tolist()]
+    rules = {} if state.anchors is None else {
+        rule: [names[j] for j in np.flatnonzero(which).tolist()] for rule, which in state.anchors.rules.items()}
+    ptr = data.cracks.get("crack_ptr")
+    return {
+        "anchored": anchored,
+        "anchor_rules": rules,
+        "anchors": dict(data.anchors_info),
+        "damage": dict(data.damage) if data.damage else None,
+        "crack_segments": 0 if ptr is None else int(ptr[-1]),
+        "bonds_with_cracks": 0 if ptr is None else int(np.count_nonzero(np.diff(ptr))),
+    }
 
 
 def stem_of(path: str) -> str:
@@ -209,6 +235,7 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
         "checks": dict(state.checks or {}),
         "repairs": records_for_report(state.repairs, surface.normalization),
         "fragments": fragment_summary(frags, stem),
+        "structure": structure_summary(state, stem),
         "outputs": [f"{stem}.glb", f"{stem}.fracture.json", f"{stem}.fracture.bin", f"{stem}.report.json"],
     }
 

@@ -6,6 +6,7 @@ game-side reader of what it writes; the recipe section keeps the name ``runtime`
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Sequence
@@ -19,7 +20,7 @@ from fracture_cli.errors import StageError
 from fracture_cli.options import option
 from fracture_cli.runtime.format import UNITS_NOTE, RuntimeData, check_runtime
 from fracture_cli.system import detmath
-from fracture_cli.types import Modes, Pieces, TetMesh
+from fracture_cli.types import Anchors, Fragments, Modes, Pieces, TetMesh
 
 log = logging.getLogger(__name__)
 STAGE = "runtime"
@@ -43,6 +44,13 @@ class RuntimeOptions:
         the same edges as an impulse of magnitude 1 with threshold ``T / m``.
         With 3.0 a unit impulse typically splits an object into 2-3 groups
         (measured on two boxes joined by a neck, k = 6 and 12 modes).
+    damage : bool, optional (default False)
+        Write damage that adds up (feature ``"damage"``, docs/FORMAT.md section 12) with ``crack_level`` and
+        ``damage_rate``, and the crack lines of every bond. Off: hits are judged alone (version 1, as before),
+        whatever the two values say; a recipe keeps its material's values and a structure turns them on.
+    crack_level, damage_rate : float, optional (default 0.6, 0.4)
+        ``c`` and ``r`` of docs/FORMAT.md section 12.4: a hit that loads a bond above ``c`` of its strength
+        cracks it and takes ``r (load - c) / (1 - c)`` of its health.
     """
 
     radius: float = option(0.05, "impact radius as a fraction of the bounding-box diagonal (diffusion time r^2)",
@@ -68,6 +76,13 @@ class RuntimeOptions:
                                  choices=("tension_shear", "tension"))
     stress_max_bonds: int = option(48, "stress criterion: at most this many bonds per site (0 = no limit)",
                                    min=0, max=100000)
+    damage: bool = option(False, "write damage that adds up (format version 2, feature 'damage'): a hit below a "
+                                 "bond's strength cracks and weakens it, in a state the game keeps per object; "
+                                 "with crack lines to draw")
+    crack_level: float = option(0.6, "damage: a hit loading a bond above this fraction of its strength cracks it "
+                                     "(1: any crack is a break)", min=0.0, max=1.0, min_exclusive=True)
+    damage_rate: float = option(0.4, "damage: the health a hit just under a bond's strength takes (about 1/rate "
+                                     "such hits break it; 0: cracks never weaken)", min=0.0, max=100.0)
 
 
 def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOptions = RuntimeOptions(),
@@ -161,6 +176,49 @@ def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOpt
         raise StageError(f"runtime data is inconsistent: {problem}", stage=STAGE)
     log.info("%s: %d sites, %d modes (d=%d), %d fragments, %d edges, radius %.3g, %.2fs", STAGE, len(sites), k, d,
              p, data.num_edges, options.radius, time.perf_counter() - started)
+    return data
+
+
+def with_structure(data: RuntimeData, anchors: Anchors | None, fragments: Fragments,
+                   options: RuntimeOptions) -> RuntimeData:
+    """``data`` with what a structure needs (docs/FORMAT.md section 12), where the recipe asks for it.
+
+    Parameters
+    ----------
+    data : RuntimeData
+        The runtime data of ``fragments`` (same order, ``p`` fragments, bonds ``data.edges (e, 2)``).
+    anchors : Anchors or None
+        From the ``anchors`` stage; with at least one anchored fragment the data gets ``anchored (p,)`` and the
+        header's ``anchors`` object (feature ``"anchors"``). None or no fragment anchored: unchanged.
+    fragments : Fragments
+        The baked fragments, for the crack lines.
+    options : RuntimeOptions
+        With ``damage``: the ``damage`` object (``crack_level``, ``damage_rate``; feature ``"damage"``) and
+        ``crack_ptr (e+1,)``, ``crack_segments (n, 2, 3)``.
+
+    Returns
+    -------
+    RuntimeData
+    """
+    if anchors is not None and anchors.any:
+        if len(anchors.anchored) != data.p:
+            raise StageError(f"{len(anchors.anchored)} anchor flags for {data.p} fragments: run 'anchors' on the "
+                             "fragments the runtime stage gets", stage=STAGE)
+        data = dataclasses.replace(data, anchored=np.asarray(anchors.anchored, dtype=np.int32),
+                                   anchors_info=dict(anchors.info))
+    if options.damage:
+        # on first use: the fault matching loads only for a structure
+        from fracture_cli.stages.fragments.cracks import crack_segments
+
+        ptr, segments = crack_segments(fragments, data.edges)
+        data = dataclasses.replace(data, damage={"crack_level": float(options.crack_level),
+                                                 "damage_rate": float(options.damage_rate)},
+                                   cracks={"crack_ptr": ptr, "crack_segments": segments})
+        log.info("%s: damage c = %g, r = %g; %d crack segments on %d of %d bonds", STAGE, options.crack_level,
+                 options.damage_rate, len(segments), int(np.count_nonzero(np.diff(ptr))), data.num_edges)
+    problem = check_runtime(data)
+    if problem:
+        raise StageError(f"runtime data is inconsistent: {problem}", stage=STAGE)
     return data
 
 

@@ -168,6 +168,8 @@ class FaceMatches:
     normal : (q, 3) float64
         Unit outward normal (from ``owner`` into ``other``).
     centroid : (q, 3) float64
+    face : (q,) int64
+        Index of the matched face in its own mesh (``meshes[owner][1]``).
     """
 
     owner: np.ndarray
@@ -175,6 +177,7 @@ class FaceMatches:
     area: np.ndarray
     normal: np.ndarray
     centroid: np.ndarray
+    face: np.ndarray
 
 
 # Faces whose candidate matches are found together (bounds the memory of coincident_faces).
@@ -196,18 +199,18 @@ def coincident_faces(meshes: Sequence[tuple[np.ndarray, np.ndarray]], candidates
         One entry per matched face (each face matches at most one other mesh),
         in the order of the meshes and their candidate faces.
     """
-    tris, owner = [], []
+    tris, owner, index = [], [], []
     for i, (V, F) in enumerate(meshes):
         F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
-        if candidates is not None:
-            F = F[np.asarray(candidates[i], dtype=bool)]
-        tris.append(np.asarray(V, dtype=np.float64)[F])
-        owner.append(np.full(len(F), i, dtype=np.int64))
+        kept = np.arange(len(F)) if candidates is None else np.flatnonzero(np.asarray(candidates[i], dtype=bool))
+        tris.append(np.asarray(V, dtype=np.float64)[F[kept]])
+        owner.append(np.full(len(kept), i, dtype=np.int64))
+        index.append(kept.astype(np.int64))
     T = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
     owner_all = np.concatenate(owner) if owner else np.zeros(0, dtype=np.int64)
     if len(T) == 0:
         empty = np.zeros(0, dtype=np.int64)
-        return FaceMatches(empty, empty, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+        return FaceMatches(empty, empty, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), empty)
     if tolerance is None:
         tolerance = INTERFACE_TOLERANCE * float(np.linalg.norm(np.ptp(T.reshape(-1, 3), axis=0)))
     normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
@@ -224,7 +227,7 @@ def coincident_faces(meshes: Sequence[tuple[np.ndarray, np.ndarray]], candidates
     q, g = np.concatenate([f[0] for f in found]), np.concatenate([f[1] for f in found])
     q, first = np.unique(q, return_index=True)  # one match per face: it lies on one other mesh
     g = g[first]
-    return FaceMatches(owner_all[q], owner_all[g], area[q], unit[q], centroid[q])
+    return FaceMatches(owner_all[q], owner_all[g], area[q], unit[q], centroid[q], np.concatenate(index)[q])
 
 
 def _block_matches(shared: tuple, start: int) -> tuple[np.ndarray, np.ndarray]:
