@@ -134,12 +134,31 @@ def require_sound(checks: list[MeshCheck]) -> None:
                     max(checks[i].bodies for i in multi), fragment_name(multi[0]))
 
 
-def require_volume(report: dict) -> None:
-    """Raise when the fragments' volumes differ from the input's by more than :data:`VOLUME_TOLERANCE`."""
+def require_volume(report: dict, difference: float | None = None, tolerance: float = VOLUME_TOLERANCE) -> None:
+    """Raise when the fragments' volumes differ from the input's by more than ``tolerance`` (relative).
+
+    Parameters
+    ----------
+    report : dict
+        The checks, with ``volume_error`` (|sum - input| / input).
+    difference : float, optional
+        (sum of the fragments' volumes - input volume) / input volume: says
+        whether the fragments hold more or less than the input (the message
+        states which was measured).
+    tolerance : float, optional (default :data:`VOLUME_TOLERANCE`)
+        See :func:`volume_tolerance`.
+    """
     error = report.get("volume_error", 0.0)
-    if not error <= VOLUME_TOLERANCE:
-        raise StageError(f"the fragments' volumes add up to the input's only within {error:.3g} (tolerance "
-                         f"{VOLUME_TOLERANCE:g}): some of the input is missing from the fragments", stage="fragments")
+    if error <= tolerance:
+        return
+    measured = f"{error:.3g} of the input's volume (tolerance {tolerance:.3g})"
+    if difference is not None and difference > 0:
+        raise StageError(f"the fragments hold more volume than the input, by {measured}: fragments overlap or a "
+                         "cut added material", stage="fragments")
+    if difference is not None and difference < 0:
+        raise StageError(f"the fragments hold less volume than the input, by {measured}: some of the input is "
+                         "missing from the fragments", stage="fragments")
+    raise StageError(f"the fragments' volumes add up to the input's only within {measured}", stage="fragments")
 
 
 def fragment_invariants(surface: SurfaceMesh, fragments: Fragments, *, max_pairs: int = 2000,
@@ -365,7 +384,8 @@ def checked_fragments(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments
     require_sound(written)
     faults = fragment_faults(frags)  # the overlap check's fragment graph and the fault shape both read them
     checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written, faults=faults))
-    require_volume(checks)
+    total = sum(trigeom.signed_volume(f.vertices, f.faces) for f in frags.fragments)
+    require_volume(checks, (total - frags.input_volume) / frags.input_volume)
     scale = surface.normalization.scale
     checks["input_volume"] = float(frags.input_volume * (scale * scale * scale))
     # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.

@@ -247,7 +247,7 @@ def _fragments(state: PipelineState, options: FragmentOptions) -> PipelineState:
     frags, split = fragments_with_split(surface, state.need("regions", "fragments"), options)
     frags, checks = checked_fragments(surface, dataclasses.replace(frags, pivot=options.pivot))
     # Cuts that fell apart: bodies that became fragments of their own, and tiny ones glued to a neighbour.
-    checks["split_bodies"] = sum(split.bodies) - len(split.bodies) - split.merged
+    checks["split_bodies"] = sum(split.bodies) - len(split.bodies) - split.merged + split.pinched
     checks["merged_bodies"] = split.merged
     return dataclasses.replace(state, fragments=frags, checks=checks)
 
@@ -255,12 +255,22 @@ def _fragments(state: PipelineState, options: FragmentOptions) -> PipelineState:
 def _simplify(state: PipelineState, options: SimplifyOptions) -> PipelineState:
     # on first use: `fracture --help` loads no stage
     from fracture_cli.checks import checked_fragments
+    from fracture_cli.stages.fragments.resolve import PINCH_GAP, separate_pinched_vertices
     from fracture_cli.stages.simplify import simplify, skipped, triangle_budget
 
     surface, frags = state.need("surface", "simplify"), state.need("fragments", "simplify")
     before = sum(len(f.faces) for f in frags.fragments)
     if not skipped(surface, options):
-        frags, checks = checked_fragments(surface, simplify(frags, surface, options)[0])
+        frags = simplify(frags, surface, options)[0]
+    # Last of the fragments' geometry: a fragment touching itself at a single vertex gets the copies apart.
+    separated, moved = separate_pinched_vertices(frags)
+    if moved:
+        log.warning("simplify: %d place(s) where a fragment touched itself at a single vertex were moved %.0e of the "
+                    "diagonal apart", moved, PINCH_GAP)
+    if not skipped(surface, options) or moved:
+        frags, checks = checked_fragments(surface, separated)
+        if skipped(surface, options):
+            checks = {**(state.checks or {}), **checks}
     else:
         checks = dict(state.checks or {})
     # Triangle counts as written, against the budget of issue 20 (input = the solid that was cut).

@@ -16,6 +16,7 @@ from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask, surface_solid
 from fracture_cli.geometry.uvs import box_uvs
 from fracture_cli.options import option
 from fracture_cli.stages.fragments.bodies import SplitReport, body_faces, split_fragments, stable_order
+from fracture_cli.stages.fragments.resolve import resolve_pinches
 from fracture_cli.system import parallel
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Regions, SurfaceMesh
 
@@ -160,6 +161,7 @@ def fragments_with_split(surface: SurfaceMesh, regions: Regions,
         materials=materials,
         normalization=surface.normalization,
         input_volume=input_volume,
+        pivot=options.pivot,
     )
 
     # The workers found each cut's bodies (body_faces) and their volumes: when there are as many bodies as cuts,
@@ -167,8 +169,27 @@ def fragments_with_split(surface: SurfaceMesh, regions: Regions,
     counts = tuple(len(d[1]) for d in done if d is not None)
     volumes = np.array([volume for d in done if d is not None for volume in d[1]])
     if sum(counts) == len(results) and not np.any(volumes < options.min_body_fraction * input_volume):
-        return cut_fragments, SplitReport(bodies=counts, source=tuple(range(len(counts))), merged=0, isolated=0)
-    return split_fragments(cut_fragments, options.min_body_fraction)
+        split = SplitReport(bodies=counts, source=tuple(range(len(counts))), merged=0, isolated=0)
+    else:
+        cut_fragments, split = split_fragments(cut_fragments, options.min_body_fraction)
+    return _resolve_written(cut_fragments, split, options)
+
+
+def _resolve_written(frags: Fragments, split: SplitReport,
+                     options: FragmentOptions) -> tuple[Fragments, SplitReport]:
+    """Split the fragments that pinch as the GLB will store them into their closed bodies
+    (:func:`~fracture_cli.stages.fragments.resolve.resolve_pinches`), then merge tiny ones (where that stays
+    closed), in the stable order."""
+    resolved_frags, resolved = resolve_pinches(frags)
+    if not resolved.split:
+        return frags, split
+    log.warning("%s: %d fragment(s) pinched as written (parts touching along an edge or at a point) and were "
+                "split into %d closed bodies, each a fragment of its own%s", STAGE, resolved.split, resolved.bodies,
+                f" ({resolved.slivers} sliver(s) of no volume left out)" if resolved.slivers else "")
+    again, merged = split_fragments(resolved_frags, options.min_body_fraction)
+    return again, SplitReport(bodies=split.bodies, source=merged.source, merged=split.merged + merged.merged,
+                              isolated=split.isolated + merged.isolated,
+                              pinched=split.pinched + resolved.bodies - resolved.split)
 
 
 @dataclass(frozen=True)

@@ -32,11 +32,12 @@ sys.path.insert(0, os.path.join(REPO, "tests"))
 from invariants import check_glb, input_box  # noqa: E402  (after the sys.path line)
 
 
-def bake_one(path: str, out: str, recipe: str, overrides: list[str], reference: float | None) -> dict:
+def bake_one(path: str, out: str, recipe: str, overrides: list[str], reference: float | None,
+             jobs: int | None = None) -> dict:
     """Bake one file with the CLI in a child process and collect what it says and writes."""
     stem = os.path.splitext(os.path.basename(path))[0]
     fracture = os.path.join(REPO, ".venv", "bin", "fracture")
-    args = [fracture, "-v", "bake", path, "-o", out, "-r", recipe]
+    args = [fracture, "-v", "bake", path, "-o", out, "-r", recipe] + (["-j", str(jobs)] if jobs else [])
     for o in overrides:
         args += ["--set", o]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -110,17 +111,20 @@ def main() -> None:
     parser.add_argument("--only", action="append", default=None, help="file names to bake (default: all)")
     parser.add_argument("--extra", action="append", default=[], help="further files to bake (e.g. sample assets)")
     parser.add_argument("--out", default=os.path.join(REPO, "build", "realworld"))
+    parser.add_argument("--jobs", type=int, default=None, help="processes per bake (fracture -j)")
+    parser.add_argument("--issue39", action="store_true", help="only the files baked with every recipe")
     args = parser.parse_args()
     with open(os.path.join(HERE, "expected.toml"), "rb") as fh:
         cases = tomllib.load(fh)["case"]
     rows = []
     os.makedirs(args.out, exist_ok=True)
-    jobs = [(os.path.join(HERE, c["file"]), c.get("volume")) for c in cases if not args.only or c["file"] in args.only]
+    jobs = [(os.path.join(HERE, c["file"]), c.get("volume")) for c in cases
+            if (not args.only or c["file"] in args.only) and (not args.issue39 or c.get("recipes") == "all")]
     jobs += [(os.path.abspath(path), None) for path in args.extra]
     for path, volume in jobs:
         for recipe in args.recipe or ["default"]:
             out = os.path.join(args.out, f"{os.path.splitext(os.path.basename(path))[0]}-{recipe}")
-            row = bake_one(path, out, recipe, args.overrides, volume)
+            row = bake_one(path, out, recipe, args.overrides, volume, args.jobs)
             rows.append(row)
             with open(os.path.join(args.out, "results.jsonl"), "a") as fh:
                 fh.write(json.dumps(row) + "\n")
