@@ -276,8 +276,9 @@ def test_two_bodies_one_hollow():
 
 
 def test_bodies_a_rounding_step_apart_are_snapped_and_united():
-    """Two boxes sharing a face, one moved by 1e-9 of the diagonal (a baked GLB's fragments read back): snapped
-    and united into one closed body, no hairline gap."""
+    """Two boxes sharing a face, one moved by 1e-9 of the diagonal (a baked GLB's fragments read back): snapped;
+    kept apart as two closed bodies touching face to face (issue 39), or with repair.touching=unite united into
+    one closed body, no hairline gap."""
     from fracture_cli.geometry.weld_check import check_mesh
 
     a = trimesh.creation.box(extents=(1, 1, 1))
@@ -285,7 +286,14 @@ def test_bodies_a_rounding_step_apart_are_snapped_and_united():
     b.apply_translation((1.0 + 2e-9, 1e-9, 0.0))
     both = trimesh.util.concatenate([a, b])
     s = surface(both.vertices, both.faces)
-    r = repair_surface(s)
+    apart = repair_surface(s)
+    assert [rec for rec in apart.records if rec.what == "kept_bodies_apart"][0].count == 2
+    V, F = apart.surface.vertices, apart.surface.faces
+    half = len(F) // 2
+    for faces in (F[:half], F[half:]):
+        body = check_mesh(V, faces)
+        assert body.closed and body.volume == pytest.approx(1 / s.normalization.scale**3, rel=1e-6)
+    r = repair_surface(s, RepairOptions(touching="unite"))
     assert [rec for rec in r.records if rec.what == "snapped_vertices"][0].count == 4
     check = check_mesh(r.surface.vertices, r.surface.faces)
     assert check.closed and check.pinched_vertices == 0, check.problems()

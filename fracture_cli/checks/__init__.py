@@ -16,6 +16,7 @@ from fracture_cli.checks.faultshape import fault_shape, fragment_faults
 from fracture_cli.errors import StageError
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.rows import unique_rows
+from fracture_cli.geometry.tetgeom import triangle_areas
 from fracture_cli.geometry.weld_check import MeshCheck, as_written, check_mesh, collapsed, weld_by_position
 from fracture_cli.system import parallel
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, SurfaceMesh
@@ -132,6 +133,35 @@ def require_sound(checks: list[MeshCheck]) -> None:
     if multi:
         log.warning("fragments: %d fragment(s) consist of several separate bodies (up to %d, e.g. %s)", len(multi),
                     max(checks[i].bodies for i in multi), fragment_name(multi[0]))
+
+
+def volume_tolerance(fragments: Fragments) -> float:
+    """The relative volume error the written fragments can have from their float32 storage alone.
+
+    Every position is stored as float32 about its fragment's pivot, so it
+    moves by up to half a float32 step of its coordinate; a face moved that
+    way changes the volume by at most its area times the move. On a thin or
+    large input (much area per volume) that bound can exceed
+    :data:`VOLUME_TOLERANCE`; the check then allows twice the bound, and the
+    report says so (``volume_tolerance``), never silently.
+
+    Returns
+    -------
+    float
+        ``max(VOLUME_TOLERANCE, 2 * sum_f area_f * sqrt(3) * 2**-24 * extent_f / input volume)``,
+        ``extent_f`` the largest pivot-relative coordinate of fragment ``f``
+        (normalized units, like the areas and the volume).
+    """
+    bound = 0.0
+    for frag in fragments.fragments:
+        if not len(frag.faces):
+            continue
+        centre = 0.5 * (frag.vertices.min(axis=0) + frag.vertices.max(axis=0))
+        extent = float(np.abs(frag.vertices - centre).max()) * 2.0  # the pivot lies inside the fragment's box
+        area = float(triangle_areas(frag.vertices, frag.faces).sum())
+        bound += area * np.sqrt(3.0) * 2.0**-24 * extent
+    return max(VOLUME_TOLERANCE, 2.0 * bound / fragments.input_volume) if fragments.input_volume > 0 else \
+        VOLUME_TOLERANCE
 
 
 def require_volume(report: dict, difference: float | None = None, tolerance: float = VOLUME_TOLERANCE) -> None:
@@ -385,7 +415,12 @@ def checked_fragments(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments
     faults = fragment_faults(frags)  # the overlap check's fragment graph and the fault shape both read them
     checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written, faults=faults))
     total = sum(trigeom.signed_volume(f.vertices, f.faces) for f in frags.fragments)
-    require_volume(checks, (total - frags.input_volume) / frags.input_volume)
+    tolerance = volume_tolerance(frags)
+    checks["volume_tolerance"] = float(f"{tolerance:.3g}")
+    if tolerance > VOLUME_TOLERANCE:
+        log.warning("fragments: the volume check allows %.3g (not %g): float32 storage of this thin or large "
+                    "asset's positions can move its volume that much", tolerance, VOLUME_TOLERANCE)
+    require_volume(checks, (total - frags.input_volume) / frags.input_volume, tolerance)
     scale = surface.normalization.scale
     checks["input_volume"] = float(frags.input_volume * (scale * scale * scale))
     # How jagged the faults look (what smoothing is for), so a recipe change shows up in review.

@@ -294,6 +294,7 @@ def _collision(state: PipelineState, options: CollisionOptions) -> PipelineState
 
 def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     # on first use: `fracture --help` loads no stage
+    from fracture_cli.geometry import trigeom
     from fracture_cli.io.physics import fragment_physics, runtime_arrays
     from fracture_cli.io.write import fragment_name
     from fracture_cli.stages.fragments.bodies import fragments_graph
@@ -303,8 +304,10 @@ def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     order = [int(f.piece) for f in frags.fragments]
     stem = os.path.splitext(os.path.basename(state.need("source", "runtime")))[0]
     names = tuple(fragment_name(i, stem) for i in range(len(order)))  # as the GLB's nodes
-    # Bonds where fragments share fault faces: every group the game splits off is connected in space.
-    graph = fragments_graph(frags)
+    # Bonds where fragments share fault faces: every group the game splits off is connected in space. Where the
+    # repaired solid is several bodies (kept apart where they only touch), also where they touch face to face.
+    contacts = state.surface is not None and trigeom.face_components(state.surface.faces) > 1
+    graph = fragments_graph(frags, contacts=contacts)
     data = runtime(state.need("tet_mesh", "runtime"), state.need("modes", "runtime"), state.need("pieces", "runtime"),
                    options, fragment_pieces=order, fragment_names=names, fragment_graph=graph)
     if options.criterion == "stress":
@@ -357,7 +360,8 @@ STAGES: tuple[Stage, ...] = (
           produces=("collision", "physics")),
     Stage("runtime", "Precompute the impact-projection data for the game (the runtime file).",
           "fracture_cli.stages.runtime:RuntimeOptions", _runtime,
-          consumes=("tet_mesh", "modes", "pieces", "fragments"), uses=("collision", "physics"), produces=("runtime",)),
+          consumes=("tet_mesh", "modes", "pieces", "fragments"), uses=("collision", "physics", "surface"),
+          produces=("runtime",)),
 )
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
 # The steps a bake reports seconds for: every stage, then writing the outputs.

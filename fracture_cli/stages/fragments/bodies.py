@@ -297,12 +297,18 @@ def fragment_graph(meshes: Sequence[tuple[np.ndarray, np.ndarray]], candidates: 
 _MIN_BOND_AREA = 1e-8
 
 
-def fragments_graph(fragments: Fragments) -> tuple[np.ndarray, np.ndarray]:
+def fragments_graph(fragments: Fragments, contacts: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The bonds of :func:`fragment_graph` between baked fragments, through their fault (interior) faces.
 
     Parameters
     ----------
     fragments : Fragments
+    contacts : bool, optional (default False)
+        Also bond fragments of separate bodies that touch face to face (a
+        wheel pressed against the chassis, a lid on its pot): their outer
+        faces that lie on each other count as an interface too. Bodies
+        touching only along an edge or at a point share no area and stay
+        unbonded.
 
     Returns
     -------
@@ -313,7 +319,8 @@ def fragments_graph(fragments: Fragments) -> tuple[np.ndarray, np.ndarray]:
     """
     interior = fragments.interior_slot
     meshes = [(f.vertices, f.faces) for f in fragments.fragments]
-    fault = [f.material_ids == interior for f in fragments.fragments]
+    fault = [np.ones(len(f.faces), dtype=bool) if contacts else f.material_ids == interior
+             for f in fragments.fragments]
     return fragment_graph(meshes, fault, min_area=_MIN_BOND_AREA * detmath.square(detmath.cbrt(fragments.input_volume)))
 
 

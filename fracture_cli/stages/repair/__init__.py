@@ -37,6 +37,7 @@ from fracture_cli.geometry.solids import (
     POS,
     UV,
     SplitMesh,
+    body_groups,
     from_manifold,
     to_manifold,
     union_bodies,
@@ -123,6 +124,13 @@ class RepairOptions:
         "into closed bodies): cut off and thickened as sheets of their own ('thicken'), left out ('drop'), or "
         "refused ('error'); closed bodies enclosing no volume are left out unless 'error'",
         choices=("thicken", "drop", "error"),
+    )
+    touching: str = option(
+        "separate",
+        "closed bodies that only touch (along a face, an edge or at a point: wheels against a chassis, a lid on a "
+        "pot) stay separate bodies, each breaking on its own ('separate'), or are united with what they touch "
+        "('unite'); bodies that overlap are always united",
+        choices=("separate", "unite"),
     )
     container_opening: float = option(
         0.5,
@@ -213,7 +221,7 @@ def repair_surface(surface: SurfaceMesh, options: RepairOptions = RepairOptions(
     materials = tuple(surface.materials)
     mesh, materials, shell = _close_open(mesh, flat, options, materials, box, surface.normals is not None, records)
     mesh = _orient_components(mesh, records, surface.normals is not None)
-    mesh, volume = _solid(mesh, len(materials), flat, records)
+    mesh, volume = _solid(mesh, len(materials), flat, records, options.touching)
     changed = any(r.what not in _NO_CHANGE for r in records)
     records.insert(0, describe(records, shell))
     warn_significant(surface.name, records)
@@ -443,20 +451,36 @@ def _orient_components(mesh: SplitMesh, records: list[RepairRecord], has_normals
     return mesh
 
 
-def _solid(mesh: SplitMesh, num_materials: int, flat: bool, records: list[RepairRecord]) -> tuple[SplitMesh, float]:
-    """Check the mesh is a valid manifold and union overlapping bodies; returns it and its volume."""
+def _solid(mesh: SplitMesh, num_materials: int, flat: bool, records: list[RepairRecord],
+           touching: str = "separate") -> tuple[SplitMesh, float]:
+    """Check the mesh is a valid manifold and union overlapping bodies (``touching='unite'``: also those that only
+    touch); returns it and its volume."""
     solid, id_to_material = to_manifold(mesh, num_materials)
     if solid.status() != manifold3d.Error.NoError:
         raise StageError(f"the repaired mesh is not a valid manifold ({solid.status().name}); fix the mesh in "
                          "your modelling tool", stage=STAGE)
-    solid, bodies, cavities = union_bodies(solid)
+    if touching == "unite":
+        solid, bodies, cavities = union_bodies(solid)
+        groups = [solid]
+    else:
+        groups, bodies, cavities = body_groups(solid)
     if bodies > 1:
-        records.append(RepairRecord("unioned_bodies", f"united {bodies} overlapping or touching bodies"
-                                    + (f" minus {cavities} cavities" if cavities else ""), count=bodies,
-                                    extra={"cavities": cavities}))
-        props, F, material_ids = from_manifold(solid, id_to_material)
-        mesh = SplitMesh(props, F, material_ids, np.arange(len(props)))
-    volume = float(solid.volume())
+        minus = f" minus {cavities} cavities" if cavities else ""
+        if len(groups) == 1:
+            records.append(RepairRecord("unioned_bodies", f"united {bodies} overlapping or touching bodies{minus}",
+                                        count=bodies, extra={"cavities": cavities}))
+        else:
+            if len(groups) < bodies:
+                records.append(RepairRecord("unioned_bodies", f"united the overlapping ones of {bodies} bodies into "
+                                            f"{len(groups)}{minus}", count=bodies, extra={"cavities": cavities}))
+            records.append(RepairRecord("kept_bodies_apart", f"kept {len(groups)} bodies that only touch (along a "
+                                        "face, an edge or at a point) apart: each breaks on its own (to unite them: "
+                                        "--set repair.touching=unite)", count=len(groups)))
+        parts = [from_manifold(g, id_to_material) for g in groups]
+        offsets = np.cumsum([0] + [len(p[0]) for p in parts])
+        mesh = SplitMesh(np.vstack([p[0] for p in parts]), np.vstack([p[1] + o for p, o in zip(parts, offsets)]),
+                         np.concatenate([p[2] for p in parts]), np.arange(int(offsets[-1])))
+    volume = float(sum(g.volume() for g in groups))
     if volume <= _MIN_VOLUME:
         if flat:
             raise StageError(_FLAT_MESSAGE, stage=STAGE)
