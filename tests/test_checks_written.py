@@ -97,6 +97,9 @@ def test_a_pinched_fragment_stops_the_bake_naming_it():
     with pytest.raises(StageError, match=r"fragment_001 would be written as a broken mesh: 1 edges shared by more "
                                          r"than two faces, 2 separate bodies"):
         require_sound(checks)
+    # With the fragments, the message says where the fragment is and which recipe key moves the cuts.
+    with pytest.raises(StageError, match=r"fragment_001 at \(0\.5, 0\.5, 0\) .*--set cage\.target_faces="):
+        require_sound(checks, frags)
 
 
 def test_separate_bodies_are_reported_not_connected(caplog):

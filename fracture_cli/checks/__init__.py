@@ -109,15 +109,26 @@ def written_summary(checks: list[MeshCheck]) -> dict:
     }
 
 
-def require_sound(checks: list[MeshCheck]) -> None:
+def require_sound(checks: list[MeshCheck], fragments: Fragments | None = None) -> None:
     """Raise unless every written fragment is watertight; warn about fragments of several bodies.
+
+    Parameters
+    ----------
+    checks : list of MeshCheck
+        :func:`written_fragments`'s.
+    fragments : Fragments, optional
+        The fragments checked: the message then says where the first broken
+        one is (its centre, in the input's units).
 
     Raises
     ------
     StageError
         Naming the first fragment that is not watertight (``fragment_NNN``, as
-        written) and what is wrong with it. Nothing has been written yet, so
-        earlier outputs stay as they were.
+        written), what is wrong with it, where it is, and the recipe key that
+        moves the cuts. The fragments stage has already split every fragment
+        that pinched into its closed bodies, so what is left could not be
+        made closed. Nothing has been written yet, so earlier outputs stay as
+        they were.
     """
     # numba kernels load on first use
     from fracture_cli.io.write import fragment_name
@@ -126,9 +137,17 @@ def require_sound(checks: list[MeshCheck]) -> None:
     if bad:
         i = bad[0]
         more = f" (and {len(bad) - 1} more fragments)" if len(bad) > 1 else ""
-        raise StageError(f"{fragment_name(i)} would be written as a broken mesh: {', '.join(checks[i].problems())}"
-                         f"{more}; the input may have parts touching along an edge or too thin to cut; rerun with "
-                         "-v for the repair log", stage="fragments")
+        where = ""
+        if fragments is not None:
+            frag = fragments.fragments[i]
+            centre = fragments.normalization.to_world(
+                (0.5 * (frag.vertices.min(axis=0) + frag.vertices.max(axis=0)))[None])[0]
+            where = " at ({:.4g}, {:.4g}, {:.4g})".format(*centre)
+        raise StageError(f"{fragment_name(i)}{where} would be written as a broken mesh: "
+                         f"{', '.join(checks[i].problems())}{more}, and splitting it where it pinches does not close "
+                         "it; a different cut avoids it: --set cage.target_faces=<another value> (moves every fault) "
+                         "or --set smooth.smoothing=0 (faults along tet faces); rerun with -v for the repair log",
+                         stage="fragments")
     multi = [i for i, c in enumerate(checks) if c.bodies > 1]
     if multi:
         log.warning("fragments: %d fragment(s) consist of several separate bodies (up to %d, e.g. %s)", len(multi),
@@ -411,7 +430,7 @@ def checked_fragments(surface: SurfaceMesh, frags: Fragments) -> tuple[Fragments
     """
     # Checked as they will be written (float32 about each pivot).
     frags, written = written_fragments(frags, frags.pivot)
-    require_sound(written)
+    require_sound(written, frags)
     faults = fragment_faults(frags)  # the overlap check's fragment graph and the fault shape both read them
     checks: dict[str, CheckValue] = dict(fragment_invariants(surface, frags, written=written, faults=faults))
     total = sum(trigeom.signed_volume(f.vertices, f.faces) for f in frags.fragments)

@@ -249,6 +249,8 @@ def _fragments(state: PipelineState, options: FragmentOptions) -> PipelineState:
     # Cuts that fell apart: bodies that became fragments of their own, and tiny ones glued to a neighbour.
     checks["split_bodies"] = sum(split.bodies) - len(split.bodies) - split.merged + split.pinched
     checks["merged_bodies"] = split.merged
+    # Fragments added by splitting fragments that pinched as written (fragments/resolve.py).
+    checks["pinch_split_bodies"] = split.pinched
     return dataclasses.replace(state, fragments=frags, checks=checks)
 
 
@@ -274,6 +276,7 @@ def _simplify(state: PipelineState, options: SimplifyOptions) -> PipelineState:
     else:
         checks = dict(state.checks or {})
     # Triangle counts as written, against the budget of issue 20 (input = the solid that was cut).
+    checks["separated_vertices"] = moved  # self-touching vertices moved apart (fragments/resolve.py)
     checks["triangles_cut"] = before
     checks["triangles"] = sum(len(f.faces) for f in frags.fragments)
     checks["triangle_budget"] = triangle_budget(len(surface.faces), len(frags.fragments))

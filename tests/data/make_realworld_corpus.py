@@ -491,7 +491,8 @@ def build() -> None:
     case("gear_coplanar.glb", glb(gear), kind="non-manifold edges (coincident faces, other triangulation)",
          outcome="solid", volume=sum(volume(V, F) for _, V, F in gear),
          why="a 16-sided hub and 8 box teeth whose base quads coincide with hub sides but are split along the "
-             "other diagonal: the faces around each shared edge pair up into closed bodies, which are united")
+             "other diagonal: the faces around each shared edge pair up into closed bodies, kept apart where they "
+             "only touch (issue 39) and cut one by one")
     boxes = vertex_contact()
     case("vertex_contact.glb", glb(boxes), kind="bodies sharing a vertex or an edge", outcome="solid",
          volume=sum(volume(V, F) for _, V, F in boxes),
@@ -524,7 +525,8 @@ def build() -> None:
     case("touching_fragments.glb", glb(frags), kind="fragments touching along faces", outcome="solid",
          volume=sum(volume(V, F) for _, V, F in frags),
          why="four closed boxes filling a block, their shared faces triangulated differently on each side (a baked "
-             "output GLB used as input): the bake sees one solid, no fragment has an open or pinched edge")
+             "output GLB used as input): they stay separate bodies (issue 39), each cut further, and no fragment has "
+             "an open or pinched edge")
     build_issue39()
 
 

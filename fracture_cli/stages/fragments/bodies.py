@@ -378,8 +378,6 @@ def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> 
         if len(members) > 1 and needs_split(written_check(group, fragments)):
             # The union pinches as written (the tiny body also touches its host along an edge or at a point, or
             # rounding joins them there): the bodies stay fragments of their own rather than one broken one.
-            log.info("%s: %d bodies of piece %d are not merged: their union would pinch as written", STAGE,
-                     len(members), fragments.fragments[frag_index].piece)
             for b in members:
                 results.append(_group_fragment(fragments, [bodies[b]], fragments.fragments[bodies[b][0]].piece))
                 source.append(bodies[b][0])
@@ -401,7 +399,6 @@ def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> 
                          isolated=isolated + kept_apart)
     new = dataclasses.replace(fragments, fragments=tuple(results[k] for k in order))
     return new, report
-
 
 
 def _merge_tiny(volumes: np.ndarray, pairs: np.ndarray, areas: np.ndarray,

@@ -8,7 +8,9 @@ report.json claims (watertight, connected, pinched_edges, volume_error), the
 repairs it lists (the decision and the kinds of repair), fragment and piece
 counts, pieces without a fragment, the fragment volumes relative to the asset,
 the modes stage's seconds and the bake's CPU seconds (user + system of the
-child process; wall-clock is noisy on a shared machine). ``--extra FILE``
+child process; wall-clock is noisy on a shared machine). ``--compare BEFORE
+AFTER`` prints two runs' results.jsonl as a case x recipe matrix (issue 39's
+before/after table). ``--extra FILE``
 bakes further files (e.g. the sample assets, with ``--recipe``). Results are
 appended as JSON lines to ``<out>/results.jsonl`` and printed as a markdown
 table.
@@ -104,6 +106,54 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _cell(row: dict, case: dict) -> str:
+    """One bake as a short table cell: refused (why), or fragments and what an artist or the checker objects to."""
+    if row["exit"] != 0:
+        error = row.get("error", "")
+        for key, label in (("truncated", "truncated GLB"), ("broken mesh", "broken fragment"),
+                           ("do not pair", "non-manifold edges"), ("volumes", "volume check")):
+            if key in error:
+                return f"**refused** ({label})"
+        return "**refused**"
+    ind = row["independent"]
+    notes = []
+    if ind["failing"]:
+        notes.append(f"{ind['failing']} broken")
+    if ind["fragments_with"].get("pinched_vertices"):
+        notes.append(f"{ind['fragments_with']['pinched_vertices']} self-touching")
+    reference = case.get("volume")
+    if reference and ind.get("volume") is not None:
+        error = ind["volume"] / reference - 1.0
+        if abs(error) > case["volume_tolerance"]:
+            notes.append(f"volume {100 * error:+.0f}%")
+    if row.get("decision") != case["outcome"]:
+        notes.append("filled lump" if row.get("decision") == "solid" else "hollow shell")
+    repairs = row.get("repairs", {})
+    if "unioned_bodies" in repairs and "kept_bodies_apart" not in repairs and "touching" in case["kind"]:
+        notes.append("bodies united")
+    return f"ok {row['counts']['fragments']}" + (f" ({'; '.join(notes)})" if notes else "")
+
+
+def compare(before: str, after: str) -> str:
+    """Markdown matrix case x recipe of two results.jsonl files: ``before -> after`` per cell."""
+    with open(os.path.join(HERE, "expected.toml"), "rb") as fh:
+        cases = {c["file"]: c for c in tomllib.load(fh)["case"]}
+    rows: dict[str, dict[tuple[str, str], dict]] = {}
+    for label, path in (("before", before), ("after", after)):
+        with open(path) as fh:
+            rows[label] = {(r["file"], r["recipe"]): r for r in map(json.loads, fh)}
+    recipes = list(dict.fromkeys(recipe for _, recipe in rows["after"]))
+    files = list(dict.fromkeys(file for file, _ in rows["after"]))
+    lines = ["| case | " + " | ".join(recipes) + " |", "|---|" + "---|" * len(recipes)]
+    for file in files:
+        cells = []
+        for recipe in recipes:
+            pair = [rows[label].get((file, recipe)) for label in ("before", "after")]
+            cells.append(" → ".join(_cell(r, cases[file]) if r else "-" for r in pair))
+        lines.append(f"| {file} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--recipe", action="append", default=None)
@@ -113,7 +163,12 @@ def main() -> None:
     parser.add_argument("--out", default=os.path.join(REPO, "build", "realworld"))
     parser.add_argument("--jobs", type=int, default=None, help="processes per bake (fracture -j)")
     parser.add_argument("--issue39", action="store_true", help="only the files baked with every recipe")
+    parser.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),
+                        help="print the case x recipe matrix of two results.jsonl files and exit")
     args = parser.parse_args()
+    if args.compare:
+        print(compare(*args.compare))
+        return
     with open(os.path.join(HERE, "expected.toml"), "rb") as fh:
         cases = tomllib.load(fh)["case"]
     rows = []
