@@ -250,10 +250,20 @@ def test_boundary_loops_split_where_two_holes_touch():
     assert sorted(len(loop) for loop in loops) == [3, 3]
 
 
+def test_open_box_is_a_container_kept_hollow():
+    """A box without its lid is a rim around an opening as wide as the box, at its top: a thin wall (issue 39)."""
+    V, F = cube()
+    plan = plan_fill(V, F[2:])
+    assert [b.action for b in plan.bodies] == ["thicken"] and plan.bodies[0].container
+    assert "open container" in plan.bodies[0].reason
+    # A hole narrower than half the box's width is not an opening of a container.
+    assert not plan_fill(V, F[2:], FillOptions(container_opening=1.01)).bodies[0].container
+
+
 def test_open_box_is_filled_whatever_the_share():
     V, F = cube()
     open_box = F[2:]
-    plan = plan_fill(V, open_box)
+    plan = plan_fill(V, open_box, FillOptions(container_opening=2.0))
     assert [b.action for b in plan.bodies] == ["fill"]
     filled = fill_holes(V, open_box, plan)
     c = check_mesh(filled.vertices, filled.faces)
@@ -265,7 +275,7 @@ def test_open_box_is_filled_whatever_the_share():
 
 def test_inside_out_open_box_is_turned_outward():
     V, F = cube()
-    plan = plan_fill(V, F[2:, ::-1])
+    plan = plan_fill(V, F[2:, ::-1], FillOptions(container_opening=2.0))
     assert plan.bodies[0].action == "fill" and plan.bodies[0].flip
     filled = fill_holes(V, F[2:, ::-1], plan)
     assert check_mesh(filled.vertices, filled.faces).volume == pytest.approx(1.0)
@@ -282,7 +292,7 @@ def test_non_star_shaped_hole_is_ear_clipped():
         j = (i + 1) % k
         F += [[i, j, k + j], [i, k + j, k + i]]
     F = np.array(F, dtype=np.int64)
-    plan = plan_fill(V, F)
+    plan = plan_fill(V, F, FillOptions(container_opening=2.0))  # the whole top is open: not a container here
     assert plan.bodies[0].action == "fill"
     filled = fill_holes(V, F, plan)
     c = check_mesh(filled.vertices, filled.faces)
@@ -316,13 +326,14 @@ def test_flat_sheet_encloses_no_volume():
 
 def test_large_holes_are_filled_only_when_hidden():
     V, F = open_tube(radius=1.0, height=0.2)
-    alone = plan_fill(V, F)
+    alone = plan_fill(V, F, FillOptions(container_opening=2.0))
     assert alone.bodies[0].action == "thicken" and "not inside another body" in alone.bodies[0].reason
+    assert plan_fill(V, F).bodies[0].container  # open at its top: a container as well
     box_V, box_F = cube(lo=(-2.0, -2.0, -1.0), size=4.0)
     V2, F2 = welded((V, F), (box_V, box_F))
     inside = plan_fill(V2, F2)
     assert [b.action for b in inside.bodies] == ["fill"] and inside.bodies[0].hidden
-    loose = plan_fill(V, F, FillOptions(max_fill_share=0.9))
+    loose = plan_fill(V, F, FillOptions(max_fill_share=0.9, container_opening=2.0))
     assert loose.bodies[0].action == "fill"
 
 

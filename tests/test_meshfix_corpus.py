@@ -1,7 +1,8 @@
 """The meshfix modules chained as round two's repair would chain them, on every real-world corpus file.
 
 This is the input side of issue 15 without the stage code: weld by position,
-keep one copy of repeated faces, orient, split non-manifold edges and
+keep one copy of repeated faces, orient, cut off fins hinged on a solid
+(issue 39), split non-manifold edges and
 vertices, fill what closes into a solid, thicken what is a sheet, turn closed
 bodies outward and unite them (manifold3d). Each corpus file must give the
 solid its ``expected.toml`` entry describes: every body closed before the
@@ -22,6 +23,7 @@ from fracture_cli.geometry.edges import edge_table, face_bodies, signed_volume, 
 from fracture_cli.geometry.weld_check import check_mesh
 from fracture_cli.stages.load import LoadOptions, load_surface
 from fracture_cli.stages.repair.faces import orient_consistently, unique_faces
+from fracture_cli.stages.repair.fins import hinged_sheets
 from fracture_cli.stages.repair.holes import fill_holes, plan_fill
 from fracture_cli.stages.repair.nonmanifold import split_nonmanifold
 from fracture_cli.stages.repair.thicken import thicken_inward
@@ -40,6 +42,14 @@ def meshfix_bodies(V: np.ndarray, F: np.ndarray, box: np.ndarray) -> tuple[list[
     W = W[unique.keep]
     flip, flipped = orient_consistently(W)
     W[flip] = W[flip][:, ::-1]
+    hinged = hinged_sheets(W)
+    if hinged.any():
+        # Fins hinged on a solid (issue 39): cut off along the hinge (own vertex copies), thickened below as sheets.
+        used = np.unique(W[hinged])
+        copy = np.full(len(V), -1, dtype=np.int64)
+        copy[used] = len(V) + np.arange(len(used))
+        V = np.vstack([V, V[used]])
+        W[hinged] = copy[W[hinged]]
     split = split_nonmanifold(V, W)
     plan = plan_fill(split.vertices, split.faces)
     filled = fill_holes(split.vertices, split.faces, plan)

@@ -44,10 +44,15 @@ def _shared_dir(tmp_path_factory) -> str:
     return path
 
 
-def bake_once(shared: str, path: str, recipe: str = "default", overrides=SMALL) -> tuple[int, str, str]:
-    """Bake ``path`` once per run (a lock keeps xdist workers from baking it twice): exit code, output, folder."""
+def bake_once(shared: str, path: str, recipe: str = "default", overrides=SMALL,
+              label: str | None = None) -> tuple[int, str, str]:
+    """Bake ``path`` once per run (a lock keeps xdist workers from baking it twice): exit code, output, folder.
+
+    ``label`` names the settings in the folder (default ``small`` for :data:`SMALL`, else ``full``).
+    """
     stem = os.path.splitext(os.path.basename(path))[0]
-    out = os.path.join(shared, f"{stem}-{recipe}" + ("-small" if overrides == SMALL else "-full"))
+    label = label or ("small" if overrides == SMALL else "full")
+    out = os.path.join(shared, f"{stem}-{recipe}-{label}")
     with open(out + ".lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         done = out + ".result.json"

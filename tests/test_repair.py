@@ -241,13 +241,22 @@ def test_open_sheet_with_mixed_winding_is_filled_outward():
     assert closed_by_position(r).volume == pytest.approx(cyl.volume / s.normalization.scale**3, rel=1e-9)
 
 
-def test_edges_shared_by_three_faces_are_refused():
+def test_fin_hinged_on_a_solid_is_cut_off_thickened_dropped_or_refused():
+    """A zero-thickness fin on a box's edge (three faces at the edge): issue 39's ``repair.fins`` policy."""
     box = trimesh.creation.box(extents=(1, 1, 1))
     fin = np.vstack([box.vertices, [[2.0, 2.0, 2.0]]])
     a, b = box.edges_unique[0]
     F = np.vstack([box.faces, [[a, b, len(box.vertices)]]])
     with pytest.raises(StageError, match="shared by more than two faces"):
-        repair(surface(fin, F))
+        repair(surface(fin, F), RepairOptions(fins="error"))
+    thickened = repair_surface(surface(fin, F))
+    assert [r.what for r in thickened.records].count("detached_fins") == 1
+    assert "thickened_sheet" in [r.what for r in thickened.records]
+    check = closed_by_position(thickened.surface)
+    assert check.volume > 1.0 / surface(fin, F).normalization.scale ** 3  # the box and a thin fin
+    dropped = repair_surface(surface(fin, F), RepairOptions(fins="drop"))
+    assert "dropped_fins" in [r.what for r in dropped.records]
+    assert closed_by_position(dropped.surface).volume == pytest.approx(1.0 / surface(fin, F).normalization.scale**3)
 
 
 def test_two_bodies_one_hollow():
@@ -267,8 +276,9 @@ def test_two_bodies_one_hollow():
 
 
 def test_bodies_a_rounding_step_apart_are_snapped_and_united():
-    """Two boxes sharing a face, one moved by 1e-9 of the diagonal (a baked GLB's fragments read back): snapped
-    and united into one closed body, no hairline gap."""
+    """Two boxes sharing a face, one moved by 1e-9 of the diagonal (a baked GLB's fragments read back): snapped;
+    kept apart as two closed bodies touching face to face (issue 39), or with repair.touching=unite united into
+    one closed body, no hairline gap."""
     from fracture_cli.geometry.weld_check import check_mesh
 
     a = trimesh.creation.box(extents=(1, 1, 1))
@@ -276,7 +286,14 @@ def test_bodies_a_rounding_step_apart_are_snapped_and_united():
     b.apply_translation((1.0 + 2e-9, 1e-9, 0.0))
     both = trimesh.util.concatenate([a, b])
     s = surface(both.vertices, both.faces)
-    r = repair_surface(s)
+    apart = repair_surface(s)
+    assert [rec for rec in apart.records if rec.what == "kept_bodies_apart"][0].count == 2
+    V, F = apart.surface.vertices, apart.surface.faces
+    half = len(F) // 2
+    for faces in (F[:half], F[half:]):
+        body = check_mesh(V, faces)
+        assert body.closed and body.volume == pytest.approx(1 / s.normalization.scale**3, rel=1e-6)
+    r = repair_surface(s, RepairOptions(touching="unite"))
     assert [rec for rec in r.records if rec.what == "snapped_vertices"][0].count == 4
     check = check_mesh(r.surface.vertices, r.surface.faces)
     assert check.closed and check.pinched_vertices == 0, check.problems()

@@ -139,6 +139,19 @@ def surface_solid(surface: SurfaceMesh, *, stage: str) -> tuple[manifold3d.Manif
     StageError
         If the surface is not closed and manifold.
     """
+    solid, id_to_material = surface_manifold(surface, stage)
+    solid, bodies, _ = union_bodies(solid)
+    if bodies > 1:
+        log.info("%s: the surface has %d overlapping bodies; using their union", stage, bodies)
+    return solid, id_to_material
+
+
+def surface_manifold(surface: SurfaceMesh, stage: str) -> tuple[manifold3d.Manifold, dict[int, int]]:
+    """The surface as one manifold3d mesh of closed bodies (not united), and its run id -> material map.
+
+    Bodies touching along an edge are separated by manifold patches (faces joined across two-face edges); see
+    :func:`fracture_cli.stages.fragments.solids.input_solids` for bodies touching face to face.
+    """
     props = vertex_properties(surface, SOLID_COLUMNS)
     F = np.asarray(surface.faces, dtype=np.int64)
     weld = weld_map(props[:, :3], F)
@@ -155,9 +168,6 @@ def surface_solid(surface: SurfaceMesh, *, stage: str) -> tuple[manifold3d.Manif
             f"the surface is not a closed solid ({solid.status().name}"
             + (f", {boundary} open edges" if boundary else "") + "); run the 'repair' stage on it first "
             "(e.g. 'fracture load IN repair cage ...'); 'bake' does this itself", stage=stage)
-    solid, bodies, _ = union_bodies(solid)
-    if bodies > 1:
-        log.info("%s: the surface has %d overlapping bodies; using their union", stage, bodies)
     return solid, id_to_material
 
 
@@ -185,6 +195,70 @@ def union_bodies(solid: manifold3d.Manifold) -> tuple[manifold3d.Manifold, int, 
     if cavities:
         solid = solid - manifold3d.Manifold.batch_boolean(cavities, manifold3d.OpType.Add)
     return solid, len(positive), len(cavities)
+
+
+# Two bodies overlap when their intersection holds more than this fraction of the smaller one (exact booleans give
+# 0 for bodies that only touch, along a face, an edge or at a point).
+OVERLAP_FRACTION = 1e-9
+
+
+def body_groups(solid: manifold3d.Manifold) -> tuple[list[manifold3d.Manifold], int, int]:
+    """The bodies of ``solid`` united where they overlap, each minus the cavities inside it; bodies that only
+    touch stay apart.
+
+    Parameters
+    ----------
+    solid : manifold3d.Manifold
+        Closed bodies stored as one mesh (they may overlap or touch; cavities
+        are shells of negative volume).
+
+    Returns
+    -------
+    groups : list of manifold3d.Manifold
+        One solid per group of bodies connected by overlaps (with positive
+        volume in common), in the order of their first body; ``[solid]``
+        when it has at most one positive body.
+    bodies : int
+        Positive bodies found.
+    cavities : int
+        Cavities subtracted.
+
+    Notes
+    -----
+    A truck's wheels pressed against its chassis, a lid resting on a pot, the
+    fragments of a baked asset: bodies an artist modelled apart that only
+    touch. United, they would be cut across as one solid; kept apart, each
+    breaks on its own and the fragments stage cuts each group separately.
+    """
+    parts = solid.decompose()
+    positive = [p for p in parts if p.volume() > 0]
+    holes = [reversed_solid(p) for p in parts if p.volume() < 0]
+    if len(positive) <= 1:
+        return [solid], len(positive), 0  # a cavity in a single body is already its inside
+    boxes = np.array([p.bounding_box() for p in positive], dtype=np.float64).reshape(-1, 6)
+    root = list(range(len(positive)))
+
+    def find(i: int) -> int:
+        while root[i] != i:
+            i = root[i]
+        return i
+
+    for i in range(len(positive)):
+        for j in range(i + 1, len(positive)):
+            if np.any(boxes[i, :3] > boxes[j, 3:]) or np.any(boxes[j, :3] > boxes[i, 3:]):
+                continue
+            common = (positive[i] ^ positive[j]).volume()
+            if common > OVERLAP_FRACTION * min(positive[i].volume(), positive[j].volume()):
+                root[max(find(i), find(j))] = min(find(i), find(j))
+    members: dict[int, list[int]] = {}
+    for i in range(len(positive)):
+        members.setdefault(find(i), []).append(i)
+    groups = [positive[m[0]] if len(m) == 1 else manifold3d.Manifold.batch_boolean([positive[i] for i in m],
+                                                                                    manifold3d.OpType.Add)
+              for m in members.values()]
+    for hole in holes:
+        groups = [g - hole if (g ^ hole).volume() > 0 else g for g in groups]
+    return groups, len(positive), len(holes)
 
 
 def split_bodies(mesh: SplitMesh, bodies: list[np.ndarray]) -> SplitMesh:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import json
+import logging
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -18,7 +19,10 @@ import numpy as np
 
 from fracture_cli import __version__
 from fracture_cli.errors import InputError
+from fracture_cli.io.glb_chunks import misaligned_warning, next_chunk
 from fracture_cli.types import Material
+
+log = logging.getLogger(__name__)
 
 _GLB_MAGIC = b"glTF"
 _CHUNK_JSON = 0x4E4F534A
@@ -267,7 +271,10 @@ def read_glb_chunks(path: str) -> tuple[dict, bytes | None]:
             doc = json.loads(chunk.decode("utf-8"))
         elif kind == _CHUNK_BIN and binary is None:
             binary = chunk
-        offset += 8 + length
+        # A chunk not padded to 4 bytes (against the specification): the next one where the file has it.
+        offset, misaligned = next_chunk(lambda at: raw[at:at + 8], offset + 8 + length, total)
+        if misaligned and kind == _CHUNK_JSON:
+            log.warning("load: %s: %s", path, misaligned_warning(length))
     if doc is None:
         raise InputError("GLB has no JSON chunk", path=path)
     return doc, binary

@@ -14,6 +14,7 @@ import stat
 import struct
 
 from fracture_cli.errors import InputError
+from fracture_cli.io.glb_chunks import next_chunk
 from fracture_cli.io.gltf_read import buffer_file, check_required_extensions
 from fracture_cli.io.inputs import external_uri, file_kind, open_regular
 
@@ -108,12 +109,29 @@ def _probe_glb(path: str) -> int:
     if not isinstance(doc, dict):
         raise InputError("has a corrupt JSON chunk (not an object)", path=path)
     check_required_extensions(doc, path)
-    binary = size - (20 + chunk_length + (-chunk_length % 4))
     needed = sum(int(b.get("byteLength", 0)) for b in doc.get("buffers", [])[:1] if "uri" not in b)
-    if needed and binary - 8 < needed:
-        raise InputError(f"is truncated: its binary chunk needs {needed:,} bytes, the file has {max(binary - 8, 0):,} "
-                         "after the JSON", path=path)
+    if needed:
+        available = _binary_chunk_length(path, 20 + chunk_length, min(length, size))
+        if available < needed:
+            raise InputError(f"is truncated: its binary chunk needs {needed:,} bytes, the file has {available:,} "
+                             "after the JSON", path=path)
     return _gltf_triangles(doc)
+
+
+def _binary_chunk_length(path: str, end: int, total: int) -> int:
+    """Bytes of the binary chunk after a JSON chunk ending at ``end``, located as the reader locates it
+    (:func:`~fracture_cli.io.glb_chunks.next_chunk`: an unpadded JSON chunk is read), at most what the file holds."""
+    with open_regular(path) as fh:
+        def header_at(offset: int) -> bytes:
+            fh.seek(offset)
+            return fh.read(8)
+
+        start, _ = next_chunk(header_at, end, total)
+        head = header_at(start)
+    if len(head) < 8:
+        return 0
+    chunk_length, _ = struct.unpack("<II", head)
+    return max(min(chunk_length, total - start - 8), 0)
 
 
 def _probe_gltf(path: str) -> int:

@@ -250,23 +250,36 @@ def _fragments(state: PipelineState, options: FragmentOptions) -> PipelineState:
     frags, split = fragments_with_split(surface, state.need("regions", "fragments"), options)
     frags, checks = checked_fragments(surface, dataclasses.replace(frags, pivot=options.pivot))
     # Cuts that fell apart: bodies that became fragments of their own, and tiny ones glued to a neighbour.
-    checks["split_bodies"] = sum(split.bodies) - len(split.bodies) - split.merged
+    checks["split_bodies"] = sum(split.bodies) - len(split.bodies) - split.merged + split.pinched
     checks["merged_bodies"] = split.merged
+    # Fragments added by splitting fragments that pinched as written (fragments/resolve.py).
+    checks["pinch_split_bodies"] = split.pinched
     return dataclasses.replace(state, fragments=frags, checks=checks)
 
 
 def _simplify(state: PipelineState, options: SimplifyOptions) -> PipelineState:
     # on first use: `fracture --help` loads no stage
     from fracture_cli.checks import checked_fragments
+    from fracture_cli.stages.fragments.resolve import PINCH_GAP, separate_pinched_vertices
     from fracture_cli.stages.simplify import simplify, skipped, triangle_budget
 
     surface, frags = state.need("surface", "simplify"), state.need("fragments", "simplify")
     before = sum(len(f.faces) for f in frags.fragments)
     if not skipped(surface, options):
-        frags, checks = checked_fragments(surface, simplify(frags, surface, options)[0])
+        frags = simplify(frags, surface, options)[0]
+    # Last of the fragments' geometry: a fragment touching itself at a single vertex gets the copies apart.
+    separated, moved = separate_pinched_vertices(frags)
+    if moved:
+        log.warning("simplify: %d place(s) where a fragment touched itself at a single vertex were moved %.0e of the "
+                    "diagonal apart", moved, PINCH_GAP)
+    if not skipped(surface, options) or moved:
+        frags, checks = checked_fragments(surface, separated)
+        if skipped(surface, options):
+            checks = {**(state.checks or {}), **checks}
     else:
         checks = dict(state.checks or {})
     # Triangle counts as written, against the budget of issue 20 (input = the solid that was cut).
+    checks["separated_vertices"] = moved  # self-touching vertices moved apart (fragments/resolve.py)
     checks["triangles_cut"] = before
     checks["triangles"] = sum(len(f.faces) for f in frags.fragments)
     checks["triangle_budget"] = triangle_budget(len(surface.faces), len(frags.fragments))
@@ -294,6 +307,7 @@ def _anchors(state: PipelineState, options: AnchorOptions) -> PipelineState:
 
 def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     # on first use: `fracture --help` loads no stage
+    from fracture_cli.geometry import trigeom
     from fracture_cli.io.physics import fragment_physics, runtime_arrays
     from fracture_cli.io.write import fragment_name
     from fracture_cli.stages.fragments.bodies import fragments_graph
@@ -303,8 +317,10 @@ def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     order = [int(f.piece) for f in frags.fragments]
     stem = os.path.splitext(os.path.basename(state.need("source", "runtime")))[0]
     names = tuple(fragment_name(i, stem) for i in range(len(order)))  # as the GLB's nodes
-    # Bonds where fragments share fault faces: every group the game splits off is connected in space.
-    graph = fragments_graph(frags)
+    # Bonds where fragments share fault faces: every group the game splits off is connected in space. Where the
+    # repaired solid is several bodies (kept apart where they only touch), also where they touch face to face.
+    contacts = state.surface is not None and trigeom.face_components(state.surface.faces) > 1
+    graph = fragments_graph(frags, contacts=contacts)
     data = runtime(state.need("tet_mesh", "runtime"), state.need("modes", "runtime"), state.need("pieces", "runtime"),
                    options, fragment_pieces=order, fragment_names=names, fragment_graph=graph)
     if options.criterion == "stress":
@@ -363,7 +379,8 @@ STAGES: tuple[Stage, ...] = (
           produces=("anchors",)),
     Stage("runtime", "Precompute the impact-projection data for the game (the runtime file).",
           "fracture_cli.stages.runtime:RuntimeOptions", _runtime,
-          consumes=("tet_mesh", "modes", "pieces", "fragments"), uses=("collision", "physics", "anchors"),
+          consumes=("tet_mesh", "modes", "pieces", "fragments"),
+          uses=("collision", "physics", "anchors", "surface"),
           produces=("runtime",)),
 )
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)

@@ -3,7 +3,12 @@
 Procedural stand-ins for the inputs artists actually have (issue 15): open
 multi-body heads, scans with holes, non-manifold gear-like bodies, a triangle
 soup, an open sheet, a teapot of open bodies, a 32-triangle model, a coarse
-blob of overlapping bodies and fragments touching along faces. Every file is
+blob of overlapping bodies and fragments touching along faces; and (issue 39,
+shapes in artist_shapes.py, ``recipes = "all"``: baked with every built-in
+recipe) a closed teapot of touching parts, an open pot, a bust with a
+non-planar hole, thin gear teeth, a truck of touching bodies, overlapping
+boxes touching along edges, fins on a solid, a wall with a window far from
+the origin, a soup of many rocks and a GLB with an unpadded chunk. Every file is
 small and deterministic (fixed seeds, no timestamps); ``expected.toml`` beside
 them says what a bake of each must give and why.
 
@@ -451,7 +456,7 @@ CASES: list[dict] = []
 
 
 def case(file: str, data: bytes, *, kind: str, outcome: str, why: str, volume: float | None = None,
-         volume_tolerance: float = 1e-3, max_fragments: int | None = None) -> None:
+         volume_tolerance: float = 1e-3, max_fragments: int | None = None, recipes: str | None = None) -> None:
     """Register one corpus file and its expected outcome.
 
     ``outcome`` is ``solid`` (closed fragments whose volumes sum to ``volume``)
@@ -460,7 +465,7 @@ def case(file: str, data: bytes, *, kind: str, outcome: str, why: str, volume: f
     (fragment counts follow the recipe, not the tessellation).
     """
     CASES.append({"file": file, "data": data, "kind": kind, "outcome": outcome, "why": why, "volume": volume,
-                  "volume_tolerance": volume_tolerance, "max_fragments": max_fragments})
+                  "volume_tolerance": volume_tolerance, "max_fragments": max_fragments, "recipes": recipes})
 
 
 def build() -> None:
@@ -486,7 +491,8 @@ def build() -> None:
     case("gear_coplanar.glb", glb(gear), kind="non-manifold edges (coincident faces, other triangulation)",
          outcome="solid", volume=sum(volume(V, F) for _, V, F in gear),
          why="a 16-sided hub and 8 box teeth whose base quads coincide with hub sides but are split along the "
-             "other diagonal: the faces around each shared edge pair up into closed bodies, which are united")
+             "other diagonal: the faces around each shared edge pair up into closed bodies, kept apart where they "
+             "only touch (issue 39) and cut one by one")
     boxes = vertex_contact()
     case("vertex_contact.glb", glb(boxes), kind="bodies sharing a vertex or an edge", outcome="solid",
          volume=sum(volume(V, F) for _, V, F in boxes),
@@ -519,7 +525,109 @@ def build() -> None:
     case("touching_fragments.glb", glb(frags), kind="fragments touching along faces", outcome="solid",
          volume=sum(volume(V, F) for _, V, F in frags),
          why="four closed boxes filling a block, their shared faces triangulated differently on each side (a baked "
-             "output GLB used as input): the bake sees one solid, no fragment has an open or pinched edge")
+             "output GLB used as input): they stay separate bodies (issue 39), each cut further, and no fragment has "
+             "an open or pinched edge")
+    build_issue39()
+
+
+def build_issue39() -> None:
+    """The failure classes of issue 39, each baked with every built-in recipe (tests/test_realworld_recipes.py)."""
+    import artist_shapes as art  # beside this script; it imports this module's shape helpers
+
+    every = "all"
+    pot = art.teapot_touching()
+    case("teapot_touching.glb", glb(pot), kind="closed teapot, parts touching", outcome="solid", recipes=every,
+         volume=solid_volume([(V, F) for _, V, F in pot]),
+         why="a closed pot and a closed lid touching along the rim (the lid's flat underside on the pot's flat "
+             "top: edges of four faces), a closed spout and handle sunk into the pot: one solid, and no cut may "
+             "leave an edge of more than two faces")
+    case("open_pot.glb", glb([("pot", *art.open_pot())]), kind="open container", outcome="shell", recipes=every,
+         why="a pot without its lid, a single surface: a rim around a large opening is a container, so it becomes "
+             "a thin wall (hollow), not a filled lump")
+    closed, holed = art.bust_with_hole()
+    case("bust_hole.glb", glb([("bust", *holed)]), kind="bust with a small non-planar hole", outcome="solid",
+         recipes=every, volume=volume(*closed), volume_tolerance=0.01,
+         why="a closed bust with one small hole wrapping around its thin stem: no flat patch exists, so it is "
+             "filled by a non-planar patch (checked for self-intersection) and the bust stays solid")
+    gear = art.gear_thin_teeth()
+    case("gear_thin_teeth.glb", glb(gear), kind="gear with thin teeth", outcome="solid", recipes=every,
+         volume=solid_volume([(V, F) for _, V, F in gear]),
+         why="a hub and 24 thin teeth (1% of the diagonal wide) sunk into it as separate bodies: united, cut "
+             "into closed one-body fragments although the teeth are thinner than the cage's tets")
+    truck = art.vehicle()
+    case("vehicle_wheels.glb", glb(truck), kind="vehicle of separate touching bodies", outcome="solid",
+         recipes=every, volume=sum(volume(V, F) for _, V, F in truck),
+         why="a truck of 14 closed bodies that only touch (wheels against the chassis, cab on it, lights, "
+             "mirrors, exhaust, hitch): the bodies stay separate, no fragment joins a wheel to the chassis")
+    boxes = art.overlapping_edges()
+    case("overlap_edges.glb", glb(boxes), kind="overlapping bodies touching along edges", outcome="solid",
+         recipes=every, volume=solid_volume([(V, F) for _, V, F in boxes]),
+         why="boxes overlapping with shared face planes and edge lines, one touching only along an edge, one only "
+             "at a corner: united where they overlap, split where they only touch")
+    V, F = art.fins_on_solid()
+    case("fins_on_solid.glb", glb([("finned", V, F)], uvs=False), kind="fins hinged on a solid", outcome="shell",
+         recipes=every, volume=1.0, volume_tolerance=0.05,
+         why="a box with two zero-thickness fins hinged on its edges and a double-sided card: the fins are cut "
+             "off and thickened as sheets (the card, enclosing nothing, goes), not refused")
+    V, F = art.wall_with_hole()
+    case("wall_hole.glb", glb([("wall", V, F)]), kind="thin wall with a through hole, far from the origin",
+         outcome="solid", recipes=every, volume=volume(V, F), volume_tolerance=1e-4,
+         why="a 400 x 300 x 12 wall with a window, 1000 units from the origin: the volume check must hold in "
+             "float64 (or say truthfully what it measured)")
+    tris = art.debris_soup()
+    case("debris_soup.stl", stl_binary(tris), kind="triangle soup of many bodies", outcome="solid",
+         recipes=every, volume=_soup_volume(tris),
+         why="14 small closed rocks (overlapping, touching, apart) as an STL triangle soup with random winding: "
+             "every fragment one body, or the bake says which cannot be")
+    bird = duck()
+    case("unpadded_chunk.glb", art.unpadded_glb(glb(bird)), kind="GLB with an unpadded JSON chunk",
+         outcome="solid", recipes=every, volume=solid_volume([(V, F) for _, V, F in bird]),
+         why="the duck with its JSON chunk not padded to 4 bytes (the binary chunk right after it): every "
+             "accessor fits, so it is read (with a warning), not refused as truncated")
+
+
+def _soup_volume(tris: np.ndarray) -> float:
+    """Volume of the union of the closed bodies a triangle soup describes (welded by exact position, each
+    connected part turned outward)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    U, index = np.unique(tris.reshape(-1, 3), axis=0, return_inverse=True)
+    F = index.reshape(-1, 3)
+    n = int(F.max()) + 1
+    graph = coo_matrix((np.ones(2 * len(F)), (np.concatenate([F[:, 0], F[:, 1]]), np.concatenate([F[:, 1], F[:, 2]]))),
+                       shape=(n, n))
+    label = connected_components(graph, directed=False)[1]
+    bodies = []
+    for part in np.unique(label[F[:, 0]]):
+        faces = F[label[F[:, 0]] == part]
+        faces = faces[np.unique(np.sort(faces, axis=1), axis=0, return_index=True)[1]]
+        bodies.append(_outward(U, faces))
+    return solid_volume(bodies)
+
+
+def _outward(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One closed connected surface (V, F) with consistent outward winding (breadth-first across edges)."""
+    F = F.copy()
+    edges: dict[tuple[int, int], list[int]] = {}
+    for f, (a, b, c) in enumerate(F.tolist()):
+        for u, v in ((a, b), (b, c), (c, a)):
+            edges.setdefault((min(u, v), max(u, v)), []).append(f)
+    done = np.zeros(len(F), dtype=bool)
+    done[0] = True
+    queue = [0]
+    while queue:
+        f = queue.pop()
+        a, b, c = F[f].tolist()
+        for u, v in ((a, b), (b, c), (c, a)):
+            for g in edges[min(u, v), max(u, v)]:
+                if not done[g]:
+                    runs = {(int(F[g, k]), int(F[g, (k + 1) % 3])) for k in range(3)}
+                    if (u, v) in runs:
+                        F[g] = F[g][::-1]
+                    done[g] = True
+                    queue.append(g)
+    return (V, F) if volume(V, F) > 0 else (V, F[:, ::-1])
 
 
 def manifest() -> str:
@@ -531,7 +639,7 @@ def manifest() -> str:
              "# default recipe. tests/test_realworld.py checks them with tests/invariants.py.", ""]
     for c in CASES:
         lines.append("[[case]]")
-        for key in ("file", "kind", "outcome", "volume", "volume_tolerance", "max_fragments", "why"):
+        for key in ("file", "kind", "outcome", "volume", "volume_tolerance", "max_fragments", "recipes", "why"):
             value = c[key]
             if value is None:
                 continue

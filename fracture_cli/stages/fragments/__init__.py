@@ -12,10 +12,12 @@ from fracture_cli.errors import StageError
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.geometry.rows import unique_rows, used_vertices
-from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask, surface_solid
+from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask
 from fracture_cli.geometry.uvs import box_uvs
 from fracture_cli.options import option
 from fracture_cli.stages.fragments.bodies import SplitReport, body_faces, split_fragments, stable_order
+from fracture_cli.stages.fragments.resolve import resolve_pinches
+from fracture_cli.stages.fragments.solids import input_solids
 from fracture_cli.system import parallel
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragment, Fragments, Material, Regions, SurfaceMesh
 
@@ -122,8 +124,10 @@ def fragments_with_split(surface: SurfaceMesh, regions: Regions,
     largest-interface neighbour, the others become fragments of their own
     (same piece). Several fragments may then share one piece.
     """
-    solid, id_to_material = surface_solid(surface, stage=STAGE)
-    input_volume = float(solid.volume())
+    # Bodies that only touch (the repair stage kept them apart) are cut one group at a time, so no fragment joins
+    # a wheel to the chassis it rests against.
+    solids, id_to_material = input_solids(surface, stage=STAGE)
+    input_volume = float(sum(solid.volume() for solid in solids))
     if input_volume <= 0:
         raise StageError("the input encloses no volume; fragments need a solid (closed) mesh", stage=STAGE)
     interior_index, materials = _with_interior(surface.materials, options.interior_color)
@@ -131,20 +135,19 @@ def fragments_with_split(surface: SurfaceMesh, regions: Regions,
     id_to_material = dict(id_to_material)
     id_to_material[region_id] = interior_index
 
-    cut = _Cut(solid, regions.meshes, region_id, id_to_material, interior_index, surface, options,
+    cut = _Cut(tuple(solids), regions.meshes, region_id, id_to_material, interior_index, surface, options,
                SHELL_VOLUME * input_volume)
     # One boolean per piece, independent of the others: on parallel.current_jobs() processes, results in order.
-    if solid.num_tri() > _CROP_TRIANGLES and len(regions.meshes) > 1:
+    if sum(solid.num_tri() for solid in solids) > _CROP_TRIANGLES and len(regions.meshes) > 1:
         groups = _piece_groups(regions.meshes, _CROP_GROUPS)
-        done: list[_Piece | None] = [None] * len(regions.meshes)
+        done: list[list[_Piece]] = [[] for _ in regions.meshes]
         for group, parts in zip(groups, parallel.ordered_map(_cut_group, groups, cut)):
             for piece, part in zip(group, parts):
                 done[piece] = part
     else:
         done = parallel.ordered_map(_cut_piece, range(len(regions.meshes)), cut)
-    cuts = [None if d is None else d[0] for d in done]
-    results = [f for f in cuts if f is not None]
-    empty = [piece for piece, f in enumerate(cuts) if f is None]
+    results = [part[0] for parts in done for part in parts]
+    empty = [piece for piece, parts in enumerate(done) if not parts]
     if empty:
         log.warning("%s: %d piece(s) do not reach the input and give no fragment: %s", STAGE, len(empty),
                     ", ".join(map(str, empty[:20])) + (" ..." if len(empty) > 20 else ""))
@@ -160,22 +163,42 @@ def fragments_with_split(surface: SurfaceMesh, regions: Regions,
         materials=materials,
         normalization=surface.normalization,
         input_volume=input_volume,
+        pivot=options.pivot,
     )
 
     # The workers found each cut's bodies (body_faces) and their volumes: when there are as many bodies as cuts,
     # none of them tiny, split_fragments returns the fragments as they are (its first test), so it is not run again.
-    counts = tuple(len(d[1]) for d in done if d is not None)
-    volumes = np.array([volume for d in done if d is not None for volume in d[1]])
+    counts = tuple(len(part[1]) for parts in done for part in parts)
+    volumes = np.array([volume for parts in done for part in parts for volume in part[1]])
     if sum(counts) == len(results) and not np.any(volumes < options.min_body_fraction * input_volume):
-        return cut_fragments, SplitReport(bodies=counts, source=tuple(range(len(counts))), merged=0, isolated=0)
-    return split_fragments(cut_fragments, options.min_body_fraction)
+        split = SplitReport(bodies=counts, source=tuple(range(len(counts))), merged=0, isolated=0)
+    else:
+        cut_fragments, split = split_fragments(cut_fragments, options.min_body_fraction)
+    return _resolve_written(cut_fragments, split, options)
+
+
+def _resolve_written(frags: Fragments, split: SplitReport,
+                     options: FragmentOptions) -> tuple[Fragments, SplitReport]:
+    """Split the fragments that pinch as the GLB will store them into their closed bodies
+    (:func:`~fracture_cli.stages.fragments.resolve.resolve_pinches`), then merge tiny ones (where that stays
+    closed), in the stable order."""
+    resolved_frags, resolved = resolve_pinches(frags)
+    if not resolved.split:
+        return frags, split
+    log.warning("%s: %d fragment(s) pinched as written (parts touching along an edge or at a point) and were "
+                "split into %d closed bodies, each a fragment of its own%s", STAGE, resolved.split, resolved.bodies,
+                f" ({resolved.slivers} sliver(s) of no volume left out)" if resolved.slivers else "")
+    again, merged = split_fragments(resolved_frags, options.min_body_fraction)
+    return again, SplitReport(bodies=split.bodies, source=merged.source, merged=split.merged + merged.merged,
+                              isolated=split.isolated + merged.isolated,
+                              pinched=split.pinched + resolved.bodies - resolved.split)
 
 
 @dataclass(frozen=True)
 class _Cut:
     """What cutting one piece needs (shared with the worker processes)."""
 
-    solid: manifold3d.Manifold
+    solids: tuple[manifold3d.Manifold, ...]
     meshes: tuple
     region_id: int
     id_to_material: dict
@@ -215,30 +238,49 @@ def _piece_groups(meshes: tuple, count: int) -> list[list[int]]:
 _Piece = tuple[Fragment, list[float]]
 
 
-def _cut_group(cut: _Cut, pieces: list[int]) -> list[_Piece | None]:
+def _cut_group(cut: _Cut, pieces: list[int]) -> list[list[_Piece]]:
     """The fragments of ``pieces``, cut from the input cropped to a box around their regions."""
     boxes = [(V.min(axis=0), V.max(axis=0)) for V, _ in (cut.meshes[p] for p in pieces) if len(V)]
     if not boxes:
-        return [None] * len(pieces)
+        return [[] for _ in pieces]
     lo = np.min([b[0] for b in boxes], axis=0) - _CROP_MARGIN
     hi = np.max([b[1] for b in boxes], axis=0) + _CROP_MARGIN
-    crop = cut.solid ^ manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
+    box = manifold3d.Manifold.cube(tuple(hi - lo)).translate(tuple(lo))
+    crop = tuple(solid ^ box for solid in cut.solids)
     return [_cut_piece(cut, piece, crop) for piece in pieces]
 
 
-def _cut_piece(cut: _Cut, piece: int, solid: manifold3d.Manifold | None = None) -> _Piece | None:
-    """The fragment of ``piece`` (``input ^ region``; ``solid``: the input or a crop of it around the region) and
-    its bodies' volumes, or None where the region misses the input."""
+def _cut_piece(cut: _Cut, piece: int, solids: tuple[manifold3d.Manifold, ...] | None = None) -> list[_Piece]:
+    """The fragments of ``piece`` (``input ^ region``, one per body group of the input; ``solids``: the groups or
+    crops of them around the region) with their bodies' volumes; empty where the region misses the input.
+
+    Body groups that only touch are cut apart and never welded into one fragment: where a wheel rests on the
+    chassis, their faces coincide, and one mesh of both would pair them across the contact.
+    """
     rv, rf = cut.meshes[piece]
-    part = (cut.solid if solid is None else solid) ^ _region_manifold(rv, rf, cut.region_id, piece)
-    if part.is_empty() or part.volume() <= cut.min_volume:
-        return None
-    frag = _to_fragment(part, piece, cut.id_to_material, cut.interior_index, cut.surface, cut.options,
-                        cut.min_volume)
-    # As split_fragments measures them, here on the workers.
-    volumes = [mass_properties(frag.vertices, frag.faces[faces]).volume for faces in body_faces(frag.vertices,
-                                                                                                 frag.faces)]
-    return frag, volumes
+    region = _region_manifold(rv, rf, cut.region_id, piece)
+    bodies = cut.solids if solids is None else solids
+    out = []
+    for body in bodies:
+        if len(bodies) > 1 and _boxes_apart(body, rv):
+            continue
+        part = body ^ region
+        if part.is_empty() or part.volume() <= cut.min_volume:
+            continue
+        frag = _to_fragment(part, piece, cut.id_to_material, cut.interior_index, cut.surface, cut.options,
+                            cut.min_volume)
+        # As split_fragments measures them, here on the workers.
+        volumes = [mass_properties(frag.vertices, frag.faces[faces]).volume
+                   for faces in body_faces(frag.vertices, frag.faces)]
+        out.append((frag, volumes))
+    return out
+
+
+def _boxes_apart(body: manifold3d.Manifold, region_vertices: np.ndarray) -> bool:
+    """Whether a body's bounding box and a region's vertices' box do not meet."""
+    box = np.asarray(body.bounding_box(), dtype=np.float64)
+    lo, hi = region_vertices.min(axis=0), region_vertices.max(axis=0)
+    return bool(np.any(box[:3] > hi) or np.any(lo > box[3:]))
 
 
 def _with_interior(materials: tuple[Material, ...], color: list) -> tuple[int, tuple[Material, ...]]:

@@ -27,6 +27,7 @@ from fracture_cli.geometry.meshtopo import manifold_patches
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.geometry.solids import SplitMesh, from_manifold, shell_mask, to_manifold
 from fracture_cli.geometry.trigeom import face_signed_volumes
+from fracture_cli.stages.fragments.resolve import needs_split, written_check
 from fracture_cli.system import detmath, parallel
 from fracture_cli.types import Fragment, Fragments
 
@@ -56,13 +57,18 @@ class SplitReport:
     merged : int
         Tiny bodies glued to a neighbour.
     isolated : int
-        Tiny bodies with no neighbour to merge into (kept as fragments of their own).
+        Tiny bodies with no neighbour to merge into, or whose union with it
+        would pinch (kept as fragments of their own).
+    pinched : int, optional (default 0)
+        Fragments added by splitting fragments that pinch as written (parts
+        touching along an edge or at a point; :mod:`.resolve`).
     """
 
     bodies: tuple[int, ...]
     source: tuple[int, ...]
     merged: int
     isolated: int
+    pinched: int = 0
 
 
 def body_faces(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
@@ -294,12 +300,18 @@ def fragment_graph(meshes: Sequence[tuple[np.ndarray, np.ndarray]], candidates: 
 _MIN_BOND_AREA = 1e-8
 
 
-def fragments_graph(fragments: Fragments) -> tuple[np.ndarray, np.ndarray]:
+def fragments_graph(fragments: Fragments, contacts: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The bonds of :func:`fragment_graph` between baked fragments, through their fault (interior) faces.
 
     Parameters
     ----------
     fragments : Fragments
+    contacts : bool, optional (default False)
+        Also bond fragments of separate bodies that touch face to face (a
+        wheel pressed against the chassis, a lid on its pot): their outer
+        faces that lie on each other count as an interface too. Bodies
+        touching only along an edge or at a point share no area and stay
+        unbonded.
 
     Returns
     -------
@@ -310,7 +322,8 @@ def fragments_graph(fragments: Fragments) -> tuple[np.ndarray, np.ndarray]:
     """
     interior = fragments.interior_slot
     meshes = [(f.vertices, f.faces) for f in fragments.fragments]
-    fault = [f.material_ids == interior for f in fragments.fragments]
+    fault = [np.ones(len(f.faces), dtype=bool) if contacts else f.material_ids == interior
+             for f in fragments.fragments]
     return fragment_graph(meshes, fault, min_area=_MIN_BOND_AREA * detmath.square(detmath.cbrt(fragments.input_volume)))
 
 
@@ -359,23 +372,36 @@ def split_fragments(fragments: Fragments, min_volume_fraction: float = 1e-4) -> 
     fault = [fragments.fragments[i].material_ids[faces] == interior for i, faces in bodies]
     pairs, areas = interface_areas(meshes, fault)
     groups, merged, isolated = _merge_tiny(volumes, pairs, areas, min_volume)
+    kept_apart = 0
     results, source = [], []
     for members in groups:
         host = max(members, key=lambda b: (volumes[b], -b))
         frag_index = bodies[host][0]
-        results.append(_group_fragment(fragments, [bodies[b] for b in members], fragments.fragments[frag_index].piece))
+        group = _group_fragment(fragments, [bodies[b] for b in members], fragments.fragments[frag_index].piece)
+        if len(members) > 1 and needs_split(written_check(group, fragments)):
+            # The union pinches as written (the tiny body also touches its host along an edge or at a point, or
+            # rounding joins them there): the bodies stay fragments of their own rather than one broken one.
+            for b in members:
+                results.append(_group_fragment(fragments, [bodies[b]], fragments.fragments[bodies[b][0]].piece))
+                source.append(bodies[b][0])
+            merged -= len(members) - 1
+            kept_apart += len(members) - 1
+            continue
+        results.append(group)
         source.append(frag_index)
     order = stable_order(results)
     if isolated:
         log.warning("%s: %d tiny bod(ies) touch no other fragment through a fault and stay fragments of their own",
                     STAGE, isolated)
+    if kept_apart:
+        log.warning("%s: %d tiny bod(ies) stay fragments of their own: united with their neighbour they would "
+                    "pinch (touch it along an edge or at a point as well)", STAGE, kept_apart)
     log.info("%s: %d fragments -> %d bodies -> %d fragments (%d tiny bodies merged)", STAGE,
              len(fragments.fragments), len(bodies), len(results), merged)
     report = SplitReport(bodies=tuple(counts), source=tuple(source[k] for k in order), merged=merged,
-                         isolated=isolated)
+                         isolated=isolated + kept_apart)
     new = dataclasses.replace(fragments, fragments=tuple(results[k] for k in order))
     return new, report
-
 
 
 def _merge_tiny(volumes: np.ndarray, pairs: np.ndarray, areas: np.ndarray,

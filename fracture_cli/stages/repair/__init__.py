@@ -37,6 +37,7 @@ from fracture_cli.geometry.solids import (
     POS,
     UV,
     SplitMesh,
+    body_groups,
     from_manifold,
     to_manifold,
     union_bodies,
@@ -50,6 +51,7 @@ from fracture_cli.stages.repair.clean import closed_as_given
 from fracture_cli.stages.repair.cleanup import is_flat, snap_between_bodies
 from fracture_cli.stages.repair.closing import fill_where_planned, interior_slot, open_bodies, thicken_sheets
 from fracture_cli.stages.repair.faces import orient_consistently, unique_faces
+from fracture_cli.stages.repair.fins import detach, empty_bodies, empty_record, fin_record, hinged_sheets, without
 from fracture_cli.stages.repair.holes import FillOptions, boundary_loops
 from fracture_cli.stages.repair.nonmanifold import NonManifoldSplit, split_nonmanifold
 from fracture_cli.stages.repair.orient import (
@@ -115,6 +117,27 @@ class RepairOptions:
         "(unless hidden inside another body); above it the body is a sheet",
         min=0.0,
         max=1.0,
+    )
+    fins: str = option(
+        "thicken",
+        "fins and sheets of zero thickness hinged on a solid's edge (edges of more than two faces that do not pair "
+        "into closed bodies): cut off and thickened as sheets of their own ('thicken'), left out ('drop'), or "
+        "refused ('error'); closed bodies enclosing no volume are left out unless 'error'",
+        choices=("thicken", "drop", "error"),
+    )
+    touching: str = option(
+        "separate",
+        "closed bodies that only touch (along a face, an edge or at a point: wheels against a chassis, a lid on a "
+        "pot) stay separate bodies, each breaking on its own ('separate'), or are united with what they touch "
+        "('unite'); bodies that overlap are always united",
+        choices=("separate", "unite"),
+    )
+    container_opening: float = option(
+        0.5,
+        "'auto' keeps a body hollow, as a thin wall, when a planar hole at its top (the whole body below the "
+        "hole's plane) is at least this fraction of the body's width there: an open container (a pot without "
+        "its lid), unless another body covers the opening (a lid); above 1: never",
+        min=0.0,
     )
 
     # Keys of older recipes: read with a warning and ignored (see fracture_cli.pipeline.recipe).
@@ -193,12 +216,12 @@ def repair_surface(surface: SurfaceMesh, options: RepairOptions = RepairOptions(
         return RepairResult(surface, (decision,))
     records: list[RepairRecord] = []
     mesh, flat = _weld_and_clean(surface, records)
-    mesh = _orient_and_split(mesh, surface.normalization, records)
+    mesh = _orient_and_split(mesh, surface.normalization, records, options.fins)
     box = np.stack([surface.vertices.min(axis=0), surface.vertices.max(axis=0)])
     materials = tuple(surface.materials)
     mesh, materials, shell = _close_open(mesh, flat, options, materials, box, surface.normals is not None, records)
     mesh = _orient_components(mesh, records, surface.normals is not None)
-    mesh, volume = _solid(mesh, len(materials), flat, records)
+    mesh, volume = _solid(mesh, len(materials), flat, records, options.touching)
     changed = any(r.what not in _NO_CHANGE for r in records)
     records.insert(0, describe(records, shell))
     warn_significant(surface.name, records)
@@ -274,14 +297,20 @@ def _flipped(mesh: SplitMesh, flip: np.ndarray) -> SplitMesh:
     return SplitMesh(mesh.props, faces, mesh.material_ids, mesh.weld)
 
 
-def _orient_and_split(mesh: SplitMesh, normalization: Normalization, records: list[RepairRecord]) -> SplitMesh:
+def _orient_and_split(mesh: SplitMesh, normalization: Normalization, records: list[RepairRecord],
+                      fins: str = "thicken") -> SplitMesh:
     """Consistent winding across two-face edges; then edges of more than two faces and pinched vertices split.
+
+    Where the faces around an edge do not bound alternating solid and empty
+    wedges, open sheets hinged there (fins) are cut off (``fins``:
+    ``thicken``: kept as sheets of their own, ``drop``: left out) and closed
+    bodies enclosing nothing are left out (:mod:`.fins`).
 
     Raises
     ------
     StageError
-        Where the faces around an edge do not bound alternating solid and
-        empty wedges (fins, sheets hinged on a solid): no inside there.
+        Where that does not give closed bodies (or ``fins`` is ``error``): no
+        inside there.
     """
     table = edge_table(mesh.welded)
     flip, flipped = orient_consistently(mesh.welded, table)
@@ -299,12 +328,40 @@ def _orient_and_split(mesh: SplitMesh, normalization: Normalization, records: li
             turned = True
     # The table's sides are still the faces' when none was turned.
     split = split_nonmanifold(V, mesh.welded, None if turned else table)
+    if fins != "error" and _lacks_inside(split):
+        mesh, split = _cut_fins(mesh, split, fins, records)
     _refuse_without_inside(split, normalization)
     changes = [r for r in split.records if r.what != "unclosed_body"]
     if changes:
         records += changes
         mesh = after_split(mesh, split)
     return mesh
+
+
+def _lacks_inside(split: NonManifoldSplit) -> bool:
+    """Whether :func:`_refuse_without_inside` would refuse the split."""
+    table = split.edges if split.edges is not None else edge_table(split.faces)
+    flat = split.body_closed & (np.abs(split.body_volume) <= _MIN_VOLUME)
+    return bool(len(split.unresolved_edges)) or bool((table.count > 2).any()) or bool(flat.any())
+
+
+def _cut_fins(mesh: SplitMesh, split: NonManifoldSplit, policy: str,
+              records: list[RepairRecord]) -> tuple[SplitMesh, NonManifoldSplit]:
+    """Cut open sheets hinged on an edge of more than two faces off (or drop them), drop closed bodies enclosing
+    nothing, and split again (see :mod:`.fins`)."""
+    hinged = hinged_sheets(mesh.welded)
+    if hinged.any():
+        where = tuple(float(x) for x in mesh.props[np.unique(mesh.faces[hinged]), :3].mean(axis=0))
+        mesh = without(mesh, hinged) if policy == "drop" else detach(mesh, hinged)
+        records.append(fin_record(int(hinged.sum()), policy == "drop", where))
+        split = split_nonmanifold(mesh.props[:, POS], mesh.welded)
+    empty = empty_bodies(split, _MIN_VOLUME)
+    if empty.any() and not len(split.unresolved_edges) and not empty.all():
+        where = tuple(float(x) for x in mesh.props[np.unique(mesh.faces[empty]), :3].mean(axis=0))
+        mesh = without(mesh, empty)
+        records.append(empty_record(int(empty.sum()), where))
+        split = split_nonmanifold(mesh.props[:, POS], mesh.welded)
+    return mesh, split
 
 
 def _refuse_without_inside(split: NonManifoldSplit, normalization: Normalization) -> None:
@@ -360,8 +417,10 @@ def _close_open(mesh: SplitMesh, flat: bool, options: RepairOptions, materials: 
     interior_material, materials = interior_slot(materials)
     if mode != "shell":
         everything = float("inf")
-        fill_options = (FillOptions(everything, everything, everything) if mode == "fill" else
-                        FillOptions(options.hole_planarity, options.small_hole, options.max_fill_share))
+        fill_options = (FillOptions(everything, everything, everything, container_opening=everything)
+                        if mode == "fill" else
+                        FillOptions(options.hole_planarity, options.small_hole, options.max_fill_share,
+                                    container_opening=options.container_opening))
         mesh, plan, done = fill_where_planned(mesh, fill_options, interior_material)
         records += done
         refused = [b for b in plan.bodies if b.action != "fill"]
@@ -392,20 +451,36 @@ def _orient_components(mesh: SplitMesh, records: list[RepairRecord], has_normals
     return mesh
 
 
-def _solid(mesh: SplitMesh, num_materials: int, flat: bool, records: list[RepairRecord]) -> tuple[SplitMesh, float]:
-    """Check the mesh is a valid manifold and union overlapping bodies; returns it and its volume."""
+def _solid(mesh: SplitMesh, num_materials: int, flat: bool, records: list[RepairRecord],
+           touching: str = "separate") -> tuple[SplitMesh, float]:
+    """Check the mesh is a valid manifold and union overlapping bodies (``touching='unite'``: also those that only
+    touch); returns it and its volume."""
     solid, id_to_material = to_manifold(mesh, num_materials)
     if solid.status() != manifold3d.Error.NoError:
         raise StageError(f"the repaired mesh is not a valid manifold ({solid.status().name}); fix the mesh in "
                          "your modelling tool", stage=STAGE)
-    solid, bodies, cavities = union_bodies(solid)
+    if touching == "unite":
+        solid, bodies, cavities = union_bodies(solid)
+        groups = [solid]
+    else:
+        groups, bodies, cavities = body_groups(solid)
     if bodies > 1:
-        records.append(RepairRecord("unioned_bodies", f"united {bodies} overlapping or touching bodies"
-                                    + (f" minus {cavities} cavities" if cavities else ""), count=bodies,
-                                    extra={"cavities": cavities}))
-        props, F, material_ids = from_manifold(solid, id_to_material)
-        mesh = SplitMesh(props, F, material_ids, np.arange(len(props)))
-    volume = float(solid.volume())
+        minus = f" minus {cavities} cavities" if cavities else ""
+        if len(groups) == 1:
+            records.append(RepairRecord("unioned_bodies", f"united {bodies} overlapping or touching bodies{minus}",
+                                        count=bodies, extra={"cavities": cavities}))
+        else:
+            if len(groups) < bodies:
+                records.append(RepairRecord("unioned_bodies", f"united the overlapping ones of {bodies} bodies into "
+                                            f"{len(groups)}{minus}", count=bodies, extra={"cavities": cavities}))
+            records.append(RepairRecord("kept_bodies_apart", f"kept {len(groups)} bodies that only touch (along a "
+                                        "face, an edge or at a point) apart: each breaks on its own (to unite them: "
+                                        "--set repair.touching=unite)", count=len(groups)))
+        parts = [from_manifold(g, id_to_material) for g in groups]
+        offsets = np.cumsum([0] + [len(p[0]) for p in parts])
+        mesh = SplitMesh(np.vstack([p[0] for p in parts]), np.vstack([p[1] + o for p, o in zip(parts, offsets)]),
+                         np.concatenate([p[2] for p in parts]), np.arange(int(offsets[-1])))
+    volume = float(sum(g.volume() for g in groups))
     if volume <= _MIN_VOLUME:
         if flat:
             raise StageError(_FLAT_MESSAGE, stage=STAGE)

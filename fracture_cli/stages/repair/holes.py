@@ -23,6 +23,7 @@ the mesh alone, so an artist can predict it:
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,10 +31,13 @@ import numpy as np
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.edges import edge_table, face_bodies, signed_volume
 from fracture_cli.geometry.tetgeom import triangle_areas
+from fracture_cli.stages.repair.patch import least_area_patch
 from fracture_cli.stages.repair.records import RepairRecord
 
 # Points per patch tested for being inside another body.
 _HIDDEN_SAMPLES = 16
+# How far (of its diagonal) a body may rise above the plane of a container's opening: a rim's lip.
+_LIP = 0.02
 
 
 @dataclass(frozen=True)
@@ -48,6 +52,10 @@ class FillOptions:
     """The patches of a body may be at most this fraction of the filled body's area (unless hidden)."""
     min_thickness: float = 1e-3
     """A filled body must enclose at least this volume per unit area, relative to its diagonal (not flat)."""
+    container_opening: float = 0.5
+    """A planar hole at the top of its body (the body on one side of its plane) at least this wide, relative to
+    the body's width in that plane, is the opening of a container: the body is a thin wall, not filled (unless
+    another body covers the opening, as a lid). Above 1: never."""
 
 
 @dataclass(frozen=True)
@@ -80,6 +88,9 @@ class HoleLoop:
     planarity: float
     patch: np.ndarray
     area: float
+    kind: str = "fan"
+    """How the patch was made: ``fan`` (around the centroid), ``ear`` (ear clipping in the loop's plane),
+    ``least_area`` (a non-planar patch over the loop's own vertices) or ``none``."""
 
 
 @dataclass(frozen=True)
@@ -92,6 +103,7 @@ class BodyPlan:
     loops: tuple[HoleLoop, ...]
     flip: bool = False
     hidden: bool = False
+    container: bool = False
 
 
 @dataclass(frozen=True)
@@ -218,22 +230,33 @@ def _inside_triangle(R: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray)
 
 
 def measure_loop(V: np.ndarray, loop: np.ndarray, body: int) -> HoleLoop:
-    """A :class:`HoleLoop` with its patch: a fan if star-shaped about the centroid, else ear clipping.
+    """A :class:`HoleLoop` with its patch: a fan if star-shaped about the centroid, else ear clipping in the
+    loop's plane, else (an outline that folds over itself in its plane) the least-area patch over its vertices.
 
-    ``patch`` is empty when neither works (the loop crosses itself in its plane).
+    ``patch`` is empty (``kind`` ``none``) when none works (a loop longer than
+    :data:`~fracture_cli.stages.repair.patch.MAX_LOOP` that crosses itself in its plane).
     """
     P = V[loop]
     c, normal, deviation = _plane(P)
     diameter = float(np.linalg.norm(P.max(axis=0) - P.min(axis=0)))
+    kind = "fan"
     patch = _fan(loop, P, c, normal)
     if patch is None:
-        patch = _ear_clip(loop, P, normal)
+        kind, patch = "ear", _ear_clip(loop, P, normal)
     if patch is None:
-        patch = np.zeros((0, 3), dtype=np.int64)
-    W = np.vstack([V, c[None]])
+        kind, patch = "least_area", least_area_patch(loop, P)
+    if patch is None:
+        kind, patch = "none", np.zeros((0, 3), dtype=np.int64)
+    return _with_patch(HoleLoop(vertices=loop, body=body, centroid=c, diameter=diameter,
+                                planarity=deviation / max(diameter, 1e-300), patch=patch, area=0.0, kind=kind), V)
+
+
+def _with_patch(loop: HoleLoop, V: np.ndarray, patch: np.ndarray | None = None, kind: str | None = None) -> HoleLoop:
+    """``loop`` with ``patch`` (default its own) and that patch's area."""
+    patch = loop.patch if patch is None else patch
+    W = np.vstack([V, loop.centroid[None]])
     area = float(triangle_areas(W, np.where(patch < 0, len(V), patch)).sum())
-    return HoleLoop(vertices=loop, body=body, centroid=c, diameter=diameter,
-                    planarity=deviation / max(diameter, 1e-300), patch=patch, area=area)
+    return dataclasses.replace(loop, patch=patch, area=area, kind=loop.kind if kind is None else kind)
 
 
 def _with_centroids(V: np.ndarray, loops: list[HoleLoop]) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -273,30 +296,89 @@ def _judge_body(b: int, loops: list[HoleLoop], W: np.ndarray, patches: list[np.n
     diag = float(np.linalg.norm(np.ptp(W[np.unique(body_faces)], axis=0)))
     for loop in loops:
         if len(loop.patch) == 0:
-            return BodyPlan(b, "thicken", "a hole's outline crosses itself, so it has no flat patch", tuple(loops))
+            return BodyPlan(b, "thicken", "a hole's outline crosses itself and is too long for a non-planar patch",
+                            tuple(loops))
         if loop.planarity > options.planarity and loop.diameter > options.small_hole * diag:
             return BodyPlan(b, "thicken", f"a boundary loop is neither planar ({loop.planarity:.2g} of its diameter "
                             f"off its plane > {options.planarity:g}) nor small ({loop.diameter / diag:.2g} of the "
                             f"body > {options.small_hole:g}): an edge of a sheet, not a hole", tuple(loops))
-    patch_faces = np.vstack(patches)
-    filled = np.vstack([body_faces, patch_faces])
-    volume = signed_volume(W, filled)
-    area = float(triangle_areas(W, filled).sum())
+    volume, area = _filled_measures(W, body_faces, patches)
     if abs(volume) <= options.min_thickness * diag * area:
         return BodyPlan(b, "thicken", "filling its holes encloses no volume (a flat or folded sheet)", tuple(loops))
-    if _patch_crosses(W, body_faces, patch_faces):
-        return BodyPlan(b, "thicken", "a fill patch would cross the surface", tuple(loops))
+    if _patch_crosses(W, body_faces, np.vstack(patches)):
+        # A fan or flat patch of a non-planar outline can cut through the surface where the least-area one,
+        # following the outline, does not.
+        loops, patches = _least_area_instead(loops, W, patches)
+        if _patch_crosses(W, body_faces, np.vstack(patches)):
+            return BodyPlan(b, "thicken", "a fill patch would cross the surface", tuple(loops))
+        volume, area = _filled_measures(W, body_faces, patches)
     share = float(sum(loop.area for loop in loops)) / area
+    opening = _container_opening(W, body_faces, loops, volume > 0, options.planarity, options.container_opening)
     hidden = False
-    if share > options.max_fill_share:
+    if share > options.max_fill_share or opening:
         samples = np.vstack([_patch_samples(W, p) for p in patches])
         hidden = bool(len(others)) and bool(np.all(np.abs(trigeom.winding_numbers(samples, W, others)) > 0.5))
-        if not hidden:
-            return BodyPlan(b, "thicken", f"the holes would be {100 * share:.3g}% of the filled surface (more than "
-                            f"{100 * options.max_fill_share:g}%) and are not inside another body", tuple(loops))
+    if opening and not hidden:
+        return BodyPlan(b, "thicken", f"a rim around a large opening ({opening:.2g} of the body's width, at its "
+                        "top): an open container, kept hollow as a thin wall", tuple(loops), container=True)
+    if share > options.max_fill_share and not hidden:
+        return BodyPlan(b, "thicken", f"the holes would be {100 * share:.3g}% of the filled surface (more than "
+                        f"{100 * options.max_fill_share:g}%) and are not inside another body", tuple(loops))
+    non_planar = sum(loop.kind == "least_area" for loop in loops)
     reason = f"{len(loops)} hole(s) close into a solid ({100 * share:.3g}% of its surface" + (
-        ", hidden inside another body)" if hidden else ")")
+        ", hidden inside another body" if hidden else "") + (
+        f"; {non_planar} by a non-planar patch" if non_planar else "") + ")"
     return BodyPlan(b, "fill", reason, tuple(loops), flip=volume < 0, hidden=hidden)
+
+
+def _filled_measures(W: np.ndarray, body_faces: np.ndarray, patches: list[np.ndarray]) -> tuple[float, float]:
+    """Signed volume and area of a body closed by its patches."""
+    filled = np.vstack([body_faces] + patches)
+    return signed_volume(W, filled), float(triangle_areas(W, filled).sum())
+
+
+def _least_area_instead(loops: list[HoleLoop], W: np.ndarray,
+                        patches: list[np.ndarray]) -> tuple[list[HoleLoop], list[np.ndarray]]:
+    """Every loop's least-area patch in place of its fan or flat one (where the loop is short enough)."""
+    new_loops, new_patches = [], []
+    for loop, patch in zip(loops, patches):
+        other = least_area_patch(loop.vertices, W[loop.vertices]) if loop.kind != "least_area" else None
+        if other is None:
+            new_loops.append(loop)
+            new_patches.append(patch)
+        else:
+            new_loops.append(_with_patch(loop, W, other, "least_area"))
+            new_patches.append(other)
+    return new_loops, new_patches
+
+
+def _container_opening(W: np.ndarray, body_faces: np.ndarray, loops: list[HoleLoop], outward: bool,
+                       planarity: float, threshold: float) -> float:
+    """How wide the body's widest opening is relative to the body, when it is a container's opening; else 0.
+
+    An opening of a container: a planar loop (within ``planarity`` of its
+    diameter) with the whole body on the inner side of its plane (the rim is
+    the top; 2% of the body's diagonal allowed for a lip) and, measured in
+    that plane, at least ``threshold`` of the body's width.
+    """
+    verts = W[np.unique(body_faces)]
+    diag = float(np.linalg.norm(np.ptp(verts, axis=0)))
+    widest = 0.0
+    for loop in loops:
+        P = W[loop.vertices]
+        c, newell, _ = _plane(P)
+        # The cap runs the loop backwards: its outward normal is -newell on an outward body.
+        n = -newell if outward else newell
+        if loop.planarity > planarity or np.max((verts - c) @ n) > _LIP * diag:
+            continue
+        u = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+        u /= np.linalg.norm(u)
+        v = np.cross(n, u)
+        width = max(float(np.ptp(verts @ u)), float(np.ptp(verts @ v)))
+        ratio = max(float(np.ptp(P @ u)), float(np.ptp(P @ v))) / max(width, 1e-300)
+        if ratio >= threshold:
+            widest = max(widest, ratio)
+    return widest
 
 
 def plan_fill(V: np.ndarray, F: np.ndarray, options: FillOptions = FillOptions()) -> FillPlan:
@@ -372,9 +454,11 @@ def fill_holes(V: np.ndarray, F: np.ndarray, plan: FillPlan) -> FilledMesh:
             patch[:] = patch[:, ::-1]
         records.append(RepairRecord(
             "filled_hole", f"filled a hole of {len(loop.vertices)} edges in body {loop.body} "
-            f"({100 * loop.area / surface_area:.3g}% of the surface)", area=loop.area,
+            f"({100 * loop.area / surface_area:.3g}% of the surface"
+            + (", a non-planar patch" if loop.kind == "least_area" else "") + ")", area=loop.area,
             where=tuple(float(x) for x in loop.centroid),
-            extra={"share": loop.area / surface_area, "planarity": loop.planarity, "edges": len(loop.vertices)}))
+            extra={"share": loop.area / surface_area, "planarity": loop.planarity, "edges": len(loop.vertices),
+                   "patch": loop.kind}))
     if flip.any():
         records.append(RepairRecord("flipped_winding", f"turned {len(flip_body)} inside-out bodies outward",
                                     count=int(flip.sum())))

@@ -14,7 +14,8 @@ log = logging.getLogger("fracture_cli.stages.repair")
 
 # Repairs that change what the asset looks like or what it is made of: printed as warnings.
 _WARNED = ("snapped_vertices", "removed_duplicate_faces", "removed_double_sided_faces", "flipped_winding",
-           "split_nonmanifold_edges", "split_nonmanifold_vertices", "doubled_wall_faces", "removed_internal_faces")
+           "split_nonmanifold_edges", "split_nonmanifold_vertices", "doubled_wall_faces", "removed_internal_faces",
+           "detached_fins", "dropped_fins", "dropped_empty_bodies", "kept_bodies_apart")
 # Lengths in a record's ``extra`` (normalized units, i.e. fractions of the diagonal).
 _LENGTHS = ("thickness", "min_thickness")
 

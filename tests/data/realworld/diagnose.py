@@ -8,7 +8,9 @@ report.json claims (watertight, connected, pinched_edges, volume_error), the
 repairs it lists (the decision and the kinds of repair), fragment and piece
 counts, pieces without a fragment, the fragment volumes relative to the asset,
 the modes stage's seconds and the bake's CPU seconds (user + system of the
-child process; wall-clock is noisy on a shared machine). ``--extra FILE``
+child process; wall-clock is noisy on a shared machine). ``--compare BEFORE
+AFTER`` prints two runs' results.jsonl as a case x recipe matrix (issue 39's
+before/after table). ``--extra FILE``
 bakes further files (e.g. the sample assets, with ``--recipe``). Results are
 appended as JSON lines to ``<out>/results.jsonl`` and printed as a markdown
 table.
@@ -32,11 +34,12 @@ sys.path.insert(0, os.path.join(REPO, "tests"))
 from invariants import check_glb, input_box  # noqa: E402  (after the sys.path line)
 
 
-def bake_one(path: str, out: str, recipe: str, overrides: list[str], reference: float | None) -> dict:
+def bake_one(path: str, out: str, recipe: str, overrides: list[str], reference: float | None,
+             jobs: int | None = None) -> dict:
     """Bake one file with the CLI in a child process and collect what it says and writes."""
     stem = os.path.splitext(os.path.basename(path))[0]
     fracture = os.path.join(REPO, ".venv", "bin", "fracture")
-    args = [fracture, "-v", "bake", path, "-o", out, "-r", recipe]
+    args = [fracture, "-v", "bake", path, "-o", out, "-r", recipe] + (["-j", str(jobs)] if jobs else [])
     for o in overrides:
         args += ["--set", o]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -103,6 +106,54 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _cell(row: dict, case: dict) -> str:
+    """One bake as a short table cell: refused (why), or fragments and what an artist or the checker objects to."""
+    if row["exit"] != 0:
+        error = row.get("error", "")
+        for key, label in (("truncated", "truncated GLB"), ("broken mesh", "broken fragment"),
+                           ("do not pair", "non-manifold edges"), ("volumes", "volume check")):
+            if key in error:
+                return f"**refused** ({label})"
+        return "**refused**"
+    ind = row["independent"]
+    notes = []
+    if ind["failing"]:
+        notes.append(f"{ind['failing']} broken")
+    if ind["fragments_with"].get("pinched_vertices"):
+        notes.append(f"{ind['fragments_with']['pinched_vertices']} self-touching")
+    reference = case.get("volume")
+    if reference and ind.get("volume") is not None:
+        error = ind["volume"] / reference - 1.0
+        if abs(error) > case["volume_tolerance"]:
+            notes.append(f"volume {100 * error:+.0f}%")
+    if row.get("decision") != case["outcome"]:
+        notes.append("filled lump" if row.get("decision") == "solid" else "hollow shell")
+    repairs = row.get("repairs", {})
+    if "unioned_bodies" in repairs and "kept_bodies_apart" not in repairs and "touching" in case["kind"]:
+        notes.append("bodies united")
+    return f"ok {row['counts']['fragments']}" + (f" ({'; '.join(notes)})" if notes else "")
+
+
+def compare(before: str, after: str) -> str:
+    """Markdown matrix case x recipe of two results.jsonl files: ``before -> after`` per cell."""
+    with open(os.path.join(HERE, "expected.toml"), "rb") as fh:
+        cases = {c["file"]: c for c in tomllib.load(fh)["case"]}
+    rows: dict[str, dict[tuple[str, str], dict]] = {}
+    for label, path in (("before", before), ("after", after)):
+        with open(path) as fh:
+            rows[label] = {(r["file"], r["recipe"]): r for r in map(json.loads, fh)}
+    recipes = list(dict.fromkeys(recipe for _, recipe in rows["after"]))
+    files = list(dict.fromkeys(file for file, _ in rows["after"]))
+    lines = ["| case | " + " | ".join(recipes) + " |", "|---|" + "---|" * len(recipes)]
+    for file in files:
+        cells = []
+        for recipe in recipes:
+            pair = [rows[label].get((file, recipe)) for label in ("before", "after")]
+            cells.append(" → ".join(_cell(r, cases[file]) if r else "-" for r in pair))
+        lines.append(f"| {file} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--recipe", action="append", default=None)
@@ -110,17 +161,25 @@ def main() -> None:
     parser.add_argument("--only", action="append", default=None, help="file names to bake (default: all)")
     parser.add_argument("--extra", action="append", default=[], help="further files to bake (e.g. sample assets)")
     parser.add_argument("--out", default=os.path.join(REPO, "build", "realworld"))
+    parser.add_argument("--jobs", type=int, default=None, help="processes per bake (fracture -j)")
+    parser.add_argument("--issue39", action="store_true", help="only the files baked with every recipe")
+    parser.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),
+                        help="print the case x recipe matrix of two results.jsonl files and exit")
     args = parser.parse_args()
+    if args.compare:
+        print(compare(*args.compare))
+        return
     with open(os.path.join(HERE, "expected.toml"), "rb") as fh:
         cases = tomllib.load(fh)["case"]
     rows = []
     os.makedirs(args.out, exist_ok=True)
-    jobs = [(os.path.join(HERE, c["file"]), c.get("volume")) for c in cases if not args.only or c["file"] in args.only]
+    jobs = [(os.path.join(HERE, c["file"]), c.get("volume")) for c in cases
+            if (not args.only or c["file"] in args.only) and (not args.issue39 or c.get("recipes") == "all")]
     jobs += [(os.path.abspath(path), None) for path in args.extra]
     for path, volume in jobs:
         for recipe in args.recipe or ["default"]:
             out = os.path.join(args.out, f"{os.path.splitext(os.path.basename(path))[0]}-{recipe}")
-            row = bake_one(path, out, recipe, args.overrides, volume)
+            row = bake_one(path, out, recipe, args.overrides, volume, args.jobs)
             rows.append(row)
             with open(os.path.join(args.out, "results.jsonl"), "a") as fh:
                 fh.write(json.dumps(row) + "\n")
