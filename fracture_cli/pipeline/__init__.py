@@ -29,7 +29,9 @@ if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help`
     from fracture_cli.checks import CheckValue
     from fracture_cli.options import StageOptions
     from fracture_cli.pipeline.cache import StageCache
+    from fracture_cli.runtime.aligned_data import AlignedData
     from fracture_cli.runtime.format import RuntimeData
+    from fracture_cli.stages.aligned.options import AlignedOptions
     from fracture_cli.stages.cage import CageOptions
     from fracture_cli.stages.collision import CollisionOptions
     from fracture_cli.stages.faults import FaultOptions
@@ -73,6 +75,7 @@ class PipelineState:
     physics: tuple | None = None  # (io.physics.FragmentPhysics, ...): mass, pivot and parts of every fragment
     checks: dict[str, CheckValue] | None = None  # what the report says of the fragments
     runtime: RuntimeData | None = None
+    aligned: AlignedData | None = None  # the aligned-fracture companion file (None: the recipe did not ask)
 
     # One overload per field kind: a stage gets its input with its type (no Any on the spine).
     @overload
@@ -309,6 +312,20 @@ def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     return dataclasses.replace(state, runtime=data)
 
 
+def _aligned(state: PipelineState, options: AlignedOptions) -> PipelineState:
+    if not options.enabled:  # the default: nothing to load
+        return dataclasses.replace(state, aligned=None)
+    # on first use: `fracture --help` loads no stage
+    from fracture_cli.stages.aligned import aligned
+    from fracture_cli.stages.simplify.rebuild import uv_scale
+
+    frags = state.need("fragments", "aligned")
+    stem = os.path.splitext(os.path.basename(state.need("source", "aligned")))[0]
+    # The new faces' UVs continue the bake's box projection of its fault faces (fragments.uv_scale).
+    data = aligned(frags, state.collision, options, uv_scale=uv_scale(frags, frags.interior_slot), stem=stem)
+    return dataclasses.replace(state, aligned=data)
+
+
 STAGES: tuple[Stage, ...] = (
     Stage("load", "Read a mesh (OBJ, PLY, STL, OFF, GLB, glTF).", "fracture_cli.stages.load:LoadOptions",
           _load, consumes=("source",), produces=("loaded", "surface", "source_sha256", "source_files")),
@@ -348,6 +365,9 @@ STAGES: tuple[Stage, ...] = (
     Stage("runtime", "Precompute the impact-projection data for the game (the runtime file).",
           "fracture_cli.stages.runtime:RuntimeOptions", _runtime,
           consumes=("tet_mesh", "modes", "pieces", "fragments"), uses=("collision", "physics"), produces=("runtime",)),
+    Stage("aligned", "Convex pieces and fracture patterns for cutting at the hit at runtime (off unless enabled).",
+          "fracture_cli.stages.aligned.options:AlignedOptions", _aligned, consumes=("fragments",),
+          uses=("collision",), produces=("aligned",)),
 )
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
 # The steps a bake reports seconds for: every stage, then writing the outputs.
