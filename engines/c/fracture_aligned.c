@@ -951,7 +951,10 @@ typedef struct hit {
     double *sites;   /* (S, 3) placed */
     const int32_t *nb_off, *nb; /* neighbours of the pattern's cells (offsets relative to the pattern) */
     double *planes;  /* (N, 4): the bisector of each neighbour entry */
-    double *pair_planes; /* (S * S, 4) at most: bisectors among one piece's kept cells */
+    double *split;       /* the split stack of split_polygon: corners */
+    size_t split_used, split_cap;
+    int32_t *split_cells; /* and candidate cells */
+    size_t split_cells_used, split_cells_cap;
     int32_t B;           /* boundary planes */
     double *boundary;    /* (B, 4) placed */
     double *ts;          /* (B,) the piece's centre against each */
@@ -1070,56 +1073,46 @@ static int push_kept(hit *h, int32_t cell, int32_t k, const poly *p, double keep
     return 1;
 }
 
-/* A convex polygon of a cut piece into the kept inner cells (positions `inner` in h->kept, `ninner` of them). */
-static void cut_polygon(hit *h, const double *polygon, int32_t count, const int32_t *inner, int32_t ninner,
-                        const double *pair, int32_t npair, double eps, int32_t material) {
-    work *w = h->w;
-    /* nearest among the inner cells, for every corner */
-    int32_t cell = -1, same = 1;
-    for (int32_t q = 0; q < count && same; ++q) {
-        int32_t best = inner[0];
-        double best_d = INFINITY;
-        for (int32_t n = 0; n < ninner; ++n) {
-            const double *s = h->sites + 3 * h->kept[inner[n]];
-            double dx = polygon[8 * q] - s[0], dy = polygon[8 * q + 1] - s[1], dz = polygon[8 * q + 2] - s[2];
-            double dd = (dx * dx + dy * dy) + dz * dz;
-            if (dd < best_d) { best = inner[n]; best_d = dd; }
-        }
-        if (q == 0) cell = best; else same = best == cell;
+/* A convex polygon into the Voronoi cells of `cells`' sites (docs/FORMAT.md section 13.5, step 2f): whole when
+ * every corner has the same nearest site, else split by the bisector of the cells of corner 0 and of the first
+ * other corner, each side going on without the other cell. Buffers come from the hit's split stack. */
+static void split_polygon(hit *h, const double *polygon, int32_t count, const int32_t *cells, int32_t ncells,
+                          double eps, int32_t material) {
+    int32_t first = nearest(h, polygon, cells, ncells), other = -1;
+    for (int32_t q = 1; q < count && other < 0; ++q) {
+        int32_t cell = nearest(h, polygon + 8 * q, cells, ncells);
+        if (cell != first) other = cell;
     }
-    if (same) { push_polygon(h, h->kept[cell], material, polygon, count); return; }
-    double cx = 0, cy = 0, cz = 0, radius = 0.0, least = INFINITY;
-    for (int32_t q = 0; q < count; ++q) { cx = cx + polygon[8 * q]; cy = cy + polygon[8 * q + 1]; cz = cz + polygon[8 * q + 2]; }
-    cx = cx / count; cy = cy / count; cz = cz / count;
-    for (int32_t q = 0; q < count; ++q) {
-        double dx = polygon[8 * q] - cx, dy = polygon[8 * q + 1] - cy, dz = polygon[8 * q + 2] - cz;
-        double dist = sqrt((dx * dx + dy * dy) + dz * dz);
-        if (dist > radius) radius = dist;
+    if (other < 0) { push_polygon(h, first, material, polygon, count); return; }
+    size_t mark_d = h->split_used, mark_i = h->split_cells_used, corners = 2 * (size_t)count + 2;
+    if (h->split_used + 2 * 8 * corners > h->split_cap || h->split_cells_used + 2 * (size_t)ncells > h->split_cells_cap) {
+        h->limit = 1;
+        return;
     }
-    for (int32_t n = 0; n < ninner; ++n) {
-        const double *s = h->sites + 3 * h->kept[inner[n]];
-        double dx = cx - s[0], dy = cy - s[1], dz = cz - s[2];
-        h->dists[n] = sqrt((dx * dx + dy * dy) + dz * dz);
-        if (h->dists[n] < least) least = h->dists[n];
+    double *near = h->split + h->split_used, *far = near + 8 * corners;
+    int32_t *near_cells = h->split_cells + h->split_cells_used, *far_cells = near_cells + ncells;
+    h->split_used += 2 * 8 * corners;
+    h->split_cells_used += 2 * (size_t)ncells;
+    double plane[4], flipped[4];
+    int bad = 0;
+    bisector(h->sites + 3 * first, h->sites + 3 * other, plane, &bad);
+    for (int c = 0; c < 4; ++c) flipped[c] = -plane[c];
+    int32_t nnear = clip_corners(h->w, polygon, count, near, plane, eps);
+    const double *near_poly = nnear == -2 ? polygon : near;
+    if (nnear == -2) nnear = count;
+    int32_t nfar = clip_corners(h->w, polygon, count, far, flipped, eps);
+    const double *far_poly = nfar == -2 ? polygon : far;
+    if (nfar == -2) nfar = count;
+    if (nnear == -1 || nfar == -1) { h->limit = 1; return; }
+    int32_t nn = 0, nf = 0;
+    for (int32_t k = 0; k < ncells; ++k) {
+        if (cells[k] != other) near_cells[nn++] = cells[k];
+        if (cells[k] != first) far_cells[nf++] = cells[k];
     }
-    int32_t *near = h->cells, nnear = 0;
-    for (int32_t n = 0; n < ninner; ++n)
-        if (h->dists[n] <= least + 2.0 * radius) near[nnear++] = n; /* positions in inner */
-    for (int32_t a = 0; a < nnear; ++a) {
-        int32_t n = near[a], part = count, which = 0;
-        const double *cur = polygon;
-        for (int32_t b = 0; b < nnear && part > 0; ++b) {
-            int32_t m = near[b];
-            if (m == n) continue;
-            int32_t got = clip_corners(w, cur, part, w->corners[which], pair + 4 * (n * npair + m), eps);
-            if (got == -2) continue;
-            if (got < 0) { h->limit = 1; return; }
-            part = got;
-            cur = w->corners[which];
-            which ^= 1;
-        }
-        if (part >= 3) push_polygon(h, h->kept[inner[n]], material, cur, part);
-    }
+    if (nnear >= 3) split_polygon(h, near_poly, nnear, near_cells, nn, eps, material);
+    if (nfar >= 3 && !h->limit) split_polygon(h, far_poly, nfar, far_cells, nf, eps, material);
+    h->split_used = mark_d;
+    h->split_cells_used = mark_i;
 }
 
 /* Piece k against the placed pattern (docs/FORMAT.md section 13.5, step 2). */
@@ -1172,6 +1165,15 @@ static void cut_piece(hit *h, int32_t k) {
         const double *planes = h->planes + 4 * h->nb_off[i];
         int32_t nplanes = h->nb_off[i + 1] - h->nb_off[i];
         for (int32_t e = 0; e < nplanes && !empty; ++e) empty = dot3(planes + 4 * e, c) - planes[4 * e + 3] > r;
+        for (int32_t e = 0; e < nplanes && !empty; ++e) { /* or every corner lies beyond a plane */
+            const double *plane = planes + 4 * e;
+            double least = INFINITY;
+            for (int32_t v = 0; v < base->nv && least > eps; ++v) {
+                double dist = dot3(plane, base->v + 3 * v) - plane[3];
+                if (dist < least) least = dist;
+            }
+            empty = least > eps;
+        }
         if (empty) continue;
         const poly *cur = clip_by(h, base, planes, nplanes, c, r, eps);
         for (int32_t e = h->wall_off[i]; cur && straddle && e < h->wall_off[i + 1]; ++e)
@@ -1216,12 +1218,6 @@ static void cut_piece(hit *h, int32_t k) {
         return;
     }
     /* the piece's triangles: beyond the boundary to the rest, inside it cut along the kept cells */
-    double *pair = h->pair_planes; /* the bisector of kept cells n and m at 4 * (n * nkept + m) */
-    int bad = 0;
-    for (int32_t n = 0; n < nkept; ++n)
-        for (int32_t m = 0; m < nkept; ++m)
-            if (m != n) bisector(h->sites + 3 * h->kept[n], h->sites + 3 * h->kept[m], pair + 4 * (n * nkept + m), &bad);
-    for (int32_t n = 0; n < nkept; ++n) h->inner[n] = n;
     const int32_t *pt = I32(d, A_PIECE_TRIANGLE_OFFSETS);
     const float *pos = F32(d, A_TRIANGLE_POSITIONS), *nrm = F32(d, A_TRIANGLE_NORMALS), *uvs = F32(d, A_TRIANGLE_UVS);
     const int32_t *mat = I32(d, A_TRIANGLE_MATERIALS);
@@ -1263,7 +1259,7 @@ static void cut_piece(hit *h, int32_t k) {
         }
         if (count < 3) continue;
         if (nkept == 0) { push_polygon(h, outer, mat[t], polygon, count); continue; }
-        cut_polygon(h, polygon, count, h->inner, nkept, pair, nkept, eps, mat[t]);
+        split_polygon(h, polygon, count, h->kept, nkept, eps, mat[t]);
         if (h->limit) return;
     }
     /* the new faces of every part: interior material, box-projected UVs */
@@ -1290,6 +1286,12 @@ static void cut_piece(hit *h, int32_t k) {
     }
 }
 
+static size_t split_bytes(int32_t S, int32_t B) {
+    size_t levels = (size_t)(S < 128 ? S : 128) + 1;
+    return sizeof(double) * levels * 2 * 8 * (2 * (size_t)(3 + B + (int32_t)levels) + 2) +
+           sizeof(int32_t) * levels * 2 * (size_t)(S + 1);
+}
+
 static size_t scratch_bytes(const fra_data *d, int32_t *vcap, int32_t *fcap, int32_t *lcap, int32_t *ccap) {
     *fcap = d->max_faces + d->max_degree + 8;
     *vcap = 2 * *fcap + d->max_vertices + 64;
@@ -1302,7 +1304,8 @@ static size_t scratch_bytes(const fra_data *d, int32_t *vcap, int32_t *fcap, int
     int32_t N = d->rows[A_CELL_NEIGHBORS], S = d->max_sites;
     return 3 * poly_bytes + sizeof(double) * ((size_t)*vcap * 4 + 2 * 8 * (size_t)*ccap) +
            sizeof(int32_t) * ((size_t)*vcap * 4 + 3 * (size_t)*lcap) + sizeof(double) * (3 * (size_t)S + (size_t)S) +
-           sizeof(int32_t) * 7 * (size_t)S + sizeof(double) * 4 * ((size_t)N + (size_t)S * (size_t)S) + 48 * 16 +
+           sizeof(int32_t) * 7 * (size_t)S + sizeof(double) * 4 * (size_t)N + 48 * 16 +
+           split_bytes(S, d->rows[A_BOUNDARY_PLANES]) +
            sizeof(double) * (3 * 8 * (size_t)*ccap + 5 * (size_t)d->rows[A_BOUNDARY_PLANES]) + sizeof(work) +
            sizeof(hit);
 }
@@ -1352,7 +1355,11 @@ static fra_status setup(const fra_data *d, int32_t q, const double *point, const
     h->cells = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->S, &ok);
     h->kept = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->S, &ok);
     h->planes = (double *)grab(a, sizeof(double) * 4 * (size_t)N, &ok);
-    h->pair_planes = (double *)grab(a, sizeof(double) * 4 * (size_t)h->S * (size_t)h->S, &ok);
+    size_t levels = (size_t)(h->S < 128 ? h->S : 128) + 1;
+    h->split_cap = levels * 2 * 8 * (2 * (size_t)(3 + d->rows[A_BOUNDARY_PLANES] + (int32_t)levels) + 2);
+    h->split_cells_cap = levels * 2 * (size_t)(h->S + 1);
+    h->split = (double *)grab(a, sizeof(double) * h->split_cap, &ok);
+    h->split_cells = (int32_t *)grab(a, sizeof(int32_t) * h->split_cells_cap, &ok);
     int32_t *local_off = (int32_t *)grab(a, sizeof(int32_t) * (size_t)(h->S + 1), &ok);
     h->B = d->rows[A_BOUNDARY_PLANES];
     int32_t *wall_off = (int32_t *)grab(a, sizeof(int32_t) * (size_t)(h->S + 1), &ok);

@@ -535,44 +535,25 @@ function clipBy(w, src, planes, po, count, c, r, eps) {
   return cur;
 }
 
-function cutPolygon(hit, polygon, count, inner, pair, eps, material, out) {
-  const w = hit.w, sites = hit.sites, n = inner.length;
-  let cell = -1, same = true;
-  for (let q = 0; q < count && same; q++) {
-    const best = nearest(sites, polygon, 8 * q, inner, n);
-    if (q === 0) cell = best; else same = best === cell;
+// A convex polygon into the Voronoi cells of `cells`' sites (docs/FORMAT.md section 13.5, step 2f): whole when
+// every corner has the same nearest site, else split by the bisector of the cells of corner 0 and of the first
+// other corner, each side going on without the other cell.
+function splitPolygon(hit, polygon, count, cells, eps, material, out) {
+  const sites = hit.sites, first = nearest(sites, polygon, 0, cells, cells.length);
+  let other = -1;
+  for (let q = 1; q < count && other < 0; q++) {
+    const cell = nearest(sites, polygon, 8 * q, cells, cells.length);
+    if (cell !== first) other = cell;
   }
-  if (same) { pushPolygon(out, cell, material, polygon, count); return; }
-  let cx = 0, cy = 0, cz = 0, radius = 0, least = Infinity;
-  for (let q = 0; q < count; q++) { cx = cx + polygon[8 * q]; cy = cy + polygon[8 * q + 1]; cz = cz + polygon[8 * q + 2]; }
-  cx = cx / count; cy = cy / count; cz = cz / count;
-  for (let q = 0; q < count; q++) {
-    const dx = polygon[8 * q] - cx, dy = polygon[8 * q + 1] - cy, dz = polygon[8 * q + 2] - cz;
-    const dist = Math.sqrt((dx * dx + dy * dy) + dz * dz);
-    if (dist > radius) radius = dist;
-  }
-  const dists = new Float64Array(n);
-  for (let k = 0; k < n; k++) {
-    const s = 3 * inner[k], dx = cx - sites[s], dy = cy - sites[s + 1], dz = cz - sites[s + 2];
-    dists[k] = Math.sqrt((dx * dx + dy * dy) + dz * dz);
-    if (dists[k] < least) least = dists[k];
-  }
-  const near = [];
-  for (let k = 0; k < n; k++) if (dists[k] <= least + 2.0 * radius) near.push(k);
-  for (const a of near) {
-    let part = count, which = 0, cur = polygon;
-    for (let b = 0; b < near.length && part > 0; b++) {
-      const m = near[b];
-      if (m === a) continue;
-      const o = 4 * (a * n + m), t = ((pair[o] * cx + pair[o + 1] * cy) + pair[o + 2] * cz) - pair[o + 3];
-      if (t < -radius) continue; // the polygon's sphere lies inside the plane
-      if (t > radius) { part = 0; break; } // or beyond it
-      part = clipCorners(w, cur, part, w.corners[which], pair, o, eps);
-      cur = w.corners[which];
-      which ^= 1;
-    }
-    if (part >= 3) pushPolygon(out, inner[a], material, cur, part);
-  }
+  if (other < 0) { pushPolygon(out, first, material, polygon, count); return; }
+  const plane = new Float64Array(8);
+  bisector(sites, first, other, plane, 0);
+  for (let c = 0; c < 4; c++) plane[4 + c] = -plane[c];
+  const near = new Float64Array(8 * (2 * count + 2)), far = new Float64Array(8 * (2 * count + 2));
+  const nn = clipCorners(hit.w, polygon, count, near, plane, 0, eps);
+  const nf = clipCorners(hit.w, polygon, count, far, plane, 4, eps);
+  if (nn >= 3) splitPolygon(hit, near, nn, cells.filter((c) => c !== other), eps, material, out);
+  if (nf >= 3) splitPolygon(hit, far, nf, cells.filter((c) => c !== first), eps, material, out);
 }
 
 function cutPiece(data, k, hit, out) {
@@ -618,6 +599,11 @@ function cutPiece(data, k, hit, out) {
   for (const i of cells) {
     let empty = false;
     for (let e = nbOff[i]; e < nbOff[i + 1] && !empty; e++) empty = dot3(planes, 4 * e, c, 0) - planes[4 * e + 3] > r;
+    for (let e = nbOff[i]; e < nbOff[i + 1] && !empty; e++) { // or every corner lies beyond a plane
+      let least = Infinity;
+      for (let v = 0; v < base.nv && least > eps; v++) least = Math.min(least, dot3(planes, 4 * e, base.v, 3 * v) - planes[4 * e + 3]);
+      empty = least > eps;
+    }
     if (empty) continue;
     let cur = clipBy(w, base, planes, 4 * nbOff[i], nbOff[i + 1] - nbOff[i], c, r, eps);
     for (let e = hit.wallOff[i]; cur && straddle && e < hit.wallOff[i + 1]; e++) {
@@ -645,8 +631,7 @@ function cutPiece(data, k, hit, out) {
     return;
   }
   for (const [i, part] of made) addPart(out, i, part);
-  const nk = inner.length, pair = new Float64Array(4 * nk * nk);
-  for (let n = 0; n < nk; n++) for (let m = 0; m < nk; m++) if (m !== n) bisector(sites, inner[n], inner[m], pair, 4 * (n * nk + m));
+  const nk = inner.length;
   const pos = a.triangle_positions, nrm = a.triangle_normals, uvs = a.triangle_uvs;
   const pt = a.piece_triangle_offsets, mat = a.triangle_materials;
   let polygon = hit.triA, spare = hit.triB;
@@ -674,7 +659,7 @@ function cutPiece(data, k, hit, out) {
     }
     if (count < 3) continue;
     if (nk === 0) { pushPolygon(out, outer, mat[t], polygon, count); continue; }
-    cutPolygon(hit, polygon, count, inner, pair, eps, mat[t], out);
+    splitPolygon(hit, polygon, count, inner, eps, mat[t], out);
   }
   const corners = w.corners[0];
   for (const [i, part] of made) {

@@ -210,27 +210,6 @@ def _candidates(piece: _Piece, sites: list) -> list[int]:
     return [i for i, dist in enumerate(dists) if dist <= bound]
 
 
-def _polygon_cells(corners: list[Corner], sites: list, kept: list[int]) -> list[int]:
-    """The cells of ``kept`` that may meet a convex polygon: its centre (the corners' sum in order over their
-    count), radius the largest distance to a corner, and the test of :func:`_candidates` among ``kept``."""
-    count = len(corners)
-    cx = cy = cz = 0.0
-    for corner in corners:
-        cx, cy, cz = cx + corner[0], cy + corner[1], cz + corner[2]
-    centre = (cx / count, cy / count, cz / count)
-    radius = 0.0
-    for corner in corners:
-        dx, dy, dz = corner[0] - centre[0], corner[1] - centre[1], corner[2] - centre[2]
-        radius = max(radius, math.sqrt((dx * dx + dy * dy) + dz * dz))
-    dists = []
-    for i in kept:
-        w = sites[i]
-        dx, dy, dz = centre[0] - w[0], centre[1] - w[1], centre[2] - w[2]
-        dists.append(math.sqrt((dx * dx + dy * dy) + dz * dz))
-    bound = min(dists) + 2.0 * radius
-    return [i for i, dist in zip(kept, dists) if dist <= bound]
-
-
 @dataclass(frozen=True)
 class _Hit:
     """A pattern placed at a hit: sites, each cell's neighbours and planes, the boundary's planes (model space)."""
@@ -320,6 +299,8 @@ def _cut_piece(data: AlignedData, k: int, piece: _Piece, hit: _Hit, out: _Output
         cell_planes = [hit.planes[(i, j)] for j in hit.neighbors[i]]
         if any(dot(plane, centre) - plane[3] > radius for plane in cell_planes):
             continue  # the piece's sphere lies beyond a plane of cell i
+        if any(min(dot(plane, x) - plane[3] for x in vertices) > eps for plane in cell_planes):
+            continue  # or every corner does
         poly = _clip_by(piece.polyhedron, cell_planes, centre, radius, eps)
         if straddle:
             poly = _clip_by(poly, [hit.boundary[b] for b in hit.walls[i]], centre, radius, eps)
@@ -348,7 +329,6 @@ def _cut_piece(data: AlignedData, k: int, piece: _Piece, hit: _Hit, out: _Output
         out.parts.setdefault(i, []).append(_part(k, False, poly, volume, centroid))
     inner = sorted({i for i, _, _, _ in parts if i != outer})
     has_outer = any(i == outer for i, _, _, _ in parts)
-    pairs = {(i, j): bisector(sites, i, j) for i in inner for j in inner if i != j}
     positions, normals, uvs, materials = rows["positions"], rows["normals"], rows["uvs"], rows["materials"]
     for t in piece.triangles:  # 2f
         polygon: list[Corner] = [(*positions[t][c], *normals[t][c], *uvs[t][c]) for c in range(3)]
@@ -365,7 +345,7 @@ def _cut_piece(data: AlignedData, k: int, piece: _Piece, hit: _Hit, out: _Output
         if not inner:
             out.add_polygon(outer, polygon, materials[t])
             continue
-        _cut_polygon(polygon, sites, inner, pairs, eps, out, materials[t])
+        _split_polygon(polygon, sites, inner, eps, out, materials[t])
     for i, poly, _, _ in parts:  # 2g: the new faces
         cap_vertices, faces = poly
         for loop, plane, new in faces:
@@ -376,24 +356,32 @@ def _cut_piece(data: AlignedData, k: int, piece: _Piece, hit: _Hit, out: _Output
                 out.add_polygon(i, corners, data.interior_material)
 
 
-def _cut_polygon(polygon: list[Corner], sites: list, inner: list[int], pairs: dict, eps: float, out: _Output,
-                 material: int) -> None:
-    """A convex polygon of a cut piece into the kept cells ``inner``: whole when its corners share the nearest
-    site, else clipped by the bisectors among the cells that may meet it."""
-    cell = _nearest(polygon[0], sites, inner)
-    if all(_nearest(corner, sites, inner) == cell for corner in polygon[1:]):
-        out.add_polygon(cell, polygon, material)
+def _split_polygon(polygon: list[Corner], sites: list, cells: list[int], eps: float, out: _Output,
+                   material: int) -> None:
+    """A convex polygon into the Voronoi cells of ``cells``' sites (section 13.5, step 2f).
+
+    When every corner has the same nearest site (the first on ties), the polygon lies in that cell. Otherwise
+    with ``a`` the cell of corner 0 and ``b`` the first other corner cell, the polygon is split by their
+    bisector; the side of ``a`` goes on without ``b`` (no point of it is nearer to ``b``), the other side
+    without ``a``.
+    """
+    first = _nearest(polygon[0], sites, cells)
+    other = -1
+    for corner in polygon[1:]:
+        cell = _nearest(corner, sites, cells)
+        if cell != first:
+            other = cell
+            break
+    if other < 0:
+        out.add_polygon(first, polygon, material)
         return
-    near = _polygon_cells(polygon, sites, inner)
-    for i in near:
-        part = polygon
-        for j in near:
-            if j != i:
-                part = clip_polygon(part, pairs[(i, j)], eps)
-                if not part:
-                    break
-        if len(part) >= 3:
-            out.add_polygon(i, part, material)
+    plane = bisector(sites, first, other)
+    near = clip_polygon(polygon, plane, eps)
+    far = clip_polygon(polygon, _flipped(plane), eps)
+    if len(near) >= 3:
+        _split_polygon(near, sites, [c for c in cells if c != other], eps, out, material)
+    if len(far) >= 3:
+        _split_polygon(far, sites, [c for c in cells if c != first], eps, out, material)
 
 
 def _triangle_rows(data: AlignedData) -> dict:
