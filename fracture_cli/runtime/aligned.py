@@ -146,6 +146,11 @@ def _pieces(data: AlignedData) -> list[_Piece]:
     return pieces
 
 
+def piece_volumes(data: AlignedData) -> list[float]:
+    """The volume of every stored piece (the divergence-theorem sum of section 13.5, in the readers' order)."""
+    return [piece.volume for piece in _pieces(data)]
+
+
 def pattern_frame(direction) -> tuple[tuple[float, float, float], ...]:
     """The columns ``(u, v, d)`` of ``R`` for an impulse direction (finite, not zero).
 
