@@ -145,7 +145,7 @@ def random_hits(data, count: int, seed: int) -> list[Hit]:
 
 
 def part_geometry(data, part: dict) -> tuple[np.ndarray, list, np.ndarray]:
-    """Corners (n, 3), face loops and planes (f, 4) of a part of a ``--full`` answer (a whole part: the stored piece)."""
+    """Corners (n, 3), face loops and planes (f, 4) of a part of a ``--full`` answer (whole: the stored piece)."""
     if not part["whole"]:
         return np.array(part["corners"], float), part["loops"], np.array(part["planes"], float)
     k = part["piece"]

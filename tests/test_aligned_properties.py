@@ -135,4 +135,5 @@ def test_the_reference_and_the_javascript_reader_agree(answers, baked, c_driver)
     if NODE is not None:
         js_answers = run_driver([NODE, JS_DRIVER], baked, hits)
         c_all = run_driver([c_driver], baked, hits)
-        assert [p for i, (c, j) in enumerate(zip(c_all, js_answers)) for p in compare(c, j, volume, size, f"hit {i}")] == []
+        differ = [p for i, (c, j) in enumerate(zip(c_all, js_answers)) for p in compare(c, j, volume, size, f"hit {i}")]
+        assert differ == []

@@ -509,10 +509,19 @@ function makePart(piece, whole, poly, mass, mo) {
 
 function pushPolygon(out, cell, material, corners, count) {
   let list = out.tris.get(cell);
-  if (!list) { list = { values: [], materials: [] }; out.tris.set(cell, list); }
+  if (!list) { list = { values: new Float64Array(24 * 64), materials: new Int32Array(64), n: 0 }; out.tris.set(cell, list); }
   for (let q = 1; q + 1 < count; q++) {
-    for (const c of [0, q, q + 1]) for (let e = 0; e < 8; e++) list.values.push(corners[8 * c + e]);
-    list.materials.push(material);
+    if (list.n === list.materials.length) { // grow both by doubling
+      const values = new Float64Array(2 * list.values.length), materials = new Int32Array(2 * list.materials.length);
+      values.set(list.values);
+      materials.set(list.materials);
+      list.values = values;
+      list.materials = materials;
+    }
+    const o = 24 * list.n;
+    list.values.set(corners.subarray(0, 8), o);
+    list.values.set(corners.subarray(8 * q, 8 * q + 16), o + 8);
+    list.materials[list.n++] = material;
   }
 }
 
@@ -549,11 +558,15 @@ function splitPolygon(hit, polygon, count, cells, eps, material, out) {
   const plane = new Float64Array(8);
   bisector(sites, first, other, plane, 0);
   for (let c = 0; c < 4; c++) plane[4 + c] = -plane[c];
-  const near = new Float64Array(8 * (2 * count + 2)), far = new Float64Array(8 * (2 * count + 2));
-  const nn = clipCorners(hit.w, polygon, count, near, plane, 0, eps);
-  const nf = clipCorners(hit.w, polygon, count, far, plane, 4, eps);
-  if (nn >= 3) splitPolygon(hit, near, nn, cells.filter((c) => c !== other), eps, material, out);
-  if (nf >= 3) splitPolygon(hit, far, nf, cells.filter((c) => c !== first), eps, material, out);
+  const size = 8 * (2 * count + 2);
+  const near = hit.pool.length ? hit.pool.pop() : new Float64Array(size);
+  const far = hit.pool.length ? hit.pool.pop() : new Float64Array(size);
+  const nearBuf = near.length >= size ? near : new Float64Array(size), farBuf = far.length >= size ? far : new Float64Array(size);
+  const nn = clipCorners(hit.w, polygon, count, nearBuf, plane, 0, eps);
+  const nf = clipCorners(hit.w, polygon, count, farBuf, plane, 4, eps);
+  if (nn >= 3) splitPolygon(hit, nearBuf, nn, cells.filter((c) => c !== other), eps, material, out);
+  if (nf >= 3) splitPolygon(hit, farBuf, nf, cells.filter((c) => c !== first), eps, material, out);
+  hit.pool.push(nearBuf, farBuf); // buffers for the next splits (a call's buffers are free once it returns)
 }
 
 function cutPiece(data, k, hit, out) {
@@ -567,7 +580,7 @@ function cutPiece(data, k, hit, out) {
     if (ts[b] > r) { whole(outer); return; }
     if (ts[b] >= -r) straddle = true;
   }
-  const dists = new Float64Array(S);
+  const dists = hit.dists;
   let best = Infinity;
   for (let i = 0; i < S; i++) {
     const dx = c[0] - sites[3 * i], dy = c[1] - sites[3 * i + 1], dz = c[2] - sites[3 * i + 2];
@@ -710,7 +723,7 @@ export function alignedFracture(data, point, direction, scale = data.defaultScal
   const ccap = data.work.ccap;
   const bo = a.cell_boundary_offsets, wallOff = new Int32Array(S + 1);
   for (let i = 0; i <= S; i++) wallOff[i] = bo[lo + i] - bo[lo];
-  const hit = { w: data.work, sites, S, planes, nbOff, boundary, B, wallOff, walls: a.cell_boundary.subarray(bo[lo]), triA: new Float64Array(8 * ccap),
+  const hit = { w: data.work, sites, S, planes, nbOff, boundary, B, wallOff, dists: new Float64Array(S), pool: [], walls: a.cell_boundary.subarray(bo[lo]), triA: new Float64Array(8 * ccap),
     triB: new Float64Array(8 * ccap), triC: new Float64Array(8 * ccap) };
   for (let k = 0; k < data.pieces; k++) cutPiece(data, k, hit, out);
   const fragments = [];
@@ -722,10 +735,10 @@ export function alignedFracture(data, point, direction, scale = data.defaultScal
       volume += part.volume;
       for (let c = 0; c < 3; c++) moment[c] += part.volume * part.centroid[c];
     }
-    const tris = out.tris.get(cell) || { values: [], materials: [] };
+    const tris = out.tris.get(cell) || { values: new Float64Array(0), materials: new Int32Array(0), n: 0 };
     fragments.push({
       cell, parts, wholePieces: out.whole.filter(([c]) => c === cell).map(([, k]) => k),
-      triangles: Float64Array.from(tris.values), materials: Int32Array.from(tris.materials), volume,
+      triangles: tris.values.slice(0, 24 * tris.n), materials: tris.materials.slice(0, tris.n), volume,
       centerOfMass: moment.map((x) => (volume > 0 ? x / volume : 0)),
     });
   }

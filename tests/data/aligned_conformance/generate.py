@@ -74,7 +74,7 @@ def _box(lo, hi) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 
 
 def boxes(options: AlignedOptions) -> AlignedData:
-    """Two unit boxes side by side along x (fragments 0 and 1); the second one in two convex parts (z < 0.5, z > 0.5)."""
+    """Two unit boxes side by side along x (fragments 0 and 1), the second one in two parts (z < 0.5, z > 0.5)."""
     frags, parts = [], []
     for j, (lo, hi) in enumerate((((0, 0, 0), (1, 1, 1)), ((1, 0, 0), (2, 1, 1)))):
         v, f, n, uv = _box(lo, hi)
