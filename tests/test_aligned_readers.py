@@ -2,7 +2,7 @@
 
 tests/data/aligned_conformance/ holds three files (two synthetic box pairs, the chair from a fast bake)
 and hits with the reference's fragments; every reader must give the same fragments within 1e-9 (in
-practice the same bits: all three follow docs/FORMAT.md section 13.5's arithmetic to the letter).
+practice the same bits: all three follow docs/FORMAT.md sections 13.3-13.4's arithmetic to the letter).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
  * fracture_aligned.c - aligned fracture at runtime (see fracture_aligned.h; docs/FORMAT.md section 13).
  * MIT licence, Copyright (c) fracture developers.
  *
- * Every sum and product is written in the order docs/FORMAT.md section 13.5 states, in double
+ * Every sum and product is written in the order docs/FORMAT.md sections 13.3-13.4 states, in double
  * precision, so the results match the Python reference and the JavaScript reader to the last bit
  * on the conformance vectors. Compile without -ffast-math and without FMA contraction
  * (-ffp-contract=off; plain -std=c99 already implies it with GCC).
@@ -639,7 +639,7 @@ static int smallest_axis(const double *n) {
     return axis;
 }
 
-/* Unit axes a, b with a x b = n (docs/FORMAT.md section 13.5). */
+/* Unit axes a, b with a x b = n (docs/FORMAT.md sections 13.3-13.4). */
 static void plane_basis(const double *n, double *a, double *b) {
     int axis = smallest_axis(n);
     double k = n[axis];
@@ -792,7 +792,7 @@ static int before(const double *p, const double *q) {
 
 enum { CLIP_SAME = 0, CLIP_EMPTY = 1, CLIP_DONE = 2, CLIP_OVERFLOW = -1 };
 
-/* The part of `src` where n . x - h <= 0, into `dst` (docs/FORMAT.md section 13.5; aligned_clip.py). */
+/* The part of `src` where n . x - h <= 0, into `dst` (docs/FORMAT.md sections 13.3-13.4; aligned_clip.py). */
 static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, double eps) {
     int plus = 0, minus = 0;
     for (int32_t i = 0; i < src->nv; ++i) {
@@ -1073,7 +1073,7 @@ static int push_kept(hit *h, int32_t cell, int32_t k, const poly *p, double keep
     return 1;
 }
 
-/* A convex polygon into the Voronoi cells of `cells`' sites (docs/FORMAT.md section 13.5, step 2f): whole when
+/* A convex polygon into the Voronoi cells of `cells`' sites (docs/FORMAT.md section 13.4, step 7): whole when
  * every corner has the same nearest site, else split by the bisector of the cells of corner 0 and of the first
  * other corner, each side going on without the other cell. Buffers come from the hit's split stack. */
 static void split_polygon(hit *h, const double *polygon, int32_t count, const int32_t *cells, int32_t ncells,
@@ -1115,7 +1115,7 @@ static void split_polygon(hit *h, const double *polygon, int32_t count, const in
     h->split_cells_used = mark_i;
 }
 
-/* Piece k against the placed pattern (docs/FORMAT.md section 13.5, step 2). */
+/* Piece k against the placed pattern (docs/FORMAT.md section 13.4). */
 static void cut_piece(hit *h, int32_t k) {
     const fra_data *d = h->d;
     work *w = h->w;

@@ -544,7 +544,7 @@ function clipBy(w, src, planes, po, count, c, r, eps) {
   return cur;
 }
 
-// A convex polygon into the Voronoi cells of `cells`' sites (docs/FORMAT.md section 13.5, step 2f): whole when
+// A convex polygon into the Voronoi cells of `cells`' sites (docs/FORMAT.md section 13.4, step 7): whole when
 // every corner has the same nearest site, else split by the bisector of the cells of corner 0 and of the first
 // other corner, each side going on without the other cell.
 function splitPolygon(hit, polygon, count, cells, eps, material, out) {
@@ -693,7 +693,7 @@ function cutPiece(data, k, hit, out) {
 }
 
 /**
- * New fragments for a hit (docs/FORMAT.md section 13.5).
+ * New fragments for a hit (docs/FORMAT.md sections 13.3-13.4).
  * @param {object} data from loadAligned
  * @param {number[]} point the hit, model space
  * @param {number[]} direction the impulse (its direction: finite, not zero)

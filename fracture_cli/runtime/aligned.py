@@ -1,6 +1,6 @@
 """Aligned fracture at runtime (seed 001): cut the asset's convex pieces with a pattern placed at the hit.
 
-:func:`aligned_fracture` is the reference of docs/FORMAT.md section 13.5 that the C and JavaScript
+:func:`aligned_fracture` is the reference of docs/FORMAT.md sections 13.3-13.4 that the C and JavaScript
 readers follow (engines/c/fracture_aligned.c, engines/web/fracture_aligned.js), checked against the
 same conformance vectors (tests/data/aligned_conformance/). A pattern's unit-volume Voronoi sites are
 placed at the hit (``world = point + scale * R * site``, ``R`` taking the pattern's +z to the impulse
@@ -147,7 +147,7 @@ def _pieces(data: AlignedData) -> list[_Piece]:
 
 
 def piece_volumes(data: AlignedData) -> list[float]:
-    """The volume of every stored piece (the divergence-theorem sum of section 13.5, in the readers' order)."""
+    """The volume of every stored piece (the divergence-theorem sum of sections 13.3-13.4, in the readers' order)."""
     return [piece.volume for piece in _pieces(data)]
 
 
@@ -281,7 +281,7 @@ def _flipped(plane):
 
 
 def _cut_piece(data: AlignedData, k: int, piece: _Piece, hit: _Hit, out: _Output, rows: dict) -> None:
-    """Piece ``k`` against the placed pattern: whole in one cell, or parts in the cells it meets (section 13.5)."""
+    """Piece ``k`` against the placed pattern: whole in one cell, or parts in the cells it meets (section 13.4)."""
     vertices, (centre, radius) = piece.polyhedron[0], (piece.centre, piece.radius)
     sites, outer = hit.sites, len(hit.sites)
     ts = [dot(plane, centre) - plane[3] for plane in hit.boundary]
@@ -363,7 +363,7 @@ def _cut_piece(data: AlignedData, k: int, piece: _Piece, hit: _Hit, out: _Output
 
 def _split_polygon(polygon: list[Corner], sites: list, cells: list[int], eps: float, out: _Output,
                    material: int) -> None:
-    """A convex polygon into the Voronoi cells of ``cells``' sites (section 13.5, step 2f).
+    """A convex polygon into the Voronoi cells of ``cells``' sites (section 13.4, step 7).
 
     When every corner has the same nearest site (the first on ties), the polygon lies in that cell. Otherwise
     with ``a`` the cell of corner 0 and ``b`` the first other corner cell, the polygon is split by their
@@ -398,7 +398,7 @@ def _triangle_rows(data: AlignedData) -> dict:
 
 def aligned_fracture(data: AlignedData, point, direction, scale: float | None = None,
                      pattern: int = 0) -> tuple[AlignedFragment, ...]:
-    """New fragments for a hit at ``point`` with an impulse along ``direction`` (docs/FORMAT.md section 13.5).
+    """New fragments for a hit at ``point`` with an impulse along ``direction`` (docs/FORMAT.md sections 13.3-13.4).
 
     Parameters
     ----------

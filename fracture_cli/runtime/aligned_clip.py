@@ -1,4 +1,4 @@
-"""Convex clipping for aligned fracture, with the exact arithmetic of docs/FORMAT.md section 13.5.
+"""Convex clipping for aligned fracture, with the exact arithmetic of docs/FORMAT.md sections 13.3-13.4.
 
 Plain Python floats (IEEE doubles), every sum and product in the order the format states, so the
 C and JavaScript readers (engines/c/fracture_aligned.c, engines/web/fracture_aligned.js), which
@@ -41,7 +41,7 @@ def smallest_axis(n) -> int:
 
 
 def plane_basis(n: Vec) -> tuple[Vec, Vec]:
-    """Unit axes ``(a, b)`` with ``a x b = n`` for a unit vector ``n`` (docs/FORMAT.md section 13.5).
+    """Unit axes ``(a, b)`` with ``a x b = n`` for a unit vector ``n`` (docs/FORMAT.md sections 13.3-13.4).
 
     ``a`` is the coordinate axis of :func:`smallest_axis` with its ``n`` component removed, normalized;
     ``b = n x a``.

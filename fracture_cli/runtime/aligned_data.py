@@ -135,7 +135,7 @@ def _offsets_problem(name: str, offsets: np.ndarray, count: int, end: int) -> st
 
 
 def check_aligned(data: AlignedData) -> str | None:
-    """Why ``data`` is not a valid aligned-fracture file (docs/FORMAT.md section 13.3), or None."""
+    """Why ``data`` is not a valid aligned-fracture file (docs/FORMAT.md section 13.2), or None."""
     a = data.arrays
     for name, (dtype, ndim, trailing) in ALIGNED_LAYOUT.items():
         array = a.get(name)

@@ -2,7 +2,8 @@
 
 A baked asset ``<stem>`` is a ``<stem>.fracture.json`` runtime file with, next to
 it, ``<stem>.fracture.bin``, the fragments ``<stem>.glb`` and optionally the
-report ``<stem>.report.json`` and the aligned-fracture pair ``<stem>.aligned.json`` + ``.bin``. The folder is re-scanned on every request, so a
+report ``<stem>.report.json`` and the aligned-fracture pair ``<stem>.aligned.json`` +
+``.bin``. The folder is re-scanned on every request, so a
 bake started in another terminal shows up (or updates) without restarting the
 server.
 """

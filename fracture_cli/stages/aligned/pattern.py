@@ -2,7 +2,7 @@
 
 A pattern is its sites (site 0 at the centre, where the hit will be) and, per cell, the cells it
 shares a face with; the runtime builds each cell's half-spaces from the placed sites
-(docs/FORMAT.md section 13.5), so it never computes a Voronoi diagram. Cells of sites on the
+(docs/FORMAT.md sections 13.3-13.4), so it never computes a Voronoi diagram. Cells of sites on the
 pattern's outside are unbounded: the pattern covers all of space.
 """
 
