@@ -9,6 +9,7 @@ which must agree with the C reader.
 
 from __future__ import annotations
 
+import json
 import os
 
 import numpy as np
@@ -137,3 +138,23 @@ def test_the_reference_and_the_javascript_reader_agree(answers, baked, c_driver)
         c_all = run_driver([c_driver], baked, hits)
         differ = [p for i, (c, j) in enumerate(zip(c_all, js_answers)) for p in compare(c, j, volume, size, f"hit {i}")]
         assert differ == []
+
+
+def test_the_pair_is_part_of_the_bake_set(tmp_path):
+    """The companion pair: written only when asked, the same bytes every time, listed in the report (outputs and
+    hashes), and removed with the publish of a bake that does not ask for it."""
+    chair = os.path.join(SAMPLE_ASSETS, "chair.glb")
+    names = ("chair.aligned.json", "chair.aligned.bin")
+    first, second = tmp_path / "a", tmp_path / "b"
+    for out in (first, second):
+        result = CliRunner().invoke(cli, ["bake", chair, "-o", str(out), *FAST, "-q"])
+        assert result.exit_code == 0, result.output
+    for name in names:
+        assert (first / name).read_bytes() == (second / name).read_bytes()
+    report = json.loads((first / "chair.report.json").read_text())
+    assert all(name in report["outputs"] and name in report["files"] for name in names)
+    result = CliRunner().invoke(cli, ["bake", chair, "-o", str(first), *FAST[:4], "-q"])
+    assert result.exit_code == 0, result.output
+    assert not any((first / name).exists() for name in names)
+    report = json.loads((first / "chair.report.json").read_text())
+    assert not any(name in report["outputs"] or name in report["files"] for name in names)

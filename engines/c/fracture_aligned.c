@@ -761,7 +761,8 @@ typedef struct work {
     int32_t vcap, fcap, lcap, ccap;
     poly buf[3];        /* base, and two to clip back and forth */
     double *dist;
-    int32_t *side, *renumber, *used, *points, *cross; /* cross: (lcap, 3) lo, hi, new index */
+    int32_t *side, *renumber, *used, *points, *cross; /* cross: (lcap, 3) hi, next record, new index */
+    int32_t *cross_head; /* (vcap,) per lower corner, its first crossing record (-1: none) */
     double *keys;       /* (vcap, 3): x, y, index */
     double *corners[2]; /* (ccap, 8) polygon corners */
     double *cdist;      /* (ccap,) */
@@ -806,6 +807,7 @@ static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, d
     if (!minus) return CLIP_EMPTY;
     int32_t nv = 0, ncross = 0;
     for (int32_t i = 0; i < src->nv; ++i) {
+        w->cross_head[i] = -1;
         if (w->side[i] <= 0) {
             w->renumber[i] = nv;
             dst->v[3 * nv] = src->v[3 * i];
@@ -828,8 +830,8 @@ static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, d
             if (w->side[a] <= 0) dst->loops[nl++] = w->renumber[a];
             if (w->side[a] * w->side[b] == -1) {
                 int32_t lo = a < b ? a : b, hi = a < b ? b : a, index = -1;
-                for (int32_t c = 0; c < ncross; ++c)
-                    if (w->cross[3 * c] == lo && w->cross[3 * c + 1] == hi) { index = w->cross[3 * c + 2]; break; }
+                for (int32_t c = w->cross_head[lo]; c >= 0; c = w->cross[3 * c + 1]) /* the crossings made at lo */
+                    if (w->cross[3 * c] == hi) { index = w->cross[3 * c + 2]; break; }
                 if (index < 0) {
                     if (nv >= w->vcap || ncross >= w->lcap) return CLIP_OVERFLOW;
                     const double *x = src->v + 3 * lo, *y = src->v + 3 * hi;
@@ -838,10 +840,10 @@ static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, d
                     dst->v[3 * nv + 1] = x[1] + (y[1] - x[1]) * t_cut;
                     dst->v[3 * nv + 2] = x[2] + (y[2] - x[2]) * t_cut;
                     index = nv++;
-                    w->cross[3 * ncross] = lo;
-                    w->cross[3 * ncross + 1] = hi;
+                    w->cross[3 * ncross] = hi;
+                    w->cross[3 * ncross + 1] = w->cross_head[lo];
                     w->cross[3 * ncross + 2] = index;
-                    ncross++;
+                    w->cross_head[lo] = ncross++;
                 }
                 dst->loops[nl++] = index;
             }
@@ -1303,7 +1305,7 @@ static size_t scratch_bytes(const fra_data *d, int32_t *vcap, int32_t *fcap, int
                         sizeof(int32_t) * (2 * (size_t)*fcap + 1 + (size_t)*lcap) + 5 * 16;
     int32_t N = d->rows[A_CELL_NEIGHBORS], S = d->max_sites;
     return 3 * poly_bytes + sizeof(double) * ((size_t)*vcap * 4 + 2 * 8 * (size_t)*ccap) +
-           sizeof(int32_t) * ((size_t)*vcap * 4 + 3 * (size_t)*lcap) + sizeof(double) * (3 * (size_t)S + (size_t)S) +
+           sizeof(int32_t) * ((size_t)*vcap * 5 + 3 * (size_t)*lcap) + sizeof(double) * (3 * (size_t)S + (size_t)S) +
            sizeof(int32_t) * 7 * (size_t)S + sizeof(double) * 4 * (size_t)N + 48 * 16 +
            split_bytes(S, d->rows[A_BOUNDARY_PLANES]) +
            sizeof(double) * (3 * 8 * (size_t)*ccap + 5 * (size_t)d->rows[A_BOUNDARY_PLANES]) + sizeof(work) +
@@ -1341,6 +1343,7 @@ static fra_status setup(const fra_data *d, int32_t q, const double *point, const
     w->used = (int32_t *)grab(a, sizeof(int32_t) * (size_t)vcap, &ok);
     w->points = (int32_t *)grab(a, sizeof(int32_t) * (size_t)vcap, &ok);
     w->cross = (int32_t *)grab(a, sizeof(int32_t) * 3 * (size_t)lcap, &ok);
+    w->cross_head = (int32_t *)grab(a, sizeof(int32_t) * (size_t)vcap, &ok);
     w->keys = (double *)grab(a, sizeof(double) * 3 * (size_t)vcap, &ok);
     w->corners[0] = (double *)grab(a, sizeof(double) * 8 * (size_t)ccap, &ok);
     w->corners[1] = (double *)grab(a, sizeof(double) * 8 * (size_t)ccap, &ok);
