@@ -95,8 +95,8 @@ def run(quick: bool = False) -> str:
     lines = [
         "## Aligned fracture (seed 001, issue 35)",
         "",
-        f"Cost per hit of `fra_fracture` (engines/c, `cc -std=c99 -O2`) and `alignedFracture` (engines/web, Node.js "
-        f"{'' if NODE else 'not installed'}) on {hits_per_asset} random surface hits per asset "
+        f"Cost per hit of `fra_fracture` (engines/c, `cc -std=c99 -O2`) and `alignedFracture` (engines/web, Node.js"
+        f"{'' if NODE else ': not installed'}) on {hits_per_asset} random surface hits per asset "
         "(tests/aligned_support.py `random_hits`: a random direction, 0.5 to 1.5 times the file's default "
         "scale, which is 0.25 of the bounding-box diagonal), one pattern; each hit repeated (C 21 times, JS "
         "5) and its median CPU time taken; then the median, 90th percentile and maximum over the hits, in "
