@@ -79,7 +79,7 @@ $(WEB_MODULES): web/package.json web/package-lock.json
 	@mkdir -p build/web && cp web/package.json web/package-lock.json build/web/
 	npm ci --silent --no-audit --no-fund --prefix build/web
 
-$(WEB_VENDOR)/BUILD.json: $(WEB_MODULES) web/build.mjs engines/web/fracture_runtime.js
+$(WEB_VENDOR)/BUILD.json: $(WEB_MODULES) web/build.mjs engines/web/fracture_runtime.js engines/web/fracture_aligned.js
 	node web/build.mjs build/web/node_modules $(WEB_VENDOR)
 
 GLTF_VALIDATOR := build/node/node_modules/gltf-validator/package.json

@@ -51,6 +51,8 @@ WRITES = {
     "fracture bake sample_assets/pillar.glb -o build/pillar -r stone_structure": ["build/pillar/pillar.fracture.json"],
     "fracture bake sample_assets/chair.glb -o build/chair-floor -r wood --set anchors.ground=true --set "
     "runtime.damage=true": ["build/chair-floor/chair.fracture.json"],
+    "fracture bake sample_assets/chair.glb -o build/chair_cut -r wood --set aligned.enabled=true": [
+        "build/chair_cut/chair.aligned.json", "build/chair_cut/chair.aligned.bin"],
 }
 
 LEFT_OUT = {
@@ -59,6 +61,7 @@ LEFT_OUT = {
     "make test": "is this test suite",
     "fracture view build/demo": "serves until Ctrl-C and opens a browser; tests/test_view_cli.py and "
                                 "tests/test_view_e2e.py run the server and its page",
+    "fracture view build/chair_cut": "serves until Ctrl-C; tests/test_view_aligned.py runs the page's cut mode",
     "fracture batch props/manifest.toml -o /shared/out --scheduler tcp://farm:8786": "needs a Dask cluster "
                                                                                        "(a scheduler at farm:8786)",
     "dask scheduler": "starts a cluster's scheduler, which runs until stopped",
@@ -120,7 +123,7 @@ def test_readme_blocks_are_found():
     commands = _commands(blocks)
     assert len(commands) >= 15 and "fracture recipes show wood" in commands
     assert any(c.startswith("dask worker") for c in commands)  # the indented block in the cluster steps
-    assert [language for _, language, _ in blocks].count("python") == 2  # In a game, Structures
+    assert [language for _, language, _ in blocks].count("python") == 3  # In a game, Structures; aligned fracture
     stale = (set(LEFT_OUT) | set(WRITES)) - set(commands)
     assert not stale, f"LEFT_OUT or WRITES name commands the README no longer shows: {sorted(stale)}"
     # A section outside GROUPS has nothing to run (a new block there needs a group, or a reason to be left out).

@@ -7,6 +7,7 @@
 //
 // The page loads these through an import map (three -> vendor/three.module.js,
 // three/addons/ -> vendor/addons/), so nothing is fetched from the internet at run time.
+// Also the aligned-fracture reader engines/web/fracture_aligned.js (the page's "cut at the click" mode).
 // Nothing here is committed: OUT_DIR is gitignored and rebuilt by `make web`.
 
 import { copyFileSync, existsSync, mkdirSync, readFileSync, renameSync, rmSync, writeFileSync } from 'node:fs';
@@ -57,6 +58,7 @@ while (queue.length) {
 }
 
 copy(join(here, '..', 'engines', 'web', 'fracture_runtime.js'), join(staging, 'fracture_runtime.js'));
+copy(join(here, '..', 'engines', 'web', 'fracture_aligned.js'), join(staging, 'fracture_aligned.js')); // aligned fracture
 const version = JSON.parse(readFileSync(join(three, 'package.json'), 'utf-8')).version;
 writeFileSync(join(staging, 'BUILD.json'), JSON.stringify({ three: version, addons: [...seen].sort() }, null, 2) + '\n');
 

@@ -90,7 +90,8 @@ REPORT_SUFFIX = ".report.json"
 #: Outputs a bake writes only when asked (``--preview``). They belong to the set all the same: published
 #: before the report and listed in it when written, removed in the same step when not (an older one
 #: would show other fragments than the files beside it).
-OPTIONAL_SUFFIXES = (".preview.png",)
+#: The aligned-fracture companion pair (docs/FORMAT.md section 13) is written only with ``aligned.enabled``.
+OPTIONAL_SUFFIXES = (".preview.png", ".aligned.bin", ".aligned.json")
 _JOURNAL = "PUBLISHING"
 _BACKUP = "previous"
 _TOKEN_RE = "[0-9a-f]{32}"

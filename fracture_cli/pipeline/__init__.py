@@ -29,8 +29,10 @@ if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help`
     from fracture_cli.checks import CheckValue
     from fracture_cli.options import StageOptions
     from fracture_cli.pipeline.cache import StageCache
+    from fracture_cli.runtime.aligned_data import AlignedData
     from fracture_cli.runtime.format import RuntimeData
     from fracture_cli.stages.anchors import AnchorOptions
+    from fracture_cli.stages.aligned.options import AlignedOptions
     from fracture_cli.stages.cage import CageOptions
     from fracture_cli.stages.collision import CollisionOptions
     from fracture_cli.stages.faults import FaultOptions
@@ -75,6 +77,7 @@ class PipelineState:
     checks: dict[str, CheckValue] | None = None  # what the report says of the fragments
     anchors: Anchors | None = None  # the fragments held by the world (none unless the recipe's [anchors] asks)
     runtime: RuntimeData | None = None
+    aligned: AlignedData | None = None  # the aligned-fracture companion file (None: the recipe did not ask)
 
     # One overload per field kind: a stage gets its input with its type (no Any on the spine).
     @overload
@@ -338,6 +341,20 @@ def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     return dataclasses.replace(state, runtime=data)
 
 
+def _aligned(state: PipelineState, options: AlignedOptions) -> PipelineState:
+    if not options.enabled:  # the default: nothing to load
+        return dataclasses.replace(state, aligned=None)
+    # on first use: `fracture --help` loads no stage
+    from fracture_cli.stages.aligned import aligned
+    from fracture_cli.stages.simplify.rebuild import uv_scale
+
+    frags = state.need("fragments", "aligned")
+    stem = os.path.splitext(os.path.basename(state.need("source", "aligned")))[0]
+    # The new faces' UVs continue the bake's box projection of its fault faces (fragments.uv_scale).
+    data = aligned(frags, state.collision, options, uv_scale=uv_scale(frags, frags.interior_slot), stem=stem)
+    return dataclasses.replace(state, aligned=data)
+
+
 STAGES: tuple[Stage, ...] = (
     Stage("load", "Read a mesh (OBJ, PLY, STL, OFF, GLB, glTF).", "fracture_cli.stages.load:LoadOptions",
           _load, consumes=("source",), produces=("loaded", "surface", "source_sha256", "source_files")),
@@ -382,6 +399,9 @@ STAGES: tuple[Stage, ...] = (
           consumes=("tet_mesh", "modes", "pieces", "fragments"),
           uses=("collision", "physics", "anchors", "surface"),
           produces=("runtime",)),
+    Stage("aligned", "Convex pieces and fracture patterns for cutting at the hit at runtime (off unless enabled).",
+          "fracture_cli.stages.aligned.options:AlignedOptions", _aligned, consumes=("fragments",),
+          uses=("collision",), produces=("aligned",)),
 )
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGES)
 # The steps a bake reports seconds for: every stage, then writing the outputs.

@@ -262,6 +262,13 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
                             collision=getattr(collision_options, "glb", "none") if state.collision else "none",
                             stem=stem, physics=state.physics)
         write_runtime(state.need("runtime", "export"), staging.file(f"{stem}.fracture.json"))
+        if state.aligned is not None:  # the companion pair, only when the recipe asks (docs/FORMAT.md section 13)
+            # on first use: keeps `fracture` start-up light
+            from fracture_cli.runtime.aligned_data import write_aligned
+
+            write_aligned(state.aligned, staging.file(f"{stem}.aligned.json"))
+            report["outputs"] = [*report["outputs"][:-1], f"{stem}.aligned.bin", f"{stem}.aligned.json",
+                                 report["outputs"][-1]]
         if preview_size is not None:
             # on first use: keeps `fracture` start-up light
             from fracture_cli.view.preview import render_preview

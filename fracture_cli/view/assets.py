@@ -2,7 +2,8 @@
 
 A baked asset ``<stem>`` is a ``<stem>.fracture.json`` runtime file with, next to
 it, ``<stem>.fracture.bin``, the fragments ``<stem>.glb`` and optionally the
-report ``<stem>.report.json``. The folder is re-scanned on every request, so a
+report ``<stem>.report.json`` and the aligned-fracture pair ``<stem>.aligned.json`` +
+``.bin``. The folder is re-scanned on every request, so a
 bake started in another terminal shows up (or updates) without restarting the
 server.
 """
@@ -18,7 +19,7 @@ from fracture_cli.errors import InputError
 
 RUNTIME_SUFFIX = ".fracture.json"
 # Every file of a bake the page may fetch, by suffix; nothing else in the folder is served.
-SERVED_SUFFIXES = (".glb", ".fracture.json", ".fracture.bin", ".report.json")
+SERVED_SUFFIXES = (".glb", ".fracture.json", ".fracture.bin", ".report.json", ".aligned.json", ".aligned.bin")
 # A bake writes its files within milliseconds; a change younger than this may be half done.
 SETTLE_SECONDS = 0.75
 

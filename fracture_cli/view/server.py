@@ -7,7 +7,7 @@ Routes (GET and HEAD only):
 * ``/api/state``: the assets of the folder, each with a version key the page
   polls to reload after a re-bake (:func:`fracture_cli.view.assets.list_assets`);
 * ``/files/<name>``: one bake output file (``.glb``, ``.fracture.json``,
-  ``.fracture.bin``, ``.report.json``) of the folder, nothing else.
+  ``.fracture.bin``, ``.report.json``, ``.aligned.json``, ``.aligned.bin``) of the folder, nothing else.
 
 The server binds to the loopback interface unless told otherwise; it only
 reads files. Two checks keep those files local:
@@ -45,7 +45,7 @@ STATIC_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "static")
 VENDOR_DIR = os.path.join(STATIC_DIR, "vendor")
 # What the page imports from vendor/; if any is missing the page cannot start.
 VENDOR_FILES = ("three.module.js", "three.core.js", "addons/controls/OrbitControls.js",
-                "addons/loaders/GLTFLoader.js", "fracture_runtime.js")
+                "addons/loaders/GLTFLoader.js", "fracture_runtime.js", "fracture_aligned.js")
 POLL_MILLISECONDS = 1000
 _TYPES = {".js": "text/javascript", ".mjs": "text/javascript", ".css": "text/css", ".html": "text/html",
           ".json": "application/json", ".glb": "model/gltf-binary", ".bin": "application/octet-stream",

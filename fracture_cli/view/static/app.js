@@ -8,9 +8,11 @@ import { loadRuntime } from './vendor/fracture_runtime.js';
 import { FragmentScene } from './scene.js';
 import { launch, poseAt, projectHit } from './hit.js';
 import { formatNumber, hitHtml, reportHtml } from './panel.js';
+import { AlignedMode } from './aligned.js'; // aligned fracture: "cut at the click" (aligned.js)
 
 const $ = (id) => document.getElementById(id);
 const scene = new FragmentScene($('canvas'));
+const aligned = new AlignedMode(scene, $('panel')); // aligned fracture (aligned.js)
 const state = {
   assets: [], stem: null, version: null, runtime: null, report: null, loading: false,
   hit: null, damage: null, flight: null, flightStart: 0, thresholdTouched: false, reloads: 0, error: null,
@@ -146,6 +148,8 @@ async function loadAsset(asset, { keepCamera = false } = {}) {
       if (response.ok) report = await response.json();
     }
     const info = await scene.load(`files/${encodeURIComponent(asset.files.glb)}${query}`, runtime.fragmentNames, { keepCamera });
+    // aligned fracture: the companion file, when the bake wrote one (aligned.js)
+    await aligned.load(asset.files['aligned.json'] ? `files/${encodeURIComponent(asset.files['aligned.json'])}` : null, query);
     const sameAsset = state.stem === asset.stem;
     Object.assign(state, { stem: asset.stem, version, runtime, report, hit: null, damage: runtime.newState(), flight: null,
       error: null });
@@ -217,6 +221,7 @@ $('asset').addEventListener('change', () => {
 
 // Back to the object as loaded: a fresh damage state, nothing moved, no cracks.
 function resetHit() {
+  aligned.reset(); // aligned fracture (aligned.js)
   Object.assign(state, { hit: null, damage: state.runtime ? state.runtime.newState() : null, flight: null });
   scene.setGroupMotion(null);
   scene.setBrokenBonds(null);
@@ -233,6 +238,10 @@ function hitAt(clientX, clientY) {
   if (!pick) return null;
   const byView = document.querySelector('input[name=direction]:checked').value === 'view';
   const direction = (byView ? pick.rayDirection : pick.normal.clone().negate()).normalize();
+  if (aligned.active) { // aligned fracture: cut the asset at the click instead (aligned.js)
+    scene.showHit(pick.point, direction, pick.point);
+    return aligned.cut(pick.point, direction);
+  }
   const magnitude = readNumber('magnitude', 1);
   const threshold = readNumber('threshold', rt.defaultThreshold);
   // Successive hits damage the object's state; otherwise each hit starts from a fresh one (which the
@@ -344,6 +353,8 @@ window.fractureTest = {
     health: Array.from(state.damage),
     lowestHealth: $('lowest-health') ? Number($('lowest-health').textContent) : null,
   }),
+  aligned: { get available() { return aligned.data !== null; }, setActive: (on) => { aligned.checkbox.checked = on; },
+    get last() { return aligned.summary(); } }, // aligned fracture (aligned.js)
 };
 
 poll();
