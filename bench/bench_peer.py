@@ -349,7 +349,8 @@ def run(quick: bool = False, assets: tuple[str, ...] | None = None, reps: int | 
     with tempfile.TemporaryDirectory(prefix="fracture-bench-peer-") as tmp:
         for asset in assets:
             results[asset] = _asset(blender, asset, reps, os.path.join(tmp, os.path.splitext(asset)[0]))
-            failures += [f"{asset}, {LABELS[kind]}: {why}" for kind, why in results[asset]["failed"].items()]
+            failures += [f"{asset}, {LABELS[kind]}: {why.replace(REPO + os.sep, '')}"  # paths as in the repository
+                         for kind, why in results[asset]["failed"].items()]
         jobs = {}
         for asset in assets:
             try:
