@@ -150,8 +150,32 @@ def _modes_rows(secs: dict[str, str]) -> list[tuple[str, str]]:
     return [("fracture modes, exact solver (s/mode by tets)", ", ".join(f"{v} at {k}" for k, v in seen.items()))]
 
 
+def _peer_rows(secs: dict[str, str]) -> list[tuple[str, str]]:
+    """Blender's Cell Fracture beside the bake (bench_peer.py): median ratios per asset, their span."""
+    body = _find(secs, "Peer:")
+    found = tables(body) if body else []
+    if len(found) < 2 or not found[0] or not found[1]:
+        return []
+
+    def medians(rows: Table, column: str) -> list[float]:  # cells "min / median"; "-" where not measured
+        return [float(r[column].split("/")[-1]) for r in rows if r[column] != "-"]
+
+    default, voronoi = found[0], found[1]
+    out = []
+    walls, cpus = medians(default, "bake / Blender (min / median)"), medians(default, "CPU ratio")
+    if walls and cpus:
+        out.append((f"default bake / Blender's Cell Fracture, same piece count, hulls and GLB (whole process, "
+                    f"{len(walls)} assets)", f"{_span(walls, '{:.1f}')}x wall, {_span(cpus, '{:.1f}')}x CPU"))
+    peer, plain = medians(voronoi, "bake / Blender"), medians(voronoi, "bake / shatter")
+    if peer and plain:
+        out.append((f"voronoi bake of 100 cells / Cell Fracture's 100 pieces with hulls ({len(peer)} assets) / "
+                    f"plain Voronoi shatter ({len(plain)})",
+                    f"{_span(peer, '{:.1f}')}x / {_span(plain, '{:.0f}')}x wall"))
+    return out
+
+
 ROWS: tuple[Callable[[dict[str, str]], list[tuple[str, str]]], ...] = (
-    _bake_rows, _recipe_rows, _assets_rows, _large_rows, _cage_rows, _modes_rows)
+    _bake_rows, _recipe_rows, _peer_rows, _assets_rows, _large_rows, _cage_rows, _modes_rows)
 
 
 def perf_table(results: str) -> str:
