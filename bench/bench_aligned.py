@@ -29,7 +29,8 @@ sys.path.insert(0, os.path.join(REPO, "tests"))
 import fracture_cli  # noqa: E402, F401, I001  (first: pins the kernels before numpy loads)
 
 from aligned_support import JS_DRIVER, NODE, compile_c_driver, random_hits, run_driver  # noqa: E402
-from fracture_cli.pipeline import STAGE_NAMES, PipelineState, Runner, stage  # noqa: E402
+from fracture_cli.pipeline import STAGE_NAMES, PipelineState, stage  # noqa: E402
+from fracture_cli.pipeline.runner import Runner  # noqa: E402
 from fracture_cli.pipeline.recipe import load_recipe  # noqa: E402
 from fracture_cli.runtime.aligned_data import write_aligned  # noqa: E402
 from fracture_cli.stages.aligned.options import AlignedOptions  # noqa: E402

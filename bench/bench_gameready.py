@@ -107,8 +107,9 @@ def _measure(fragments: Fragments) -> dict:
 def _lean(asset: str, recipe_name: str, tmp: str) -> tuple[Fragments, tuple]:
     """The pipeline up to ``simplify`` on one sample asset; its fragments and the lean-mesh row's figures."""
     from fracture_cli.io.write import write_fragments_glb
-    from fracture_cli.pipeline import STAGE_NAMES, PipelineState, Runner
+    from fracture_cli.pipeline import STAGE_NAMES, PipelineState
     from fracture_cli.pipeline.recipe import load_recipe
+    from fracture_cli.pipeline.runner import Runner
     from fracture_cli.stages.simplify import triangle_budget
 
     recipe = load_recipe(recipe_name)

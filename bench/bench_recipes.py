@@ -36,7 +36,7 @@ TARGET_RATIO = 2.0
 _BAKE_CHILD = r"""
 import json, os, resource, sys, time
 t0 = time.perf_counter()
-from fracture_cli import pipeline
+from fracture_cli.pipeline import runner as pipeline
 from fracture_cli.pipeline.bake import bake
 from fracture_cli.pipeline.recipe import load_recipe
 from fracture_cli.system import clock

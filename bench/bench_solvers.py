@@ -28,8 +28,9 @@ def chair_system():
     """The chair's field system: matrix (n, n) CSC, right-hand sides (n, p), unknowns, pieces."""
     import scipy.sparse as sp
 
-    from fracture_cli.pipeline import PipelineState, Runner
+    from fracture_cli.pipeline import PipelineState
     from fracture_cli.pipeline.recipe import load_recipe
+    from fracture_cli.pipeline.runner import Runner
     from fracture_cli.stages.smooth.field import _MIN_TET_WEIGHT, refined
 
     recipe = load_recipe("wood")

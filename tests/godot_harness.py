@@ -112,12 +112,16 @@ class GodotProject:
                 return
         assert not missing, f"Godot did not import {missing} (exit {result.returncode}):\n{result.stderr[-3000:]}"
 
-    def run_script(self, script: str, *args: str, timeout: float = 600, name: str = "run.gd") -> GodotRun:
-        """Write ``script`` (a GDScript extending SceneTree) and run it headless with ``-- args``."""
+    def run_script(self, script: str, *args: str, timeout: float = 600, name: str = "run.gd",
+                   flags: tuple[str, ...] = ()) -> GodotRun:
+        """Write ``script`` (a GDScript extending SceneTree) and run it headless with ``-- args``.
+
+        ``flags`` go to Godot before the script (e.g. ``("--fixed-fps", "60")``: every frame simulates 1/60 s).
+        """
         self.write(name, script)
         try:
             result = subprocess.run(
-                [self.godot, "--path", str(self.root), "--script", "res://" + name, "--", *args],
+                [self.godot, *flags, "--path", str(self.root), "--script", "res://" + name, "--", *args],
                 check=False,
                 capture_output=True,
                 text=True,

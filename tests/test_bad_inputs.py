@@ -104,7 +104,7 @@ def check_loaded(entry):
 def check_bonds_are_shared_faces(out: str, stem: str, meshes, interior: int, diagonal: float) -> None:
     """The runtime file bonds exactly the written fragments that share fault faces, so every group is connected."""
     from fracture_cli.runtime.format import load_runtime
-    from fracture_cli.stages.fragments.bodies import fragment_graph
+    from fracture_cli.stages.fragments.interfaces import fragment_graph
 
     data = load_runtime(os.path.join(out, stem + ".fracture.json"))
     assert list(data.fragment_names) == [m.name for m in meshes]

@@ -71,14 +71,14 @@ def test_an_import_error_raised_while_handling_ctrl_c_is_an_interrupt():
 
 
 def test_a_stage_failing_on_ctrl_c_ends_as_an_interrupt(tmp_path, monkeypatch):
-    monkeypatch.setattr("fracture_cli.pipeline.Runner.run", lambda *a, **k: interrupted_import())
+    monkeypatch.setattr("fracture_cli.pipeline.runner.Runner.run", lambda *a, **k: interrupted_import())
     assert_interrupted(CliRunner().invoke(cli, ["bake", BOX, "-o", str(tmp_path / "out")]))
 
     def dropped(*a, **k):
         interrupts.record(signal.SIGINT)
         raise ImportError("initialization failed")  # no context: the extension cleared it
 
-    monkeypatch.setattr("fracture_cli.pipeline.Runner.run", dropped)
+    monkeypatch.setattr("fracture_cli.pipeline.runner.Runner.run", dropped)
     assert_interrupted(CliRunner().invoke(cli, ["load", BOX, "repair"]))
     assert not os.path.exists(tmp_path / "out")
 
@@ -90,7 +90,7 @@ def test_keep_going_stops_on_ctrl_c(tmp_path, monkeypatch):
         calls.append(a)
         interrupted_import()
 
-    monkeypatch.setattr("fracture_cli.pipeline.Runner.run", run)
+    monkeypatch.setattr("fracture_cli.pipeline.runner.Runner.run", run)
     other = tmp_path / "other.obj"
     shutil.copy(BOX, other)
     assert_interrupted(CliRunner().invoke(cli, ["bake", BOX, str(other), "-k", "-o", str(tmp_path / "out")]))
@@ -348,7 +348,7 @@ def test_a_broken_pipe_that_is_not_stdout_is_an_error(monkeypatch):
     def broken(*a, **k):
         raise BrokenPipeError(32, "Broken pipe")
 
-    monkeypatch.setattr("fracture_cli.pipeline.Runner.run", broken)
+    monkeypatch.setattr("fracture_cli.pipeline.runner.Runner.run", broken)
     result = CliRunner().invoke(cli, ["load", BOX])
     assert result.exit_code == 1
     assert "internal error (BrokenPipeError" in result.stderr

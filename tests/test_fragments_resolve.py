@@ -11,7 +11,7 @@ import trimesh
 from fracture_cli.geometry.solids import body_groups
 from fracture_cli.geometry.weld_check import check_mesh
 from fracture_cli.stages.fragments.resolve import (
-    PINCH_GAP,
+    PINCH_GAPS,
     resolve_pinches,
     separate_pinched_vertices,
     split_at_pinches,
@@ -83,10 +83,10 @@ def test_a_body_touching_itself_at_a_vertex_is_moved_apart():
     assert moved >= 1
     after = written_check(separated.fragments[0], frags)
     assert after.closed and after.pinched_vertices == 0
-    # Each moved copy is appended, PINCH_GAP from the corner it copies (the corner both boxes share).
+    # Each moved copy is appended, the smallest of PINCH_GAPS from the corner it copies (the corner both boxes share).
     copies = separated.fragments[0].vertices[len(V):]
     assert len(copies) == moved
-    assert np.linalg.norm(copies - np.array([1.0, 1.0, 1.0]), axis=1) == pytest.approx(PINCH_GAP)
+    assert np.linalg.norm(copies - np.array([1.0, 1.0, 1.0]), axis=1) == pytest.approx(PINCH_GAPS[0])
     assert after.volume == pytest.approx(check.volume, rel=1e-4)
 
 

@@ -8,7 +8,8 @@ import trimesh
 
 from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.geometry.trigeom import edge_manifold_closed, vertex_manifold
-from fracture_cli.stages.fragments.bodies import body_faces, fragment_graph, interface_areas, split_fragments
+from fracture_cli.stages.fragments.bodies import body_faces, split_fragments
+from fracture_cli.stages.fragments.interfaces import fragment_graph, interface_areas
 from fracture_cli.types import Fragment, Fragments, Material, Normalization
 
 OUTER, INTERIOR = 0, 1

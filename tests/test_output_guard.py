@@ -57,7 +57,7 @@ def refused(args: list[str], *paths, folders=()) -> str:
 @pytest.fixture
 def no_work(monkeypatch):
     """Fail the test if any stage starts: the guard refuses before any work."""
-    monkeypatch.setattr("fracture_cli.pipeline.Runner.run", lambda *a, **k: pytest.fail("a stage ran"))
+    monkeypatch.setattr("fracture_cli.pipeline.runner.Runner.run", lambda *a, **k: pytest.fail("a stage ran"))
 
 
 @pytest.fixture

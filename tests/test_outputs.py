@@ -637,8 +637,9 @@ def test_chain_save_and_export_never_replace_their_input(tmp_path):
     result = CliRunner().invoke(cli, ["load", str(glb), "save", str(glb)])
     assert result.exit_code == 1
     assert_one_line(result, "prop.glb", "which this command reads")
-    from fracture_cli.pipeline import PipelineState, Runner
+    from fracture_cli.pipeline import PipelineState
     from fracture_cli.pipeline.bake import write_outputs
+    from fracture_cli.pipeline.runner import Runner
 
     with pytest.raises(OutputError, match="which this command reads"):  # the chain's `export` step
         write_outputs(str(tmp_path), "prop", PipelineState(source=str(glb)), {}, Runner("t"))

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli.pipeline import PipelineState, Runner
+from fracture_cli.pipeline import PipelineState
 from fracture_cli.pipeline.bake import bake
 from fracture_cli.pipeline.recipe import load_recipe
+from fracture_cli.pipeline.runner import Runner
 from fracture_cli.runtime.format import load_runtime
 from fracture_cli.runtime.impact import project_impact
 from fracture_cli.stages.pattern import PatternOptions, pattern

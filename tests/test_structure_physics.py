@@ -11,85 +11,34 @@ breaks through after as many hits as stone's crack level and damage rate allow (
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 import pytest
 import trimesh
+from structure_support import (
+    BREAK_SPEED,
+    HARD,
+    bake_pillar,
+    breaking_magnitude,
+    fragment_meshes,
+    mid_height_hit,
+    struck_fragment,
+)
 
 from fracture_cli.geometry.mass import principal_axes, quaternion_xyzw
-from fracture_cli.pipeline.bake import bake
-from fracture_cli.pipeline.recipe import load_recipe
 from fracture_cli.runtime.damage import hit, new_state
-from fracture_cli.runtime.format import RuntimeData, load_runtime
+from fracture_cli.runtime.format import RuntimeData
 from fracture_cli.runtime.impact import ImpactResult, project_impact
 
-from conftest import SAMPLE_ASSETS
-
-# A coarser cage, faults as cut and at most four parts per fragment: a few seconds, and the same structure
-# (a base of anchored fragments, a shaft, a capital).
-FAST = ["cage.target_faces=600", "simplify.tolerance=0", "collision.max_parts=4"]
 DENSITY = 2400.0  # kg/m^3, stone; the pillar is in metres, +Y up
 GRAVITY = 9.81
 STEP = 1.0 / 240.0  # Bullet's default step
 SECONDS = 2.0
-# The game's one factor per material (docs/FORMAT.md section 5): a hit that just frees a piece leaves it at
-# this speed. Only this calibration turns the runtime file's impulse unit into newton-seconds.
-BREAK_SPEED = 1.0  # m/s
-# The hard hit is this many times the impulse that just breaks through: four times 0.92, so a quarter of it
-# loads every bond that held the struck piece to at least 0.92 of its strength (above stone's crack level,
-# and below the strength, so no single quarter hit breaks through).
-HARD = 4.0 * 0.92
 
 
 @pytest.fixture(scope="module")
 def pillar(tmp_path_factory) -> tuple[str, RuntimeData]:
-    out = tmp_path_factory.mktemp("pillar")
-    bake(os.path.join(SAMPLE_ASSETS, "pillar.glb"), str(out), load_recipe("stone_structure", FAST))
-    return str(out / "pillar"), load_runtime(str(out / "pillar.fracture.json"))
-
-
-def _fragment_meshes(stem: str, data: RuntimeData) -> dict[str, trimesh.Trimesh]:
-    """Every fragment of the GLB as one mesh in model space, by node name (trimesh splits primitives)."""
-    scene = trimesh.load(stem + ".glb")
-    parents = scene.graph.transforms.parents
-    found: dict[str, list[trimesh.Trimesh]] = {}
-    for node in scene.graph.nodes_geometry:
-        transform, geometry = scene.graph[node]
-        owner = node
-        while owner not in data.fragment_names and owner in parents:
-            owner = parents[owner]
-        if owner in data.fragment_names:
-            found.setdefault(owner, []).append(scene.geometry[geometry].copy().apply_transform(transform))
-    return {name: trimesh.util.concatenate(parts) for name, parts in found.items()}
-
-
-def _mid_height_hit(data: RuntimeData) -> tuple[np.ndarray, np.ndarray]:
-    """The contact site at mid-height on the +X side, and a unit direction into the pillar (-X)."""
-    sites = np.asarray(data.sites, dtype=np.float64)
-    middle = (sites[:, 1].min() + sites[:, 1].max()) / 2.0
-    near = np.flatnonzero(np.abs(sites[:, 1] - middle) < 0.05 * np.ptp(sites[:, 1]))
-    return sites[near[np.argmax(sites[near, 0])]], np.array([-1.0, 0.0, 0.0])
-
-
-def _struck(meshes: dict[str, trimesh.Trimesh], data: RuntimeData, point: np.ndarray) -> int:
-    """The fragment whose surface is nearest to ``point`` (the one the hit lands on)."""
-    nearest = [float(np.linalg.norm(meshes[name].vertices - point, axis=1).min()) for name in data.fragment_names]
-    return int(np.argmin(nearest))
-
-
-def _breaking_magnitude(data: RuntimeData, point, direction, struck: int) -> float:
-    """The least impulse (runtime units) whose stateless hit frees the struck fragment from the world."""
-    lo, hi = 0.0, 1.0
-    while project_impact(data, point, direction * hi).anchored[struck]:
-        lo, hi = hi, hi * 2.0
-    for _ in range(60):
-        middle = (lo + hi) / 2.0
-        if project_impact(data, point, direction * middle).anchored[struck]:
-            lo = middle
-        else:
-            hi = middle
-    return hi
+    return bake_pillar(tmp_path_factory.mktemp("pillar"))
 
 
 def test_pillar_is_anchored_at_its_base_and_carries_damage_and_cracks(pillar):
@@ -110,11 +59,11 @@ def test_pillar_falls_where_it_is_broken_and_its_base_stays(pillar, tmp_path):
     pybullet = pytest.importorskip("pybullet", reason="needs pybullet (pip install -e '.[test]', or pip install "
                                                       "pybullet) for the physics test")
     stem, data = pillar
-    meshes = _fragment_meshes(stem, data)
+    meshes = fragment_meshes(stem, data)
     assert sorted(meshes) == sorted(data.fragment_names)
-    point, direction = _mid_height_hit(data)
-    struck = _struck(meshes, data, point)
-    breaking = _breaking_magnitude(data, point, direction, struck)
+    point, direction = mid_height_hit(data)
+    struck = struck_fragment(meshes, data, point)
+    breaking = breaking_magnitude(data, point, direction, struck)
     magnitude = HARD * breaking
     result = project_impact(data, point, direction * magnitude)
     assert not result.anchored[struck] and np.all(result.anchored[np.asarray(data.anchored) == 1])
@@ -145,10 +94,10 @@ def test_pillar_falls_where_it_is_broken_and_its_base_stays(pillar, tmp_path):
 
 def test_quarter_hits_crack_first_and_break_through_within_the_bound(pillar):
     stem, data = pillar
-    meshes = _fragment_meshes(stem, data)
-    point, direction = _mid_height_hit(data)
-    struck = _struck(meshes, data, point)
-    breaking = _breaking_magnitude(data, point, direction, struck)
+    meshes = fragment_meshes(stem, data)
+    point, direction = mid_height_hit(data)
+    struck = struck_fragment(meshes, data, point)
+    breaking = breaking_magnitude(data, point, direction, struck)
     light = direction * HARD * breaking / 4.0
     c, r = data.damage["crack_level"], data.damage["damage_rate"]
     q = r / (1.0 - c)

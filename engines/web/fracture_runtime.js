@@ -227,7 +227,7 @@ function expectedShapes(h) {
   const { sites: s, modes: k, fragments: p, edges: e } = h.counts;
   const d = h.dim;
   const nnz = h.counts.site_bonds;
-  // The number of crack segments is the array's own (counts.crack_segments is optional).
+  // The number of crack segments is the array's own (counts.crack_segments must then agree with it).
   const segments = h.arrays.crack_segments;
   const n = segments && Array.isArray(segments.shape) ? segments.shape[0] : -1;
   return { sites: [s, 3], B: [s, k, d], W: [k, p, d], edges: [e, 2], edge_areas: [e],
@@ -348,7 +348,8 @@ function readStructure(h, arrays, view, shapes) {
   for (let m = 1; ok && m < ptr.length; m++) ok = ptr[m] >= ptr[m - 1];
   if (!ok) fail(`crack_ptr must start at 0, never decrease and end at ${n}`);
   const count = h.counts.crack_segments;
-  if (count !== undefined && count !== n) fail(`counts.crack_segments is ${JSON.stringify(count)} but crack_segments has ${n}`);
+  // Present with the crack arrays, as counts.collision_parts with the game-ready arrays (docs/FORMAT.md 12.1).
+  if (count !== n) fail(`counts.crack_segments is ${JSON.stringify(count)} but crack_segments has ${n}`);
 }
 
 /**

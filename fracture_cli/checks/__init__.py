@@ -29,6 +29,7 @@ CheckValue = float | int | bool
 # A bake fails when the fragments' volumes differ from the input solid's by more than this fraction
 # (they are exact booleans of it: the error is rounding, ~1e-9, plus zero-volume slivers dropped).
 VOLUME_TOLERANCE = 1e-5
+FLOAT32_HALF_STEP = 5.9604644775390625e-08  # 2**-24: float32 rounds to within this relative error
 
 
 def written_fragments(fragments: Fragments, pivot: str = "center_of_mass") -> tuple[Fragments, list[MeshCheck]]:
@@ -178,7 +179,7 @@ def volume_tolerance(fragments: Fragments) -> float:
         centre = 0.5 * (frag.vertices.min(axis=0) + frag.vertices.max(axis=0))
         extent = float(np.abs(frag.vertices - centre).max()) * 2.0  # the pivot lies inside the fragment's box
         area = float(triangle_areas(frag.vertices, frag.faces).sum())
-        bound += area * np.sqrt(3.0) * 2.0**-24 * extent
+        bound += area * np.sqrt(3.0) * FLOAT32_HALF_STEP * extent
     return max(VOLUME_TOLERANCE, 2.0 * bound / fragments.input_volume) if fragments.input_volume > 0 else \
         VOLUME_TOLERANCE
 

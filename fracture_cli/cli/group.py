@@ -4,7 +4,7 @@ Commands only parse options and call the library. The chained stage commands
 are generated from :data:`fracture_cli.pipeline.STAGES` (click's imagepipe
 pattern: each returns a processor, :func:`run_chain` threads one
 :class:`~fracture_cli.pipeline.PipelineState` through them with one
-:class:`~fracture_cli.pipeline.Runner`), and their flags from the stages'
+:class:`~fracture_cli.pipeline.runner.Runner`), and their flags from the stages'
 option dataclasses with the active recipe's values as defaults. The console
 script's entry point, :func:`fracture_cli.cli.main`, imports this module after
 installing its Ctrl-C handling (:mod:`fracture_cli.system.interrupts`).
@@ -27,7 +27,8 @@ import click
 from fracture_cli import __version__
 from fracture_cli.cli.options import build_options, configure_output, hoist_global_flags, stage_options, toml_text
 from fracture_cli.errors import EXIT_FAILURE, FractureError, exit_code_for
-from fracture_cli.pipeline import STAGE_NAMES, PipelineState, Runner, stage
+from fracture_cli.pipeline import STAGE_NAMES, PipelineState, stage
+from fracture_cli.pipeline.runner import Runner
 from fracture_cli.system import progress
 from fracture_cli.system.interrupts import EXIT_INTERRUPTED, caused_by_interrupt
 from fracture_cli.system.parallel import available_cores

@@ -4,7 +4,7 @@ One :class:`~fracture_cli.geometry.trigeom.BoxGrid` over boxes of mixed size nee
 cell about the size of the small ones, and every large box is then entered in
 every cell it covers: the fragments of the 1M-triangle bench input (tiny
 surface triangles, fault triangles across the whole fragment) put 45M entries
-in the grid of :func:`~fracture_cli.stages.fragments.bodies.coincident_faces`
+in the grid of :func:`~fracture_cli.stages.fragments.interfaces.coincident_faces`
 (3 GB of keys and temporaries, half a minute to build and query).
 :class:`LevelGrid` sorts the boxes into classes by extent, each class on a grid
 whose cells are about its size, so no box covers more than a few cells per

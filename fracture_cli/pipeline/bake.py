@@ -34,9 +34,10 @@ from fracture_cli.io.inputs import estimate_output_bytes, input_files
 from fracture_cli.io.outputs import output_set
 from fracture_cli.io.preflight import check_inputs_untouched, guard_outputs, preflight
 from fracture_cli.io.write import fragment_name
-from fracture_cli.pipeline import STAGE_NAMES, STEPS, PipelineState, Runner
+from fracture_cli.pipeline import STAGE_NAMES, STEPS, PipelineState
 from fracture_cli.pipeline.cache import file_sha256
 from fracture_cli.pipeline.recipe import Recipe
+from fracture_cli.pipeline.runner import Runner
 from fracture_cli.system import numeric_env
 from fracture_cli.system.interrupts import caused_by_interrupt
 from fracture_cli.types import Fragments

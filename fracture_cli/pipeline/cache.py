@@ -5,7 +5,7 @@ table marks ``cached``, keyed by a hash of everything it depends on: the tool
 version, every byte of the input (the asset and its companion files: glTF
 buffers and images, OBJ material libraries and textures; :func:`input_digest`)
 and the options of every stage up to and
-including that one (:class:`~fracture_cli.pipeline.Runner` chains the keys). A
+including that one (:class:`~fracture_cli.pipeline.runner.Runner` chains the keys). A
 bake that only changes later options (smoothing, fragments, runtime) then skips
 the cage search and the modes solve. Entries are written atomically; an
 unreadable entry is reported and recomputed, never trusted. The cache only

@@ -112,7 +112,7 @@ def runtime(tet_mesh: TetMesh, modes: Modes, pieces: Pieces, options: RuntimeOpt
     fragment_graph : ((e, 2) int, (e,) float), optional
         Bonds between fragments measured on their meshes (pairs ``P < Q`` in
         the fragments' order, sorted; shared fault area in normalized units
-        squared, see :func:`fracture_cli.stages.fragments.bodies.fragment_graph`).
+        squared, see :func:`fracture_cli.stages.fragments.interfaces.fragment_graph`).
         Default: the piece graph mapped to the fragments, which may bond
         fragments that touch only outside the input.
 

@@ -9,7 +9,7 @@ shared at fork time, never on which worker ran it or when, so the outputs are
 byte-identical to a serial run (tests/test_parallel.py bakes both ways).
 
 :func:`using` sets the number of jobs for everything run inside it (the
-pipeline's :class:`~fracture_cli.pipeline.Runner` does this per stage) and
+pipeline's :class:`~fracture_cli.pipeline.runner.Runner` does this per stage) and
 limits BLAS (OpenBLAS, MKL) to one thread meanwhile: the bake's own workers
 use the cores, a BLAS worker thread on top would only oversubscribe them
 (``make -j2 assets``, several bakes at once), and a reduction split over a

@@ -32,7 +32,7 @@ from fracture_cli.geometry.hulls import (
 from fracture_cli.geometry.mass import MassProperties, mass_properties
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.geometry.trigeom import cross3
-from fracture_cli.stages.fragments.bodies import INTERFACE_TOLERANCE, coincident_faces
+from fracture_cli.stages.fragments.interfaces import INTERFACE_TOLERANCE, coincident_faces
 from fracture_cli.system import detmath, parallel
 
 # A closed mesh: vertices (n, 3), faces (m, 3).

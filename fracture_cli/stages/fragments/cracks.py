@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from fracture_cli.geometry.rows import unique_rows
-from fracture_cli.stages.fragments.bodies import coincident_faces
+from fracture_cli.stages.fragments.interfaces import coincident_faces
 from fracture_cli.types import Fragments
 
 

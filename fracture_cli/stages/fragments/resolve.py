@@ -159,10 +159,12 @@ def _check_one(fragments: Fragments, index: int) -> MeshCheck:
     return written_check(fragments.fragments[index], fragments)
 
 
-# How far a fan's copy of a pinched vertex moves into its own material (fraction of the bounding-box diagonal):
-# about 80 float32 steps of a fragment's pivot-relative coordinates, so the copies stay apart as written, and far
-# below any modelled feature (the volume changes by this times the fan's area, ~1e-9 of the asset).
-PINCH_GAP = 1e-5
+# How far a fan's copy of a pinched vertex moves into its own material (fractions of the bounding-box diagonal),
+# smallest first: 1e-6 is about 8 float32 steps of a fragment's pivot-relative coordinates, so the copies stay
+# apart as written, far below any modelled feature; the fragment loses a third of this times the fan's area of
+# volume (1.8e-6 of a box cut by three coarse profiles at 1e-5, over issue 32's 1e-6 volume target), so the
+# larger gap is only taken where float32 storage would merge the smaller one.
+PINCH_GAPS = (1e-6, 1e-5)
 
 
 def separate_pinched_vertices(fragments: Fragments) -> tuple[Fragments, int]:
@@ -179,7 +181,8 @@ def separate_pinched_vertices(fragments: Fragments) -> tuple[Fragments, int]:
         every vertex of a fragment whose faces form several fans (cones of one
         body meeting at a point, as a region of the cut can touch itself), the
         second and later fans get their own copy of the vertex, moved by
-        :data:`PINCH_GAP` into the fan's own material (against its faces' mean
+        the first of :data:`PINCH_GAPS` that keeps the copies apart as written into the fan's
+        own material (against its faces' mean
         normal). A fragment the move would not leave closed and free of
         pinched vertices, as written, keeps its vertex.
     moved : int
@@ -189,7 +192,7 @@ def separate_pinched_vertices(fragments: Fragments) -> tuple[Fragments, int]:
     -----
     Moving into the fan's own material only shrinks that fragment there, so
     no fragment comes to overlap another; its neighbours keep their faces
-    (a gap of :data:`PINCH_GAP` at a point). Run after the faults are
+    (a gap of :data:`PINCH_GAPS` at a point). Run after the faults are
     simplified: the simplify stage welds the fragments into one complex and
     wants both sides of a fault to coincide.
     """
@@ -200,10 +203,12 @@ def separate_pinched_vertices(fragments: Fragments) -> tuple[Fragments, int]:
     out = list(fragments.fragments)
     moved = 0
     for i in pinched:
-        frag, count = _separate(out[i], fragments)
-        if count and _separated(written_check(frag, fragments)):
-            out[i] = frag
-            moved += count
+        for gap in PINCH_GAPS:
+            frag, count = _separate(out[i], fragments, gap)
+            if count and _separated(written_check(frag, fragments)):
+                out[i] = frag
+                moved += count
+                break
     return dataclasses.replace(fragments, fragments=tuple(out)), moved
 
 
@@ -211,7 +216,7 @@ def _separated(check: MeshCheck) -> bool:
     return check.closed and check.pinched_vertices == 0
 
 
-def _separate(frag: Fragment, fragments: Fragments) -> tuple[Fragment, int]:
+def _separate(frag: Fragment, fragments: Fragments, gap: float) -> tuple[Fragment, int]:
     """``frag`` with each pinched vertex's later fans moved into their material (:func:`separate_pinched_vertices`)."""
     stored = _stored(frag, fragments)
     _, index = weld_by_position(stored)
@@ -241,7 +246,7 @@ def _separate(frag: Fragment, fragments: Fragments) -> tuple[Fragment, int]:
         if length == 0.0:
             continue
         source = faces[corners[0]]
-        vertices.append(V[source][None] + PINCH_GAP * inward / length)
+        vertices.append(V[source][None] + gap * inward / length)
         normals.append(frag.normals[source][None])
         if uvs is not None and frag.uvs is not None:
             uvs.append(frag.uvs[source][None])

@@ -245,7 +245,10 @@ func hit(world_point: Vector3, world_impulse: Vector3, body: PhysicsBody = null,
 
 # Split body `index` into `pieces` (from _split(): the largest first). A static body keeps its largest
 # anchored piece (without anchors: its largest piece); every other piece gets a new body: a StaticBody
-# when anchored, else a RigidBody, and the free ones share `impulse` at `world_point`.
+# when anchored, else a RigidBody whose origin is the piece's centre of mass (Godot 3 turns a RigidBody
+# about its origin; each fragment node's origin is its centre of mass, docs/FORMAT.md section 10).
+# `impulse` at `world_point` goes to the free piece that was struck (the one nearest the point); when
+# the struck piece stays held, the free ones share it.
 func _break_body(index: int, pieces: Array, anchored: Array, world_point: Vector3, impulse: Vector3) -> Array:
 	var target: PhysicsBody = _bodies[index]
 	var model_frame: Transform = target.global_transform * _model_to_body[index]
@@ -259,6 +262,8 @@ func _break_body(index: int, pieces: Array, anchored: Array, world_point: Vector
 	for k in range(pieces.size()):
 		if k != keep and anchored[pieces[k][0]] == 0:
 			free += 1
+	var struck := _nearest_piece(pieces, model_frame.affine_inverse().xform(world_point))
+	var struck_free: bool = struck != keep and anchored[pieces[struck][0]] == 0
 	var out := []
 	for k in range(pieces.size()):
 		if k == keep:
@@ -267,9 +272,13 @@ func _break_body(index: int, pieces: Array, anchored: Array, world_point: Vector
 		var held: bool = anchored[pieces[k][0]] == 1
 		var piece_body: PhysicsBody = StaticBody.new() if held else RigidBody.new()
 		piece_body.name = "piece_%d" % _bodies.size()
-		_add_body(piece_body, target.global_transform, model_frame, pieces[k])
-		if not held and impulse != Vector3.ZERO:
-			piece_body.apply_impulse(world_point - piece_body.global_transform.origin, impulse / float(free))
+		var at: Transform = target.global_transform
+		if not held:
+			at = model_frame * Transform(Basis(), _centre_of(pieces[k]))
+		_add_body(piece_body, at, model_frame, pieces[k])
+		if not held and impulse != Vector3.ZERO and (k == struck or not struck_free):
+			var share: Vector3 = impulse if struck_free else impulse / float(free)
+			piece_body.apply_impulse(world_point - piece_body.global_transform.origin, share)
 		out.append(piece_body)
 	if target is RigidBody:
 		var volume := 0.0
@@ -277,6 +286,33 @@ func _break_body(index: int, pieces: Array, anchored: Array, world_point: Vector
 			volume += _volumes[j]
 		target.mass = max(volume * density, 0.001)
 	return out
+
+
+# Centre of mass of `members` in the model frame: their nodes' origins (each a fragment's centre of mass)
+# weighted by the fragments' volumes (bounding boxes, as the masses).
+func _centre_of(members: Array) -> Vector3:
+	var sum := Vector3.ZERO
+	var weight := 0.0
+	for j in members:
+		sum += _rest[j].origin * _volumes[j]
+		weight += _volumes[j]
+	return sum / weight if weight > 0.0 else _rest[members[0]].origin
+
+
+# The piece (index into `pieces`) holding the fragment nearest `point` (model frame): the smallest distance
+# from the point to a fragment mesh's bounding box, then to the box's centre (a point inside several boxes).
+func _nearest_piece(pieces: Array, point: Vector3) -> int:
+	var best := 0
+	var best_key := [INF, INF]
+	for k in range(pieces.size()):
+		for j in pieces[k]:
+			var box: AABB = _rest[j].xform(_meshes[j].get_aabb())
+			var outside: Vector3 = (box.position - point).abs() + (point - box.end).abs() - box.size
+			var key := [max(outside.length() * 0.5, 0.0), point.distance_to(box.position + box.size * 0.5)]
+			if key[0] < best_key[0] or (key[0] == best_key[0] and key[1] < best_key[1]):
+				best_key = key
+				best = k
+	return best
 
 
 # Lines along the crack segments of every cracked bond, in the body that holds the bond (a cracked bond

@@ -439,7 +439,8 @@ func _check_structure(top: Dictionary, table: Dictionary, counts: Dictionary, pe
 	var n: int = segment_shape[0]
 	if ptr_shape[0] != e + 1 or segment_shape[1] != 2 or segment_shape[2] != 3:
 		return _fail("crack arrays must be crack_ptr (e + 1) and crack_segments (n, 2, 3)")
-	if counts.has("crack_segments") and _integer(counts.get("crack_segments")) != n:
+	# Present with the crack arrays, as counts.collision_parts with the game-ready arrays (FORMAT.md 12.1).
+	if not counts.has("crack_segments") or _integer(counts.get("crack_segments")) != n:
 		return _fail("header counts.crack_segments does not match the arrays")
 	var ptr = _read_entry(peer, table, CRACK_PTR)
 	if ptr[0] != 0 or ptr[e] != n:
