@@ -28,8 +28,8 @@ import fracture_cli  # noqa: E402, F401, I001  (first: pins the kernels before n
 from fracture_cli.atlas import run_atlas  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-COLUMNS = ("hit_detached", "locality_2x", "locality_8x", "first_break_splits", "graded_median", "b0_median",
-           "d1_median")
+COLUMNS = ("hit_detached", "hit_on_largest", "hit_detached_others", "locality_2x", "locality_8x",
+           "first_break_splits", "graded_median", "b0_median", "d1_median")
 
 
 def _bake(asset: str, recipe: str, out: str, overrides: list[str]) -> tuple[str, dict]:
@@ -48,7 +48,7 @@ def _bake(asset: str, recipe: str, out: str, overrides: list[str]) -> tuple[str,
 def _cell(value, key: str) -> str:
     if value is None:
         return "inf" if key.startswith("graded") else "-"
-    if key in ("hit_detached", "first_break_splits"):
+    if key in ("hit_detached", "hit_on_largest", "hit_detached_others", "first_break_splits"):
         return f"{100 * value:.0f}%"
     return f"{value:.3g}"
 

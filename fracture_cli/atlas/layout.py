@@ -18,6 +18,12 @@ A fragment's *centroid* is its centre of mass (not its mean vertex: a fragment's
 mesh can be dense in one corner); the asset's centre is the volume-weighted
 mean of the fragments' centres (its centre of mass), or the mean of the contact
 sites without positions.
+
+The fragment a hit lands on (:meth:`FragmentLayout.hit_fragment`) is the one a
+game's collider reports: the fragment whose convex collision parts (the
+game-ready arrays) lie nearest the hit point. Where a file has no parts, it is
+the fragment whose centroid is nearest (the hit may then be attributed to a
+smaller neighbour whose centre lies closer than the centre of the fragment hit).
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli.atlas.hits import nearest_fragment
 from fracture_cli.runtime.format import RuntimeData
 
 log = logging.getLogger(__name__)
@@ -50,6 +57,21 @@ class FragmentLayout:
     volumes: np.ndarray
     centroids: np.ndarray | None
     source: str
+    part_planes: tuple[tuple[np.ndarray, ...], ...] | None = None
+
+    def hit_fragment(self, point: np.ndarray) -> int | None:
+        """The fragment (index) a hit at ``point`` (3,) lands on (module docstring); None without positions.
+
+        With collision parts: the smallest over a fragment's parts of the part's largest plane value
+        ``n . x + c`` (0 on the part's surface, negative inside, outside a lower bound of the distance);
+        ties by the smallest index.
+        """
+        if self.part_planes is None:
+            return None if self.centroids is None else nearest_fragment(self.centroids, point)
+        x = np.append(np.asarray(point, dtype=np.float64), 1.0)
+        values = [min((float((planes @ x).max()) for planes in parts), default=np.inf)
+                  for parts in self.part_planes]
+        return int(np.argmin(values))
 
     def asset_center(self, data: RuntimeData) -> np.ndarray:
         """The asset's centre (3,): volume-weighted mean of the centroids, else the mean contact site."""
@@ -76,12 +98,38 @@ def fragment_layout(data: RuntimeData, glb_path: str | os.PathLike | None = None
     if data.gameready:
         return FragmentLayout(volumes=np.asarray(data.gameready["fragment_volume"], dtype=np.float64),
                               centroids=np.asarray(data.gameready["fragment_center_of_mass"], dtype=np.float64),
-                              source="gameready")
+                              source="gameready", part_planes=_part_planes(data.gameready, data.p))
     if glb_path is not None and os.path.exists(glb_path):
         layout = _layout_from_glb(data, os.fspath(glb_path))
         if layout is not None:
             return layout
     return FragmentLayout(volumes=np.ones(data.p), centroids=None, source="none")
+
+
+def _part_planes(gameready: dict[str, np.ndarray], p: int) -> tuple[tuple[np.ndarray, ...], ...] | None:
+    """Per fragment, each convex part's face planes ``(m, 4)``: rows ``(n, c)``, unit ``n``, inside ``n . x + c <= 0``.
+
+    None when a fragment has no parts (the hit fragment then falls back to centroids).
+    """
+    # on first use: only the atlas needs hulls of the runtime file's parts
+    from scipy.spatial import ConvexHull, QhullError
+
+    vertices = np.asarray(gameready["collision_vertices"], dtype=np.float64)
+    part_ptr = np.asarray(gameready["collision_part_offsets"], dtype=np.int64)
+    fragment_ptr = np.asarray(gameready["collision_fragment_offsets"], dtype=np.int64)
+    out = []
+    for j in range(p):
+        parts = []
+        for i in range(int(fragment_ptr[j]), int(fragment_ptr[j + 1])):
+            try:
+                hull = ConvexHull(vertices[part_ptr[i]:part_ptr[i + 1]])
+            except QhullError:  # a flat part: it holds no volume, so no hit lands inside it
+                continue
+            parts.append(hull.equations)
+        if not parts:
+            return None
+        out.append(tuple(parts))
+    return tuple(out)
 
 
 def _layout_from_glb(data: RuntimeData, glb_path: str) -> FragmentLayout | None:

@@ -16,7 +16,11 @@ Figures (keys of the JSON summary; ``None`` when no hit qualifies or the file
 has no fragment positions):
 
 * ``hit_detached``: share of the detaching hits (``d1`` finite) whose hit fragment
+  (the fragment the hit lands on, :meth:`~fracture_cli.atlas.layout.FragmentLayout.hit_fragment`)
   is detached just above the first detachment, at ``d1 * (1 + 1e-9)``;
+* ``hit_on_largest``: share of those hits that land on the largest fragment (by volume), which can
+  only count as detached when the rest of the object comes off it as one lighter group
+  (docs/notes/breaking-analysis.md); ``hit_detached_others``: ``hit_detached`` over the other hits;
 * ``locality_2x``, ``locality_8x``: at ``M = 2 * b0`` (``8 * b0``), per hit that
   detaches something at ``M``: the mean over the detached fragments of
   ``|hit - centroid|`` divided by the mean of ``|hit - centroid|`` over all
@@ -46,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli.atlas.criterion import BreakingImpulses, modes_breaking_impulses
-from fracture_cli.atlas.hits import HitAnalysis, analyse_hit, detached, groups_at, nearest_fragment, rest_groups
+from fracture_cli.atlas.hits import HitAnalysis, analyse_hit, detached, groups_at, rest_groups
 from fracture_cli.atlas.layout import FragmentLayout
 from fracture_cli.runtime.format import RuntimeData
 
@@ -64,6 +68,8 @@ class AtlasFigures:
     breaking_hits: int
     detaching_hits: int
     hit_detached: float | None
+    hit_on_largest: float | None
+    hit_detached_others: float | None
     locality_2x: float | None
     locality_2x_median: float | None
     locality_2x_hits: int
@@ -167,11 +173,14 @@ def atlas_figures(data: RuntimeData, layout: FragmentLayout, hits: tuple[HitAnal
     threshold = float(data.default_threshold)
     breaking = [h for h in hits if np.isfinite(h.b0)]
     detaching = [h for h in hits if np.isfinite(h.d1)]
-    hit_flags = []
+    hit_flags, on_largest = [], []
+    largest = int(np.argmax(layout.volumes))
     if layout.centroids is not None:
         for h in detaching:
             gone = detached(groups_at(data, h, just_above(h.d1)), rest, layout.volumes)
-            hit_flags.append(bool(gone[nearest_fragment(layout.centroids, h.point)]))
+            struck = layout.hit_fragment(h.point)
+            hit_flags.append(bool(gone[struck]))
+            on_largest.append(struck == largest)
     localities: dict[float, list[float]] = {}
     for factor in LOCALITY_FACTORS:
         values = [locality(data, layout, h, factor * h.b0, rest) for h in breaking]
@@ -180,7 +189,8 @@ def atlas_figures(data: RuntimeData, layout: FragmentLayout, hits: tuple[HitAnal
     per_threshold = threshold > 0.0
     return AtlasFigures(
         hits=len(hits), breaking_hits=len(breaking), detaching_hits=len(detaching),
-        hit_detached=_share(hit_flags),
+        hit_detached=_share(hit_flags), hit_on_largest=_share(on_largest),
+        hit_detached_others=_share([flag for flag, big in zip(hit_flags, on_largest) if not big]),
         locality_2x=_mean(localities[2.0]), locality_2x_median=quantile(localities[2.0], 0.5),
         locality_2x_hits=len(localities[2.0]),
         locality_8x=_mean(localities[8.0]), locality_8x_median=quantile(localities[8.0], 0.5),
