@@ -80,6 +80,7 @@ WELD = 1e-6
 
 # A body or an intersection holding less than this fraction of its reference volume is rounding, not material:
 # a zero-volume shell where faces of an exact boolean coincide, two bodies touching along a face, a piece that
-# sampled none of the asset. The reference is the input solid's volume, or the smaller body's where two are
-# compared (and, in repair, before the input has a volume, the unit diagonal's cube).
+# sampled none of the asset. The reference is the input solid's volume, the smaller body's where two are
+# compared, or the cube of the bounding-box diagonal where no volume is known yet (repair's bodies, the patches of
+# a fragment).
 SLIVER_VOLUME = 1e-9

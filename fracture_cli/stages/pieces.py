@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.edges import components, renumber_by_first
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.options import option
@@ -41,8 +42,6 @@ class PiecesOptions:
                                        "cage's")}
 
 
-# A piece holding less than this fraction of the asset holds none of it (sampling noise).
-_EMPTY = 1e-9
 # Barycentric lattice order of the points sampled in each tet to estimate how much of it is asset material.
 _SAMPLE_ORDER = 3
 
@@ -135,7 +134,7 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
 
     held = volumes_t if surface is None else volumes_t * tet_material_fraction(tet_mesh, surface)
     tet_piece = _merge_small(tet_piece, face_tets, tet_mesh.interior_face_areas, held,
-                             max(options.min_fragment_fraction, _EMPTY))
+                             max(options.min_fragment_fraction, tol.SLIVER_VOLUME))
     p = int(tet_piece.max()) + 1 if t else 0
 
     volumes = np.bincount(tet_piece, weights=volumes_t, minlength=p)

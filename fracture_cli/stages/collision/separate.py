@@ -19,6 +19,7 @@ import manifold3d
 import numpy as np
 import numpy.typing as npt
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.hulls import (
     MIN_PART_VOLUME,
     face_planes,
@@ -43,8 +44,6 @@ _Bodies = tuple[Sequence[_Mesh], Sequence[int] | np.ndarray] | _FullBodies
 # hull_faces of a part: face planes (normals (m, 3), offsets (m,)) and surface area.
 _HullFaces = tuple[tuple[np.ndarray, np.ndarray], float]
 
-# Overlaps below this volume (fraction of the smaller part) are contact, not overlap.
-_TOUCH = 1e-9
 # Rounding allowance (normalized coordinates, unit diagonal) of a point's depth inside clipped parts (_depth):
 # far above the error of a plane distance or of a clip's corners, far below a part's size.
 _MARGIN = 1e-7
@@ -259,7 +258,8 @@ def separate_hulls(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = 
         # contact, they overlap, and a part reaching beyond its side of the plane inside the ball needs its trim,
         # both known without reading the clipped corners back (a clip is only computed when they are).
         radius = _depth(shared, trims, (i, j), centre) - _MARGIN if clipped[i] or clipped[j] else 0.0
-        deep = radius > 0 and 4.0 / 3.0 * np.pi * detmath.cube(radius) > 1e3 * _TOUCH * min(volumes[i], volumes[j])
+        deep = radius > 0 and (4.0 / 3.0 * np.pi * detmath.cube(radius)
+                               > 1e3 * tol.SLIVER_VOLUME * min(volumes[i], volumes[j]))
         # Once a part was clipped by an earlier pair, this pair may be apart already: then it keeps its material.
         if (clipped[i] or clipped[j]) and not deep and not _overlapping(hulls[i], hulls[j], current(i), current(j),
                                                                         normal, offset):
@@ -293,7 +293,7 @@ def _overlapping(a: manifold3d.Manifold, b: manifold3d.Manifold, corners_a: np.n
         return False
     if (corners_a @ normal).max() <= offset <= (corners_b @ normal).min():
         return False
-    return (a ^ b).volume() > _TOUCH * min(a.volume(), b.volume())
+    return (a ^ b).volume() > tol.SLIVER_VOLUME * min(a.volume(), b.volume())
 
 
 def _depth(shared: _Shared, trims: list, pair: tuple[int, int], centre: np.ndarray) -> float:
@@ -330,12 +330,13 @@ def _pair_plane(shared: _Shared, pair: tuple[int, int]) -> tuple[np.ndarray, flo
         return None
     smaller = min(a.volume(), b.volume())
     # A face plane of one hull with the other's corners beyond it (up to a slab too thin to matter) separates them.
-    slack = 0.5 * _TOUCH * smaller / max(shared.areas[i], shared.areas[j], 1e-300)
+    slack = 0.5 * tol.SLIVER_VOLUME * smaller / max(shared.areas[i], shared.areas[j], tol.SMALLEST_DIVISOR)
     if (overlap_bound_separated(shared.corners[i], shared.planes[i], shared.corners[j], slack)
             or overlap_bound_separated(shared.corners[j], shared.planes[j], shared.corners[i], slack)):
         return None
     overlap = a ^ b
-    if overlap.is_empty() or overlap.volume() <= _TOUCH * smaller:
+    # Overlaps below SLIVER_VOLUME of the smaller part are contact, not overlap.
+    if overlap.is_empty() or overlap.volume() <= tol.SLIVER_VOLUME * smaller:
         return None
     interface = _interface_normal(shared, i, j)
     return _best_plane(overlap, shared.materials[i], shared.materials[j], mass_a, mass_b, interface)

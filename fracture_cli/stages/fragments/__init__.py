@@ -9,10 +9,11 @@ import manifold3d
 import numpy as np
 
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.geometry.rows import unique_rows, used_vertices
-from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask
+from fracture_cli.geometry.solids import shell_mask
 from fracture_cli.geometry.uvs import box_uvs
 from fracture_cli.options import option
 from fracture_cli.stages.fragments.bodies import SplitReport, body_faces, split_fragments, stable_order
@@ -136,7 +137,7 @@ def fragments_with_split(surface: SurfaceMesh, regions: Regions,
     id_to_material[region_id] = interior_index
 
     cut = _Cut(tuple(solids), regions.meshes, region_id, id_to_material, interior_index, surface, options,
-               SHELL_VOLUME * input_volume)
+               tol.SLIVER_VOLUME * input_volume)
     # One boolean per piece, independent of the others: on parallel.current_jobs() processes, results in order.
     if sum(solid.num_tri() for solid in solids) > _CROP_TRIANGLES and len(regions.meshes) > 1:
         groups = _piece_groups(regions.meshes, _CROP_GROUPS)

@@ -11,9 +11,9 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fracture_cli.errors import StageError
-from fracture_cli.geometry import tetgeom, trigeom
+from fracture_cli.geometry import tetgeom, tolerances, trigeom
 from fracture_cli.geometry.rows import group_rows
-from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask
+from fracture_cli.geometry.solids import shell_mask
 from fracture_cli.stages.smooth.field import forced_field
 from fracture_cli.stages.smooth.options import STAGE
 from fracture_cli.stages.smooth.topology import SINGULAR_TOL, combinations
@@ -106,7 +106,7 @@ class _CellList:
             vertices = np.array(mesh.vert_properties[:, :3], dtype=np.float64)
             faces = np.array(mesh.tri_verts, dtype=np.int64)
             # Coplanar cell faces can leave zero-volume shells in a union; drop them (not cavities).
-            faces = faces[shell_mask(mesh, SHELL_VOLUME * region.volume())]
+            faces = faces[shell_mask(mesh, tolerances.SLIVER_VOLUME * region.volume())]
             meshes.append(_separate_pinches(*trigeom.compact(vertices, faces)))
         return meshes
 
