@@ -33,7 +33,7 @@ from fracture_cli.geometry.hulls import (
 from fracture_cli.geometry.mass import MassProperties, mass_properties
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.geometry.trigeom import cross3
-from fracture_cli.stages.fragments.interfaces import INTERFACE_TOLERANCE, coincident_faces
+from fracture_cli.stages.fragments.interfaces import coincident_faces
 from fracture_cli.system import detmath, parallel
 
 # A closed mesh: vertices (n, 3), faces (m, 3).
@@ -44,9 +44,6 @@ _Bodies = tuple[Sequence[_Mesh], Sequence[int] | np.ndarray] | _FullBodies
 # hull_faces of a part: face planes (normals (m, 3), offsets (m,)) and surface area.
 _HullFaces = tuple[tuple[np.ndarray, np.ndarray], float]
 
-# Rounding allowance (normalized coordinates, unit diagonal) of a point's depth inside clipped parts (_depth):
-# far above the error of a plane distance or of a clip's corners, far below a part's size.
-_MARGIN = 1e-7
 # Offsets tried for a separating plane, as fractions of the overlap's extent along its normal.
 _PLANE_FRACTIONS = np.linspace(0.0, 1.0, 9)
 
@@ -66,7 +63,7 @@ class _Material:
         squared = np.einsum("tcj,tcj->tc", arm, arm)
         radius = np.sqrt(np.maximum(np.maximum(squared[:, 0], squared[:, 1]), squared[:, 2]))
         scale = float(np.abs(self.vertices).max()) if len(self.vertices) else 0.0
-        self.radius = radius * (1.0 + 1e-9) + 1e-9 * scale
+        self.radius = radius * (1.0 + tol.TIE) + tol.SAME_POINT * scale
 
 
 @dataclass(frozen=True)
@@ -225,7 +222,7 @@ def separate_hulls(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = 
         masses = [mass_properties(V, F) for V, F in materials]
     points = np.vstack([m.vertices for m in solids]) if solids else np.zeros((1, 3))
 
-    tolerance = INTERFACE_TOLERANCE * float(np.linalg.norm(np.ptp(points, axis=0)))
+    tolerance = tol.ON_SURFACE * float(np.linalg.norm(np.ptp(points, axis=0)))
     pairs = overlapping_boxes([h.bounding_box() for h in hulls])
     if groups is not None:
         index: dict = {}
@@ -256,8 +253,9 @@ def separate_hulls(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = 
         normal, offset, centre = plane
         # A ball of this radius lies in both parts as clipped so far (none if <= 0): when it holds far more than
         # contact, they overlap, and a part reaching beyond its side of the plane inside the ball needs its trim,
-        # both known without reading the clipped corners back (a clip is only computed when they are).
-        radius = _depth(shared, trims, (i, j), centre) - _MARGIN if clipped[i] or clipped[j] else 0.0
+        # both known without reading the clipped corners back (a clip is only computed when they are). ON_SURFACE
+        # allows for the rounding of a plane distance and of a clip's corners.
+        radius = _depth(shared, trims, (i, j), centre) - tol.ON_SURFACE if clipped[i] or clipped[j] else 0.0
         deep = radius > 0 and (4.0 / 3.0 * np.pi * detmath.cube(radius)
                                > 1e3 * tol.SLIVER_VOLUME * min(volumes[i], volumes[j]))
         # Once a part was clipped by an earlier pair, this pair may be apart already: then it keeps its material.
@@ -266,7 +264,7 @@ def separate_hulls(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = 
             continue
         # A part wholly on its side of the plane stays as it is (and needs no trim).
         for part, side, level in ((i, -normal, -offset), (j, normal, offset)):
-            if ((deep and part in stale and float(side @ centre) - radius < level - _MARGIN)
+            if ((deep and part in stale and float(side @ centre) - radius < level - tol.ON_SURFACE)
                     or (len(current(part)) and (corners[part] @ side).min() < level)):
                 hulls[part] = hulls[part].trim_by_plane(side, level)
                 trims[part].append((side, level))
