@@ -338,7 +338,7 @@ def _to_fragment(part: manifold3d.Manifold, piece: int, id_to_material: dict, in
     positions = props[:, :3]
     normals = props[:, _NORMAL].copy()
     length = np.linalg.norm(normals, axis=1, keepdims=True)
-    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), 0.0)
+    normals = np.where(length > tol.ROUNDOFF, normals / np.maximum(length, tol.SMALLEST_DIVISOR), 0.0)
     uvs = props[:, _UV].copy()
 
     # Interior faces: one vertex per (vertex, plane) so normals are flat and

@@ -240,7 +240,7 @@ def _as_surface(mesh: SplitMesh, surface: SurfaceMesh, materials: tuple[Material
     props, F = trigeom.compact(mesh.props, mesh.faces)
     normals = props[:, NORMAL]
     length = np.linalg.norm(normals, axis=1, keepdims=True)
-    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), 0.0)
+    normals = np.where(length > tol.ROUNDOFF, normals / np.maximum(length, tol.SMALLEST_DIVISOR), 0.0)
     return SurfaceMesh(
         vertices=np.ascontiguousarray(props[:, POS]),
         faces=np.ascontiguousarray(F, dtype=np.int64),

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.system.jit import njit
 
 
@@ -269,7 +270,7 @@ def nearest(X: np.ndarray, grid: tuple, cell: float, Q: np.ndarray, k: int) -> n
                         c += step
             # A point in a cell r + 1 shells away is more than r cells away along some axis (the margin: rounding
             # in the cell of a point).
-            if found == k and best[k - 1] < (r * cell * (1.0 - 1e-9)) * (r * cell * (1.0 - 1e-9)):
+            if found == k and best[k - 1] < (r * cell * (1.0 - tol.TIE)) * (r * cell * (1.0 - tol.TIE)):
                 break
         out[q] = ids
     return out

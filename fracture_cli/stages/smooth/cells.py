@@ -20,11 +20,6 @@ from fracture_cli.stages.smooth.topology import SINGULAR_TOL, combinations
 
 log = logging.getLogger(__name__)
 
-
-# Barycentric feasibility tolerance when enumerating cell corners; the fields
-# are O(1) (smoothed one-hot values), so an absolute tolerance is meaningful.
-_FEASIBLE_TOL = 1e-12
-
 # Fallback (union) path only: how far apart (unit bbox diagonal) the copies of
 # a vertex where a region touches itself are moved.
 _PINCH_SEPARATION = 1e-7
@@ -287,7 +282,9 @@ def _cell_corners(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         for i in range(4):
             b[:, :, idx == i, i] = 0.0
     slack = np.einsum("nmpj,nmcj->nmcp", H, b)  # (N, m, C, planes)
-    valid = ok & (slack >= -_FEASIBLE_TOL).all(axis=3)
+    # Barycentric feasibility up to rounding: the fields are O(1) (smoothed one-hot values), so an absolute
+    # tolerance is meaningful.
+    valid = ok & (slack >= -tolerances.ROUNDOFF).all(axis=3)
     b = np.clip(b, 0.0, None)
     b /= b.sum(axis=3, keepdims=True)
     return b, valid

@@ -38,7 +38,7 @@ class CageSurface:
         # The closest point is no farther than the nearest cage vertex: only triangles whose boxes come that
         # near can hold it.
         d0, _ = self.tree.query(points)
-        reach = d0 * (1.0 + 1e-9) + 1e-12
+        reach = d0 * (1.0 + tol.TIE) + tol.ZERO_LENGTH
         row, face = self.grid.query(np.stack([points - reach[:, None], points + reach[:, None]], axis=1))
         tri = self.V[self.F[face]]
         closest = trigeom.closest_points(points[row], tri[:, 0], tri[:, 1], tri[:, 2])
