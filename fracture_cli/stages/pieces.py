@@ -278,7 +278,7 @@ def _piece_graph(tet_mesh: TetMesh, tet_piece: np.ndarray,
     norm = np.linalg.norm(summed, axis=1, keepdims=True)
     # A curved interface can have a near-zero mean normal; fall back to the centroid direction.
     fallback = centroids[pairs[:, 1]] - centroids[pairs[:, 0]]
-    fallback /= np.maximum(np.linalg.norm(fallback, axis=1, keepdims=True), 1e-300)
+    fallback /= np.maximum(np.linalg.norm(fallback, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     edge_normals = np.where(norm > tol.ROUNDOFF * edge_areas[:, None], summed / np.maximum(norm, tol.SMALLEST_DIVISOR),
                             fallback)
     return pairs.astype(np.int32), edge_areas, edge_centroids, edge_normals

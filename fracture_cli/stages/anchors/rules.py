@@ -146,7 +146,7 @@ def _barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> 
     d00, d01, d11 = (np.einsum("ij,ij->i", x, y) for x, y in ((v0, v0), (v0, v1), (v1, v1)))
     d20, d21 = np.einsum("ij,ij->i", v2, v0), np.einsum("ij,ij->i", v2, v1)
     denom = d00 * d11 - d01 * d01
-    ok = denom > 1e-30 * np.maximum(d00 * d11, 1e-300)
+    ok = denom > 1e-30 * np.maximum(d00 * d11, tol.SMALLEST_DIVISOR)
     safe = np.where(ok, denom, 1.0)
     v = (d11 * d20 - d01 * d21) / safe
     w = (d00 * d21 - d01 * d20) / safe

@@ -389,7 +389,7 @@ def _best_plane(overlap: manifold3d.Manifold, material_a: _Material, material_b:
     candidates = [axes[:, int(np.argmax(moments))], towards_b]
     if interface_normal is not None:
         candidates.insert(0, interface_normal)
-    volume_a, volume_b = max(mass_a.volume, 1e-300), max(mass_b.volume, 1e-300)
+    volume_a, volume_b = max(mass_a.volume, tol.SMALLEST_DIVISOR), max(mass_b.volume, tol.SMALLEST_DIVISOR)
     best, best_cost = None, np.inf
     for normal in candidates:
         length = np.linalg.norm(normal)

@@ -346,7 +346,7 @@ def _to_fragment(part: manifold3d.Manifold, piece: int, id_to_material: dict, in
     ti = tris[inside]
     a, b, c = positions[ti[:, 0]], positions[ti[:, 1]], positions[ti[:, 2]]
     fn = np.cross(b - a, c - a)
-    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     offset = np.einsum("ij,ij->i", fn, a)
     plane_key = np.column_stack([np.round(fn * 1e6), np.round(offset * 1e9)]).astype(np.int64)
     _, plane = unique_rows(plane_key, return_inverse=True)
@@ -358,7 +358,7 @@ def _to_fragment(part: manifold3d.Manifold, piece: int, id_to_material: dict, in
     # Each plane's normal: mean of its faces' normals (they agree to 1e-6).
     plane_normal = np.zeros((plane.max() + 1 if len(plane) else 0, 3))
     np.add.at(plane_normal, plane, fn)
-    plane_normal /= np.maximum(np.linalg.norm(plane_normal, axis=1, keepdims=True), 1e-300)
+    plane_normal /= np.maximum(np.linalg.norm(plane_normal, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     new_normals = plane_normal[uniq[:, 1]]
     new_uvs = box_uvs(surface.normalization.to_world(new_positions), new_normals, options.uv_scale)
 

@@ -99,7 +99,7 @@ def body_faces(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
     for k in range(3):
         np.minimum.at(lo, patch, V[F[:, k]])
         np.maximum.at(hi, patch, V[F[:, k]])
-    scale = max(float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))), 1e-300)
+    scale = max(float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))), tol.SMALLEST_DIVISOR)
     empty = np.abs(volume) <= tol.SLIVER_VOLUME * scale * scale * scale
     positive = np.flatnonzero((volume > 0) & ~empty)
     members = {int(p): [int(p)] for p in positive}
@@ -274,7 +274,7 @@ def _mesh_centroid(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     vol = face_signed_volumes(V, F)
     total = vol.sum()
-    if abs(total) < 1e-300:
+    if abs(total) < tol.SMALLEST_DIVISOR:
         return V.mean(axis=0)
     return ((a + b + c) / 4.0 * vol[:, None]).sum(axis=0) / total
 

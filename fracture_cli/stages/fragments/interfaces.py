@@ -121,7 +121,7 @@ def coincident_faces(meshes: Sequence[tuple[np.ndarray, np.ndarray]], candidates
         tolerance = tol.ON_SURFACE * float(np.linalg.norm(np.ptp(T.reshape(-1, 3), axis=0)))
     normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
     area = 0.5 * np.linalg.norm(normal, axis=1)
-    unit = normal / np.maximum(2.0 * area, 1e-300)[:, None]
+    unit = normal / np.maximum(2.0 * area, tol.SMALLEST_DIVISOR)[:, None]
     centroid = T.mean(axis=1)
     boxes = np.stack([T.min(axis=1), T.max(axis=1)], axis=1)
     grid = LevelGrid(boxes)  # BoxGrid's pairs and order without its 45M entries for large fault triangles
@@ -162,7 +162,7 @@ def _inside(points: np.ndarray, triangles: np.ndarray, tolerance: float) -> np.n
         edge = v - u
         # Signed distance of the point from the edge, inward positive, in the triangle's plane.
         inward = np.cross(normal, edge)
-        inward /= np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), 1e-300)
+        inward /= np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
         inside &= np.einsum("ij,ij->i", points - u, inward) >= -tolerance
     return inside
 

@@ -86,7 +86,7 @@ def _edge_fan(V: np.ndarray, F: np.ndarray, table: EdgeTable, sides: np.ndarray)
     third = faces[(faces != a) & (faces != b)]
     w = V[third] - V[a]
     w = w - np.outer(w @ axis, axis)
-    u = w[0] / max(np.linalg.norm(w[0]), 1e-300)
+    u = w[0] / max(np.linalg.norm(w[0]), tol.SMALLEST_DIVISOR)
     angle = detmath.atan2(w @ np.cross(axis, u), w @ u)
     angle = np.where(angle < 0, angle + 2 * np.pi, angle)
     # Faces around the edge whose angles differ by less than TIE (radians) are coincident: the wedge between them

@@ -43,7 +43,7 @@ def quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np.
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     normal = np.cross(b - a, c - a)
     area = np.linalg.norm(normal, axis=1)
-    unit = normal / np.maximum(area, 1e-300)[:, None]
+    unit = normal / np.maximum(area, tol.SMALLEST_DIVISOR)[:, None]
     plane = np.sqrt(area)[:, None] * np.column_stack([unit, -np.einsum("ij,ij->i", unit, a)])
     outer = np.einsum("fi,fj->fij", plane, plane)
     Q = np.zeros((n, 4, 4))

@@ -133,7 +133,7 @@ def coplanar_groups(surface: SurfaceMesh) -> np.ndarray:
     """
     V, F = surface.vertices, surface.faces
     normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     plane = np.column_stack([np.round(normal * 1e6), np.round(np.einsum("ij,ij->i", normal, V[F[:, 0]]) * 1e9)])
     _, plane_id = unique_rows(plane.astype(np.int64), return_inverse=True)
     plane_id = plane_id.reshape(-1)
@@ -170,7 +170,7 @@ def source_groups(surface: SurfaceMesh, points: np.ndarray, thorough: np.ndarray
         best[far], best_distance[far] = _nearest_within(S, centroid[far], tol.ON_SURFACE)
     T = S[np.maximum(best, 0)]
     normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     off_plane = np.abs(np.einsum("mcj,mj->mc", points - T[:, :1], normal)).max(axis=1)
     return np.where((best_distance <= tol.ON_SURFACE) & (off_plane <= tol.ON_SURFACE), group[np.maximum(best, 0)], -1)
 

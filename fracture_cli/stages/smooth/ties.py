@@ -128,10 +128,10 @@ def fan(poly: np.ndarray, keys: np.ndarray, normals: np.ndarray, positions: np.n
     centre /= np.maximum(count, 1)[:, None]
     if centre_pos is not None:
         centre = centre_pos
-    nrm = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    nrm = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     helper = np.where(np.abs(nrm[:, :1]) < 0.6, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     u = np.cross(nrm, helper)
-    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     w = np.cross(nrm, u)
     d = P - centre[poly]
     angle = detmath.atan2(np.einsum("ij,ij->i", d, w[poly]), np.einsum("ij,ij->i", d, u[poly]))
