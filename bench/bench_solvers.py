@@ -28,10 +28,11 @@ def chair_system():
     """The chair's field system: matrix (n, n) CSC, right-hand sides (n, p), unknowns, pieces."""
     import scipy.sparse as sp
 
+    from fracture_cli.geometry import tolerances as tol
     from fracture_cli.pipeline import PipelineState
     from fracture_cli.pipeline.recipe import load_recipe
     from fracture_cli.pipeline.runner import Runner
-    from fracture_cli.stages.smooth.field import _MIN_TET_WEIGHT, refined
+    from fracture_cli.stages.smooth.field import refined
 
     recipe = load_recipe("wood")
     runner = Runner("bench")
@@ -43,7 +44,7 @@ def chair_system():
                             options.max_refined_tets)
     n, p = tm.num_vertices, state.pieces.num_pieces
     vol = np.abs(tm.tet_volumes)
-    vol = np.maximum(vol, _MIN_TET_WEIGHT * vol.mean())
+    vol = np.maximum(vol, tol.ROUNDOFF * vol.mean())
     quarter = np.repeat(vol / 4.0, 4)
     rhs = sp.coo_matrix((quarter, (tm.tets.reshape(-1), np.repeat(tet_piece, 4))), shape=(n, p)).toarray()
     mass = np.bincount(tm.tets.reshape(-1), weights=quarter, minlength=n)

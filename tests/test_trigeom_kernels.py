@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.trigeom_kernels import PAIR_CHUNK, intersect_pairs, warm_kernels
 
@@ -25,7 +26,7 @@ def _separated(axes, a, b, scale, eps):
     return np.any(valid & (gap > eps), axis=1)
 
 
-def reference(A, B, eps=trigeom.SEPARATION_EPS):
+def reference(A, B, eps=tol.ZERO_LENGTH):
     """All 17 axes of every pair in arrays: both normals, 9 edge x edge, 12 normal x edge."""
     hit = np.zeros(len(A), dtype=bool)
     for s in range(0, len(A), PAIR_CHUNK):

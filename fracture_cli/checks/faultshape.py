@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.system import detmath
 from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, Regions
@@ -17,8 +18,6 @@ from fracture_cli.types import INTERIOR_MATERIAL_NAME, Fragments, Regions
 # this fraction of its longest edge squared has a normal dominated by rounding
 # (marching-tet corners that land almost on a tet vertex); it is ignored with its edges.
 _SLIVER = 1e-8
-# Vertices closer than this (unit bbox diagonal) are one vertex for fault_roughness.
-_WELD = 1e-9
 
 
 # Faults measured by :func:`fault_shape`: an edge bending more than this is a visible crease under flat shading.
@@ -37,7 +36,8 @@ def _fault_edges(vertices: np.ndarray, faces: np.ndarray, fault: np.ndarray):
     nothing = (np.zeros(0), np.zeros(0), 0.0)
     if len(faces) == 0:
         return nothing
-    _, weld = unique_rows(np.round(vertices / _WELD), return_inverse=True)
+    # Vertices closer than SAME_POINT are one vertex.
+    _, weld = unique_rows(np.round(vertices / tol.SAME_POINT), return_inverse=True)
     F = weld.reshape(-1)[faces]
     P = vertices[faces]
     normal = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
@@ -166,7 +166,7 @@ def region_faults(regions: Regions):
     V = np.concatenate(all_vertices)
     F = np.concatenate(tris)
     owner = np.concatenate(owners)
-    _, weld = unique_rows(np.round(V / _WELD), return_inverse=True)
+    _, weld = unique_rows(np.round(V / tol.SAME_POINT), return_inverse=True)
     W = np.sort(weld.reshape(-1)[F], axis=1)
     _, inverse, counts = unique_rows(W, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import manifold3d
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.trigeom import cross3
 
 # Pieces and parts with less volume are dropped.
@@ -70,7 +71,7 @@ def _planes(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
     corner = V[F[:, 0]]
     normal = cross3(V[F[:, 1]] - corner, V[F[:, 2]] - corner)
     length = np.sqrt(np.einsum("ij,ij->i", normal, normal))
-    normal /= np.maximum(length, 1e-300)[:, None]
+    normal /= np.maximum(length, tol.SMALLEST_DIVISOR)[:, None]
     return normal, np.einsum("ij,ij->i", normal, corner), 0.5 * length
 
 
@@ -105,14 +106,14 @@ def simplify_hull(points: np.ndarray, max_vertices: int) -> np.ndarray:
     chosen = _initial_tetrahedron(corners)
     scale = float(np.linalg.norm(np.ptp(corners, axis=0)))
     # The corners still outside the current hull, in order. One inside it stays inside the larger hulls that
-    # follow (up to rounding, far below the 1e-12 that stops the loop), so it is never the farthest again and
+    # follow (up to rounding, far below the tol.ROUNDOFF that stops the loop), so it is never the farthest again and
     # is not looked at again: most of a dense hull's corners drop out after a few insertions.
     outside_ids = np.setdiff1d(np.arange(len(corners)), chosen)
     while len(chosen) < max_vertices and len(outside_ids):
         normal, offset = face_planes(*hull_mesh(corners[chosen]))
         outside = max_beyond(corners[outside_ids], normal, offset)
         farthest = int(np.argmax(outside))  # the first of equals: the ids are in order
-        if outside[farthest] <= 1e-12 * scale:
+        if outside[farthest] <= tol.ROUNDOFF * scale:
             break
         chosen.append(int(outside_ids[farthest]))
         keep = outside > 0

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.trigeom import cross3
 
 
@@ -102,7 +103,7 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> MassProperties:
     v = np.einsum("ij,ij->i", a, cross3(b, c)) / 6.0  # np.cross's products, without its axis handling
     volume = float(v.sum())
     s = a + b + c
-    if not abs(volume) > 1e-300:
+    if not abs(volume) > tol.SMALLEST_DIVISOR:
         return MassProperties(0.0, used.mean(axis=0), np.zeros((3, 3)))
     first = (v[:, None] * s).sum(axis=0) / 4.0
     centre_local = first / volume
@@ -132,13 +133,14 @@ def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     follow the coordinate axes as closely as possible (column ``c`` is the
     principal axis nearest to axis ``c``, pointing its way), so a body aligned
     with its model axes gets the identity; the last column is flipped if
-    needed for ``det R = +1``. Entries below 1e-12 of the tensor's largest are
+    needed for ``det R = +1``. Entries below ``tol.ROUNDOFF`` of the tensor's largest are
     rounding and are zeroed first, so equal moments (a cube) keep the
     identity.
     """
     tensor = np.asarray(inertia, dtype=np.float64)
     tensor = (tensor + tensor.T) / 2.0
-    tensor = np.where(np.abs(tensor) > 1e-12 * max(float(np.abs(tensor).max()), 1e-300), tensor, 0.0)
+    largest = max(float(np.abs(tensor).max()), tol.SMALLEST_DIVISOR)
+    tensor = np.where(np.abs(tensor) > tol.ROUNDOFF * largest, tensor, 0.0)
     moments, axes = np.linalg.eigh(tensor)
     best = max(_PERMUTATIONS, key=lambda perm: (float(np.abs(axes[np.arange(3), list(perm)]).sum()), perm))
     axes, moments = axes[:, list(best)], moments[list(best)]

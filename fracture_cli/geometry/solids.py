@@ -16,6 +16,7 @@ import manifold3d
 import numpy as np
 
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.meshtopo import boundary_edges, manifold_patches, nonmanifold_edges
 from fracture_cli.geometry.rows import unique_rows, used_vertices
@@ -30,9 +31,6 @@ POS, UV, NORMAL, COLOR = slice(0, 3), slice(3, 5), slice(5, 8), slice(8, 12)
 # Column count with colours (the repair stage) and without (:func:`surface_solid`: fragments do not carry them).
 NUM_COLUMNS = 12
 SOLID_COLUMNS = 8
-# Connected parts of a boolean result below this fraction of the volume are artefacts
-# (zero-volume shells where faces coincide), not material.
-SHELL_VOLUME = 1e-9
 
 
 @dataclass(frozen=True)
@@ -197,11 +195,6 @@ def union_bodies(solid: manifold3d.Manifold) -> tuple[manifold3d.Manifold, int, 
     return solid, len(positive), len(cavities)
 
 
-# Two bodies overlap when their intersection holds more than this fraction of the smaller one (exact booleans give
-# 0 for bodies that only touch, along a face, an edge or at a point).
-OVERLAP_FRACTION = 1e-9
-
-
 def body_groups(solid: manifold3d.Manifold) -> tuple[list[manifold3d.Manifold], int, int]:
     """The bodies of ``solid`` united where they overlap, each minus the cavities inside it; bodies that only
     touch stay apart.
@@ -247,8 +240,10 @@ def body_groups(solid: manifold3d.Manifold) -> tuple[list[manifold3d.Manifold], 
         for j in range(i + 1, len(positive)):
             if np.any(boxes[i, :3] > boxes[j, 3:]) or np.any(boxes[j, :3] > boxes[i, 3:]):
                 continue
+            # Overlapping, not touching: exact booleans give 0 for bodies that only touch (along a face, an edge
+            # or at a point).
             common = (positive[i] ^ positive[j]).volume()
-            if common > OVERLAP_FRACTION * min(positive[i].volume(), positive[j].volume()):
+            if common > tol.SLIVER_VOLUME * min(positive[i].volume(), positive[j].volume()):
                 root[max(find(i), find(j))] = min(find(i), find(j))
     members: dict[int, list[int]] = {}
     for i in range(len(positive)):

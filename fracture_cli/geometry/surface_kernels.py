@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.system.jit import njit
 
 
@@ -81,7 +82,7 @@ def sah_tree(corners: np.ndarray, leaf_size: int, bins: int, max_level: int):  #
                 axis, extent, low = k, c1 - c0, c0
         split = (s + e) // 2
         if extent > 0.0 and level < max_level:
-            scale = bins * (1.0 - 1e-9) / extent
+            scale = bins * (1.0 - tol.TIE) / extent
             bin_count[:] = 0
             bin_lo[:] = np.inf
             bin_hi[:] = -np.inf

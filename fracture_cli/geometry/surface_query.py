@@ -14,7 +14,7 @@ longest axis of their box centres (ties to the first bin, partitions in place
 by one fixed loop), leaves of at most :data:`LEAF_SIZE` triangles (on the
 sample assets 10-25% faster queries than a Morton-order hierarchy, on a
 million-triangle sphere about the same). Node boxes are widened by
-:data:`BOX_MARGIN` of the mesh's scale, far more than any rounding of the
+:data:`~fracture_cli.geometry.tolerances.SAME_POINT` of the mesh's scale, far more than any rounding of the
 triangle tests, so pruning a node never drops a triangle the test would keep:
 every query returns what a brute-force loop over all triangles with the same
 per-triangle arithmetic returns, whatever the traversal order.
@@ -51,13 +51,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.surface_kernels import cast_rays, closest_d2, count_parallel, node_boxes, sah_tree
 
 # Triangles per leaf.
 LEAF_SIZE = 4
-# Node boxes are widened by this fraction of the mesh's scale (its extent or its largest coordinate, whichever
-# is larger): float64 rounding of the triangle tests is ~1e-16 of it.
-BOX_MARGIN = 1e-9
 # Ray directions of the inside vote; irrational-looking on purpose so rays do not run along grid-aligned edges.
 VOTE_DIRECTIONS = np.array(
     [[0.5773, 0.6123, 0.5402], [-0.7071, 0.3162, 0.6325], [0.2673, -0.8018, 0.5345]], dtype=np.float64
@@ -114,8 +112,10 @@ def build(vertices: np.ndarray, faces: np.ndarray) -> SurfaceQuery:
         return SurfaceQuery(corners, np.zeros((0, 2, 3)), empty, empty, empty, 0, 0.0)
     order, right, start, count, depth = sah_tree(corners, LEAF_SIZE, _BINS, _SAH_LEVELS)
     corners = np.ascontiguousarray(corners[order])
+    # The mesh's scale: its extent or its largest coordinate, whichever is larger (float64 rounding of the
+    # triangle tests is ~1e-16 of it).
     scale = max(float(np.abs(corners).max()), float((corners.max(axis=(0, 1)) - corners.min(axis=(0, 1))).max()))
-    box = node_boxes(corners, right, start, count, BOX_MARGIN * scale)
+    box = node_boxes(corners, right, start, count, tol.SAME_POINT * scale)
     return SurfaceQuery(corners, box, right, start, count, int(depth), scale)
 
 
@@ -141,7 +141,7 @@ def distances(query: SurfaceQuery, points: np.ndarray, upper: float | np.ndarray
     else:
         bound = np.broadcast_to(np.asarray(upper, dtype=np.float64), (len(points),))
         # Widened by far more than the rounding of squares, so that no distance <= upper is cut off.
-        bound2 = np.ascontiguousarray((bound * bound) * (1.0 + 1e-9))
+        bound2 = np.ascontiguousarray((bound * bound) * (1.0 + tol.TIE))
     if len(query.corners) == 0 or len(points) == 0:
         return np.full(len(points), np.inf)
     d2 = closest_d2(query.corners, query.box, query.right, query.start, query.count, query.depth, points, bound2)
@@ -182,10 +182,10 @@ def hit_counts(query: SurfaceQuery, origins: np.ndarray, directions: np.ndarray)
         return _rays(query, origins, directions, False).astype(np.int64)
     if not np.any(direction != 0.0):
         raise ValueError("a ray direction is zero")
-    # As BOX_MARGIN: far above the rounding of the shear, here of origins too.
+    # As the node boxes' margin: far above the rounding of the shear, here of origins too.
     scale = max(query.scale, float(np.abs(origins).max()))
     cells = min(max(_GRID_CELLS_PER_TRIANGLE * len(query.corners), len(origins) // _GRID_RAYS_PER_CELL), _GRID_CELLS)
-    return count_parallel(query.corners, origins, direction, BOX_MARGIN * scale, cells)
+    return count_parallel(query.corners, origins, direction, tol.SAME_POINT * scale, cells)
 
 
 def inside(query: SurfaceQuery, points: np.ndarray) -> np.ndarray:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.system import detmath
 
@@ -103,7 +104,7 @@ def interior_face_normals(V: np.ndarray, T: np.ndarray, faces: np.ndarray, face_
         return np.zeros((0, 3))
     a, b, c = V[faces[:, 0]], V[faces[:, 1]], V[faces[:, 2]]
     n = np.cross(b - a, c - a)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
 
 
 def barycentric_gradients(V: np.ndarray, T: np.ndarray) -> np.ndarray:

@@ -12,11 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.system import detmath
-
-# Separation below this (normalized units, unit bounding-box diagonal) counts
-# as touching, i.e. as an intersection.
-SEPARATION_EPS = 1e-12
 
 # Point-triangle pairs per chunk of :func:`winding_numbers` (bounds its memory).
 _WINDING_CHUNK = 2_000_000
@@ -72,7 +69,7 @@ def vertex_normals(V: np.ndarray, F: np.ndarray, n: int | None = None, unit: boo
                    axis=1).reshape(n, 3)
     if not unit:
         return acc
-    return acc / np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-300)
+    return acc / np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
 
 
 def solid_angle_fraction(a: np.ndarray, b: np.ndarray, c: np.ndarray,
@@ -278,10 +275,10 @@ def default_cell(boxes: np.ndarray) -> float:
     """A grid cell size for :class:`BoxGrid`: the median box extent, bounded below."""
     extent = (boxes[:, 1] - boxes[:, 0]).max(axis=1)
     total = float((boxes[:, 1].max(axis=0) - boxes[:, 0].min(axis=0)).max())
-    return max(float(np.median(extent)), total / 256.0, 1e-12)
+    return max(float(np.median(extent)), total / 256.0, tol.ZERO_LENGTH)
 
 
-def triangles_intersect(A: np.ndarray, B: np.ndarray, eps: float = SEPARATION_EPS) -> np.ndarray:
+def triangles_intersect(A: np.ndarray, B: np.ndarray, eps: float = tol.ZERO_LENGTH) -> np.ndarray:
     """Separating-axis test between triangle pairs.
 
     Parameters
@@ -289,7 +286,7 @@ def triangles_intersect(A: np.ndarray, B: np.ndarray, eps: float = SEPARATION_EP
     A, B : (p, 3, 3) float
         Corner positions of the two triangles of each pair. A segment can be
         passed as a degenerate triangle ``(a, b, b)``.
-    eps : float, optional (default 1e-12)
+    eps : float, optional (default :data:`~fracture_cli.geometry.tolerances.ZERO_LENGTH`)
         A gap no larger than this counts as touching.
 
     Returns
@@ -419,7 +416,7 @@ def _intersecting_pairs(V: np.ndarray, F: np.ndarray, i: np.ndarray, j: np.ndarr
         def unit_normals(T):
             n = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
             length = np.linalg.norm(n, axis=1, keepdims=True)
-            return n / np.maximum(length, 1e-300), length[:, 0]
+            return n / np.maximum(length, tol.SMALLEST_DIVISOR), length[:, 0]
 
         ni, li = unit_normals(Fi[s2])
         nj, lj = unit_normals(Fj[s2])
@@ -461,7 +458,7 @@ def mesh_intersections(V_a: np.ndarray, F_a: np.ndarray, V_b: np.ndarray, F_b: n
     ids_a = np.arange(len(F_a)) if candidates_a is None else np.asarray(candidates_a, dtype=np.int64)
     if len(ids_a) == 0:
         return np.zeros((0, 2), dtype=np.int64)
-    qi, j = grid_b.query(triangle_boxes(V_a, F_a[ids_a]), pad=SEPARATION_EPS)
+    qi, j = grid_b.query(triangle_boxes(V_a, F_a[ids_a]), pad=tol.ZERO_LENGTH)
     i = ids_a[qi]
     hit = triangles_intersect(V_a[F_a[i]], V_b[F_b[j]])
     return np.stack([i[hit], j[hit]], axis=1)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.system.jit import njit
 
 #: Pairs per chunk; the degenerate-axis threshold scales with the largest coordinate of a chunk.
@@ -123,8 +124,8 @@ def intersect_pairs(A: np.ndarray, B: np.ndarray, eps: float) -> np.ndarray:  # 
                     elif scale == scale:
                         scale = max(scale, x, y)
         if scale == scale:
-            scale = max(scale, 1e-300)
-        threshold = 1e-12 * scale * scale
+            scale = max(scale, tol.SMALLEST_DIVISOR)
+        threshold = tol.ROUNDOFF * scale * scale
         for i in range(start, stop):
             for c in range(3):
                 for d in range(3):
@@ -138,4 +139,4 @@ def warm_kernels() -> int:
     """Compile (and cache) the kernel on two touching triangles; ``make install`` calls it once. Returns hits."""
     A = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
     B = np.array([[[0.5, 0.0, 0.0], [1.5, 0.0, 0.0], [0.5, 1.0, 0.0]]])
-    return int(intersect_pairs(A, B, 1e-12).sum())
+    return int(intersect_pairs(A, B, tol.ZERO_LENGTH).sum())

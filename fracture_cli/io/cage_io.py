@@ -28,6 +28,7 @@ import os
 import numpy as np
 
 from fracture_cli.errors import InputError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.io.atomic import atomic_path
 from fracture_cli.types import Cage, Normalization, TetMesh
 
@@ -89,7 +90,7 @@ def _write_ply(path: str, vertices: np.ndarray, faces: np.ndarray, offset: float
 def _write_stl(path: str, vertices: np.ndarray, faces: np.ndarray, offset: float) -> None:
     T = vertices[faces]
     normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     records = np.zeros(len(faces), dtype=[("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
     records["n"] = normal
     records["v"] = T

@@ -27,14 +27,13 @@ from typing import Any
 import numpy as np
 
 from fracture_cli.errors import InputError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.io.gltf_conventions import is_collision_only
 
 log = logging.getLogger(__name__)
 # The glTF document reader (fracture_cli.io.gltf_read._Document): index, accessor, attribute, fail, doc, scene.
 _Reader = Any
 
-# |det| of a node's linear part at or below this fraction of the product of its column lengths: degenerate.
-_DEGENERATE = 1e-12
 # Vertices skinned at a time (the per-vertex 4 x 4 blends of one chunk: 8 MB).
 _SKIN_CHUNK = 65536
 
@@ -125,7 +124,8 @@ def is_degenerate(linear: np.ndarray) -> bool:
         return True
     columns = [math.sqrt(float(np.dot(linear[:, k], linear[:, k]))) for k in range(3)]
     scale = columns[0] * columns[1] * columns[2]
-    return not abs(float(determinant3(linear))) > _DEGENERATE * scale or scale == 0.0
+    # Degenerate: |det| at or below ROUNDOFF of the product of its column lengths.
+    return not abs(float(determinant3(linear))) > tol.ROUNDOFF * scale or scale == 0.0
 
 
 class Scene:

@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.hulls import hull_mesh
 from fracture_cli.geometry.mass import MassProperties, mass_properties, quaternion_xyzw
 from fracture_cli.io.gltf import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, UINT16
@@ -133,7 +134,7 @@ def node_extras(mass: MassProperties) -> dict:
     """
     inertia = mass.inertia6()
     # Products of inertia at rounding level (a box's) are written as zeros.
-    inertia[np.abs(inertia) <= 1e-12 * max(float(np.abs(inertia).max()), 1e-300)] = 0.0
+    inertia[np.abs(inertia) <= tol.ROUNDOFF * max(float(np.abs(inertia).max()), tol.SMALLEST_DIVISOR)] = 0.0
     return {"fracture": {
         "volume": _round(mass.volume),
         "center_of_mass": [_round(x) for x in mass.center],

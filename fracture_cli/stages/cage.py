@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.edgelengths import longest_edges
 from fracture_cli.geometry.rows import group_rows, used_vertices
@@ -30,11 +31,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 STAGE = "cage"
-
-# Input vertices must be at least this far from the cage (normalized units): a clearance that any later
-# rounding (TetGen, the tetra stage) keeps positive. (Distances are exact float64; the value dates from
-# open3d's float32 distances, whose rounding near the unit cube was about 6e-8.)
-MIN_CLEARANCE = 1e-6
 
 # Input triangles whose distance to a cage, bounded below from their corners' clearance, exceeds this
 # cannot touch it (the bound is exact up to float64 rounding; the margin dates from float32 distances).
@@ -216,8 +212,9 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, target: int, decimator: s
 class _ContainmentCheck:
     """Strict containment of the input in a candidate cage, independent of how the cage was built.
 
-    Passes when (1) every input vertex is at least :data:`MIN_CLEARANCE` from
-    the cage surface, (2) every input vertex is inside the cage by a ray-parity
+    Passes when (1) every input vertex is at least :data:`~fracture_cli.geometry.tolerances.WELD`
+    from the cage surface (normalized units: a clearance that any later rounding, TetGen's or the tetra
+    stage's, keeps positive), (2) every input vertex is inside the cage by a ray-parity
     vote (:func:`fracture_cli.geometry.surface_query.inside`), and (3) no input triangle
     intersects or touches a cage triangle (exact separating-axis tests in
     float64, after a broad phase). (1)+(3) mean no part of the input surface
@@ -257,7 +254,7 @@ class _ContainmentCheck:
         points = self.query_vertices
         # Exact up to reach_bound (inf beyond: such a position is far enough for both tests below).
         clearance = distances(cage_query, points, self.reach_bound)
-        too_close = int(np.sum(clearance < MIN_CLEARANCE))
+        too_close = int(np.sum(clearance < tol.WELD))
         if too_close:
             return f"{too_close} input vertices touch the cage"
         outside = int(np.sum(~inside(cage_query, points)))
@@ -267,7 +264,7 @@ class _ContainmentCheck:
         corners = cage_vertices[cage_faces]
         centre = corners.mean(axis=1)
         radius = np.linalg.norm(corners - centre[:, None, :], axis=2).max(axis=1)
-        reach = radius + MIN_CLEARANCE
+        reach = radius + tol.WELD
         near = np.flatnonzero(distances(self.query, centre, reach) <= reach)
         # Likewise only input triangles that may reach the cage: a triangle is at least its farthest corner's
         # clearance minus its longest edge away from it (most of a million-triangle input is not, and

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.options import option
 from fracture_cli.types import Regions
 
@@ -135,7 +136,7 @@ def _normal_shift(positions: np.ndarray, faces: np.ndarray, owner: np.ndarray, f
     normal = np.stack([np.bincount(corners, weights=np.repeat(cross[:, a], 3), minlength=n) for a in range(3)],
                       axis=1)
     length = np.sqrt(np.einsum("ij,ij->i", normal, normal))
-    unit = normal / np.maximum(length, 1e-300)[:, None]
+    unit = normal / np.maximum(length, tol.SMALLEST_DIVISOR)[:, None]
     edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     d = positions[edges[:, 0]] - positions[edges[:, 1]]
     edge_length = np.sqrt(np.einsum("ij,ij->i", d, d))

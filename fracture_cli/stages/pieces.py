@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.edges import components, renumber_by_first
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.options import option
@@ -41,8 +42,6 @@ class PiecesOptions:
                                        "cage's")}
 
 
-# A piece holding less than this fraction of the asset holds none of it (sampling noise).
-_EMPTY = 1e-9
 # Barycentric lattice order of the points sampled in each tet to estimate how much of it is asset material.
 _SAMPLE_ORDER = 3
 
@@ -135,7 +134,7 @@ def pieces(tet_mesh: TetMesh, modes: Modes, options: PiecesOptions = PiecesOptio
 
     held = volumes_t if surface is None else volumes_t * tet_material_fraction(tet_mesh, surface)
     tet_piece = _merge_small(tet_piece, face_tets, tet_mesh.interior_face_areas, held,
-                             max(options.min_fragment_fraction, _EMPTY))
+                             max(options.min_fragment_fraction, tol.SLIVER_VOLUME))
     p = int(tet_piece.max()) + 1 if t else 0
 
     volumes = np.bincount(tet_piece, weights=volumes_t, minlength=p)
@@ -279,6 +278,7 @@ def _piece_graph(tet_mesh: TetMesh, tet_piece: np.ndarray,
     norm = np.linalg.norm(summed, axis=1, keepdims=True)
     # A curved interface can have a near-zero mean normal; fall back to the centroid direction.
     fallback = centroids[pairs[:, 1]] - centroids[pairs[:, 0]]
-    fallback /= np.maximum(np.linalg.norm(fallback, axis=1, keepdims=True), 1e-300)
-    edge_normals = np.where(norm > 1e-12 * edge_areas[:, None], summed / np.maximum(norm, 1e-300), fallback)
+    fallback /= np.maximum(np.linalg.norm(fallback, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
+    edge_normals = np.where(norm > tol.ROUNDOFF * edge_areas[:, None], summed / np.maximum(norm, tol.SMALLEST_DIVISOR),
+                            fallback)
     return pairs.astype(np.int32), edge_areas, edge_centroids, edge_normals

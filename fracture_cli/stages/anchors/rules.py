@@ -11,13 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.boxlevels import LevelGrid
 from fracture_cli.geometry.trigeom import closest_points
 from fracture_cli.types import Fragments, SurfaceMesh
 
-# A fragment shares volume with a box when their intersection holds more than this fraction of the input's volume:
-# a box that only touches a fragment's face (an exact boolean gives ~0 there, up to rounding) does not anchor it.
-MIN_SHARED_VOLUME = 1e-9
 # Outer faces lie on the input's surface up to rounding; a colour sample looks for its triangle this far first
 # (normalized units), then ten times farther until it finds one.
 _NEAR = 1e-6
@@ -60,8 +58,9 @@ def in_box(fragments: Fragments, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
     A fragment with a vertex strictly inside the box shares volume with it (a solid has volume next to every
     point of its surface); otherwise the exact intersection (manifold3d) must hold more than
-    :data:`MIN_SHARED_VOLUME` of the input's volume, which also catches a box inside a fragment or crossing
-    it between its vertices.
+    :data:`~fracture_cli.geometry.tolerances.SLIVER_VOLUME` of the input's volume (a box that only touches a
+    fragment's face shares ~0 there, up to rounding, and does not anchor it), which also catches a box inside a
+    fragment or crossing it between its vertices.
     """
     # on first use: manifold3d only when a box is given
     import manifold3d
@@ -78,7 +77,7 @@ def in_box(fragments: Fragments, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     if np.any(box_lo >= box_hi):
         return picked
     box = manifold3d.Manifold.cube(tuple(float(x) for x in box_hi - box_lo)).translate(tuple(float(x) for x in box_lo))
-    floor = MIN_SHARED_VOLUME * fragments.input_volume
+    floor = tol.SLIVER_VOLUME * fragments.input_volume
     for j, frag in enumerate(fragments.fragments):
         V = np.asarray(frag.vertices, dtype=np.float64)
         if np.any(V.max(axis=0) <= box_lo) or np.any(V.min(axis=0) >= box_hi):
@@ -147,7 +146,7 @@ def _barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> 
     d00, d01, d11 = (np.einsum("ij,ij->i", x, y) for x, y in ((v0, v0), (v0, v1), (v1, v1)))
     d20, d21 = np.einsum("ij,ij->i", v2, v0), np.einsum("ij,ij->i", v2, v1)
     denom = d00 * d11 - d01 * d01
-    ok = denom > 1e-30 * np.maximum(d00 * d11, 1e-300)
+    ok = denom > 1e-30 * np.maximum(d00 * d11, tol.SMALLEST_DIVISOR)
     safe = np.where(ok, denom, 1.0)
     v = (d11 * d20 - d01 * d21) / safe
     w = (d00 * d21 - d01 * d20) / safe

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.hulls import (
     canonical,
     face_planes,
@@ -161,8 +162,8 @@ def collision_shapes(meshes: Sequence[tuple[np.ndarray, np.ndarray]], options: C
                     ", ".join(map(str, empty[:10])))
     return CollisionShapes(parts=tuple(tuple(p) for p in result), volumes=volumes_arr,
                            hull_ratio=np.array(hull_ratio),
-                           parts_ratio=parts_volume / np.maximum(volumes_arr, 1e-300),
-                           coverage=covered / np.maximum(volumes_arr, 1e-300),
+                           parts_ratio=parts_volume / np.maximum(volumes_arr, tol.SMALLEST_DIVISOR),
+                           coverage=covered / np.maximum(volumes_arr, tol.SMALLEST_DIVISOR),
                            part_faces=tuple(f for _, _, _, faces in finished for f in faces))
 
 
@@ -278,7 +279,7 @@ def _overlap_fraction(shared: tuple, pair: tuple[int, int]) -> float:
     if smaller <= 0:
         return 0.0
     # A cross-section of a convex part is at most half its surface.
-    slack = 0.5 * _NEGLIGIBLE * smaller / max(areas[i], areas[j], 1e-300)
+    slack = 0.5 * _NEGLIGIBLE * smaller / max(areas[i], areas[j], tol.SMALLEST_DIVISOR)
     if (overlap_bound_separated(corners[i], planes[i], corners[j], slack)
             or overlap_bound_separated(corners[j], planes[j], corners[i], slack)):
         return 0.0

@@ -15,6 +15,7 @@ import manifold3d
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.hulls import MIN_PART_VOLUME, hull_of, mesh_of
 from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.geometry.meshtopo import unique_edges
@@ -142,7 +143,7 @@ def _best_cut(part: manifold3d.Manifold,
         candidates += [(normal, offset, s, _cut_points(V, edges, ends, offset))
                        for offset in lo + (hi - lo) * _CUT_FRACTIONS]
     bounds = _cost_bounds(V, candidates) if len(V) > _BOUND_VERTICES else np.zeros(len(candidates))
-    best, best_cost = None, hull.volume() * (1.0 - 1e-9)
+    best, best_cost = None, hull.volume() * (1.0 - tol.TIE)
     for index in np.argsort(bounds, kind="stable").tolist():
         if bounds[index] * (1.0 - _BOUND_SLACK) > best_cost:
             break  # this bound and every later one exceed the best cost

@@ -19,6 +19,7 @@ import manifold3d
 import numpy as np
 import numpy.typing as npt
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.hulls import (
     MIN_PART_VOLUME,
     face_planes,
@@ -32,7 +33,7 @@ from fracture_cli.geometry.hulls import (
 from fracture_cli.geometry.mass import MassProperties, mass_properties
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.geometry.trigeom import cross3
-from fracture_cli.stages.fragments.interfaces import INTERFACE_TOLERANCE, coincident_faces
+from fracture_cli.stages.fragments.interfaces import coincident_faces
 from fracture_cli.system import detmath, parallel
 
 # A closed mesh: vertices (n, 3), faces (m, 3).
@@ -43,11 +44,6 @@ _Bodies = tuple[Sequence[_Mesh], Sequence[int] | np.ndarray] | _FullBodies
 # hull_faces of a part: face planes (normals (m, 3), offsets (m,)) and surface area.
 _HullFaces = tuple[tuple[np.ndarray, np.ndarray], float]
 
-# Overlaps below this volume (fraction of the smaller part) are contact, not overlap.
-_TOUCH = 1e-9
-# Rounding allowance (normalized coordinates, unit diagonal) of a point's depth inside clipped parts (_depth):
-# far above the error of a plane distance or of a clip's corners, far below a part's size.
-_MARGIN = 1e-7
 # Offsets tried for a separating plane, as fractions of the overlap's extent along its normal.
 _PLANE_FRACTIONS = np.linspace(0.0, 1.0, 9)
 
@@ -67,7 +63,7 @@ class _Material:
         squared = np.einsum("tcj,tcj->tc", arm, arm)
         radius = np.sqrt(np.maximum(np.maximum(squared[:, 0], squared[:, 1]), squared[:, 2]))
         scale = float(np.abs(self.vertices).max()) if len(self.vertices) else 0.0
-        self.radius = radius * (1.0 + 1e-9) + 1e-9 * scale
+        self.radius = radius * (1.0 + tol.TIE) + tol.SAME_POINT * scale
 
 
 @dataclass(frozen=True)
@@ -226,7 +222,7 @@ def separate_hulls(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = 
         masses = [mass_properties(V, F) for V, F in materials]
     points = np.vstack([m.vertices for m in solids]) if solids else np.zeros((1, 3))
 
-    tolerance = INTERFACE_TOLERANCE * float(np.linalg.norm(np.ptp(points, axis=0)))
+    tolerance = tol.ON_SURFACE * float(np.linalg.norm(np.ptp(points, axis=0)))
     pairs = overlapping_boxes([h.bounding_box() for h in hulls])
     if groups is not None:
         index: dict = {}
@@ -257,16 +253,18 @@ def separate_hulls(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = 
         normal, offset, centre = plane
         # A ball of this radius lies in both parts as clipped so far (none if <= 0): when it holds far more than
         # contact, they overlap, and a part reaching beyond its side of the plane inside the ball needs its trim,
-        # both known without reading the clipped corners back (a clip is only computed when they are).
-        radius = _depth(shared, trims, (i, j), centre) - _MARGIN if clipped[i] or clipped[j] else 0.0
-        deep = radius > 0 and 4.0 / 3.0 * np.pi * detmath.cube(radius) > 1e3 * _TOUCH * min(volumes[i], volumes[j])
+        # both known without reading the clipped corners back (a clip is only computed when they are). ON_SURFACE
+        # allows for the rounding of a plane distance and of a clip's corners.
+        radius = _depth(shared, trims, (i, j), centre) - tol.ON_SURFACE if clipped[i] or clipped[j] else 0.0
+        deep = radius > 0 and (4.0 / 3.0 * np.pi * detmath.cube(radius)
+                               > 1e3 * tol.SLIVER_VOLUME * min(volumes[i], volumes[j]))
         # Once a part was clipped by an earlier pair, this pair may be apart already: then it keeps its material.
         if (clipped[i] or clipped[j]) and not deep and not _overlapping(hulls[i], hulls[j], current(i), current(j),
                                                                         normal, offset):
             continue
         # A part wholly on its side of the plane stays as it is (and needs no trim).
         for part, side, level in ((i, -normal, -offset), (j, normal, offset)):
-            if ((deep and part in stale and float(side @ centre) - radius < level - _MARGIN)
+            if ((deep and part in stale and float(side @ centre) - radius < level - tol.ON_SURFACE)
                     or (len(current(part)) and (corners[part] @ side).min() < level)):
                 hulls[part] = hulls[part].trim_by_plane(side, level)
                 trims[part].append((side, level))
@@ -293,7 +291,7 @@ def _overlapping(a: manifold3d.Manifold, b: manifold3d.Manifold, corners_a: np.n
         return False
     if (corners_a @ normal).max() <= offset <= (corners_b @ normal).min():
         return False
-    return (a ^ b).volume() > _TOUCH * min(a.volume(), b.volume())
+    return (a ^ b).volume() > tol.SLIVER_VOLUME * min(a.volume(), b.volume())
 
 
 def _depth(shared: _Shared, trims: list, pair: tuple[int, int], centre: np.ndarray) -> float:
@@ -330,12 +328,13 @@ def _pair_plane(shared: _Shared, pair: tuple[int, int]) -> tuple[np.ndarray, flo
         return None
     smaller = min(a.volume(), b.volume())
     # A face plane of one hull with the other's corners beyond it (up to a slab too thin to matter) separates them.
-    slack = 0.5 * _TOUCH * smaller / max(shared.areas[i], shared.areas[j], 1e-300)
+    slack = 0.5 * tol.SLIVER_VOLUME * smaller / max(shared.areas[i], shared.areas[j], tol.SMALLEST_DIVISOR)
     if (overlap_bound_separated(shared.corners[i], shared.planes[i], shared.corners[j], slack)
             or overlap_bound_separated(shared.corners[j], shared.planes[j], shared.corners[i], slack)):
         return None
     overlap = a ^ b
-    if overlap.is_empty() or overlap.volume() <= _TOUCH * smaller:
+    # Overlaps below SLIVER_VOLUME of the smaller part are contact, not overlap.
+    if overlap.is_empty() or overlap.volume() <= tol.SLIVER_VOLUME * smaller:
         return None
     interface = _interface_normal(shared, i, j)
     return _best_plane(overlap, shared.materials[i], shared.materials[j], mass_a, mass_b, interface)
@@ -390,7 +389,7 @@ def _best_plane(overlap: manifold3d.Manifold, material_a: _Material, material_b:
     candidates = [axes[:, int(np.argmax(moments))], towards_b]
     if interface_normal is not None:
         candidates.insert(0, interface_normal)
-    volume_a, volume_b = max(mass_a.volume, 1e-300), max(mass_b.volume, 1e-300)
+    volume_a, volume_b = max(mass_a.volume, tol.SMALLEST_DIVISOR), max(mass_b.volume, tol.SMALLEST_DIVISOR)
     best, best_cost = None, np.inf
     for normal in candidates:
         length = np.linalg.norm(normal)

@@ -9,10 +9,11 @@ import manifold3d
 import numpy as np
 
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.geometry.rows import unique_rows, used_vertices
-from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask
+from fracture_cli.geometry.solids import shell_mask
 from fracture_cli.geometry.uvs import box_uvs
 from fracture_cli.options import option
 from fracture_cli.stages.fragments.bodies import SplitReport, body_faces, split_fragments, stable_order
@@ -136,7 +137,7 @@ def fragments_with_split(surface: SurfaceMesh, regions: Regions,
     id_to_material[region_id] = interior_index
 
     cut = _Cut(tuple(solids), regions.meshes, region_id, id_to_material, interior_index, surface, options,
-               SHELL_VOLUME * input_volume)
+               tol.SLIVER_VOLUME * input_volume)
     # One boolean per piece, independent of the others: on parallel.current_jobs() processes, results in order.
     if sum(solid.num_tri() for solid in solids) > _CROP_TRIANGLES and len(regions.meshes) > 1:
         groups = _piece_groups(regions.meshes, _CROP_GROUPS)
@@ -337,7 +338,7 @@ def _to_fragment(part: manifold3d.Manifold, piece: int, id_to_material: dict, in
     positions = props[:, :3]
     normals = props[:, _NORMAL].copy()
     length = np.linalg.norm(normals, axis=1, keepdims=True)
-    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), 0.0)
+    normals = np.where(length > tol.ROUNDOFF, normals / np.maximum(length, tol.SMALLEST_DIVISOR), 0.0)
     uvs = props[:, _UV].copy()
 
     # Interior faces: one vertex per (vertex, plane) so normals are flat and
@@ -345,7 +346,7 @@ def _to_fragment(part: manifold3d.Manifold, piece: int, id_to_material: dict, in
     ti = tris[inside]
     a, b, c = positions[ti[:, 0]], positions[ti[:, 1]], positions[ti[:, 2]]
     fn = np.cross(b - a, c - a)
-    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     offset = np.einsum("ij,ij->i", fn, a)
     plane_key = np.column_stack([np.round(fn * 1e6), np.round(offset * 1e9)]).astype(np.int64)
     _, plane = unique_rows(plane_key, return_inverse=True)
@@ -357,7 +358,7 @@ def _to_fragment(part: manifold3d.Manifold, piece: int, id_to_material: dict, in
     # Each plane's normal: mean of its faces' normals (they agree to 1e-6).
     plane_normal = np.zeros((plane.max() + 1 if len(plane) else 0, 3))
     np.add.at(plane_normal, plane, fn)
-    plane_normal /= np.maximum(np.linalg.norm(plane_normal, axis=1, keepdims=True), 1e-300)
+    plane_normal /= np.maximum(np.linalg.norm(plane_normal, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     new_normals = plane_normal[uniq[:, 1]]
     new_uvs = box_uvs(surface.normalization.to_world(new_positions), new_normals, options.uv_scale)
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import manifold3d
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.geometry.meshtopo import manifold_patches
 from fracture_cli.geometry.rows import unique_rows
@@ -33,8 +34,6 @@ log = logging.getLogger(__name__)
 
 STAGE = "components"
 
-# Shells of a boolean result with less volume than this (fraction of the input) are artefacts.
-_SHELL_VOLUME = 1e-9
 
 
 @dataclass(frozen=True)
@@ -100,8 +99,8 @@ def body_faces(vertices: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
     for k in range(3):
         np.minimum.at(lo, patch, V[F[:, k]])
         np.maximum.at(hi, patch, V[F[:, k]])
-    scale = max(float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))), 1e-300)
-    empty = np.abs(volume) <= _SHELL_VOLUME * scale * scale * scale
+    scale = max(float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))), tol.SMALLEST_DIVISOR)
+    empty = np.abs(volume) <= tol.SLIVER_VOLUME * scale * scale * scale
     positive = np.flatnonzero((volume > 0) & ~empty)
     members = {int(p): [int(p)] for p in positive}
     for cavity in np.flatnonzero((volume < 0) & ~empty).tolist():
@@ -260,7 +259,7 @@ def _group_fragment(fragments: Fragments, members: list, piece: int) -> Fragment
         id_to_material.update(ids)
     union = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add)
     props, F, material_ids = from_manifold(union, id_to_material)
-    keep = shell_mask(union.to_mesh64(), _SHELL_VOLUME * fragments.input_volume)
+    keep = shell_mask(union.to_mesh64(), tol.SLIVER_VOLUME * fragments.input_volume)
     F, material_ids = F[keep], material_ids[keep]
     used, local = np.unique(F, return_inverse=True)
     props = props[used]
@@ -275,7 +274,7 @@ def _mesh_centroid(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     vol = face_signed_volumes(V, F)
     total = vol.sum()
-    if abs(total) < 1e-300:
+    if abs(total) < tol.SMALLEST_DIVISOR:
         return V.mean(axis=0)
     return ((a + b + c) / 4.0 * vol[:, None]).sum(axis=0) / total
 

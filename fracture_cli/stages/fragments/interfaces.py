@@ -1,7 +1,8 @@
 """Where meshes touch face to face: interface areas, the faces that lie on another mesh, the fragment graph.
 
 Two fragments are bonded where their fault faces lie on each other (opposite normals, a centroid on the other's
-face within :data:`INTERFACE_TOLERANCE`); the shared area is the bond's area.
+face within :data:`~fracture_cli.geometry.tolerances.ON_SURFACE` of the bounding-box diagonal); the shared area is
+the bond's area.
 """
 
 from __future__ import annotations
@@ -11,13 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.boxlevels import LevelGrid
 from fracture_cli.system import detmath, parallel
 from fracture_cli.types import Fragments
 
-# Two faces lie on one interface when the centroid of one is within this distance of the other's
-# plane (relative to the bounding-box diagonal of all meshes) and their normals are opposite.
-INTERFACE_TOLERANCE = 1e-7
 # Normals of the two sides of an interface: cosine below this counts as opposite.
 _OPPOSITE_COS = -0.5
 
@@ -34,7 +33,7 @@ def interface_areas(meshes: Sequence[tuple[np.ndarray, np.ndarray]], candidates:
         Faces that may lie on an interface (the fault faces).
     tolerance : float, optional
         Distance of a face centroid from the other face's plane that still
-        counts as on it (default :data:`INTERFACE_TOLERANCE` times the bounding-box
+        counts as on it (default :data:`~fracture_cli.geometry.tolerances.ON_SURFACE` times the bounding-box
         diagonal of all meshes).
 
     Returns
@@ -119,10 +118,10 @@ def coincident_faces(meshes: Sequence[tuple[np.ndarray, np.ndarray]], candidates
         empty = np.zeros(0, dtype=np.int64)
         return FaceMatches(empty, empty, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), empty)
     if tolerance is None:
-        tolerance = INTERFACE_TOLERANCE * float(np.linalg.norm(np.ptp(T.reshape(-1, 3), axis=0)))
+        tolerance = tol.ON_SURFACE * float(np.linalg.norm(np.ptp(T.reshape(-1, 3), axis=0)))
     normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
     area = 0.5 * np.linalg.norm(normal, axis=1)
-    unit = normal / np.maximum(2.0 * area, 1e-300)[:, None]
+    unit = normal / np.maximum(2.0 * area, tol.SMALLEST_DIVISOR)[:, None]
     centroid = T.mean(axis=1)
     boxes = np.stack([T.min(axis=1), T.max(axis=1)], axis=1)
     grid = LevelGrid(boxes)  # BoxGrid's pairs and order without its 45M entries for large fault triangles
@@ -163,7 +162,7 @@ def _inside(points: np.ndarray, triangles: np.ndarray, tolerance: float) -> np.n
         edge = v - u
         # Signed distance of the point from the edge, inward positive, in the triangle's plane.
         inward = np.cross(normal, edge)
-        inward /= np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), 1e-300)
+        inward /= np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
         inside &= np.einsum("ij,ij->i", points - u, inward) >= -tolerance
     return inside
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.edges import corner_fans, edge_table
 from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.geometry.solids import SplitMesh
@@ -29,9 +30,6 @@ from fracture_cli.stages.repair.carry import after_split
 from fracture_cli.stages.repair.nonmanifold import split_nonmanifold
 from fracture_cli.system import parallel
 from fracture_cli.types import Fragment, Fragments
-
-# Bodies of a split fragment with less volume than this fraction of the input are slivers of rounding.
-_SLIVER_VOLUME = 1e-9
 
 
 def written_check(frag: Fragment, fragments: Fragments) -> MeshCheck:
@@ -89,7 +87,7 @@ def split_at_pinches(frag: Fragment, fragments: Fragments) -> tuple[list[Fragmen
     out = after_split(mesh, split)
     volume = np.array([mass_properties(out.props[:, :3], out.faces[split.body == b]).volume
                        for b in range(len(split.body_closed))])
-    keep = np.flatnonzero(volume > _SLIVER_VOLUME * fragments.input_volume)
+    keep = np.flatnonzero(volume > tol.SLIVER_VOLUME * fragments.input_volume)
     if not len(keep):
         return None
     bodies = []

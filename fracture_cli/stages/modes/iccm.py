@@ -21,6 +21,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tolerances
 from fracture_cli.stages.modes.options import STAGE, ModesOptions
 from fracture_cli.stages.modes.solver import (
     ConicSubproblemSolver,
@@ -255,7 +256,7 @@ def _iccm_mode(solve: _Solve, c: np.ndarray, found: list[np.ndarray], inner: _MI
         if certified:
             gaps.append(result.energy - result.lower_bound)
         u = result.u / math.sqrt(inner.dot(result.u, result.u))
-        change = float(np.abs(u - c).max()) / max(float(np.abs(c).max()), 1e-300)
+        change = float(np.abs(u - c).max()) / max(float(np.abs(c).max()), tolerances.SMALLEST_DIVISOR)
         c = u
         if change <= opts.tol and certified:
             converged = True

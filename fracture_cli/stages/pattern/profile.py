@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fracture_cli.errors import RecipeError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.system import detmath
 from fracture_cli.types import TetMesh
 
@@ -124,7 +125,7 @@ def split_cell(points: np.ndarray, weights: np.ndarray, profile: tuple[np.ndarra
     s = d[:, 0] * along[0] + d[:, 1] * along[1] + d[:, 2] * along[2]
     h = d[:, 0] * normal[0] + d[:, 1] * normal[1] + d[:, 2] * normal[2]
     lo, hi = float(s.min()), float(s.max())
-    length = max(hi - lo, 1e-12)
+    length = max(hi - lo, tol.ZERO_LENGTH)
     offset = np.interp((s - lo) / length, shape[:, 0], shape[:, 1]) * length
     g = h - offset
     # The surface's height: the volume_ratio quantile of g by asset volume (a sequential sum of a sorted order).

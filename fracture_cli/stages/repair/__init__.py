@@ -26,6 +26,7 @@ import manifold3d
 import numpy as np
 
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.edges import edge_table
 from fracture_cli.geometry.meshtopo import components
@@ -70,8 +71,6 @@ log = logging.getLogger(__name__)
 
 STAGE = "repair"
 
-# A solid of a unit-diagonal box enclosing less than this has no inside.
-_MIN_VOLUME = 1e-9
 # Vertices of different bodies closer than this (of the diagonal) are one point: a few float32 steps of a
 # fragment's pivot-relative coordinates (a baked GLB read back), far below any modelled feature.
 SNAP_TOLERANCE = 2e-7
@@ -241,7 +240,7 @@ def _as_surface(mesh: SplitMesh, surface: SurfaceMesh, materials: tuple[Material
     props, F = trigeom.compact(mesh.props, mesh.faces)
     normals = props[:, NORMAL]
     length = np.linalg.norm(normals, axis=1, keepdims=True)
-    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-300), 0.0)
+    normals = np.where(length > tol.ROUNDOFF, normals / np.maximum(length, tol.SMALLEST_DIVISOR), 0.0)
     return SurfaceMesh(
         vertices=np.ascontiguousarray(props[:, POS]),
         faces=np.ascontiguousarray(F, dtype=np.int64),
@@ -341,7 +340,7 @@ def _orient_and_split(mesh: SplitMesh, normalization: Normalization, records: li
 def _lacks_inside(split: NonManifoldSplit) -> bool:
     """Whether :func:`_refuse_without_inside` would refuse the split."""
     table = split.edges if split.edges is not None else edge_table(split.faces)
-    flat = split.body_closed & (np.abs(split.body_volume) <= _MIN_VOLUME)
+    flat = split.body_closed & (np.abs(split.body_volume) <= tol.SLIVER_VOLUME)
     return bool(len(split.unresolved_edges)) or bool((table.count > 2).any()) or bool(flat.any())
 
 
@@ -355,7 +354,7 @@ def _cut_fins(mesh: SplitMesh, split: NonManifoldSplit, policy: str,
         mesh = without(mesh, hinged) if policy == "drop" else detach(mesh, hinged)
         records.append(fin_record(int(hinged.sum()), policy == "drop", where))
         split = split_nonmanifold(mesh.props[:, POS], mesh.welded)
-    empty = empty_bodies(split, _MIN_VOLUME)
+    empty = empty_bodies(split, tol.SLIVER_VOLUME)
     if empty.any() and not len(split.unresolved_edges) and not empty.all():
         where = tuple(float(x) for x in mesh.props[np.unique(mesh.faces[empty]), :3].mean(axis=0))
         mesh = without(mesh, empty)
@@ -374,7 +373,7 @@ def _refuse_without_inside(split: NonManifoldSplit, normalization: Normalization
     """
     table = split.edges if split.edges is not None else edge_table(split.faces)
     many = table.ends[table.count > 2]
-    flat = split.body_closed & (np.abs(split.body_volume) <= _MIN_VOLUME)
+    flat = split.body_closed & (np.abs(split.body_volume) <= tol.SLIVER_VOLUME)
     if len(split.unresolved_edges):
         ends = split.unresolved_edges
     elif len(many):
@@ -481,7 +480,7 @@ def _solid(mesh: SplitMesh, num_materials: int, flat: bool, records: list[Repair
         mesh = SplitMesh(np.vstack([p[0] for p in parts]), np.vstack([p[1] + o for p, o in zip(parts, offsets)]),
                          np.concatenate([p[2] for p in parts]), np.arange(int(offsets[-1])))
     volume = float(sum(g.volume() for g in groups))
-    if volume <= _MIN_VOLUME:
+    if volume <= tol.SLIVER_VOLUME:
         if flat:
             raise StageError(_FLAT_MESSAGE, stage=STAGE)
         raise StageError(f"the repaired mesh encloses no volume ({volume:.3g} of a unit-diagonal box); it needs a "

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.geometry.solids import COLOR, NORMAL, POS, UV, SplitMesh
@@ -95,7 +96,7 @@ def after_fill(mesh: SplitMesh, filled: FilledMesh, loops: list[HoleLoop], inter
     V = filled.vertices
     area_vector = np.cross(V[patch[:, 1]] - V[patch[:, 0]], V[patch[:, 2]] - V[patch[:, 0]])
     summed = np.stack([np.bincount(loop_of, weights=area_vector[:, k], minlength=len(loops)) for k in range(3)], 1)
-    normal = summed / np.maximum(np.linalg.norm(summed, axis=1, keepdims=True), 1e-300)
+    normal = summed / np.maximum(np.linalg.norm(summed, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     keys, inverse = unique_rows(np.column_stack([np.repeat(loop_of, 3), patch.reshape(-1)]), return_inverse=True)
     loop_id, welded = keys[:, 0], keys[:, 1]
     block = np.zeros((len(keys), mesh.props.shape[1]))

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.edges import edge_table, face_bodies, signed_volume
 from fracture_cli.geometry.tetgeom import triangle_areas
@@ -169,7 +170,7 @@ def _plane(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Centroid, unit normal of the loop's winding (Newell) and largest distance to the best-fit plane."""
     c = P.mean(axis=0)
     newell = np.cross(P - c, np.roll(P, -1, axis=0) - c).sum(axis=0)
-    normal = newell / max(np.linalg.norm(newell), 1e-300)
+    normal = newell / max(np.linalg.norm(newell), tol.SMALLEST_DIVISOR)
     fit = np.linalg.svd(P - c, full_matrices=False)[2][-1]
     return c, normal, float(np.abs((P - c) @ fit).max())
 
@@ -248,7 +249,8 @@ def measure_loop(V: np.ndarray, loop: np.ndarray, body: int) -> HoleLoop:
     if patch is None:
         kind, patch = "none", np.zeros((0, 3), dtype=np.int64)
     return _with_patch(HoleLoop(vertices=loop, body=body, centroid=c, diameter=diameter,
-                                planarity=deviation / max(diameter, 1e-300), patch=patch, area=0.0, kind=kind), V)
+                                planarity=deviation / max(diameter, tol.SMALLEST_DIVISOR), patch=patch, area=0.0,
+                                kind=kind), V)
 
 
 def _with_patch(loop: HoleLoop, V: np.ndarray, patch: np.ndarray | None = None, kind: str | None = None) -> HoleLoop:
@@ -375,7 +377,7 @@ def _container_opening(W: np.ndarray, body_faces: np.ndarray, loops: list[HoleLo
         u /= np.linalg.norm(u)
         v = np.cross(n, u)
         width = max(float(np.ptp(verts @ u)), float(np.ptp(verts @ v)))
-        ratio = max(float(np.ptp(P @ u)), float(np.ptp(P @ v))) / max(width, 1e-300)
+        ratio = max(float(np.ptp(P @ u)), float(np.ptp(P @ v))) / max(width, tol.SMALLEST_DIVISOR)
         if ratio >= threshold:
             widest = max(widest, ratio)
     return widest

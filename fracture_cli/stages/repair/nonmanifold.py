@@ -16,13 +16,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.edges import EdgeTable, corner_fans, edge_table, face_bodies, signed_volume
 from fracture_cli.stages.repair.records import RepairRecord
 from fracture_cli.system import detmath
 
-# Faces around an edge whose angles differ by less than this (radians) are coincident: the wedge between them
-# is taken to be empty (two bodies touching face to face), never a sheet of material of zero thickness.
-ANGLE_TIE = 1e-9
 # Rounds of doubling internal walls (faces with material on both sides) before giving up.
 _MAX_WALL_ROUNDS = 4
 
@@ -88,13 +86,15 @@ def _edge_fan(V: np.ndarray, F: np.ndarray, table: EdgeTable, sides: np.ndarray)
     third = faces[(faces != a) & (faces != b)]
     w = V[third] - V[a]
     w = w - np.outer(w @ axis, axis)
-    u = w[0] / max(np.linalg.norm(w[0]), 1e-300)
+    u = w[0] / max(np.linalg.norm(w[0]), tol.SMALLEST_DIVISOR)
     angle = detmath.atan2(w @ np.cross(axis, u), w @ u)
     angle = np.where(angle < 0, angle + 2 * np.pi, angle)
-    angle = np.where(angle > 2 * np.pi - ANGLE_TIE, 0.0, angle)
+    # Faces around the edge whose angles differ by less than TIE (radians) are coincident: the wedge between them
+    # is taken to be empty (two bodies touching face to face), never a sheet of material of zero thickness.
+    angle = np.where(angle > 2 * np.pi - tol.TIE, 0.0, angle)
     sign = np.where(table.forward[sides], 1, -1)
-    # Angles within ANGLE_TIE are one angle; there the +1 face comes first.
-    order = np.lexsort((-sign, np.round(angle / ANGLE_TIE)))
+    # Angles within TIE are one angle; there the +1 face comes first.
+    order = np.lexsort((-sign, np.round(angle / tol.TIE)))
     return sides[order], sign[order]
 
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fracture_cli.errors import StageError
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.edges import edge_table
 from fracture_cli.geometry.tetgeom import triangle_areas
@@ -169,7 +170,7 @@ def _build(V: np.ndarray, F: np.ndarray, offset: np.ndarray, t: np.ndarray, thic
     source = np.concatenate([np.arange(n), used, ends, ends])
     faces = np.vstack([F, back, rim])
     kind = np.concatenate([np.zeros(len(F)), np.ones(len(back)), np.full(len(rim), 2)]).astype(np.int8)
-    thinned = int((t[used] < thickness * (1 - 1e-9)).sum())
+    thinned = int((t[used] < thickness * (1 - tol.TIE)).sum())
     area = float(triangle_areas(V, F).sum())
     records = [RepairRecord("thickened_sheet", f"thickened an open sheet of {len(F)} faces behind its visible side"
                             + (f" (thinner at {thinned} vertices, down to {t[used].min() / thickness:.2g} of the "

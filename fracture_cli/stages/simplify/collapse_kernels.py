@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.system.jit import njit
 
 
@@ -42,7 +43,7 @@ def quadrics(V: np.ndarray, faces: np.ndarray, fault: np.ndarray, n: int) -> np.
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
     normal = np.cross(b - a, c - a)
     area = np.linalg.norm(normal, axis=1)
-    unit = normal / np.maximum(area, 1e-300)[:, None]
+    unit = normal / np.maximum(area, tol.SMALLEST_DIVISOR)[:, None]
     plane = np.sqrt(area)[:, None] * np.column_stack([unit, -np.einsum("ij,ij->i", unit, a)])
     outer = np.einsum("fi,fj->fij", plane, plane)
     Q = np.zeros((n, 4, 4))
@@ -269,7 +270,7 @@ def nearest(X: np.ndarray, grid: tuple, cell: float, Q: np.ndarray, k: int) -> n
                         c += step
             # A point in a cell r + 1 shells away is more than r cells away along some axis (the margin: rounding
             # in the cell of a point).
-            if found == k and best[k - 1] < (r * cell * (1.0 - 1e-9)) * (r * cell * (1.0 - 1e-9)):
+            if found == k and best[k - 1] < (r * cell * (1.0 - tol.TIE)) * (r * cell * (1.0 - tol.TIE)):
                 break
         out[q] = ids
     return out

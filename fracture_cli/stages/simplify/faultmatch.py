@@ -16,6 +16,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.exactgeom import real_pairs
 from fracture_cli.geometry.meshtopo import manifold_patches, undirected_edges
 from fracture_cli.geometry.rows import group_rows, unique_rows
@@ -31,10 +32,6 @@ from fracture_cli.geometry.trigeom import (
 from fracture_cli.system import parallel
 from fracture_cli.types import Fragment, Fragments, SurfaceMesh
 
-# Vertices of different fragments closer than this (normalized units) are one point.
-WELD_TOLERANCE = 1e-6
-# An outer face lies in an input triangle when its corners are this close to it (normalized units).
-ON_SURFACE = 1e-7
 # Input triangles tried per outer face (nearest centroids first) before all of them are.
 _CANDIDATES = 16
 
@@ -136,7 +133,7 @@ def coplanar_groups(surface: SurfaceMesh) -> np.ndarray:
     """
     V, F = surface.vertices, surface.faces
     normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     plane = np.column_stack([np.round(normal * 1e6), np.round(np.einsum("ij,ij->i", normal, V[F[:, 0]]) * 1e9)])
     _, plane_id = unique_rows(plane.astype(np.int64), return_inverse=True)
     plane_id = plane_id.reshape(-1)
@@ -168,14 +165,14 @@ def source_groups(surface: SurfaceMesh, points: np.ndarray, thorough: np.ndarray
         distance = point_triangle_distance(centroid, S[near[:, j]])
         better = distance < best_distance
         best[better], best_distance[better] = near[better, j], distance[better]
-    far = np.flatnonzero((best_distance > ON_SURFACE) & thorough)  # beside a big input triangle
+    far = np.flatnonzero((best_distance > tol.ON_SURFACE) & thorough)  # beside a big input triangle
     if len(far):
-        best[far], best_distance[far] = _nearest_within(S, centroid[far], ON_SURFACE)
+        best[far], best_distance[far] = _nearest_within(S, centroid[far], tol.ON_SURFACE)
     T = S[np.maximum(best, 0)]
     normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     off_plane = np.abs(np.einsum("mcj,mj->mc", points - T[:, :1], normal)).max(axis=1)
-    return np.where((best_distance <= ON_SURFACE) & (off_plane <= ON_SURFACE), group[np.maximum(best, 0)], -1)
+    return np.where((best_distance <= tol.ON_SURFACE) & (off_plane <= tol.ON_SURFACE), group[np.maximum(best, 0)], -1)
 
 
 def _nearest_within(S: np.ndarray, points: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:

@@ -5,7 +5,7 @@ are most of a bake's triangles (chair, wood: 32,000 for a 2,500-triangle input).
 :func:`simplify_faults` works on the finished fragments, all at once:
 
 1. **One shared complex.** Vertices of all fragments are welded (within
-   :data:`WELD_TOLERANCE`); every interior face is matched with the opposite
+   :data:`~fracture_cli.geometry.tolerances.WELD`); every interior face is matched with the opposite
    face of the fragment on the other side and kept once, for both. Outer faces
    are labelled with the input polygon (coplanar input triangles) they lie in. Faces that are neither
    (a fault face without a twin) keep their corners locked.
@@ -44,10 +44,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.stages.simplify.budget import Limits, shares, triangle_budget
 from fracture_cli.stages.simplify.decimate import SurfaceComplex
 from fracture_cli.stages.simplify.faultmatch import (
-    WELD_TOLERANCE,
     bad_faces,
     closed_when_welded,
     share_unmatched,
@@ -155,7 +155,7 @@ def _simplify_faults(fragments: Fragments, surface: SurfaceMesh, tolerance: floa
     offsets = np.cumsum([0] + [len(f.vertices) for f in fragments.fragments])
     positions = np.vstack([f.vertices for f in fragments.fragments])
     owner = np.repeat(np.arange(len(fragments.fragments)), np.diff(offsets))
-    gid, welded = weld(positions, owner, WELD_TOLERANCE)
+    gid, welded = weld(positions, owner, tol.WELD)
     original = fragments
     fragments = share_unmatched(fragments, gid, offsets, interior)
     classified = _classify(fragments, surface, gid, offsets, welded, interior)
@@ -486,7 +486,7 @@ def _classify(fragments: Fragments, surface: SurfaceMesh, gid: np.ndarray, offse
         for g, v in zip(G[i].tolist(), local[i].tolist()):
             corner.setdefault((int(groups[i]), g), (int(owner[i]), v))
     # The input's own vertices stay: the outer surface keeps its triangulation's corners, only cuts move.
-    near, _ = cKDTree(surface.vertices).query(welded, distance_upper_bound=WELD_TOLERANCE)
+    near, _ = cKDTree(surface.vertices).query(welded, distance_upper_bound=tol.WELD)
     on_input = np.flatnonzero(np.isfinite(near))
     owner_pair = np.column_stack([owner[rows], np.where(paired[rows], owner[np.maximum(twin[rows], 0)], -1)])
     return Classified(faces=G[rows], groups=groups[rows], owners=owners, owner_pair=owner_pair, fault=paired[rows],

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.geometry.uvs import box_uvs
 from fracture_cli.types import Fragment, Fragments
@@ -114,12 +115,12 @@ def _flat(V: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
     a, b, c = V[faces[:, 0]], V[faces[:, 1]], V[faces[:, 2]]
     normal = np.cross(b - a, c - a)
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     key = np.column_stack([np.round(normal * 1e6), np.round(np.einsum("ij,ij->i", normal, a) * 1e9)])
     _, plane = unique_rows(key.astype(np.int64), return_inverse=True)
     plane = plane.reshape(-1)
     plane_normal = np.zeros((plane.max() + 1, 3))
     np.add.at(plane_normal, plane, normal)
-    plane_normal /= np.maximum(np.linalg.norm(plane_normal, axis=1, keepdims=True), 1e-300)
+    plane_normal /= np.maximum(np.linalg.norm(plane_normal, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     uniq, corner = unique_rows(np.column_stack([faces.reshape(-1), np.repeat(plane, 3)]), return_inverse=True)
     return V[uniq[:, 0]], plane_normal[uniq[:, 1]], corner.reshape(-1, 3)

@@ -11,19 +11,14 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fracture_cli.errors import StageError
-from fracture_cli.geometry import tetgeom, trigeom
+from fracture_cli.geometry import tetgeom, tolerances, trigeom
 from fracture_cli.geometry.rows import group_rows
-from fracture_cli.geometry.solids import SHELL_VOLUME, shell_mask
+from fracture_cli.geometry.solids import shell_mask
 from fracture_cli.stages.smooth.field import forced_field
 from fracture_cli.stages.smooth.options import STAGE
 from fracture_cli.stages.smooth.topology import SINGULAR_TOL, combinations
 
 log = logging.getLogger(__name__)
-
-
-# Barycentric feasibility tolerance when enumerating cell corners; the fields
-# are O(1) (smoothed one-hot values), so an absolute tolerance is meaningful.
-_FEASIBLE_TOL = 1e-12
 
 # Fallback (union) path only: how far apart (unit bbox diagonal) the copies of
 # a vertex where a region touches itself are moved.
@@ -106,7 +101,7 @@ class _CellList:
             vertices = np.array(mesh.vert_properties[:, :3], dtype=np.float64)
             faces = np.array(mesh.tri_verts, dtype=np.int64)
             # Coplanar cell faces can leave zero-volume shells in a union; drop them (not cavities).
-            faces = faces[shell_mask(mesh, SHELL_VOLUME * region.volume())]
+            faces = faces[shell_mask(mesh, tolerances.SLIVER_VOLUME * region.volume())]
             meshes.append(_separate_pinches(*trigeom.compact(vertices, faces)))
         return meshes
 
@@ -287,7 +282,9 @@ def _cell_corners(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         for i in range(4):
             b[:, :, idx == i, i] = 0.0
     slack = np.einsum("nmpj,nmcj->nmcp", H, b)  # (N, m, C, planes)
-    valid = ok & (slack >= -_FEASIBLE_TOL).all(axis=3)
+    # Barycentric feasibility up to rounding: the fields are O(1) (smoothed one-hot values), so an absolute
+    # tolerance is meaningful.
+    valid = ok & (slack >= -tolerances.ROUNDOFF).all(axis=3)
     b = np.clip(b, 0.0, None)
     b /= b.sum(axis=3, keepdims=True)
     return b, valid

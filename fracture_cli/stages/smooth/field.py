@@ -10,6 +10,7 @@ import scipy.sparse.linalg as spla
 
 from fracture_cli.errors import StageError
 from fracture_cli.geometry import tetgeom, trigeom
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.stages.smooth.marching import direct_regions
 from fracture_cli.stages.smooth.options import STAGE
 from fracture_cli.stages.smooth.topology import Topology
@@ -18,8 +19,6 @@ from fracture_cli.types import Pieces, TetMesh
 log = logging.getLogger(__name__)
 
 
-# Field method: smallest weight of a tet (fraction of the mean tet volume) in the lumped mass of the smoothing.
-_MIN_TET_WEIGHT = 1e-12
 
 # Field method: the most a vanishing piece's field (values in [0, 1]) may be raised to keep its volume.
 _MAX_BIAS = 0.5
@@ -121,9 +120,9 @@ def smoothed_field(tet_mesh: TetMesh, tet_piece: np.ndarray, p: int, lam: float)
     """Smoothed piece membership ``Z`` (n, p) at the vertices."""
     n = tet_mesh.num_vertices
     vol = np.abs(tet_mesh.tet_volumes)
-    # Tets flat to rounding (a flat cage tet refined) still weigh a little, so that a vertex only they touch
-    # has a mass and the value of their piece instead of making the system singular.
-    vol = np.maximum(vol, _MIN_TET_WEIGHT * vol.mean()) if len(vol) else vol
+    # Tets flat to rounding (a flat cage tet refined) still weigh a little (ROUNDOFF of the mean tet volume), so
+    # that a vertex only they touch has a mass and the value of their piece instead of making the system singular.
+    vol = np.maximum(vol, tol.ROUNDOFF * vol.mean()) if len(vol) else vol
     # M_V Z0 with Z0 the lumped-mass average of the one-hot tet field: each tet
     # gives a quarter of its volume to each of its vertices, in its piece's column.
     quarter = np.repeat(vol / 4.0, 4)

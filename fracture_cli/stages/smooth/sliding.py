@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.edgelengths import longest_edges
 from fracture_cli.stages.smooth.pointgrid import PointGrid
@@ -16,8 +17,6 @@ from fracture_cli.types import SurfaceMesh
 _SLIDE_CLEARANCE = 1e-3
 # Broad-phase cells of the containment check, as a fraction of the cage's median triangle size.
 _QUERY_CELL = 0.2
-# Rounding allowance (unit bbox diagonal) of the plane test that stands in for the separating-axis test's own.
-_PLANE_MARGIN = 1e-9
 # Input triangles with edges up to this many query cells are found through their corners.
 _SHORT_EDGE = 1.0
 
@@ -39,7 +38,7 @@ class CageSurface:
         # The closest point is no farther than the nearest cage vertex: only triangles whose boxes come that
         # near can hold it.
         d0, _ = self.tree.query(points)
-        reach = d0 * (1.0 + 1e-9) + 1e-12
+        reach = d0 * (1.0 + tol.TIE) + tol.ZERO_LENGTH
         row, face = self.grid.query(np.stack([points - reach[:, None], points + reach[:, None]], axis=1))
         tri = self.V[self.F[face]]
         closest = trigeom.closest_points(points[row], tri[:, 0], tri[:, 1], tri[:, 2])
@@ -109,7 +108,7 @@ def _near_plane(P: np.ndarray, V0: np.ndarray, X: np.ndarray, faces: np.ndarray,
     reach = np.linalg.norm(new - old, axis=2).max(axis=1)
     offset = np.abs(np.einsum("ij,ij->i", P - old[box, 0], normal[box]))
     # The margin covers rounding.
-    keep = (length[box] <= tiny) | (offset <= (reach[box] * (1.0 + 1e-6) + _PLANE_MARGIN) * length[box])
+    keep = (length[box] <= tiny) | (offset <= (reach[box] * (1.0 + 1e-6) + tol.SAME_POINT) * length[box])
     return box[keep], qi[keep]
 
 
@@ -203,7 +202,8 @@ class Containment:
         normal = np.cross(A[:, 1] - A[:, 0], A[:, 2] - A[:, 0])
         length = np.linalg.norm(normal, axis=1)
         side = np.einsum("ij,ij->i", self.SV[point] - A[box, 0], normal[box])
-        reach = (_SLIDE_CLEARANCE + _PLANE_MARGIN) * length[box]
+        # SAME_POINT: the rounding allowance of this plane test, which stands in for the separating-axis test's own.
+        reach = (_SLIDE_CLEARANCE + tol.SAME_POINT) * length[box]
         # A triangle is separated on the normal if all its corners are beyond the slab on one side; the
         # input lies below the outward cage, so gathering triangles from their corners not below the slab
         # finds every other one (and a few above it). Degenerate cage triangles keep every corner.

@@ -4,12 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.stages.smooth.topology import SINGULAR_TOL, combinations
 from fracture_cli.system import detmath
-
-# Pieces with at least this margin below the best guaranteed value are never
-# candidates in a simplex (field values are O(1)).
-_CANDIDATE_TOL = 1e-12
 
 
 def tie_points(V: np.ndarray, Zv: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -46,13 +43,14 @@ def tie_points(V: np.ndarray, Zv: np.ndarray, S: np.ndarray) -> tuple[np.ndarray
         # (Which of tied best pieces argmax picks does not matter: a tie fails the margin test.)
         best = Zv.argmax(axis=1)
         z2, z1 = np.partition(Zv, -2, axis=1)[:, -2:].T
-        clear = np.all(best[S] == best[S[:, :1]], axis=1) & (z2[S].max(axis=1) < z1[S].min(axis=1) - _CANDIDATE_TOL)
+        clear = np.all(best[S] == best[S[:, :1]], axis=1) & (z2[S].max(axis=1) < z1[S].min(axis=1) - tol.ROUNDOFF)
         kept = np.flatnonzero(~clear)
         S = S[kept]
     Zs = Zv[S]  # (N, k+1, p)
     floor = Zs.min(axis=1).max(axis=1)
-    # Pieces that can win somewhere on the simplex (necessary test, with a margin for rounding).
-    cand = Zs.max(axis=1) >= floor[:, None] - _CANDIDATE_TOL
+    # Pieces that can win somewhere on the simplex (necessary test, with a margin for rounding: field values
+    # are O(1)).
+    cand = Zs.max(axis=1) >= floor[:, None] - tol.ROUNDOFF
     counts = cand.sum(axis=1)
     out_s, out_tie, out_pos = [], [], []
     for m in np.unique(counts).tolist():
@@ -130,10 +128,10 @@ def fan(poly: np.ndarray, keys: np.ndarray, normals: np.ndarray, positions: np.n
     centre /= np.maximum(count, 1)[:, None]
     if centre_pos is not None:
         centre = centre_pos
-    nrm = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    nrm = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     helper = np.where(np.abs(nrm[:, :1]) < 0.6, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     u = np.cross(nrm, helper)
-    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), tol.SMALLEST_DIVISOR)
     w = np.cross(nrm, u)
     d = P - centre[poly]
     angle = detmath.atan2(np.einsum("ij,ij->i", d, w[poly]), np.einsum("ij,ij->i", d, u[poly]))

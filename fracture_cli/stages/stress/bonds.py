@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.types import Fragments, Pieces, TetMesh
 
 
@@ -188,7 +189,7 @@ def contact_points(tet_mesh: TetMesh, fragments: Fragments, edges: np.ndarray, b
             continue
         corners_q = cKDTree(fq.vertices[np.unique(faces_q)])
         dist, _ = corners_q.query(fp.vertices)
-        shared = np.all(dist[faces_p] <= 1e-9, axis=1)
+        shared = np.all(dist[faces_p] <= tol.SAME_POINT, axis=1)
         tri = fp.vertices[faces_p[shared]]
         if not len(tri):
             continue

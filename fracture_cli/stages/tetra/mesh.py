@@ -9,6 +9,7 @@ import numpy as np
 
 from fracture_cli.errors import StageError
 from fracture_cli.geometry import tetgeom, trigeom
+from fracture_cli.geometry import tolerances as tol
 from fracture_cli.stages.tetra import tetgen as _tetgen
 from fracture_cli.stages.tetra.options import STAGE, TetraOptions
 from fracture_cli.system import detmath
@@ -16,8 +17,6 @@ from fracture_cli.types import Cage, TetMesh
 
 log = logging.getLogger(__name__)
 
-# Tets at or below this shape (volume / longest edge^3; 0.118 for a regular tet) are flat to rounding.
-_FLAT_SHAPE = 1e-12
 
 
 def tetgen_switches(options: TetraOptions, cage_volume: float) -> str:
@@ -49,8 +48,8 @@ def _run_tetgen(vertices: np.ndarray, faces: np.ndarray, switches: str, timeout:
         cage_area = tetgeom.triangle_areas(vertices, faces).sum()
         cage_volume = np.einsum("ij,ij->i", vertices[faces[:, 0]],
                                 np.cross(vertices[faces[:, 1]], vertices[faces[:, 2]])).sum() / 6.0
-        same_area = abs(tetgeom.triangle_areas(nodes, boundary).sum() - cage_area) <= 1e-9 * cage_area
-        same_volume = abs(volumes.sum() - cage_volume) <= 1e-9 * cage_volume
+        same_area = abs(tetgeom.triangle_areas(nodes, boundary).sum() - cage_area) <= tol.TIE * cage_area
+        same_volume = abs(volumes.sum() - cage_volume) <= tol.TIE * cage_volume
         if not (same_area and same_volume):
             return "the tet mesh boundary differs from the cage surface (TetGen changed it)", None, None, None
         log.info("tetra: TetGen refined %d cage faces with points on them (same surface)",
@@ -106,7 +105,7 @@ def _shape(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 
 def _peel_flat_boundary_tets(nodes: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, int]:
-    """Remove tets flat to rounding (shape <= _FLAT_SHAPE) that have a face on the boundary.
+    """Remove tets flat to rounding (shape <= ``tol.ROUNDOFF``) that have a face on the boundary.
 
     Four coplanar cage vertices can form such a tet (TetGen ``Y`` may not split
     the boundary). Removing it swaps its boundary faces for its other faces,
@@ -124,7 +123,7 @@ def _peel_flat_boundary_tets(nodes: np.ndarray, tets: np.ndarray) -> tuple[np.nd
         shape = _shape(nodes, tets)
         boundary_tets = set(TetMesh(vertices=nodes, tets=tets).boundary_face_tets.tolist())
         candidates = [int(i) for i in np.argsort(shape, kind="stable")
-                      if shape[i] <= _FLAT_SHAPE and int(i) in boundary_tets and tuple(tets[i]) not in blocked]
+                      if shape[i] <= tol.ROUNDOFF and int(i) in boundary_tets and tuple(tets[i]) not in blocked]
         if not candidates:
             return tets, removed
         i = candidates[0]

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.sparse as sp
 
+from fracture_cli.geometry import tolerances
 from fracture_cli.stages.modes.solver import partition_kernels
 from fracture_cli.stages.modes.solver.energy import Constraints, SubproblemResult, scaled_problem
 from fracture_cli.stages.modes.solver.master import MasterLP
@@ -183,7 +184,7 @@ class CutSubproblemSolver:
         of this mode: budgeted rounds that make no progress cannot merge away what they refine."""
         u = x[self.cells] + theta * v
         norm = float(np.sqrt(u @ (self.vol * u)))
-        rayleigh = float(self.omega @ np.abs(u[self._fa] - u[self._fb])) / max(norm, 1e-300)
+        rayleigh = float(self.omega @ np.abs(u[self._fa] - u[self._fb])) / max(norm, tolerances.SMALLEST_DIVISOR)
         if not rayleigh < self._budget_merge_rayleigh * (1.0 - 1e-9):
             return x
         self._budget_merge_rayleigh = rayleigh
@@ -313,7 +314,7 @@ class CutSubproblemSolver:
             supply = MY @ lam
             members, rc = self._price(supply)
             worst_rc = min(rc, 0.0)
-            if members is None or rc >= -self.tol * max(objective, 1e-300):
+            if members is None or rc >= -self.tol * max(objective, tolerances.SMALLEST_DIVISOR):
                 return x, theta, objective, worst_rc, True
             if not self.refine(members):
                 # The set is a union of cells: the violation is within the master LP's tolerance.
@@ -344,7 +345,7 @@ class CutSubproblemSolver:
         MY = self.vol[:, None] * Y
         # Relative to ||y_j||_M ||u||_M (the M_T-cosine), the natural scale of y_j^T M_T u.
         norms = np.sqrt(np.einsum("tj,tj->j", MY, Y) * float(u @ (self.vol * u)))
-        residual = float(np.max(np.abs(MY.T @ u - b) / np.maximum(norms, 1e-300)))
+        residual = float(np.max(np.abs(MY.T @ u - b) / np.maximum(norms, tolerances.SMALLEST_DIVISOR)))
         if not residual <= 1e-7:
             raise RuntimeError(f"the master LP's solution violates the constraints by {residual:.2e} (relative)")
         energy = float(self.omega @ np.abs(u[self._fa] - u[self._fb]))

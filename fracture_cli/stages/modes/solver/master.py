@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy.sparse as sp
 
+from fracture_cli.geometry import tolerances
+
 _highspy: Any
 try:  # HiGHS's own bindings allow warm starts; scipy's linprog (same HiGHS) is the fallback
     import highspy as _highspy
@@ -165,7 +167,7 @@ class MasterLP:
         n, edges, edge_omega, indicator = cell_graph
         G = np.asarray((indicator @ Y).T)  # (m, n): y_j^T M_T 1_P
         # Row scaling for HiGHS (tet volumes are tiny in normalized units); lambda is scaled back.
-        row_scale = 1.0 / np.maximum(np.einsum("t,tj->j", self.vol, np.abs(Y)), 1e-300)
+        row_scale = 1.0 / np.maximum(np.einsum("t,tj->j", self.vol, np.abs(Y)), tolerances.SMALLEST_DIVISOR)
         G = G * row_scale[:, None]
         G[np.abs(G) < 1e-12] = 0.0  # round-off of sums that cancel; keeps HiGHS's matrix clean
         b = b * row_scale
