@@ -206,9 +206,9 @@ def ordered_map(function: Callable[[Any, T], R], items: Sequence[T], shared: Any
 
 #: What a pool of forked workers costs before it computes anything, seconds: forking a process of 50-400 MB after
 #: a bake's imports, starting two workers, pickling the results back and the copy-on-write faults of the children.
-#: Measured 0.07-0.26 s (smallest of 7) and 0.12-0.31 s (median) on 2 shared cores at load 5.5-7 (bench/RESULTS.md,
-#: "Fixed costs: start-up and a worker pool"); the smaller figures count: on a busy machine :func:`idle_cores` forks
-#: nothing.
+#: Measured on 2 shared cores: 0.07-0.26 s (smallest of 7) and 0.12-0.31 s (median) at load 5.5-7, 0.23-0.26 s and
+#: 0.31 s at load 10-11 (bench/RESULTS.md, "Fixed costs: start-up and a worker pool"). The smaller figures count: on
+#: a busy machine :func:`idle_cores` forks nothing, and no idle machine was at hand to measure.
 #: A map forks only when it saves more than this.
 FORK_SECONDS = 0.15
 
