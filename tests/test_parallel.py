@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import time
 
 import numpy as np
 import pytest
@@ -85,7 +86,8 @@ def test_jobs_flag_is_global():
 
 
 @pytest.mark.slow
-def test_bake_with_one_job_and_two_is_byte_identical(tmp_path):
+def test_bake_with_one_job_and_two_is_byte_identical(tmp_path, monkeypatch):
+    monkeypatch.setattr(parallel, "FORK_SECONDS", -1.0)  # every map forks after its first item, however small
     chair = os.path.join(SAMPLE_ASSETS, "chair.glb")
     outs = []
     for jobs in ("1", "2"):
@@ -140,3 +142,32 @@ def test_stalled_workers_are_abandoned_and_the_items_finished_here(monkeypatch, 
     with caplog.at_level(logging.WARNING, logger="fracture_cli"):
         assert parallel.ordered_map(_sleeps_in_workers, list(range(7)), 3, jobs=2) == [3 * i for i in range(7)]
     assert any("stopped making progress" in r.message for r in caplog.records)
+
+
+def _costly(shared, item):
+    """About ``shared`` CPU seconds of work, and the process that did it."""
+    start = time.process_time()
+    while time.process_time() - start < shared:
+        pass
+    return item, os.getpid()
+
+
+def test_a_bake_map_forks_only_for_work_that_pays():
+    # Cheap items stay in this process whatever --jobs says; costly ones go to workers after the first.
+    with parallel.using(2):
+        cheap = parallel.ordered_map(_costly, list(range(30)), 0.0)
+        costly = parallel.ordered_map(_costly, list(range(8)), 2 * parallel.FORK_SECONDS / 5)
+    assert [i for i, _ in cheap] == list(range(30))
+    assert {pid for _, pid in cheap} == {os.getpid()}
+    assert [i for i, _ in costly] == list(range(8))
+    assert costly[0][1] == os.getpid()
+    if hasattr(os, "fork"):
+        assert os.getpid() not in {pid for _, pid in costly[1:]}
+
+
+def test_fork_pays_above_the_break_even():
+    per_item = parallel.FORK_SECONDS / 10
+    assert not parallel.fork_pays(per_item, 1, 10, 2)  # half of 10 items saved = the fork's cost: no gain
+    assert parallel.fork_pays(per_item, 1, 30, 2)
+    assert not parallel.fork_pays(per_item, 1, 1000, 1)
+    assert 1 <= parallel.idle_cores(parallel.available_cores()) <= parallel.available_cores()

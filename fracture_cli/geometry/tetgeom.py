@@ -6,12 +6,16 @@ code; :class:`fracture_cli.types.TetMesh` caches their results.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import scipy.sparse as sp
 
 from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.system import detmath
+
+if TYPE_CHECKING:  # only for annotations: the functions that build matrices import scipy when they run
+    import scipy.sparse as sp
 
 # Faces of a positively oriented tet (a, b, c, d), each oriented outward (its
 # normal points away from the opposite vertex).
@@ -135,6 +139,9 @@ def stiffness_matrix(V: np.ndarray, T: np.ndarray) -> sp.csr_matrix:
     ``K = sum_t vol_t G_t G_t^T`` with ``G_t`` the hat-function gradients; this
     equals the cotangent formula (libigl's ``cotmatrix`` is ``-K``).
     """
+    # on first use: scipy.sparse (0.3-1 s to import) stays out of modules that only need this file's array geometry
+    import scipy.sparse as sp
+
     n = len(V)
     vol = np.abs(tet_volumes(V, T))
     G = barycentric_gradients(V, T)
@@ -149,6 +156,9 @@ def stiffness_matrix(V: np.ndarray, T: np.ndarray) -> sp.csr_matrix:
 
 def lumped_mass(V: np.ndarray, T: np.ndarray) -> sp.dia_matrix:
     """Lumped vertex mass matrix (n, n): each vertex gets a quarter of its tets' volume."""
+    # on first use: scipy.sparse (0.3-1 s to import) stays out of modules that only need this file's array geometry
+    import scipy.sparse as sp
+
     n = len(V)
     vol = np.abs(tet_volumes(V, T))
     m = np.bincount(T.reshape(-1), weights=np.repeat(vol / 4.0, 4), minlength=n)
@@ -157,6 +167,9 @@ def lumped_mass(V: np.ndarray, T: np.ndarray) -> sp.dia_matrix:
 
 def tet_from_vertex(T: np.ndarray, n: int) -> sp.csr_matrix:
     """Averaging operator ``C`` (t, n): each tet takes the mean of its four vertices."""
+    # on first use: scipy.sparse (0.3-1 s to import) stays out of modules that only need this file's array geometry
+    import scipy.sparse as sp
+
     t = len(T)
     rows = np.repeat(np.arange(t), 4)
     return sp.csr_matrix((np.full(4 * t, 0.25), (rows, T.reshape(-1))), shape=(t, n))

@@ -13,8 +13,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from fracture_cli.errors import StageError
 from fracture_cli.options import option
@@ -224,6 +222,10 @@ def with_structure(data: RuntimeData, anchors: Anchors | None, fragments: Fragme
 
 def _site_coefficients(tet_mesh: TetMesh, U: np.ndarray, tau: float) -> np.ndarray:
     """``(M_V + tau K)^{-1} C^T M_T U_i`` at every vertex, (n, k, d): the unit-mass spread of ALGORITHM.md s. 4."""
+    # on first use: scipy (0.5-1 s to import) is not loaded to resolve a recipe, which imports this module
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
     k, t, d = U.shape
     volumes = tet_mesh.tet_volumes
     C = sp.csr_matrix(tet_mesh.tet_from_vertex)

@@ -16,6 +16,13 @@ use the cores, a BLAS worker thread on top would only oversubscribe them
 varying number of threads would round differently on machines with a
 different core count.
 
+A pool pays for itself only when the work is large (issue 33: 24 forks cost
+a small bake 1.1 s, and beside a second bake on 2 cores the default ``-j``
+was 1.2-1.3x slower than ``-j 1``): a bake's map therefore starts its items
+in this process and forks only for the items left when their estimated cost
+is above the break-even (:func:`fork_pays`, :data:`FORK_SECONDS`), on the
+cores that no other task is running on at that moment (:func:`idle_cores`).
+
 Under a parallel ``make`` (``make -j2 assets``) make already runs several
 bakes at once; a bake's own workers would only add fork and pickle overhead
 and fight for the same cores. Unless ``--jobs`` is given, a map then asks
@@ -150,11 +157,16 @@ def ordered_map(function: Callable[[Any, T], R], items: Sequence[T], shared: Any
         inherit it when they fork, it is never pickled.
     jobs : int, optional
         At most this many processes (default :func:`current_jobs`). One job, one item,
-        a worker process or a platform without ``fork`` runs serially here. When
-        neither this nor :func:`using` gives a number and make's jobserver is
-        usable, the map runs on 1 + (the tokens it gets from make without
-        waiting) workers: the bake's own job slot and one per token, which go
-        back when the map ends.
+        a worker process or a platform without ``fork`` runs serially here. Given
+        here, the items run on that many workers. Otherwise (a bake: its
+        ``--jobs`` or every core) the items run in this process, one after
+        another, until the ones left would take longer here than forked
+        (:func:`fork_pays`); only those go to workers, so a map of small items
+        never forks. Then, when neither this nor :func:`using` gives a number,
+        the workers are as many as the cores no other task runs on
+        (:func:`idle_cores`), or, when make's jobserver is usable, 1 + (the
+        tokens it gets from make without waiting): the bake's own job slot and
+        one per token, which go back when the map ends.
 
     Returns
     -------
@@ -164,14 +176,100 @@ def ordered_map(function: Callable[[Any, T], R], items: Sequence[T], shared: Any
     count = min(jobs if jobs is not None else current_jobs(), len(items))
     if count <= 1 or _IN_WORKER or not hasattr(os, "fork"):
         return [function(shared, item) for item in items]
-    make = jobserver.client() if jobs is None and _JOBS.get() is None else None  # an explicit number wins
-    if make is None:
+    if jobs is not None:  # the caller's explicit number: workers, whatever the work costs
         return _run_locked(function, shared, items, count)
+    # The bake's jobs: the items run here, one after another, until the ones left are worth forking for.
+    done: list[R] = []
+    started = time.process_time()
+    for item in items:
+        if done and fork_pays(time.process_time() - started, len(done), len(items) - len(done), count):
+            break
+        done.append(function(shared, item))
+    else:
+        return done
+    rest = items[len(done):]
+    count = min(count, len(rest))
+    make = jobserver.client() if _JOBS.get() is None else None  # an explicit number wins
+    if make is None and _JOBS.get() is None:
+        # No --jobs and no make: only the cores nothing else runs on now (another bake beside this one).
+        count = min(count, idle_cores(available_cores()))
+    if count <= 1:
+        return done + [function(shared, item) for item in rest]
+    if make is None:
+        return done + _run_locked(function, shared, rest, count)
     # This process holds make's implicit slot; each further worker needs a token.
     with make.tokens(count - 1) as extra:
         if extra == 0:
-            return [function(shared, item) for item in items]
-        return _run_locked(function, shared, items, 1 + extra)
+            return done + [function(shared, item) for item in rest]
+        return done + _run_locked(function, shared, rest, 1 + extra)
+
+
+#: What a pool of forked workers costs before it computes anything, seconds: forking a process of 50-400 MB after
+#: a bake's imports, starting two workers, pickling the results back and the copy-on-write faults of the children.
+#: Measured on 2 shared cores: 0.07-0.26 s (smallest of 7) and 0.12-0.31 s (median) at load 5.5-7, 0.23-0.26 s and
+#: 0.31 s at load 10-11 (bench/RESULTS.md, "Fixed costs: start-up and a worker pool"). The smaller figures count: on
+#: a busy machine :func:`idle_cores` forks nothing, and no idle machine was at hand to measure.
+#: A map forks only when it saves more than this.
+FORK_SECONDS = 0.15
+
+
+def fork_pays(spent: float, done: int, left: int, workers: int) -> bool:
+    """Whether forking ``workers`` processes for the ``left`` items finishes them sooner than this process would.
+
+    Parameters
+    ----------
+    spent : float
+        CPU seconds this process spent on the items done so far.
+    done : int
+        How many items that was (the rest is estimated at the same cost per item).
+    left : int
+        Items still to do.
+    workers : int
+        Processes they would be shared among (this process waits meanwhile).
+
+    Returns
+    -------
+    bool
+        True when the rest's estimated cost less its share per worker is more
+        than :data:`FORK_SECONDS`.
+    """
+    rest = spent / max(done, 1) * left
+    return rest - rest / max(workers, 1) > FORK_SECONDS
+
+
+def idle_cores(cores: int) -> int:
+    """How many of ``cores`` no other task is running on now (at least 1: this process's own).
+
+    Parameters
+    ----------
+    cores : int
+        The cores this process may use (:func:`available_cores`).
+
+    Returns
+    -------
+    int
+        ``cores`` less the other runnable tasks, between 1 and ``cores``;
+        ``cores`` where ``/proc/loadavg`` cannot be read (not Linux).
+
+    Notes
+    -----
+    Linux's count of runnable tasks (``/proc/loadavg``'s fourth field, this
+    process included; threads count one each), the smallest of three looks a
+    millisecond apart, so a task that only just woke does not count. Beside
+    another CPU-bound job on a 2-core machine this is 1: its own workers would
+    only take turns with it (issue 33: forking there made a bake 1.2-1.3x
+    slower than ``-j 1``).
+    """
+    running = []
+    for attempt in range(3):
+        try:
+            with open("/proc/loadavg", encoding="ascii") as fh:
+                running.append(int(fh.read().split()[3].split("/")[0]))
+        except (OSError, ValueError, IndexError):
+            return cores
+        if attempt < 2:
+            time.sleep(0.001)
+    return max(1, min(cores, cores - (min(running) - 1)))
 
 
 def _run_locked(function: Callable[[Any, T], R], shared: Any, items: Sequence[T], count: int) -> list[R]:

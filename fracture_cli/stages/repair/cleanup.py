@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from fracture_cli.geometry.edges import components
 from fracture_cli.geometry.rows import used_vertices
@@ -49,6 +48,9 @@ def snap_between_bodies(props: np.ndarray, faces: np.ndarray, weld: np.ndarray, 
         return 0
     local = np.searchsorted(reps, welded)
     body = components(len(reps), np.vstack([local[:, [0, 1]], local[:, [1, 2]]]))  # per welded vertex
+    # on first use: scipy.spatial (0.4-0.7 s to import) is not loaded to resolve a recipe, which imports this module
+    from scipy.spatial import cKDTree
+
     pairs = cKDTree(props[reps, POS]).query_pairs(tolerance, output_type="ndarray")
     pairs = pairs[body[pairs[:, 0]] != body[pairs[:, 1]]] if len(pairs) else pairs
     if not len(pairs):

@@ -5,8 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from fracture_cli.geometry.edges import EdgeTable, components, edge_table
 from fracture_cli.geometry.rows import unique_rows
@@ -128,6 +126,10 @@ def orient_consistently(W: np.ndarray, table: EdgeTable | None = None) -> tuple[
     patch then keeps the winding most of its faces already had. ``table`` is
     ``edge_table(W)`` if the caller has it.
     """
+    # on first use: scipy.sparse (0.3-1 s to import) is not loaded to resolve a recipe, which imports this module
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import breadth_first_order, connected_components
+
     W = np.asarray(W, dtype=np.int64).reshape(-1, 3)
     m = len(W)
     if table is None:
