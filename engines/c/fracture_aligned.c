@@ -306,6 +306,7 @@ struct fra_data {
     char **materials;
     double *piece_mass;    /* (P, 4): volume, centroid */
     double *piece_tri_radius; /* (P,): the largest distance of a corner of the piece's triangles to its sphere's centre */
+    double *tri_sphere;       /* (T, 4): each stored triangle's corners' mean and their largest distance to it */
     int32_t max_faces, max_vertices, max_degree, max_sites;
 };
 
@@ -348,6 +349,7 @@ void fra_free(fra_data *d) {
     free(d->materials);
     free(d->piece_mass);
     free(d->piece_tri_radius);
+    free(d->tri_sphere);
     free(d);
 }
 
@@ -462,6 +464,19 @@ static fra_status validate(fra_data *d, char *message, size_t size) {
             if (dd > R) R = dd;
         }
         d->piece_tri_radius[k] = R;
+    }
+    d->tri_sphere = (double *)malloc((size_t)(T > 0 ? T : 1) * 4 * sizeof(double));
+    if (!d->tri_sphere) return fail(FRA_ERR_MEMORY, message, size, "out of memory");
+    for (int32_t t = 0; t < T; ++t) {
+        const float *x = tp + 9 * (size_t)t;
+        double *ts = d->tri_sphere + 4 * (size_t)t, R = 0;
+        for (int c = 0; c < 3; ++c) ts[c] = (((double)x[c] + (double)x[3 + c]) + (double)x[6 + c]) / 3.0;
+        for (int q = 0; q < 3; ++q) {
+            double dx = (double)x[3 * q] - ts[0], dy = (double)x[3 * q + 1] - ts[1], dz = (double)x[3 * q + 2] - ts[2];
+            double dd = sqrt((dx * dx + dy * dy) + dz * dz);
+            if (dd > R) R = dd;
+        }
+        ts[3] = R;
     }
     return FRA_OK;
 }
@@ -809,106 +824,151 @@ static int before(const double *p, const double *q) {
 enum { CLIP_SAME = 0, CLIP_EMPTY = 1, CLIP_DONE = 2, CLIP_OVERFLOW = -1 };
 
 /* The part of `src` where n . x - h <= 0, into `dst` (docs/FORMAT.md sections 13.3-13.4; aligned_clip.py). */
+/* The crossing of edge (a, b) of a clip, made once per edge from its lower corner lo to the higher hi (the
+ * crossings made at lo are a list from cross_head[lo]); returns its new corner's index, -1 when out of room. */
+static int32_t clip_crossing(const double *sv, const double *dist, int32_t *cross, int32_t *cross_head, double *dv,
+                             int32_t a, int32_t b, int32_t *nv, int32_t *ncross, int32_t vcap, int32_t lcap) {
+    int32_t lo = a < b ? a : b, hi = a < b ? b : a;
+    for (int32_t c = cross_head[lo]; c >= 0; c = cross[3 * c + 1])
+        if (cross[3 * c] == hi) return cross[3 * c + 2];
+    if (*nv >= vcap || *ncross >= lcap) return -1;
+    const double *x = sv + 3 * lo, *y = sv + 3 * hi;
+    double t_cut = dist[lo] / (dist[lo] - dist[hi]);
+    int32_t index = (*nv)++;
+    dv[3 * index] = x[0] + (y[0] - x[0]) * t_cut;
+    dv[3 * index + 1] = x[1] + (y[1] - x[1]) * t_cut;
+    dv[3 * index + 2] = x[2] + (y[2] - x[2]) * t_cut;
+    int32_t record = (*ncross)++;
+    cross[3 * record] = hi;
+    cross[3 * record + 1] = cross_head[lo];
+    cross[3 * record + 2] = index;
+    cross_head[lo] = record;
+    return index;
+}
+
 static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, double eps) {
-    int plus = 0, minus = 0;
-    for (int32_t i = 0; i < src->nv; ++i) {
-        double s = dot3(plane, src->v + 3 * i) - plane[3];
-        w->dist[i] = s;
-        w->side[i] = s > eps ? 1 : (s < -eps ? -1 : 0);
-        plus |= w->side[i] == 1;
-        minus |= w->side[i] == -1;
+    /* the arrays as restrict locals: a store through one no longer makes the compiler reload the others */
+    const double *restrict sv = src->v, *restrict splane = src->plane;
+    const int32_t *restrict sloops = src->loops, *restrict soff = src->loop_off, *restrict sisnew = src->isnew;
+    double *restrict dv = dst->v, *restrict dplane = dst->plane, *restrict dist = w->dist;
+    int32_t *restrict dloops = dst->loops, *restrict doff = dst->loop_off, *restrict disnew = dst->isnew;
+    int32_t *restrict side = w->side, *restrict renumber = w->renumber, *restrict used = w->used;
+    int32_t *restrict cross = w->cross, *restrict cross_head = w->cross_head, *restrict points = w->points;
+    const int32_t snv = src->nv, snf = src->nf, vcap = w->vcap, fcap = w->fcap, lcap = w->lcap;
+    const double n0 = plane[0], n1 = plane[1], n2 = plane[2], h = plane[3];
+    int plus = 0, minus = 0, zero = 0;
+    for (int32_t i = 0; i < snv; ++i) {
+        const double *x = sv + 3 * i;
+        double s = ((n0 * x[0] + n1 * x[1]) + n2 * x[2]) - h;
+        int sd = (s > eps) - (s < -eps);
+        dist[i] = s;
+        side[i] = sd;
+        plus |= sd == 1;
+        minus |= sd == -1;
+        zero |= sd == 0;
     }
     if (!plus) return CLIP_SAME;
     if (!minus) return CLIP_EMPTY;
     int32_t nv = 0, ncross = 0;
-    for (int32_t i = 0; i < src->nv; ++i) {
-        w->cross_head[i] = -1;
-        if (w->side[i] <= 0) {
-            w->renumber[i] = nv;
-            dst->v[3 * nv] = src->v[3 * i];
-            dst->v[3 * nv + 1] = src->v[3 * i + 1];
-            dst->v[3 * nv + 2] = src->v[3 * i + 2];
+    for (int32_t i = 0; i < snv; ++i) {
+        cross_head[i] = -1;
+        if (side[i] <= 0) {
+            renumber[i] = nv;
+            dv[3 * nv] = sv[3 * i];
+            dv[3 * nv + 1] = sv[3 * i + 1];
+            dv[3 * nv + 2] = sv[3 * i + 2];
             nv++;
         } else {
-            w->renumber[i] = -1;
+            renumber[i] = -1;
         }
     }
-    int32_t kept_vertices = nv, nf = 0, nl = 0;
-    dst->loop_off[0] = 0;
-    for (int32_t f = 0; f < src->nf; ++f) {
-        const int32_t *loop = src->loops + src->loop_off[f];
-        int32_t count = src->loop_off[f + 1] - src->loop_off[f], start = nl;
-        if (nf + 2 > w->fcap) return CLIP_OVERFLOW;
-        for (int32_t t = 0; t < count; ++t) {
-            int32_t a = loop[t], b = loop[t + 1 < count ? t + 1 : 0];
-            if (nl + 2 > w->lcap) return CLIP_OVERFLOW;
-            if (w->side[a] <= 0) dst->loops[nl++] = w->renumber[a];
-            if (w->side[a] * w->side[b] == -1) {
-                int32_t lo = a < b ? a : b, hi = a < b ? b : a, index = -1;
-                for (int32_t c = w->cross_head[lo]; c >= 0; c = w->cross[3 * c + 1]) /* the crossings made at lo */
-                    if (w->cross[3 * c] == hi) { index = w->cross[3 * c + 2]; break; }
-                if (index < 0) {
-                    if (nv >= w->vcap || ncross >= w->lcap) return CLIP_OVERFLOW;
-                    const double *x = src->v + 3 * lo, *y = src->v + 3 * hi;
-                    double t_cut = w->dist[lo] / (w->dist[lo] - w->dist[hi]);
-                    dst->v[3 * nv] = x[0] + (y[0] - x[0]) * t_cut;
-                    dst->v[3 * nv + 1] = x[1] + (y[1] - x[1]) * t_cut;
-                    dst->v[3 * nv + 2] = x[2] + (y[2] - x[2]) * t_cut;
-                    index = nv++;
-                    w->cross[3 * ncross] = hi;
-                    w->cross[3 * ncross + 1] = w->cross_head[lo];
-                    w->cross[3 * ncross + 2] = index;
-                    w->cross_head[lo] = ncross++;
-                }
-                dst->loops[nl++] = index;
+    int32_t kept_vertices = nv, nf = 0, nl = 0, dropped = 0;
+    doff[0] = 0;
+    for (int32_t f = 0; f < snf; ++f) {
+        const int32_t *loop = sloops + soff[f];
+        int32_t count = soff[f + 1] - soff[f], start = nl;
+        if (nf + 2 > fcap) return CLIP_OVERFLOW;
+        int32_t crossings_before = ncross;
+        int tight = nl + 2 * count > lcap; /* each edge adds two entries at most: else no check per edge */
+        int32_t a = loop[0], sa = side[a]; /* the edges in loop order: (a, b) = (loop[t - 1], loop[t]), then the last */
+        for (int32_t t = 1; t < count; ++t) {
+            int32_t b = loop[t], sb = side[b];
+            if (tight && nl + 2 > lcap) return CLIP_OVERFLOW;
+            dloops[nl] = renumber[a]; /* kept when its side is <= 0 (written either way: no branch) */
+            nl += sa <= 0;
+            if (sa * sb == -1) {
+                int32_t index = clip_crossing(sv, dist, cross, cross_head, dv, a, b, &nv, &ncross, vcap, lcap);
+                if (index < 0) return CLIP_OVERFLOW;
+                dloops[nl++] = index;
+            }
+            a = b; sa = sb;
+        }
+        { /* the closing edge (loop[count - 1], loop[0]) */
+            int32_t b = loop[0], sb = side[b];
+            if (tight && nl + 2 > lcap) return CLIP_OVERFLOW;
+            dloops[nl] = renumber[a];
+            nl += sa <= 0;
+            if (sa * sb == -1) {
+                int32_t index = clip_crossing(sv, dist, cross, cross_head, dv, a, b, &nv, &ncross, vcap, lcap);
+                if (index < 0) return CLIP_OVERFLOW;
+                dloops[nl++] = index;
             }
         }
         if (nl - start >= 3) {
-            for (int c = 0; c < 4; ++c) dst->plane[4 * nf + c] = src->plane[4 * f + c];
-            dst->isnew[nf] = src->isnew[f];
-            dst->loop_off[++nf] = nl;
+            memcpy(dplane + 4 * nf, splane + 4 * f, 4 * sizeof(double));
+            disnew[nf] = sisnew[f];
+            doff[++nf] = nl;
         } else {
+            dropped |= ncross > crossings_before; /* (a face with crossings is never dropped: checked all the same) */
             nl = start;
         }
     }
-    for (int32_t i = 0; i < nv; ++i) w->used[i] = 0;
-    for (int32_t i = 0; i < nl; ++i) w->used[dst->loops[i]] = 1;
+    /* The cap's corners: those of side 0 that a kept face uses, then the crossings that one uses. Without a corner
+     * of side 0, and unless a dropped face made a crossing (it cannot: a face with one has a corner of side -1 and
+     * two crossings), that is every crossing. */
     int32_t npoints = 0;
-    for (int32_t i = 0; i < src->nv; ++i)
-        if (w->side[i] == 0 && w->used[w->renumber[i]]) w->points[npoints++] = w->renumber[i];
-    for (int32_t i = kept_vertices; i < nv; ++i)
-        if (w->used[i]) w->points[npoints++] = i;
+    if (zero || dropped) {
+        for (int32_t i = 0; i < nv; ++i) used[i] = 0;
+        for (int32_t i = 0; i < nl; ++i) used[dloops[i]] = 1;
+        for (int32_t i = 0; i < snv; ++i)
+            if (side[i] == 0 && used[renumber[i]]) points[npoints++] = renumber[i];
+        for (int32_t i = kept_vertices; i < nv; ++i)
+            if (used[i]) points[npoints++] = i;
+    } else {
+        for (int32_t i = kept_vertices; i < nv; ++i) points[npoints++] = i;
+    }
     dst->nv = nv;
     if (npoints >= 3) {
-        if (nl + npoints > w->lcap) return CLIP_OVERFLOW;
+        if (nl + npoints > lcap) return CLIP_OVERFLOW;
         double cx = 0, cy = 0, cz = 0, a[3], b[3];
+        double *restrict keys = w->keys;
         for (int32_t i = 0; i < npoints; ++i) {
-            const double *x = dst->v + 3 * w->points[i];
+            const double *x = dv + 3 * points[i];
             cx = cx + x[0]; cy = cy + x[1]; cz = cz + x[2];
         }
         cx = cx / npoints; cy = cy / npoints; cz = cz / npoints;
         plane_basis(plane, a, b);
         for (int32_t i = 0; i < npoints; ++i) {
-            const double *x = dst->v + 3 * w->points[i];
+            const double *x = dv + 3 * points[i];
             double dd[3] = {x[0] - cx, x[1] - cy, x[2] - cz};
-            double *key = w->keys + 3 * i;
+            double *key = keys + 3 * i;
             key[0] = dot3(dd, a);
             key[1] = dot3(dd, b);
-            key[2] = (double)w->points[i];
+            key[2] = (double)points[i];
         }
         for (int32_t j = 1; j < npoints; ++j) {
-            double item[3] = {w->keys[3 * j], w->keys[3 * j + 1], w->keys[3 * j + 2]};
+            double item[3] = {keys[3 * j], keys[3 * j + 1], keys[3 * j + 2]};
             int32_t k = j - 1;
-            while (k >= 0 && before(item, w->keys + 3 * k)) {
-                memcpy(w->keys + 3 * (k + 1), w->keys + 3 * k, 3 * sizeof(double));
+            while (k >= 0 && before(item, keys + 3 * k)) {
+                memcpy(keys + 3 * (k + 1), keys + 3 * k, 3 * sizeof(double));
                 k--;
             }
-            memcpy(w->keys + 3 * (k + 1), item, 3 * sizeof(double));
+            memcpy(keys + 3 * (k + 1), item, 3 * sizeof(double));
         }
-        for (int32_t i = 0; i < npoints; ++i) dst->loops[nl++] = (int32_t)w->keys[3 * i + 2];
-        for (int c = 0; c < 4; ++c) dst->plane[4 * nf + c] = plane[c];
-        dst->isnew[nf] = 1;
-        dst->loop_off[++nf] = nl;
+        for (int32_t i = 0; i < npoints; ++i) dloops[nl++] = (int32_t)keys[3 * i + 2];
+        memcpy(dplane + 4 * nf, plane, 4 * sizeof(double));
+        disnew[nf] = 1;
+        doff[++nf] = nl;
     }
     dst->nf = nf;
     dst->nl = nl;
@@ -1297,9 +1357,16 @@ static void cut_piece(hit *h, int32_t k) {
             corner[6] = uvs[6 * (size_t)t + 2 * (size_t)q];
             corner[7] = uvs[6 * (size_t)t + 2 * (size_t)q + 1];
         }
-        int32_t count = 3;
+        int32_t count = 3, whole = 1; /* whole: still the stored triangle, inside its sphere (ts, tr) */
+        const double *ts = d->tri_sphere + 4 * (size_t)t;
+        double tr = ts[3], tmargin = 1e-4 * tr + 1e-12 * ((fabs(ts[0]) + fabs(ts[1])) + fabs(ts[2]) + 2.0 * tr);
         for (int32_t n = 0; n < nwalls && count > 0; ++n) {
             const double *plane = h->boundary + 4 * h->near_walls[n];
+            if (whole) { /* the sides clip_both would find, from the sphere when it lies clear of the plane */
+                double st = dot3(plane, ts) - plane[3], slack = tr + (tmargin + 1e-12 * fabs(plane[3]));
+                if (st + slack < -eps) continue; /* every corner inside: nothing beyond, the polygon unchanged */
+                if (st - slack > eps) { push_polygon(h, outer, mat[t], polygon, count); count = 0; break; } /* all beyond */
+            }
             int32_t nb, got; /* the polygon beyond the plane (to the rest) and inside it */
             if (clip_both(w, polygon, NULL, count, plane, eps, spare, NULL, -1, &got, beyond, NULL, -1, &nb) < 0) {
                 h->limit = 1;
@@ -1309,6 +1376,7 @@ static void cut_piece(hit *h, int32_t k) {
             else if (nb >= 3) push_polygon(h, outer, mat[t], beyond, nb);
             if (got == -2) continue;
             count = got;
+            whole = 0;
             double *swap = polygon;
             polygon = spare;
             spare = swap;
