@@ -305,7 +305,7 @@ struct fra_data {
     int32_t P, T, Q, M, interior;
     char **materials;
     double *piece_mass;    /* (P, 4): volume, centroid */
-    double *piece_tri_radius; /* (P,): the largest distance of a corner of the piece's triangles to its sphere's centre */
+    double *piece_tri_radius; /* (P,): the farthest corner of the piece's triangles from its sphere's centre */
     double *tri_sphere;       /* (T, 4): each stored triangle's corners' mean and their largest distance to it */
     int32_t max_faces, max_vertices, max_degree, max_sites;
 };
@@ -1343,7 +1343,8 @@ static void cut_piece(hit *h, int32_t k) {
      * corners, |n| <= 1 + 1e-5) leaves each one unchanged, and is skipped. */
     int32_t nwalls = 0;
     if (has_outer) {
-        double R = d->piece_tri_radius[k], margin = 1e-4 * R + 1e-12 * ((fabs(c[0]) + fabs(c[1])) + fabs(c[2]) + 2.0 * R);
+        double R = d->piece_tri_radius[k];
+        double margin = 1e-4 * R + 1e-12 * ((fabs(c[0]) + fabs(c[1])) + fabs(c[2]) + 2.0 * R);
         for (int32_t b = 0; b < B; ++b)
             if (!(h->ts[b] + R + (margin + 1e-12 * fabs(h->boundary[4 * b + 3])) < -eps)) h->near_walls[nwalls++] = b;
     }
