@@ -305,6 +305,8 @@ struct fra_data {
     int32_t P, T, Q, M, interior;
     char **materials;
     double *piece_mass;    /* (P, 4): volume, centroid */
+    double *piece_tri_radius; /* (P,): the farthest corner of the piece's triangles from its sphere's centre */
+    double *tri_sphere;       /* (T, 4): each stored triangle's corners' mean and their largest distance to it */
     int32_t max_faces, max_vertices, max_degree, max_sites;
 };
 
@@ -346,6 +348,8 @@ void fra_free(fra_data *d) {
         for (int32_t m = 0; m < d->M; ++m) free(d->materials[m]);
     free(d->materials);
     free(d->piece_mass);
+    free(d->piece_tri_radius);
+    free(d->tri_sphere);
     free(d);
 }
 
@@ -448,6 +452,32 @@ static fra_status validate(fra_data *d, char *message, size_t size) {
     d->piece_mass = (double *)malloc((size_t)P * 4 * sizeof(double));
     if (!d->piece_mass) return fail(FRA_ERR_MEMORY, message, size, "out of memory");
     for (int32_t k = 0; k < P; ++k) piece_mass(d, k, d->piece_mass + 4 * k);
+    d->piece_tri_radius = (double *)malloc((size_t)P * sizeof(double));
+    if (!d->piece_tri_radius) return fail(FRA_ERR_MEMORY, message, size, "out of memory");
+    const int32_t *pt = I32(d, A_PIECE_TRIANGLE_OFFSETS);
+    const float *tp = F32(d, A_TRIANGLE_POSITIONS), *sphere = F32(d, A_PIECE_SPHERE);
+    for (int32_t k = 0; k < P; ++k) {
+        double R = 0;
+        for (int32_t i = 9 * pt[k]; i < 9 * pt[k + 1]; i += 3) {
+            double dx = (double)tp[i] - sphere[4 * k], dy = (double)tp[i + 1] - sphere[4 * k + 1];
+            double dz = (double)tp[i + 2] - sphere[4 * k + 2], dd = sqrt((dx * dx + dy * dy) + dz * dz);
+            if (dd > R) R = dd;
+        }
+        d->piece_tri_radius[k] = R;
+    }
+    d->tri_sphere = (double *)malloc((size_t)(T > 0 ? T : 1) * 4 * sizeof(double));
+    if (!d->tri_sphere) return fail(FRA_ERR_MEMORY, message, size, "out of memory");
+    for (int32_t t = 0; t < T; ++t) {
+        const float *x = tp + 9 * (size_t)t;
+        double *ts = d->tri_sphere + 4 * (size_t)t, R = 0;
+        for (int c = 0; c < 3; ++c) ts[c] = (((double)x[c] + (double)x[3 + c]) + (double)x[6 + c]) / 3.0;
+        for (int q = 0; q < 3; ++q) {
+            double dx = (double)x[3 * q] - ts[0], dy = (double)x[3 * q + 1] - ts[1], dz = (double)x[3 * q + 2] - ts[2];
+            double dd = sqrt((dx * dx + dy * dy) + dz * dz);
+            if (dd > R) R = dd;
+        }
+        ts[3] = R;
+    }
     return FRA_OK;
 }
 
@@ -794,116 +824,166 @@ static int before(const double *p, const double *q) {
 enum { CLIP_SAME = 0, CLIP_EMPTY = 1, CLIP_DONE = 2, CLIP_OVERFLOW = -1 };
 
 /* The part of `src` where n . x - h <= 0, into `dst` (docs/FORMAT.md sections 13.3-13.4; aligned_clip.py). */
+/* The crossing of edge (a, b) of a clip, made once per edge from its lower corner lo to the higher hi (the
+ * crossings made at lo are a list from cross_head[lo]); returns its new corner's index, -1 when out of room. */
+static int32_t clip_crossing(const double *sv, const double *dist, int32_t *cross, int32_t *cross_head, double *dv,
+                             int32_t a, int32_t b, int32_t *nv, int32_t *ncross, int32_t vcap, int32_t lcap) {
+    int32_t lo = a < b ? a : b, hi = a < b ? b : a;
+    for (int32_t c = cross_head[lo]; c >= 0; c = cross[3 * c + 1])
+        if (cross[3 * c] == hi) return cross[3 * c + 2];
+    if (*nv >= vcap || *ncross >= lcap) return -1;
+    const double *x = sv + 3 * lo, *y = sv + 3 * hi;
+    double t_cut = dist[lo] / (dist[lo] - dist[hi]);
+    int32_t index = (*nv)++;
+    dv[3 * index] = x[0] + (y[0] - x[0]) * t_cut;
+    dv[3 * index + 1] = x[1] + (y[1] - x[1]) * t_cut;
+    dv[3 * index + 2] = x[2] + (y[2] - x[2]) * t_cut;
+    int32_t record = (*ncross)++;
+    cross[3 * record] = hi;
+    cross[3 * record + 1] = cross_head[lo];
+    cross[3 * record + 2] = index;
+    cross_head[lo] = record;
+    return index;
+}
+
 static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, double eps) {
-    int plus = 0, minus = 0;
-    for (int32_t i = 0; i < src->nv; ++i) {
-        double s = dot3(plane, src->v + 3 * i) - plane[3];
-        w->dist[i] = s;
-        w->side[i] = s > eps ? 1 : (s < -eps ? -1 : 0);
-        plus |= w->side[i] == 1;
-        minus |= w->side[i] == -1;
+    /* the arrays as restrict locals: a store through one no longer makes the compiler reload the others */
+    const double *restrict sv = src->v, *restrict splane = src->plane;
+    const int32_t *restrict sloops = src->loops, *restrict soff = src->loop_off, *restrict sisnew = src->isnew;
+    double *restrict dv = dst->v, *restrict dplane = dst->plane, *restrict dist = w->dist;
+    int32_t *restrict dloops = dst->loops, *restrict doff = dst->loop_off, *restrict disnew = dst->isnew;
+    int32_t *restrict side = w->side, *restrict renumber = w->renumber, *restrict used = w->used;
+    int32_t *restrict cross = w->cross, *restrict cross_head = w->cross_head, *restrict points = w->points;
+    const int32_t snv = src->nv, snf = src->nf, vcap = w->vcap, fcap = w->fcap, lcap = w->lcap;
+    const double n0 = plane[0], n1 = plane[1], n2 = plane[2], h = plane[3];
+    int plus = 0, minus = 0, zero = 0;
+    for (int32_t i = 0; i < snv; ++i) {
+        const double *x = sv + 3 * i;
+        double s = ((n0 * x[0] + n1 * x[1]) + n2 * x[2]) - h;
+        int sd = (s > eps) - (s < -eps);
+        dist[i] = s;
+        side[i] = sd;
+        plus |= sd == 1;
+        minus |= sd == -1;
+        zero |= sd == 0;
     }
     if (!plus) return CLIP_SAME;
     if (!minus) return CLIP_EMPTY;
     int32_t nv = 0, ncross = 0;
-    for (int32_t i = 0; i < src->nv; ++i) {
-        w->cross_head[i] = -1;
-        if (w->side[i] <= 0) {
-            w->renumber[i] = nv;
-            dst->v[3 * nv] = src->v[3 * i];
-            dst->v[3 * nv + 1] = src->v[3 * i + 1];
-            dst->v[3 * nv + 2] = src->v[3 * i + 2];
+    for (int32_t i = 0; i < snv; ++i) {
+        cross_head[i] = -1;
+        if (side[i] <= 0) {
+            renumber[i] = nv;
+            dv[3 * nv] = sv[3 * i];
+            dv[3 * nv + 1] = sv[3 * i + 1];
+            dv[3 * nv + 2] = sv[3 * i + 2];
             nv++;
         } else {
-            w->renumber[i] = -1;
+            renumber[i] = -1;
         }
     }
-    int32_t kept_vertices = nv, nf = 0, nl = 0;
-    dst->loop_off[0] = 0;
-    for (int32_t f = 0; f < src->nf; ++f) {
-        const int32_t *loop = src->loops + src->loop_off[f];
-        int32_t count = src->loop_off[f + 1] - src->loop_off[f], start = nl;
-        if (nf + 2 > w->fcap) return CLIP_OVERFLOW;
-        for (int32_t t = 0; t < count; ++t) {
-            int32_t a = loop[t], b = loop[t + 1 < count ? t + 1 : 0];
-            if (nl + 2 > w->lcap) return CLIP_OVERFLOW;
-            if (w->side[a] <= 0) dst->loops[nl++] = w->renumber[a];
-            if (w->side[a] * w->side[b] == -1) {
-                int32_t lo = a < b ? a : b, hi = a < b ? b : a, index = -1;
-                for (int32_t c = w->cross_head[lo]; c >= 0; c = w->cross[3 * c + 1]) /* the crossings made at lo */
-                    if (w->cross[3 * c] == hi) { index = w->cross[3 * c + 2]; break; }
-                if (index < 0) {
-                    if (nv >= w->vcap || ncross >= w->lcap) return CLIP_OVERFLOW;
-                    const double *x = src->v + 3 * lo, *y = src->v + 3 * hi;
-                    double t_cut = w->dist[lo] / (w->dist[lo] - w->dist[hi]);
-                    dst->v[3 * nv] = x[0] + (y[0] - x[0]) * t_cut;
-                    dst->v[3 * nv + 1] = x[1] + (y[1] - x[1]) * t_cut;
-                    dst->v[3 * nv + 2] = x[2] + (y[2] - x[2]) * t_cut;
-                    index = nv++;
-                    w->cross[3 * ncross] = hi;
-                    w->cross[3 * ncross + 1] = w->cross_head[lo];
-                    w->cross[3 * ncross + 2] = index;
-                    w->cross_head[lo] = ncross++;
-                }
-                dst->loops[nl++] = index;
+    int32_t kept_vertices = nv, nf = 0, nl = 0, dropped = 0;
+    doff[0] = 0;
+    for (int32_t f = 0; f < snf; ++f) {
+        const int32_t *loop = sloops + soff[f];
+        int32_t count = soff[f + 1] - soff[f], start = nl;
+        if (nf + 2 > fcap) return CLIP_OVERFLOW;
+        int32_t crossings_before = ncross;
+        int tight = nl + 2 * count > lcap; /* each edge adds two entries at most: else no check per edge */
+        int32_t a = loop[0], sa = side[a]; /* the edges in loop order: (a, b) = (loop[t - 1], loop[t]), then the last */
+        for (int32_t t = 1; t < count; ++t) {
+            int32_t b = loop[t], sb = side[b];
+            if (tight && nl + 2 > lcap) return CLIP_OVERFLOW;
+            dloops[nl] = renumber[a]; /* kept when its side is <= 0 (written either way: no branch) */
+            nl += sa <= 0;
+            if (sa * sb == -1) {
+                int32_t index = clip_crossing(sv, dist, cross, cross_head, dv, a, b, &nv, &ncross, vcap, lcap);
+                if (index < 0) return CLIP_OVERFLOW;
+                dloops[nl++] = index;
+            }
+            a = b; sa = sb;
+        }
+        { /* the closing edge (loop[count - 1], loop[0]) */
+            int32_t b = loop[0], sb = side[b];
+            if (tight && nl + 2 > lcap) return CLIP_OVERFLOW;
+            dloops[nl] = renumber[a];
+            nl += sa <= 0;
+            if (sa * sb == -1) {
+                int32_t index = clip_crossing(sv, dist, cross, cross_head, dv, a, b, &nv, &ncross, vcap, lcap);
+                if (index < 0) return CLIP_OVERFLOW;
+                dloops[nl++] = index;
             }
         }
         if (nl - start >= 3) {
-            for (int c = 0; c < 4; ++c) dst->plane[4 * nf + c] = src->plane[4 * f + c];
-            dst->isnew[nf] = src->isnew[f];
-            dst->loop_off[++nf] = nl;
+            memcpy(dplane + 4 * nf, splane + 4 * f, 4 * sizeof(double));
+            disnew[nf] = sisnew[f];
+            doff[++nf] = nl;
         } else {
+            dropped |= ncross > crossings_before; /* (a face with crossings is never dropped: checked all the same) */
             nl = start;
         }
     }
-    for (int32_t i = 0; i < nv; ++i) w->used[i] = 0;
-    for (int32_t i = 0; i < nl; ++i) w->used[dst->loops[i]] = 1;
+    /* The cap's corners: those of side 0 that a kept face uses, then the crossings that one uses. Without a corner
+     * of side 0, and unless a dropped face made a crossing (it cannot: a face with one has a corner of side -1 and
+     * two crossings), that is every crossing. */
     int32_t npoints = 0;
-    for (int32_t i = 0; i < src->nv; ++i)
-        if (w->side[i] == 0 && w->used[w->renumber[i]]) w->points[npoints++] = w->renumber[i];
-    for (int32_t i = kept_vertices; i < nv; ++i)
-        if (w->used[i]) w->points[npoints++] = i;
+    if (zero || dropped) {
+        for (int32_t i = 0; i < nv; ++i) used[i] = 0;
+        for (int32_t i = 0; i < nl; ++i) used[dloops[i]] = 1;
+        for (int32_t i = 0; i < snv; ++i)
+            if (side[i] == 0 && used[renumber[i]]) points[npoints++] = renumber[i];
+        for (int32_t i = kept_vertices; i < nv; ++i)
+            if (used[i]) points[npoints++] = i;
+    } else {
+        for (int32_t i = kept_vertices; i < nv; ++i) points[npoints++] = i;
+    }
     dst->nv = nv;
     if (npoints >= 3) {
-        if (nl + npoints > w->lcap) return CLIP_OVERFLOW;
+        if (nl + npoints > lcap) return CLIP_OVERFLOW;
         double cx = 0, cy = 0, cz = 0, a[3], b[3];
+        double *restrict keys = w->keys;
         for (int32_t i = 0; i < npoints; ++i) {
-            const double *x = dst->v + 3 * w->points[i];
+            const double *x = dv + 3 * points[i];
             cx = cx + x[0]; cy = cy + x[1]; cz = cz + x[2];
         }
         cx = cx / npoints; cy = cy / npoints; cz = cz / npoints;
         plane_basis(plane, a, b);
         for (int32_t i = 0; i < npoints; ++i) {
-            const double *x = dst->v + 3 * w->points[i];
+            const double *x = dv + 3 * points[i];
             double dd[3] = {x[0] - cx, x[1] - cy, x[2] - cz};
-            double *key = w->keys + 3 * i;
+            double *key = keys + 3 * i;
             key[0] = dot3(dd, a);
             key[1] = dot3(dd, b);
-            key[2] = (double)w->points[i];
+            key[2] = (double)points[i];
         }
         for (int32_t j = 1; j < npoints; ++j) {
-            double item[3] = {w->keys[3 * j], w->keys[3 * j + 1], w->keys[3 * j + 2]};
+            double item[3] = {keys[3 * j], keys[3 * j + 1], keys[3 * j + 2]};
             int32_t k = j - 1;
-            while (k >= 0 && before(item, w->keys + 3 * k)) {
-                memcpy(w->keys + 3 * (k + 1), w->keys + 3 * k, 3 * sizeof(double));
+            while (k >= 0 && before(item, keys + 3 * k)) {
+                memcpy(keys + 3 * (k + 1), keys + 3 * k, 3 * sizeof(double));
                 k--;
             }
-            memcpy(w->keys + 3 * (k + 1), item, 3 * sizeof(double));
+            memcpy(keys + 3 * (k + 1), item, 3 * sizeof(double));
         }
-        for (int32_t i = 0; i < npoints; ++i) dst->loops[nl++] = (int32_t)w->keys[3 * i + 2];
-        for (int c = 0; c < 4; ++c) dst->plane[4 * nf + c] = plane[c];
-        dst->isnew[nf] = 1;
-        dst->loop_off[++nf] = nl;
+        for (int32_t i = 0; i < npoints; ++i) dloops[nl++] = (int32_t)keys[3 * i + 2];
+        memcpy(dplane + 4 * nf, plane, 4 * sizeof(double));
+        disnew[nf] = 1;
+        doff[++nf] = nl;
     }
     dst->nf = nf;
     dst->nl = nl;
     return CLIP_DONE;
 }
 
-/* Sutherland-Hodgman of a convex polygon (count corners of 8 values) into out; returns the new count, -2 when
- * nothing lies beyond the plane (the polygon unchanged, `out` not written) or -1 when `out` is too small. */
-static int32_t clip_corners(const work *w, const double *in, int32_t count, double *out, const double *plane,
-                            double eps) {
+/* Sutherland-Hodgman of a convex polygon (`count` corners of 8 values) by the plane (n, h), into both sides at once:
+ * `near` the part where n . x - h <= 0, `far` the part where -n . x + h <= 0 (the clip by the flipped plane, whose
+ * distances are the exact negations: IEEE rounding is symmetric, so the sides swap and each crossing is the same
+ * point, made once from the edge's first corner in loop order). Each count: the number of corners, 0 when nothing is
+ * left, -2 when nothing lies beyond (the polygon unchanged, not copied); returns -1 when a buffer is too small. With
+ * `tags`, each copied corner's tag goes along (-1 where it equals `drop_near` or `drop_far`; -1 for crossings). */
+static int clip_both(const work *w, const double *in, const int32_t *tags, int32_t count, const double *plane,
+                     double eps, double *near, int32_t *near_tags, int32_t drop_near, int32_t *nnear, double *far,
+                     int32_t *far_tags, int32_t drop_far, int32_t *nfar) {
     int plus = 0, minus = 0;
     double *dist = w->cdist;
     int32_t *side = w->cside;
@@ -914,17 +994,35 @@ static int32_t clip_corners(const work *w, const double *in, int32_t count, doub
         plus |= side[i] == 1;
         minus |= side[i] == -1;
     }
-    if (!plus) return -2; /* unchanged: `out` not written */
-    if (!minus) return 0;
-    int32_t n = 0;
+    if (!plus || !minus) { /* one side unchanged, the other empty (both unchanged when every corner is on the plane) */
+        *nnear = plus ? 0 : -2;
+        *nfar = minus ? 0 : -2;
+        if (tags) {
+            for (int32_t i = 0; i < count; ++i) {
+                near_tags[i] = tags[i] == drop_near ? -1 : tags[i];
+                far_tags[i] = tags[i] == drop_far ? -1 : tags[i];
+            }
+        }
+        return 0;
+    }
+    int32_t n = 0, m = 0;
     for (int32_t t = 0; t < count; ++t) {
         int32_t u = t + 1 < count ? t + 1 : 0;
-        if (n + 2 > w->ccap) return -1;
-        if (side[t] <= 0) memcpy(out + 8 * n++, in + 8 * t, 8 * sizeof(double));
+        if (n + 2 > w->ccap || m + 2 > w->ccap) return -1;
+        if (side[t] <= 0) {
+            memcpy(near + 8 * n, in + 8 * t, 8 * sizeof(double));
+            if (tags) near_tags[n] = tags[t] == drop_near ? -1 : tags[t];
+            n++;
+        }
+        if (side[t] >= 0) {
+            memcpy(far + 8 * m, in + 8 * t, 8 * sizeof(double));
+            if (tags) far_tags[m] = tags[t] == drop_far ? -1 : tags[t];
+            m++;
+        }
         if (side[t] * side[u] == -1) {
             const double *a = in + 8 * t, *b = in + 8 * u;
             double weight = dist[t] / (dist[t] - dist[u]);
-            double *p = out + 8 * n++;
+            double *p = near + 8 * n;
             for (int c = 0; c < 8; ++c) p[c] = a[c] + (b[c] - a[c]) * weight;
             double length = sqrt((p[3] * p[3] + p[4] * p[4]) + p[5] * p[5]);
             if (length > 0.0) {
@@ -932,9 +1030,15 @@ static int32_t clip_corners(const work *w, const double *in, int32_t count, doub
                 p[4] = p[4] / length;
                 p[5] = p[5] / length;
             }
+            memcpy(far + 8 * m, p, 8 * sizeof(double));
+            if (tags) near_tags[n] = far_tags[m] = -1;
+            n++;
+            m++;
         }
     }
-    return n;
+    *nnear = n;
+    *nfar = m;
+    return 0;
 }
 
 /* ------------------------------------------------------------------------------------------ cut */
@@ -955,14 +1059,17 @@ typedef struct hit {
     double *planes;  /* (N, 4): the bisector of each neighbour entry */
     double *split;       /* the split stack of split_polygon: corners */
     size_t split_used, split_cap;
+    int32_t *split_tags;  /* the corners' nearest cells (one per corner of `split`: at split_used / 8) */
     int32_t *split_cells; /* and candidate cells */
     size_t split_cells_used, split_cells_cap;
     int32_t B;           /* boundary planes */
     double *boundary;    /* (B, 4) placed */
     double *ts;          /* (B,) the piece's centre against each */
+    int32_t *near_walls; /* (B,) those that may cut the piece's triangles */
     int32_t *cand, *inner;
     const int32_t *wall_off, *walls; /* per cell (offsets relative to the pattern), its boundary planes */
     double *tri_a, *tri_b, *tri_c; /* (ccap, 8) polygon buffers for the triangles */
+    int32_t *tri_tags;             /* (ccap,) their corners' nearest cells for split_polygon */
     int32_t *cells, *kept;
     double *dists;
     unsigned char *parts_begin;
@@ -1077,13 +1184,17 @@ static int push_kept(hit *h, int32_t cell, int32_t k, const poly *p, double keep
 
 /* A convex polygon into the Voronoi cells of `cells`' sites (docs/FORMAT.md section 13.4, step 7): whole when
  * every corner has the same nearest site, else split by the bisector of the cells of corner 0 and of the first
- * other corner, each side going on without the other cell. Buffers come from the hit's split stack. */
-static void split_polygon(hit *h, const double *polygon, int32_t count, const int32_t *cells, int32_t ncells,
-                          double eps, int32_t material) {
-    int32_t first = nearest(h, polygon, cells, ncells), other = -1;
+ * other corner, each side going on without the other cell. Buffers come from the hit's split stack.
+ * `tags[q]`: corner q's nearest cell among `cells` when already known, else -1 (found here when needed). A corner
+ * copied to a side keeps its tag unless it was the cell that side goes on without (the nearest of a list is
+ * still the nearest of the list without another of its cells: the same answer as finding it again). */
+static void split_polygon(hit *h, const double *polygon, int32_t *tags, int32_t count, const int32_t *cells,
+                          int32_t ncells, double eps, int32_t material) {
+    if (tags[0] < 0) tags[0] = nearest(h, polygon, cells, ncells);
+    int32_t first = tags[0], other = -1;
     for (int32_t q = 1; q < count && other < 0; ++q) {
-        int32_t cell = nearest(h, polygon + 8 * q, cells, ncells);
-        if (cell != first) other = cell;
+        if (tags[q] < 0) tags[q] = nearest(h, polygon + 8 * q, cells, ncells);
+        if (tags[q] != first) other = tags[q];
     }
     if (other < 0) { push_polygon(h, first, material, polygon, count); return; }
     size_t mark_d = h->split_used, mark_i = h->split_cells_used, corners = 2 * (size_t)count + 2;
@@ -1092,27 +1203,30 @@ static void split_polygon(hit *h, const double *polygon, int32_t count, const in
         return;
     }
     double *near = h->split + h->split_used, *far = near + 8 * corners;
+    int32_t *near_tags = h->split_tags + h->split_used / 8, *far_tags = near_tags + corners;
     int32_t *near_cells = h->split_cells + h->split_cells_used, *far_cells = near_cells + ncells;
     h->split_used += 2 * 8 * corners;
     h->split_cells_used += 2 * (size_t)ncells;
-    double plane[4], flipped[4];
+    double plane[4];
     int bad = 0;
     bisector(h->sites + 3 * first, h->sites + 3 * other, plane, &bad);
-    for (int c = 0; c < 4; ++c) flipped[c] = -plane[c];
-    int32_t nnear = clip_corners(h->w, polygon, count, near, plane, eps);
+    int32_t nnear, nfar;
+    if (clip_both(h->w, polygon, tags, count, plane, eps, near, near_tags, other, &nnear, far, far_tags, first,
+                  &nfar) < 0) {
+        h->limit = 1;
+        return;
+    }
     const double *near_poly = nnear == -2 ? polygon : near;
     if (nnear == -2) nnear = count;
-    int32_t nfar = clip_corners(h->w, polygon, count, far, flipped, eps);
     const double *far_poly = nfar == -2 ? polygon : far;
     if (nfar == -2) nfar = count;
-    if (nnear == -1 || nfar == -1) { h->limit = 1; return; }
     int32_t nn = 0, nf = 0;
     for (int32_t k = 0; k < ncells; ++k) {
         if (cells[k] != other) near_cells[nn++] = cells[k];
         if (cells[k] != first) far_cells[nf++] = cells[k];
     }
-    if (nnear >= 3) split_polygon(h, near_poly, nnear, near_cells, nn, eps, material);
-    if (nfar >= 3 && !h->limit) split_polygon(h, far_poly, nfar, far_cells, nf, eps, material);
+    if (nnear >= 3) split_polygon(h, near_poly, near_tags, nnear, near_cells, nn, eps, material);
+    if (nfar >= 3 && !h->limit) split_polygon(h, far_poly, far_tags, nfar, far_cells, nf, eps, material);
     h->split_used = mark_d;
     h->split_cells_used = mark_i;
 }
@@ -1224,6 +1338,16 @@ static void cut_piece(hit *h, int32_t k) {
     const float *pos = F32(d, A_TRIANGLE_POSITIONS), *nrm = F32(d, A_TRIANGLE_NORMALS), *uvs = F32(d, A_TRIANGLE_UVS);
     const int32_t *mat = I32(d, A_TRIANGLE_MATERIALS);
     double *polygon = h->tri_a, *spare = h->tri_b, *beyond = h->tri_c;
+    /* With a part in the rest, the boundary planes in order cut the triangles; a plane that every corner of every
+     * triangle of the piece lies inside of (beyond eps, with a margin for rounding: sphere (c, R) of the triangles'
+     * corners, |n| <= 1 + 1e-5) leaves each one unchanged, and is skipped. */
+    int32_t nwalls = 0;
+    if (has_outer) {
+        double R = d->piece_tri_radius[k];
+        double margin = 1e-4 * R + 1e-12 * ((fabs(c[0]) + fabs(c[1])) + fabs(c[2]) + 2.0 * R);
+        for (int32_t b = 0; b < B; ++b)
+            if (!(h->ts[b] + R + (margin + 1e-12 * fabs(h->boundary[4 * b + 3])) < -eps)) h->near_walls[nwalls++] = b;
+    }
     for (int32_t t = pt[k]; t < pt[k + 1]; ++t) {
         for (int q = 0; q < 3; ++q) {
             double *corner = polygon + 8 * q;
@@ -1234,34 +1358,34 @@ static void cut_piece(hit *h, int32_t k) {
             corner[6] = uvs[6 * (size_t)t + 2 * (size_t)q];
             corner[7] = uvs[6 * (size_t)t + 2 * (size_t)q + 1];
         }
-        int32_t count = 3;
-        if (has_outer) {
-            for (int32_t b = 0; b < B && count > 0; ++b) {
-                const double *plane = h->boundary + 4 * b;
-                int any_beyond = 0, any_inside = 0;
-                for (int32_t q = 0; q < count; ++q) { /* the sides clip_corners finds, to skip both calls */
-                    double dist = dot3(plane, polygon + 8 * q) - plane[3];
-                    any_beyond |= dist > eps;
-                    any_inside |= dist < -eps;
-                }
-                if (!any_beyond && any_inside) continue; /* nothing beyond, the polygon unchanged */
-                double flipped[4] = {-plane[0], -plane[1], -plane[2], -plane[3]};
-                int32_t nb = clip_corners(w, polygon, count, beyond, flipped, eps);
-                if (nb == -1) { h->limit = 1; return; }
-                if (nb == -2) push_polygon(h, outer, mat[t], polygon, count);
-                else if (nb >= 3) push_polygon(h, outer, mat[t], beyond, nb);
-                int32_t got = clip_corners(w, polygon, count, spare, plane, eps);
-                if (got == -1) { h->limit = 1; return; }
-                if (got == -2) continue;
-                count = got;
-                double *swap = polygon;
-                polygon = spare;
-                spare = swap;
+        int32_t count = 3, whole = 1; /* whole: still the stored triangle, inside its sphere (ts, tr) */
+        const double *ts = d->tri_sphere + 4 * (size_t)t;
+        double tr = ts[3], tmargin = 1e-4 * tr + 1e-12 * ((fabs(ts[0]) + fabs(ts[1])) + fabs(ts[2]) + 2.0 * tr);
+        for (int32_t n = 0; n < nwalls && count > 0; ++n) {
+            const double *plane = h->boundary + 4 * h->near_walls[n];
+            if (whole) { /* the sides clip_both would find, from the sphere when it lies clear of the plane */
+                double st = dot3(plane, ts) - plane[3], slack = tr + (tmargin + 1e-12 * fabs(plane[3]));
+                if (st + slack < -eps) continue; /* every corner inside: nothing beyond, the polygon unchanged */
+                if (st - slack > eps) { push_polygon(h, outer, mat[t], polygon, count); count = 0; break; } /* all beyond */
             }
+            int32_t nb, got; /* the polygon beyond the plane (to the rest) and inside it */
+            if (clip_both(w, polygon, NULL, count, plane, eps, spare, NULL, -1, &got, beyond, NULL, -1, &nb) < 0) {
+                h->limit = 1;
+                return;
+            }
+            if (nb == -2) push_polygon(h, outer, mat[t], polygon, count);
+            else if (nb >= 3) push_polygon(h, outer, mat[t], beyond, nb);
+            if (got == -2) continue;
+            count = got;
+            whole = 0;
+            double *swap = polygon;
+            polygon = spare;
+            spare = swap;
         }
         if (count < 3) continue;
         if (nkept == 0) { push_polygon(h, outer, mat[t], polygon, count); continue; }
-        split_polygon(h, polygon, count, h->kept, nkept, eps, mat[t]);
+        for (int32_t q = 0; q < count; ++q) h->tri_tags[q] = -1;
+        split_polygon(h, polygon, h->tri_tags, count, h->kept, nkept, eps, mat[t]);
         if (h->limit) return;
     }
     /* the new faces of every part: interior material, box-projected UVs */
@@ -1291,6 +1415,7 @@ static void cut_piece(hit *h, int32_t k) {
 static size_t split_bytes(int32_t S, int32_t B) {
     size_t levels = (size_t)(S < 128 ? S : 128) + 1;
     return sizeof(double) * levels * 2 * 8 * (2 * (size_t)(3 + B + (int32_t)levels) + 2) +
+           sizeof(int32_t) * levels * 2 * (2 * (size_t)(3 + B + (int32_t)levels) + 2) +
            sizeof(int32_t) * levels * 2 * (size_t)(S + 1);
 }
 
@@ -1308,7 +1433,9 @@ static size_t scratch_bytes(const fra_data *d, int32_t *vcap, int32_t *fcap, int
            sizeof(int32_t) * ((size_t)*vcap * 5 + 3 * (size_t)*lcap) + sizeof(double) * (3 * (size_t)S + (size_t)S) +
            sizeof(int32_t) * 7 * (size_t)S + sizeof(double) * 4 * (size_t)N + 48 * 16 +
            split_bytes(S, d->rows[A_BOUNDARY_PLANES]) +
-           sizeof(double) * (3 * 8 * (size_t)*ccap + 5 * (size_t)d->rows[A_BOUNDARY_PLANES]) + sizeof(work) +
+           sizeof(double) * (3 * 8 * (size_t)*ccap + 5 * (size_t)d->rows[A_BOUNDARY_PLANES]) +
+           sizeof(int32_t) * ((size_t)*ccap + (size_t)d->rows[A_BOUNDARY_PLANES]) +
+           sizeof(work) +
            sizeof(hit);
 }
 
@@ -1362,17 +1489,20 @@ static fra_status setup(const fra_data *d, int32_t q, const double *point, const
     h->split_cap = levels * 2 * 8 * (2 * (size_t)(3 + d->rows[A_BOUNDARY_PLANES] + (int32_t)levels) + 2);
     h->split_cells_cap = levels * 2 * (size_t)(h->S + 1);
     h->split = (double *)grab(a, sizeof(double) * h->split_cap, &ok);
+    h->split_tags = (int32_t *)grab(a, sizeof(int32_t) * (h->split_cap / 8), &ok);
     h->split_cells = (int32_t *)grab(a, sizeof(int32_t) * h->split_cells_cap, &ok);
     int32_t *local_off = (int32_t *)grab(a, sizeof(int32_t) * (size_t)(h->S + 1), &ok);
     h->B = d->rows[A_BOUNDARY_PLANES];
     int32_t *wall_off = (int32_t *)grab(a, sizeof(int32_t) * (size_t)(h->S + 1), &ok);
     h->boundary = (double *)grab(a, sizeof(double) * 4 * (size_t)h->B, &ok);
     h->ts = (double *)grab(a, sizeof(double) * (size_t)h->B, &ok);
+    h->near_walls = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->B, &ok);
     h->cand = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->S, &ok);
     h->inner = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->S, &ok);
     h->tri_a = (double *)grab(a, sizeof(double) * 8 * (size_t)ccap, &ok);
     h->tri_b = (double *)grab(a, sizeof(double) * 8 * (size_t)ccap, &ok);
     h->tri_c = (double *)grab(a, sizeof(double) * 8 * (size_t)ccap, &ok);
+    h->tri_tags = (int32_t *)grab(a, sizeof(int32_t) * (size_t)ccap, &ok);
     if (!ok) return FRA_ERR_ARENA;
     /* the frame: d = direction / max |component|, normalized; (u, v) = plane_basis(d) */
     double m = fabs(direction[0]);
