@@ -70,7 +70,8 @@ def main() -> int:
     if only and os.path.exists(args.out):
         with open(args.out) as fh:
             kept = previous_sections(fh.read())
-        sections = {**{k: v for k, v in kept.items() if k not in sections}, **sections}
+        # A kept section ends where the next begins: without its trailing blank lines, so a rerun adds none.
+        sections = {**{k: v.rstrip() + "\n" for k, v in kept.items() if k not in sections}, **sections}
     body = [sections[k] for k in sorted(sections)]
     with open(args.out, "w") as fh:
         fh.write("\n".join(header) + "\n" + "\n".join(body))
