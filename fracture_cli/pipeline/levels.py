@@ -39,6 +39,10 @@ def run_levels(state: PipelineState, options: LevelsOptions, stages: dict[str, A
     return dataclasses.replace(state, levels=result, runtime=with_levels(data, result))
 
 
+# The written-mesh checks counted over every child (each 0 when the children pass, as level 1's).
+BROKEN_FACES = ("open_edges", "pinched_edges", "misoriented_edges", "degenerate_faces", "separated_vertices")
+
+
 def levels_summary(result: Levels | None, names: list[str]) -> dict[str, Any] | None:
     """The report's ``levels`` block: what was broken again, the leaves, and the children's checks (worst over all).
 
@@ -68,6 +72,9 @@ def levels_summary(result: Levels | None, names: list[str]) -> dict[str, Any] | 
         "checks": {
             "watertight": all(c.get("watertight", True) for c in checks),
             "connected": all(c.get("connected", True) for c in checks),
+            **{key: int(sum(c.get(key, 0) for c in checks)) for key in BROKEN_FACES},
+            "fragment_bodies_max": worst("fragment_bodies_max"),
+            "max_outer_distance": worst("max_outer_distance"),
             "volume_error_max": worst("volume_error"),
             "parent_area_error_max": worst("parent_area_error"),
             "parent_distance_max": worst("parent_distance"),
