@@ -36,7 +36,13 @@ from fracture_cli.stages.fragments.cracks import crack_segments
 from fracture_cli.stages.fragments.interfaces import fragments_graph
 from fracture_cli.stages.fragments.resolve import separate_pinched_vertices
 from fracture_cli.stages.levels.options import STAGE, LevelsOptions
-from fracture_cli.stages.levels.submesh import covering_tets, propagate_labels, submesh, submesh_eta
+from fracture_cli.stages.levels.submesh import (
+    covering_tets,
+    manifold_cover,
+    propagate_labels,
+    submesh,
+    submesh_eta,
+)
 from fracture_cli.stages.modes import modes
 from fracture_cli.stages.pieces import PiecesOptions, pieces
 from fracture_cli.stages.runtime import site_coefficients
@@ -208,7 +214,8 @@ def _refine(ctx: Context, plan: Plan) -> Refinement | str:
 
 def _child_regions(ctx: Context, plan: Plan, surface: SurfaceMesh) -> Regions:
     """Closed regions, one per child piece, that partition every tet near the parent (its faults smoothed)."""
-    cover = covering_tets(ctx.tet_mesh, surface.vertices.min(axis=0), surface.vertices.max(axis=0))
+    cover = manifold_cover(ctx.tet_mesh, covering_tets(ctx.tet_mesh, surface.vertices.min(axis=0),
+                                                       surface.vertices.max(axis=0)))
     labels = np.full(len(cover), -1, dtype=np.int64)
     where = np.searchsorted(cover, plan.tets)
     inside = (where < len(cover)) & (cover[np.minimum(where, len(cover) - 1)] == plan.tets)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture_cli.geometry.tetgeom import TET_EDGES, TET_FACES
 from fracture_cli.types import TetMesh
 
 # How far beyond a fragment's bounding box the covering tets reach (normalized units: bbox diagonal 1).
@@ -71,6 +72,38 @@ def covering_tets(tet_mesh: TetMesh, lo: np.ndarray, hi: np.ndarray) -> np.ndarr
     tlo, thi = corners.min(axis=1), corners.max(axis=1)
     meets = np.all((tlo <= np.asarray(hi) + COVER_MARGIN) & (thi >= np.asarray(lo) - COVER_MARGIN), axis=1)
     return np.flatnonzero(meets)
+
+
+def manifold_cover(tet_mesh: TetMesh, tets: np.ndarray, rounds: int = 16) -> np.ndarray:
+    """``tets`` (ascending) and the tets around every edge where their union's boundary is not edge-manifold.
+
+    A set of tets chosen by their boxes touches itself along edges on its boundary (four or more boundary
+    faces at one edge); a region built on it that reaches such an edge is not edge-manifold, and the
+    smoothing then builds it again as a slow union of cells. Adding every tet around such an edge (it
+    becomes interior, or a mesh-boundary edge of a manifold mesh), in rounds until none is left (at most
+    ``rounds``), gives a set whose regions are built directly, as on the whole mesh at level 1.
+    """
+    T = np.asarray(tet_mesh.tets, dtype=np.int64)
+    n = tet_mesh.num_vertices
+    edges = np.sort(T[:, TET_EDGES], axis=2)
+    edge_keys = edges[:, :, 0] * n + edges[:, :, 1]  # (t, 6)
+    keep = np.zeros(len(T), dtype=bool)
+    keep[np.asarray(tets, dtype=np.int64)] = True
+    for _ in range(rounds):
+        faces = np.sort(T[keep][:, TET_FACES].reshape(-1, 3), axis=1)
+        keys = (faces[:, 0] * n + faces[:, 1]) * n + faces[:, 2]
+        unique, counts = np.unique(keys, return_counts=True)
+        boundary = faces[np.isin(keys, unique[counts == 1])]
+        sides = np.concatenate([boundary[:, [0, 1]], boundary[:, [1, 2]], boundary[:, [0, 2]]])
+        side_keys, side_counts = np.unique(sides[:, 0] * n + sides[:, 1], return_counts=True)
+        bad = side_keys[side_counts > 2]
+        if len(bad) == 0:
+            break
+        add = np.isin(edge_keys, bad).any(axis=1) & ~keep
+        if not add.any():
+            break
+        keep |= add
+    return np.flatnonzero(keep)
 
 
 def propagate_labels(tet_mesh: TetMesh, tets: np.ndarray, labels: np.ndarray) -> np.ndarray:
