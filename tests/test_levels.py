@@ -32,7 +32,13 @@ from fracture_cli.runtime.format import load_runtime
 from fracture_cli.runtime.impact import project_impact
 from fracture_cli.stages import levels as stage
 from fracture_cli.stages.levels.options import LevelsOptions
-from fracture_cli.stages.levels.submesh import covering_tets, propagate_labels, submesh, submesh_eta
+from fracture_cli.stages.levels.submesh import (
+    covering_tets,
+    manifold_cover,
+    propagate_labels,
+    submesh,
+    submesh_eta,
+)
 from fracture_cli.testing import grid_tetmesh
 from fracture_cli.types import Fragment, Fragments, Material, Normalization
 
@@ -70,6 +76,27 @@ def test_covering_tets_hold_the_box_and_labels_grow_over_faces():
     labels[0], labels[-1] = 7, 3
     grown = propagate_labels(mesh, cover, labels)
     assert set(grown.tolist()) == {3, 7} and grown[0] == 7 and grown[-1] == 3
+
+
+def test_manifold_cover_leaves_no_edge_where_the_set_touches_itself():
+    mesh = grid_tetmesh((3, 3, 3))
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    centroids = mesh.vertices[mesh.tets].mean(axis=1)
+    # Two blocks of tets that meet along one edge of the grid (diagonal cells of a 2x2 layer): pinched there.
+    cell = np.floor((centroids - lo) / (hi - lo) * 3).astype(int)
+    chosen = np.flatnonzero(np.all(cell[:, :2] == 0, axis=1) | np.all(cell[:, :2] == 1, axis=1))
+
+    def pinched(tets):
+        faces = np.sort(mesh.tets[tets][:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3), axis=1)
+        unique, counts = np.unique(faces, axis=0, return_counts=True)
+        outer = unique[counts == 1]
+        sides = np.concatenate([outer[:, [0, 1]], outer[:, [1, 2]], outer[:, [0, 2]]])
+        return int((np.unique(sides, axis=0, return_counts=True)[1] > 2).sum())
+
+    assert pinched(chosen) > 0
+    cover = manifold_cover(mesh, chosen)
+    assert np.all(np.isin(chosen, cover)) and np.all(np.diff(cover) > 0) and pinched(cover) == 0
+    assert np.array_equal(manifold_cover(mesh, cover), cover)
 
 
 def test_candidates_largest_first_ratio_min_volume_and_anchors():

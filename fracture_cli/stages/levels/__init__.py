@@ -1,4 +1,4 @@
-"""Levels of fracture: fragments that break again, each by its own impact data (issue 34; ALGORITHM.md section 12).
+"""Levels of fracture: fragments that break again, each by its own impact data (issue 34; ALGORITHM.md section 13).
 
 With ``count = 2`` the stage picks level-1 fragments by a rule (the largest first, at most
 ``ratio`` of them, none below ``min_volume``, none anchored) and breaks each into children

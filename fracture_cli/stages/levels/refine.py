@@ -1,4 +1,4 @@
-"""One level-1 fragment broken again: its children and its body's impact data (docs/ALGORITHM.md section 12).
+"""One level-1 fragment broken again: its children and its body's impact data (docs/ALGORITHM.md section 13).
 
 Two steps per fragment, each a function of that fragment alone (so the stage runs them on
 ``--jobs`` workers and the bytes do not depend on the count):

@@ -2,10 +2,11 @@
 
 A level-1 fragment was cut from its piece's region, which is (up to fault smoothing) the
 union of the piece's tets. Its children's modes are solved on those tets alone
-(:func:`piece_submesh`); the regions the children are cut with must cover the whole
+(:func:`submesh`); the regions the children are cut with must cover the whole
 fragment, smoothed faults included, so they are built on every tet near the fragment
-(:func:`covering_tets`), each labelled with the child piece of the nearest of the
-piece's tets across the tet mesh's faces (:func:`propagate_labels`).
+(:func:`covering_tets`, closed to an edge-manifold set by :func:`manifold_cover`), each
+labelled with the child piece of the nearest of the piece's tets across the tet mesh's
+faces (:func:`propagate_labels`).
 """
 
 from __future__ import annotations
