@@ -288,7 +288,8 @@ def nearest_fragment(data: RuntimeData, fragments, point) -> int:
                              dtype=np.float64)
         if len(corners) == 0:
             corners = np.asarray(ready["fragment_center_of_mass"][j], dtype=np.float64).reshape(1, 3)
-        d2 = float(np.min(np.sum((corners - x) ** 2, axis=1)))
+        offsets = corners - x
+        d2 = float(np.min(np.sum(offsets * offsets, axis=1)))
         if d2 < best_d2:
             best, best_d2 = int(g), d2
     if best < 0:

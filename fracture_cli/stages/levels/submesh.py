@@ -144,6 +144,7 @@ def propagate_labels(tet_mesh: TetMesh, tets: np.ndarray, labels: np.ndarray) ->
         centroids = tet_mesh.tet_centroids[tets]
         known = np.flatnonzero(out >= 0)
         for m in missing.tolist():
-            d2 = np.sum((centroids[known] - centroids[m]) ** 2, axis=1)
+            offsets = centroids[known] - centroids[m]
+            d2 = np.sum(offsets * offsets, axis=1)
             out[m] = out[known[int(np.argmin(d2))]]
     return out
