@@ -31,6 +31,7 @@ GROUPS = {
     "The command chain": "chain",
     "In a game": "chain",  # reads build/chair/chair.fracture.json, which the chain exports
     "Structures": "structures",  # bakes the pillar as a structure, hits it, and runs the game loop on it
+    "Fragments that break again": "levels",  # bakes with two levels, then hits the pillar and a piece that flew
 }
 
 # Files a command writes (relative to the copy's root), checked right after it.
@@ -53,6 +54,10 @@ WRITES = {
     "runtime.damage=true": ["build/chair-floor/chair.fracture.json"],
     "fracture bake sample_assets/chair.glb -o build/chair_cut -r wood --set aligned.enabled=true": [
         "build/chair_cut/chair.aligned.json", "build/chair_cut/chair.aligned.bin"],
+    "fracture bake sample_assets/pillar.glb -o build/pillar_levels -r stone --set levels.count=2": [
+        "build/pillar_levels/pillar.fracture.json", "build/pillar_levels/pillar.glb"],
+    "fracture bake sample_assets/chair.glb -o build/chair_levels -r wood --set levels.count=2 --set "
+    "levels.ratio=0.25 --set levels.max_leaves=24": ["build/chair_levels/chair.fracture.json"],
 }
 
 LEFT_OUT = {
@@ -123,7 +128,7 @@ def test_readme_blocks_are_found():
     commands = _commands(blocks)
     assert len(commands) >= 15 and "fracture recipes show wood" in commands
     assert any(c.startswith("dask worker") for c in commands)  # the indented block in the cluster steps
-    assert [language for _, language, _ in blocks].count("python") == 3  # In a game, Structures; aligned fracture
+    assert [language for _, language, _ in blocks].count("python") == 4  # In a game, Structures, aligned, levels
     stale = (set(LEFT_OUT) | set(WRITES)) - set(commands)
     assert not stale, f"LEFT_OUT or WRITES name commands the README no longer shows: {sorted(stale)}"
     # A section outside GROUPS has nothing to run (a new block there needs a group, or a reason to be left out).

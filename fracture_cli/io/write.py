@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 from collections.abc import Sequence
@@ -11,7 +12,7 @@ import numpy as np
 from fracture_cli.errors import InputError
 from fracture_cli.io.atomic import atomic_path, write_bytes_atomic
 from fracture_cli.io.gltf import Primitive, glb_bytes
-from fracture_cli.io.physics import FragmentPhysics, node_origin
+from fracture_cli.io.physics import OMI_BODY, FragmentPhysics, node_origin
 from fracture_cli.types import Fragments, Normalization, SurfaceMesh
 
 log = logging.getLogger(__name__)
@@ -150,6 +151,14 @@ def fragment_name(index: int, stem: str | None = None) -> str:
     return f"{stem}_fragment_{index:03d}" if stem else f"fragment_{index:03d}"
 
 
+def child_name(parent: str, index: int) -> str:
+    """The node name of a fragment's ``index``-th child: ``<parent>_c00``, ``<parent>_c01``, ... (docs/FORMAT.md 14.6).
+
+    ``_c`` keeps it apart from the parent's collision-part nodes (``<parent>_00``, ``UCX_<parent>_00``).
+    """
+    return f"{parent}_c{index:02d}"
+
+
 def prefixed_materials(materials, stem: str | None):
     """``materials`` renamed ``<stem>_<name>`` (``chair_interior``): engines share materials by name across files."""
     import dataclasses
@@ -173,7 +182,8 @@ def _compact(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: str = "center_of_mass",
                         parts=None, collision: str = "none", stem: str | None = None,
-                        physics: Sequence[FragmentPhysics] | None = None) -> None:
+                        physics: Sequence[FragmentPhysics] | None = None,
+                        children: Sequence[tuple[int, Fragments, Sequence[FragmentPhysics]]] = ()) -> None:
     """Write all fragments to one GLB: one node and mesh per fragment, named ``<stem>_fragment_###``.
 
     Each mesh has one primitive per material it uses (the input's materials and
@@ -200,6 +210,12 @@ def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: st
         Mass properties, pivots and parts of every fragment as the pipeline computed them
         (:func:`fracture_cli.io.physics.fragment_physics`); computed here from ``pivot`` and
         ``parts`` when not given.
+    children : sequence of (int, Fragments, sequence of FragmentPhysics), optional
+        Fragments broken again (levels, docs/FORMAT.md section 14.6): the parent's index, its children
+        (same materials) and their physics. Each child is a node under its parent's node, named
+        :func:`child_name`, positioned relative to it, its ``extras.fracture`` with ``"level": 2``; its
+        collision parts as ``collision`` says, except ``omi`` (a dynamic body inside another: the parts
+        are in the runtime file only).
     """
     # on first use: reading or writing one format loads only what it needs
     from fracture_cli.io.physics import fragment_physics, physics_extender
@@ -211,5 +227,38 @@ def write_fragments_glb(path: str | os.PathLike, fragments: Fragments, pivot: st
         prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids,
                                   fragments.normalization, body.origin)
         meshes.append((fragment_name(i, stem), prims, body.origin))
+    every, parents = list(physics), []
+    for parent, kids, kid_physics in children:
+        for j, (frag, body) in enumerate(zip(kids.fragments, kid_physics)):
+            prims = split_by_material(frag.vertices, frag.faces, frag.normals, frag.uvs, frag.material_ids,
+                                      kids.normalization, body.origin)
+            meshes.append((child_name(fragment_name(parent, stem), j), prims, body.origin))
+            every.append(dataclasses.replace(body, parts=()) if collision == "omi" else body)
+            parents.append(parent)
     materials = prefixed_materials(fragments.materials, stem)
-    write_bytes_atomic(path, glb_bytes(meshes, materials, extend=physics_extender(physics, collision)))
+    extend = physics_extender(every, collision)
+    if parents:
+        extend = _nested(extend, len(physics), parents, every)
+    write_bytes_atomic(path, glb_bytes(meshes, materials, extend=extend))
+
+
+def _nested(extend, p: int, parents: list[int], physics: Sequence[FragmentPhysics]):
+    """``extend`` followed by moving the child nodes ``p ..`` under their parents' nodes (one scene tree)."""
+    def nest(doc: dict, buffer) -> None:
+        extend(doc, buffer)
+        nodes = doc["nodes"]
+        doc["scenes"][0]["nodes"] = list(range(p))
+        for offset, parent in enumerate(parents):
+            node = nodes[p + offset]
+            relative = np.asarray(physics[p + offset].origin, np.float64) - np.asarray(physics[parent].origin,
+                                                                                        np.float64)
+            node.pop("translation", None)
+            if np.any(relative != 0):
+                node["translation"] = [float(x) for x in relative]
+            node.get("extensions", {}).pop(OMI_BODY, None)  # a dynamic body inside another is not a body
+            if "extensions" in node and not node["extensions"]:
+                del node["extensions"]
+            node["extras"]["fracture"]["level"] = 2
+            nodes[parent].setdefault("children", []).append(p + offset)
+
+    return nest

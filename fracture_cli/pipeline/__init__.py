@@ -32,6 +32,8 @@ if TYPE_CHECKING:  # numpy and the types only for annotations: `fracture --help`
     from fracture_cli.stages.collision import CollisionOptions
     from fracture_cli.stages.faults import FaultOptions
     from fracture_cli.stages.fragments import FragmentOptions
+    from fracture_cli.stages.levels import Levels
+    from fracture_cli.stages.levels.options import LevelsOptions
     from fracture_cli.stages.load import LoadOptions
     from fracture_cli.stages.material import MaterialOptions
     from fracture_cli.stages.modes import ModesOptions
@@ -73,6 +75,8 @@ class PipelineState:
     anchors: Anchors | None = None  # the fragments held by the world (none unless the recipe's [anchors] asks)
     runtime: RuntimeData | None = None
     aligned: AlignedData | None = None  # the aligned-fracture companion file (None: the recipe did not ask)
+    levels: Levels | None = None  # fragments broken again (None or no refinement: one level)
+    stage_options: dict[str, Any] = field(default_factory=dict)  # the options each stage ran with (the runner's)
 
     # One overload per field kind: a stage gets its input with its type (no Any on the spine).
     @overload
@@ -336,6 +340,17 @@ def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     return dataclasses.replace(state, runtime=data)
 
 
+def _levels(state: PipelineState, options: LevelsOptions) -> PipelineState:
+    if options.count < 2:  # the default: one level, nothing to load, the same bytes
+        return dataclasses.replace(state, levels=None)
+    # on first use: `fracture --help` loads no stage
+    from fracture_cli.pipeline.levels import LEVEL_ONE, run_levels
+
+    # The children are made with the options the level-1 stages ran with (their defaults where a chain skipped one).
+    return run_levels(state, options, {name: state.stage_options.get(name) or stage(name).options_class()
+                                       for name in LEVEL_ONE})
+
+
 def _aligned(state: PipelineState, options: AlignedOptions) -> PipelineState:
     if not options.enabled:  # the default: nothing to load
         return dataclasses.replace(state, aligned=None)
@@ -394,6 +409,10 @@ STAGES: tuple[Stage, ...] = (
           consumes=("tet_mesh", "modes", "pieces", "fragments"),
           uses=("collision", "physics", "anchors", "surface"),
           produces=("runtime",)),
+    Stage("levels", "Break the largest fragments again into children with their own impact data (off unless "
+          "levels.count = 2).", "fracture_cli.stages.levels.options:LevelsOptions", _levels,
+          consumes=("tet_mesh", "pieces", "fragments", "runtime"),
+          uses=("eta", "anchors", "stage_options"), produces=("levels", "runtime")),
     Stage("aligned", "Convex pieces and fracture patterns for cutting at the hit at runtime (off unless enabled).",
           "fracture_cli.stages.aligned.options:AlignedOptions", _aligned, consumes=("fragments",),
           uses=("collision",), produces=("aligned",)),

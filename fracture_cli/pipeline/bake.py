@@ -212,7 +212,7 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
     used = dataclasses.replace(recipe, options={**recipe.options, **runner.options})
     cage, tet_mesh, modes, pieces = state.cage, state.tet_mesh, state.modes, state.pieces
     stem = stem_of(state.need("source", "export"))
-    return {
+    report: dict[str, Any] = {
         "tool": "fracture",
         "version": __version__,
         # The numeric kernels and the versions of what computes the outputs (same values: same bytes).
@@ -239,6 +239,12 @@ def build_report(state: PipelineState, recipe: Recipe, runner: Runner) -> dict[s
         "structure": structure_summary(state, stem),
         "outputs": [f"{stem}.glb", f"{stem}.fracture.json", f"{stem}.fracture.bin", f"{stem}.report.json"],
     }
+    if state.levels is not None:  # fragments broken again (docs/FORMAT.md section 14); absent with one level
+        # on first use: keeps `fracture` start-up light
+        from fracture_cli.pipeline.levels import levels_summary
+
+        report["levels"] = levels_summary(state.levels, [fragment_name(i, stem) for i in range(len(frags.fragments))])
+    return report
 
 
 def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[str, Any],
@@ -259,9 +265,11 @@ def write_outputs(out_dir: str, stem: str, state: PipelineState, report: dict[st
     with runner.step("export"), output_set(out_dir, stem) as staging:
         collision_options = runner.options.get("collision")
         frags = state.need("fragments", "export")
+        children = [] if state.levels is None else [(r.fragment, r.children, r.physics)
+                                                     for r in state.levels.refinements]
         write_fragments_glb(staging.file(f"{stem}.glb"), frags, pivot=frags.pivot, parts=state.collision,
                             collision=getattr(collision_options, "glb", "none") if state.collision else "none",
-                            stem=stem, physics=state.physics)
+                            stem=stem, physics=state.physics, children=children)
         write_runtime(state.need("runtime", "export"), staging.file(f"{stem}.fracture.json"))
         if state.aligned is not None:  # the companion pair, only when the recipe asks (docs/FORMAT.md section 13)
             # on first use: keeps `fracture` start-up light

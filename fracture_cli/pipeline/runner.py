@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import time
 from collections.abc import Iterator
@@ -76,7 +77,8 @@ class Runner:
 
             self._key = cache_key("load", result.source_sha256, options)
         self.options[name] = options
-        return result
+        # Later stages that make fragments again (levels) make them as these did.
+        return dataclasses.replace(result, stage_options={**result.stage_options, name: options})
 
     def step(self, name: str) -> contextlib.AbstractContextManager[progress.Task]:
         """A context that logs, times and shows progress of one step (a stage or ``export``)."""

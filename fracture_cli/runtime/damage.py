@@ -22,6 +22,7 @@ import numpy as np
 from fracture_cli.errors import ImpactArgumentError
 from fracture_cli.runtime.format import RuntimeData
 from fracture_cli.runtime.impact import ImpactResult, apply_hit
+from fracture_cli.runtime.levels import body_view
 
 STATE_DTYPE = np.dtype("<f8")
 
@@ -50,15 +51,17 @@ def check_state(data: RuntimeData, state: np.ndarray) -> None:
         raise ImpactArgumentError("a damage state holds healths in [0, 1]; this one has other values (NaN?)")
 
 
-def hit(data: RuntimeData, state: np.ndarray, point, impulse, threshold: float | None = None) -> ImpactResult:
+def hit(data: RuntimeData, state: np.ndarray, point, impulse, threshold: float | None = None,
+        body: int = 0) -> ImpactResult:
     """Apply one hit to ``state`` (in place) and say what it does.
 
     Parameters
     ----------
     data : RuntimeData
     state : (e,) float64
-        From :func:`new_state` or a saved state; updated in place (unchanged when the hit is refused).
-    point, impulse, threshold
+        From :func:`new_state` or a saved state; updated in place (unchanged when the hit is refused). With
+        ``body``: that body's state (``e_b`` bonds; :func:`new_state` of ``body_view(data, body)``).
+    point, impulse, threshold, body
         As :func:`fracture_cli.runtime.impact.project_impact`.
 
     Returns
@@ -73,8 +76,9 @@ def hit(data: RuntimeData, state: np.ndarray, point, impulse, threshold: float |
     ImpactArgumentError
         For an invalid state or invalid hit inputs.
     """
-    check_state(data, state)
-    return apply_hit(data, state, point, impulse, threshold)
+    view = body_view(data, body)
+    check_state(view, state)
+    return apply_hit(view, state, point, impulse, threshold)
 
 
 def state_from_bytes(data: RuntimeData, raw: bytes) -> np.ndarray:

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fracture_cli.runtime.gameready import GAMEREADY_LAYOUT, check_gameready
+from fracture_cli.runtime.levels import ALL_LEVEL_LAYOUTS, body_view, check_level_structure, level_counts, num_bodies
 from fracture_cli.runtime.stress import CRITERIA, STRESS_LAYOUT, check_stress
 from fracture_cli.runtime.structure import ANCHOR_LAYOUT, CRACK_LAYOUT, check_anchored, check_cracks, check_damage
 
@@ -28,7 +29,8 @@ ARRAY_LAYOUT: dict[str, tuple[str, int]] = {
     "edge_areas": ("float32", 1),
 }
 FILE_DTYPES = {"float32": np.dtype("<f4"), "int32": np.dtype("<i4")}
-ALL_LAYOUTS = {**ARRAY_LAYOUT, **GAMEREADY_LAYOUT, **STRESS_LAYOUT, **ANCHOR_LAYOUT, **CRACK_LAYOUT}
+ALL_LAYOUTS = {**ARRAY_LAYOUT, **GAMEREADY_LAYOUT, **STRESS_LAYOUT, **ANCHOR_LAYOUT, **CRACK_LAYOUT,
+               **ALL_LEVEL_LAYOUTS}
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,6 +80,14 @@ class RuntimeData:
         fault meets the outer surface, model space (for drawing cracked bonds).
     anchors_info : dict
         How the bake chose the anchored fragments (header key ``anchors``; informational).
+    levels : dict of str -> array
+        Feature ``"levels"`` (docs/FORMAT.md section 14): the arrays of
+        :data:`fracture_cli.runtime.levels.ALL_LEVEL_LAYOUTS` that the file has (``parent (p_all,)``, the
+        ``body_*`` arrays of every body below the whole asset, the ``child_*`` game-ready arrays); empty: one level.
+    child_names : tuple of str
+        With levels: the names of fragments ``p .. p_all - 1`` (GLB nodes below their parent's node).
+    levels_info : dict
+        With levels: the header's ``levels`` object (``count``, ``thresholds`` per level, informational keys).
     """
 
     sites: np.ndarray
@@ -98,11 +108,15 @@ class RuntimeData:
     damage: dict = field(default_factory=dict)
     cracks: dict[str, np.ndarray] = field(default_factory=dict)
     anchors_info: dict = field(default_factory=dict)
+    levels: dict[str, np.ndarray] = field(default_factory=dict)
+    child_names: tuple[str, ...] = ()
+    levels_info: dict = field(default_factory=dict)
 
     @property
     def features(self) -> tuple[str, ...]:
         """The format-2 features the data needs (sorted; empty: a version-1 file)."""
-        present = {"anchors": self.anchored is not None, "damage": bool(self.damage), "stress": bool(self.stress)}
+        present = {"anchors": self.anchored is not None, "damage": bool(self.damage), "stress": bool(self.stress),
+                   "levels": bool(self.levels)}
         return tuple(name for name in sorted(present) if present[name])
 
     @property
@@ -148,6 +162,9 @@ class RuntimeData:
         for name, (dtype, _) in CRACK_LAYOUT.items():
             if name in self.cracks:
                 arrays[name] = np.ascontiguousarray(self.cracks[name], dtype=FILE_DTYPES[dtype])
+        for name, (dtype, _) in ALL_LEVEL_LAYOUTS.items():
+            if name in self.levels:
+                arrays[name] = np.ascontiguousarray(self.levels[name], dtype=FILE_DTYPES[dtype])
         return arrays
 
     def counts(self) -> dict[str, int]:
@@ -160,6 +177,7 @@ class RuntimeData:
             counts["site_bonds"] = int(len(self.stress["site_bonds"]))
         if self.cracks:
             counts["crack_segments"] = int(len(self.cracks["crack_segments"]))
+        counts.update(level_counts(self))
         return counts
 
 
@@ -211,7 +229,21 @@ def check_runtime(data: RuntimeData) -> str | None:
         problem = check_stress(data.stress, s, expected["edges"][0])
         if problem:
             return problem
-    return _check_structure(data)
+    return _check_structure(data) or _check_levels(data)
+
+
+def _check_levels(data: RuntimeData) -> str | None:
+    """The checks of docs/FORMAT.md section 14.2: the structure, then every body's view as a runtime file."""
+    if not data.levels:
+        return None
+    problem = check_level_structure(data)
+    if problem:
+        return problem
+    for body in range(1, num_bodies(data)):
+        problem = check_runtime(body_view(data, body))
+        if problem:
+            return f"body {body}: {problem}"
+    return None
 
 
 def _check_structure(data: RuntimeData) -> str | None:

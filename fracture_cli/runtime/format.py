@@ -33,6 +33,7 @@ from fracture_cli.runtime.data import (  # noqa: F401  (UNITS_NOTE, GAMEREADY_LA
     check_runtime,
 )
 from fracture_cli.runtime.header import parse_header
+from fracture_cli.runtime.levels import ALL_LEVEL_LAYOUTS
 from fracture_cli.runtime.stress import STRESS_LAYOUT, header_features
 from fracture_cli.runtime.structure import ANCHOR_LAYOUT, CRACK_LAYOUT, DAMAGE_KEYS, check_damage
 
@@ -102,6 +103,9 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
             header["damage"] = {key: float(data.damage[key]) for key in DAMAGE_KEYS}
         if data.anchored is not None and data.anchors_info:
             header["anchors"] = {key: data.anchors_info[key] for key in sorted(data.anchors_info)}
+        if data.levels:  # docs/FORMAT.md section 14
+            header["child_names"] = list(data.child_names)
+            header["levels"] = {key: data.levels_info[key] for key in sorted(data.levels_info)}
     text = json.dumps(header, sort_keys=True, indent=2, ensure_ascii=True, allow_nan=False) + "\n"
     return text.encode("ascii"), binary
 
@@ -239,6 +243,14 @@ def _decode_structure(header: dict, features: tuple[str, ...], table: dict, bina
     if any(name in table for name in CRACK_LAYOUT):  # drawing only; check_runtime wants both
         fields["cracks"] = {name: _array(table, name, binary, path, CRACK_LAYOUT) for name in CRACK_LAYOUT
                             if name in table}
+    if "levels" in features:  # section 14: every levels array the table lists (check_runtime says which belong)
+        info, names = header.get("levels"), header.get("child_names")
+        if not isinstance(info, dict) or not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise _fail("inconsistent runtime file: the feature 'levels' needs a header object 'levels' and a list "
+                        "of strings 'child_names'", path)
+        fields["levels"] = {name: _array(table, name, binary, path, ALL_LEVEL_LAYOUTS) for name in ALL_LEVEL_LAYOUTS
+                            if name in table}
+        fields["levels_info"], fields["child_names"] = dict(info), tuple(names)
     return fields
 
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from fracture_cli.errors import ImpactArgumentError
 from fracture_cli.runtime.format import RuntimeData
+from fracture_cli.runtime.levels import body_view
 from fracture_cli.runtime.stress import PreparedStress
 from fracture_cli.runtime.structure import damage_factor
 
@@ -278,7 +279,7 @@ def _threshold(value) -> float:
     return threshold
 
 
-def project_impact(data: RuntimeData, point, impulse, threshold: float | None = None) -> ImpactResult:
+def project_impact(data: RuntimeData, point, impulse, threshold: float | None = None, body: int = 0) -> ImpactResult:
     """Project an impact onto the fracture modes and group the fragments.
 
     Parameters
@@ -291,9 +292,13 @@ def project_impact(data: RuntimeData, point, impulse, threshold: float | None = 
     impulse : (3,) float
         Impulse vector in model-space axes; any unit, the same as ``threshold``;
         finite. Only ``impulse / threshold`` matters.
-    threshold : float, optional (default ``data.default_threshold``)
+    threshold : float, optional (default ``data.default_threshold``; the body's level's with ``body``)
         Toughness, >= 0 (``inf``: nothing breaks): an edge breaks when the
         displacement jump across it exceeds this.
+    body : int, optional (default 0: the whole asset)
+        With feature ``"levels"`` (docs/FORMAT.md section 14): the body that answers, one that breaks a
+        fragment into its children (:func:`fracture_cli.runtime.levels.body_of`); the answer is then in
+        that body's local indices (child ``j`` is fragment ``children_range(data, body)[j]``).
 
     Returns
     -------
@@ -316,7 +321,7 @@ def project_impact(data: RuntimeData, point, impulse, threshold: float | None = 
     impulses of 1e-170 or 1e200 give the same groups as any other impulse
     with the same ``impulse / threshold``; a zero impulse breaks nothing.
     """
-    return apply_hit(data, None, point, impulse, threshold)
+    return apply_hit(body_view(data, body), None, point, impulse, threshold)
 
 
 def apply_hit(data: RuntimeData, state: np.ndarray | None, point, impulse, threshold: float | None) -> ImpactResult:

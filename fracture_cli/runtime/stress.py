@@ -25,8 +25,9 @@ STRESS_LAYOUT: dict[str, tuple[str, int]] = {
     "site_bond_gain": ("float32", 2),
     "bond_strength": ("float32", 1),
 }
-KNOWN_FEATURES: tuple[str, ...] = ("anchors", "damage", "stress")
-"""The ``features`` this reader implements (``"anchors"`` and ``"damage"``: :mod:`fracture_cli.runtime.structure`)."""
+KNOWN_FEATURES: tuple[str, ...] = ("anchors", "damage", "levels", "stress")
+"""The ``features`` this reader implements (``"anchors"`` and ``"damage"``: :mod:`fracture_cli.runtime.structure`;
+``"levels"``: :mod:`fracture_cli.runtime.levels`)."""
 CRITERIA: tuple[str, ...] = ("modes", "stress")
 
 

@@ -244,6 +244,10 @@ def _site_coefficients(tet_mesh: TetMesh, U: np.ndarray, tau: float) -> np.ndarr
     return lu.solve(np.asfortranarray(rhs)).reshape(-1, k, d)  # (n, k, d)
 
 
+# Public: the levels stage computes every refined fragment's ``B`` on its own tets the same way.
+site_coefficients = _site_coefficients
+
+
 def _restrict_to_fragments(W: np.ndarray, pieces: Pieces, fragment_pieces: Sequence[int] | np.ndarray | None,
                            fragment_graph: tuple[np.ndarray, np.ndarray] | None = None,
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

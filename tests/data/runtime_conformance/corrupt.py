@@ -350,14 +350,56 @@ CASES = [
      lambda h, b: _edit(["arrays", "crack_ptr"], ...)(*_edit(["arrays", "crack_segments"], ...)(h, b)),
      "ok", "the crack arrays are optional (drawing only)"),
     ("ok_structure", "structure", lambda h, b: (h, b), "ok", "the anchors + damage base file itself"),
+    ("feature_unknown_name", "structure", _edit(["features"], ["anchors", "damage", "teleport"]), "rejected",
+     "a feature no reader implements ('teleport')"),
+    # docs/FORMAT.md section 14 (base: levels_dyadic, feature "levels": p = 4, 4 bodies, p_all = 11, S = 6, E = 5).
+    ("levels_header_missing", "levels", _edit(["levels"], ...), "rejected",
+     "feature 'levels' without the levels object"),
+    ("levels_child_names_short", "levels", _edit(["child_names"], ["a", "b"]), "rejected",
+     "child_names has fewer names than p_all - p"),
+    ("levels_count_wrong", "levels", _edit(["levels", "count"], 2), "rejected",
+     "levels.count is not the deepest level (3)"),
+    ("levels_thresholds_short", "levels", _edit(["levels", "thresholds"], [1.0, 0.5]), "rejected",
+     "levels.thresholds has fewer entries than levels.count"),
+    ("levels_threshold0_differs", "levels", _edit(["levels", "thresholds"], [2.0, 0.5, 0.25]), "rejected",
+     "levels.thresholds[0] differs from default_threshold"),
+    ("levels_threshold_negative", "levels", _edit(["levels", "thresholds"], [1.0, -0.5, 0.25]), "rejected",
+     "a negative level threshold"),
+    ("levels_array_missing", "levels", _edit(["arrays", "body_W"], ...), "rejected", "body_W missing"),
+    ("levels_counts_bodies", "levels", _edit(["counts", "bodies"], 3), "rejected", "counts.bodies disagrees"),
+    ("levels_parent_wrong", "levels", lambda h, b: _poke(h, b, "parent", 6, "i", 3), "rejected",
+     "a child's parent is not its body's fragment"),
+    ("levels_parent_level1", "levels", lambda h, b: _poke(h, b, "parent", 0, "i", 2), "rejected",
+     "a level-1 fragment has a parent"),
+    ("levels_body_fragment_order", "levels", lambda h, b: _poke(h, b, "body_fragment", 2, "i", 0), "rejected",
+     "body_fragment not strictly increasing over bodies >= 1"),
+    ("levels_child_ptr_one_child", "levels", lambda h, b: _poke(h, b, "body_child_ptr", 2, "i", 8), "rejected",
+     "body 2 has one child"),
+    ("levels_site_ptr_body0", "levels", lambda h, b: _poke(h, b, "body_site_ptr", 1, "i", 1), "rejected",
+     "body 0 has rows in body_site_ptr"),
+    ("levels_edge_out_of_range", "levels", lambda h, b: _poke(h, b, "body_edges", 7, "i", 3), "rejected",
+     "a bond of body 2 names local child 3 (it has 2)"),
+    ("levels_edge_reversed", "levels", lambda h, b: _poke(h, b, "body_edges", 0, "i", 1), "rejected",
+     "a bond (P, Q) with P >= Q"),
+    ("levels_W_nan", "levels", lambda h, b: _poke(h, b, "body_W", 3, "f", float("nan")), "rejected",
+     "NaN in body_W"),
+    ("levels_sites_inf", "levels", lambda h, b: _poke(h, b, "body_sites", 4, "f", float("inf")), "rejected",
+     "inf in body_sites"),
+    ("ok_levels_reordered", "levels", _relayout(["body_W", "parent", "sites", "body_edges", "B", "body_B", "W",
+                                                 "body_fragment", "edges", "body_sites", "body_child_ptr",
+                                                 "body_edge_areas", "edge_areas", "body_site_ptr",
+                                                 "body_edge_ptr"], 16, 0x5A),
+     "ok", "levels arrays in another order, non-zero gaps"),
+    ("ok_levels", "levels", lambda h, b: (h, b), "ok", "the levels base file itself"),
 ]
 
 
-def generate(out: str, example_json: str, dyadic_json: str, structure_json: str) -> list[str]:
+def generate(out: str, example_json: str, dyadic_json: str, structure_json: str, levels_json: str) -> list[str]:
     """Write every case and ``index.json`` into ``out``; returns the paths written (relative to its parent)."""
     os.makedirs(out, exist_ok=True)
     bases = {}
-    for key, path in (("example", example_json), ("dyadic", dyadic_json), ("structure", structure_json)):
+    for key, path in (("example", example_json), ("dyadic", dyadic_json), ("structure", structure_json),
+                      ("levels", levels_json)):
         with open(path, encoding="utf-8") as fh:
             header = json.load(fh)
         with open(os.path.join(os.path.dirname(path), header["buffer"]["uri"]), "rb") as fh:
@@ -386,7 +428,7 @@ def generate(out: str, example_json: str, dyadic_json: str, structure_json: str)
         if expect == "ok":
             entry["vectors"] = vectors
             entry["fragment_names"] = UNICODE_NAMES if name == "ok_unicode_names" else header["fragment_names"]
-        if base == "structure":  # a reader without these features refuses every such file: skip, by name
+        if base in ("structure", "levels"):  # a reader without these features refuses every such file: skip by name
             entry["features"] = list(bases[base][0]["features"])
         if name == "crc_mismatch":
             entry["only_crc"] = True

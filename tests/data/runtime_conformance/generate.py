@@ -38,8 +38,10 @@ import fracture_cli  # noqa: E402, F401, I001
 import numpy as np  # noqa: E402
 
 import corrupt  # noqa: E402
+import levels  # noqa: E402
 import reference  # noqa: E402
 import reference_damage  # noqa: E402
+import reference_levels  # noqa: E402
 import structures  # noqa: E402
 
 from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime  # noqa: E402
@@ -194,12 +196,16 @@ def sample_assets() -> list[tuple[str, str]]:
 
 # Sample assets baked with the stress criterion too: (asset, recipe, name of the runtime file here).
 STRESS_BAKES = [("chair.glb", "wood", "chair_stress")]
+# ... and with two levels of fracture (docs/FORMAT.md section 14), fast settings: (asset, recipe, name, --set values).
+LEVEL_BAKES = [("pillar.glb", "stone", "pillar_levels", ("levels.count=2", "levels.ratio=0.5"))]
 
 
 def rebake_sample_assets(dest: str) -> None:
     """Bake every sample asset with its manifest recipe and copy its runtime file to ``dest``."""
     bakes = [(asset, recipe, os.path.splitext(asset)[0], ()) for asset, recipe in sample_assets()]
     bakes += [(asset, recipe, name, ("--set", "runtime.criterion=stress")) for asset, recipe, name in STRESS_BAKES]
+    bakes += [(asset, recipe, name, tuple(x for value in sets for x in ("--set", value)))
+              for asset, recipe, name, sets in LEVEL_BAKES]
     for asset, recipe, name, extra in bakes:
         stem = os.path.splitext(asset)[0]
         with tempfile.TemporaryDirectory() as tmp:
@@ -535,7 +541,8 @@ def generate(out: str, rebake: bool = False) -> list[str]:
         rebake_sample_assets(out)
     stems = [os.path.splitext(asset)[0] for asset, _ in sample_assets()]
     stress_stems = [name for _, _, name in STRESS_BAKES]
-    for stem in stems + stress_stems:
+    level_stems = [name for _, _, name, _ in LEVEL_BAKES]
+    for stem in stems + stress_stems + level_stems:
         if os.path.abspath(out) != HERE and not rebake:
             for suffix in (".fracture.json", ".fracture.bin"):
                 shutil.copyfile(os.path.join(HERE, stem + suffix), os.path.join(out, stem + suffix))
@@ -560,13 +567,38 @@ def generate(out: str, rebake: bool = False) -> list[str]:
         write_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", rt, impacts, seqs)
         written.append(f"{name}.vectors.json")
     written += [f"{name}{suffix}" for name in structure for suffix in (".fracture.json", ".fracture.bin")]
+    # Levels (docs/FORMAT.md section 14): after every other file, so the seeds above stay as they were.
+    first_seed = len([*small, *stems, *stress_small, *stress_stems, *structure])
+    for offset, name in enumerate(_levels_files(out, small) + level_stems):
+        seed = first_seed + offset
+        data = load_runtime(os.path.join(out, f"{name}.fracture.json"))
+        rt = reference_levels.LevelFile.from_data(data).view(0)
+        rng = np.random.default_rng(100 + seed)
+        impacts = designed_impacts(rt, rng) + random_impacts(rt, SAMPLE_IMPACTS if name in level_stems else 8,
+                                                              seed=200 + seed)
+        levels.write_level_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", data, seed,
+                                   impacts, vector_entry)
+        written += [f"{name}{suffix}" for suffix in (".fracture.json", ".fracture.bin", ".vectors.json")]
     written += corrupt.generate(
         os.path.join(out, "corrupt"),
         os.path.join(out, "example.fracture.json"),
         os.path.join(out, "dyadic_d3.fracture.json"),
         os.path.join(out, "structure_dyadic.fracture.json"),
+        os.path.join(out, "levels_dyadic.fracture.json"),
     )
     return written
+
+
+def _levels_files(out: str, small: dict) -> list[str]:
+    """Write the synthetic section-14 runtime files (levels.py) into ``out``; their names, in seed order."""
+    files = {
+        "levels_dyadic": levels.levels_dyadic(),
+        "levels_stress": levels.levels_stress(),
+        "levels_random": levels.levels_random(small["random_d3"], seed=19),
+    }
+    for name, data in files.items():
+        write_runtime(data, os.path.join(out, f"{name}.fracture.json"))
+    return list(files)
 
 
 def _structure_files(out: str, small: dict, stress_small: dict) -> list[str]:
