@@ -11,10 +11,6 @@ import os
 import subprocess
 
 import pytest
-from levels_support import body_input as levels_body_input
-from levels_support import check_bodies, check_children, levels_files
-from levels_support import check_sequences as check_level_sequences
-from levels_support import sequence_input as levels_sequence_input
 from engine_support import (
     CORRUPT,
     REPO,
@@ -33,6 +29,10 @@ from engine_support import (
     runtime_paths,
     vector_names,
 )
+from levels_support import body_input as levels_body_input
+from levels_support import check_bodies, check_children, levels_files
+from levels_support import check_sequences as check_level_sequences
+from levels_support import sequence_input as levels_sequence_input
 
 C_DIR = os.path.join(REPO, "engines", "c")
 SOURCES = [os.path.join(C_DIR, "fracture_runtime.c"), os.path.join(C_DIR, "tools", "fracture_check.c")]
