@@ -54,7 +54,7 @@ READER_FEATURES: dict[str, tuple[str, ...]] = {
     "c": ("anchors", "damage", "levels", "stress"),
     "csharp": ("anchors", "damage", "stress"),
     "gdscript": ("anchors", "damage", "stress"),
-    "js": ("anchors", "damage", "stress"),
+    "js": ("anchors", "damage", "levels", "stress"),
 }
 
 

@@ -57,8 +57,8 @@ def check_bodies(vectors: dict, output: str, structure: bool = True) -> list[str
     for line in output.splitlines():
         if line.startswith(("ok", "error")):
             answers.append([line, None])
-        elif line.startswith("structure") and answers:
-            tokens, key, sections = line.split()[1:], None, {}
+        elif line.startswith(("structure", "more")) and answers:  # C, C#: "structure c .. y ..", JS: "more c .. n .."
+            tokens, key, sections = line.replace(" n ", " y ").split()[1:], None, {}
             for token in tokens:
                 if token in ("c", "y", "h"):
                     key = token
