@@ -52,7 +52,7 @@ def require_tool(name: str, package: str) -> str:
 # vector files that need them (``vector_names(READER_FEATURES[reader])``) and skips only the others.
 READER_FEATURES: dict[str, tuple[str, ...]] = {
     "c": ("anchors", "damage", "levels", "stress"),
-    "csharp": ("anchors", "damage", "stress"),
+    "csharp": ("anchors", "damage", "levels", "stress"),
     "gdscript": ("anchors", "damage", "stress"),
     "js": ("anchors", "damage", "levels", "stress"),
 }
