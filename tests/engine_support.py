@@ -53,7 +53,7 @@ def require_tool(name: str, package: str) -> str:
 READER_FEATURES: dict[str, tuple[str, ...]] = {
     "c": ("anchors", "damage", "levels", "stress"),
     "csharp": ("anchors", "damage", "levels", "stress"),
-    "gdscript": ("anchors", "damage", "stress"),
+    "gdscript": ("anchors", "damage", "levels", "stress"),
     "js": ("anchors", "damage", "levels", "stress"),
 }
 
