@@ -1,4 +1,4 @@
-"""The C reader per hit on a piece of a file with levels (docs/FORMAT.md section 14.5; issue 34: median < 1 us at level 2).
+"""The C reader per hit on a piece of a file with levels (docs/FORMAT.md 14.5; issue 34: median < 1 us at level 2).
 
 Each hit strikes a level-2 fragment (a child) of a split level-1 fragment: the state is made
 by the Python reader (fracture_cli.runtime.levelstate) hitting the parent hard at one of its
@@ -50,9 +50,10 @@ def _split_state(data, body: int, rng) -> np.ndarray | None:
 
 def _level2_lines(data, hits: int, rng) -> list[str]:
     lines: list[str] = []
-    bodies = [b for b in range(1, num_bodies(data))]
-    states = {b: _split_state(data, b, rng) for b in bodies}
-    bodies = [b for b in bodies if states[b] is not None]
+    bodies = list(range(1, num_bodies(data)))
+    found = {b: _split_state(data, b, rng) for b in bodies}
+    states = {b: state for b, state in found.items() if state is not None}
+    bodies = sorted(states)
     while bodies and len(lines) < hits:
         body = bodies[int(rng.integers(0, len(bodies)))]
         view, state = body_view(data, body), states[body]
@@ -83,7 +84,8 @@ def _level1_lines(data, hits: int, rng) -> list[str]:
 def run(quick: bool = False) -> str:
     hits = 1000 if quick else 5000
     rng = np.random.default_rng(0)
-    rows, notes = [], []
+    rows: list[str] = []
+    notes: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
         exe = _build_c_bench(tmp, notes)
         if exe is None:

@@ -58,7 +58,8 @@ def check_bodies(vectors: dict, output: str, structure: bool = True) -> list[str
         if line.startswith(("ok", "error")):
             answers.append([line, None])
         elif line.startswith(("structure", "more")) and answers:  # C, C#: "structure c .. y ..", JS: "more c .. n .."
-            tokens, key, sections = line.replace(" n ", " y ").split()[1:], None, {}
+            tokens, key = line.replace(" n ", " y ").split()[1:], "c"
+            sections: dict[str, list[int]] = {}
             for token in tokens:
                 if token in ("c", "y", "h"):
                     key = token
@@ -89,7 +90,7 @@ def parse_piece(line: str) -> dict:
     if tokens[1] == "error":
         return {"expect": "error", "reason": " ".join(tokens[2:h]), "health": health}
     sections: dict[str, list[str]] = {}
-    key = None
+    key = "b"
     for token in tokens[7:h]:
         if token in ("b", "c", "p", "y"):
             key = token
