@@ -100,7 +100,8 @@ def run(quick: bool = False) -> str:
                 c = _run_c_bench(exe, json_path, hits_file, "--pieces")
                 rows.append(f"| {name} | {data.p} | {len(data.levels['parent'])} | {num_bodies(data)} | {level} | "
                             f"{len(lines)} | {c['groups_median']} | {_cell(c)} | {float(c['cpu_mean_ns']) / 1e3:.2f} |")
-    return ("C reader per hit on a piece (`fr_hit_piece`, docs/FORMAT.md section 14.5: the piece's body on a copy "
+    return ("## Levels: the C reader per hit on a piece\n\n"
+            "C reader per hit on a piece (`fr_hit_piece`, docs/FORMAT.md section 14.5: the piece's body on a copy "
             "of its healths, the struck fragment's own body, the pieces that replace the struck one; target at "
             f"level 2: median under 1 us), {ROUNDS} rounds, the state copied outside the timed call. Level 2: a "
             "child of a split level-1 fragment; level 1: the intact asset.\n\n"

@@ -257,7 +257,8 @@ typedef struct fr_pieces {
     int32_t count; /* out */
 } fr_pieces;
 
-/* Every piece of an object (body by body, by first fragment); FR_ERR_STATE for an invalid state. */
+/* Every piece of an object (body by body, by first fragment); FR_ERR_STATE for an invalid state. Workspace as
+ * fr_hit_piece's. */
 fr_status fr_object_pieces(const fr_runtime *rt, const double *health, void *workspace, fr_pieces *out);
 
 /*
@@ -268,7 +269,9 @@ fr_status fr_object_pieces(const fr_runtime *rt, const double *health, void *wor
  * max_children / max_bonds; after the hit: broken = every broken bond, groups over all its children);
  * `child` for struck's own body when it has one (child_body >= 0). `pieces`: what struck's piece became.
  * Does not allocate; workspace: fr_piece_workspace_size(rt) bytes (16-byte aligned) or NULL for the
- * runtime's own (not thread-safe).
+ * runtime's own (not thread-safe; only a file with levels has one: pass a workspace otherwise).
+ * The caller's `body.alpha` / `body.displacement` (optional) need the largest modes / children * d of
+ * any body. Cost: two body hits plus union-finds over the struck piece's body (0.5 us at level 2).
  */
 typedef struct fr_piece_hit {
     fr_impact body, child; /* groups required in both (sized max_children) */

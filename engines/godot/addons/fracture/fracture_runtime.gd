@@ -434,7 +434,7 @@ func _check_structure(top: Dictionary, table: Dictionary, counts: Dictionary, pe
 		if r == null or not _finite(r) or r < 0.0:
 			return _fail("damage.damage_rate must be a finite number >= 0")
 		out["damage"] = [c, r]
-	if _features.empty() or (not table.has("crack_ptr") and not table.has("crack_segments")):
+	if (_features.empty() and not _view) or (not table.has("crack_ptr") and not table.has("crack_segments")):
 		return out
 	if not table.has("crack_ptr") or not table.has("crack_segments"):
 		return _fail("the crack arrays come together: crack_ptr and crack_segments")
