@@ -219,6 +219,7 @@ static void print_health(const double *health, int32_t n)
 /* A "hit" line: fr_hit_piece on the object state, then every piece (fr_object_pieces). */
 static int hit_piece(const fr_runtime *rt, char *line, double *health)
 {
+    static unsigned calls = 0;
     const fr_levels_info lv = fr_get_levels_info(rt);
     char *tokens[8];
     int n = 0, j, i;
@@ -253,7 +254,7 @@ static int hit_piece(const fr_runtime *rt, char *line, double *health)
     out.pieces.fragments = fragments;
     out.pieces.offsets = fragments + lv.all_fragments;
     status = fr_hit_piece(rt, health, (int32_t)atol(tokens[0]), point, impulse, strcmp(tokens[7], "-") == 0 ? NULL
-                          : &threshold, j % 2 ? workspace : NULL, &out);
+                          : &threshold, (calls++ % 2) ? workspace : NULL, &out); /* both scratch paths */
     if (status != FR_OK) {
         printf("piece error %s", fr_status_string(status));
     } else {
