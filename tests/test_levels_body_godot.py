@@ -1,0 +1,173 @@
+"""The Godot add-on's FractureBody on a bake with levels (headless Godot 3, real physics).
+
+The sample pillar baked with two levels (fast settings, Godot's ``-convcolonly`` collision parts) goes into a
+FractureBody (engines/godot/tests/levels_scene.gd). A first hit on the intact asset detaches a group holding a
+fragment with children; the group flies for half a second under gravity; a second hit on that fragment, where
+it flew (model space through the body's transform and back), splits it. After setup and after each hit the
+bodies must be the object's pieces as the Python reader has them (fracture_cli.runtime.levelstate, replayed with
+the model-space inputs the GDScript reader got), the meshes shown exactly the shown fragments' GLB nodes
+(level-2 nodes hidden until their parent splits), and the split fragment's children must start in the frame
+of the body they split from.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from engine_support import bits_to_float, float_to_bits
+from godot_harness import GodotProject
+from structure_support import FAST
+
+from fracture_cli.pipeline.bake import bake
+from fracture_cli.pipeline.recipe import load_recipe
+from fracture_cli.runtime.format import RuntimeData, load_runtime
+from fracture_cli.runtime.levels import body_of, body_threshold, body_view, children_range
+from fracture_cli.runtime.levelstate import hit_piece, nearest_fragment, new_object_state, shown_fragments, shown_pieces
+
+from conftest import SAMPLE_ASSETS
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENE_SCRIPT = os.path.join(REPO, "engines", "godot", "tests", "levels_scene.gd")
+LEVELS = ["levels.count=2", "levels.ratio=0.5", "collision.glb=godot"]
+FRAMES = 30  # half a second at 60 frames per second between the hits
+FRAME_TOLERANCE = 1e-4  # float32 transforms of a body about a metre from the origin
+
+
+@pytest.fixture(scope="module")
+def pillar(tmp_path_factory) -> tuple[str, RuntimeData]:
+    """The sample pillar baked with two levels: (GLB stem, runtime data)."""
+    out = tmp_path_factory.mktemp("pillar_levels")
+    bake(os.path.join(SAMPLE_ASSETS, "pillar.glb"), str(out), load_recipe("stone", FAST + LEVELS))
+    return str(out / "pillar"), load_runtime(str(out / "pillar.fracture.json"))
+
+
+def _first_hit(data: RuntimeData, rng) -> tuple[int, np.ndarray, np.ndarray, int]:
+    """A hit on the intact asset that detaches a group holding a fragment with children (that fragment)."""
+    for _ in range(2000):
+        state = new_object_state(data)
+        point = data.sites[rng.integers(0, data.num_sites)].astype(np.float64)
+        struck = nearest_fragment(data, range(data.p), point)
+        impulse = rng.normal(size=3)
+        impulse *= data.default_threshold * rng.uniform(1.0, 15.0) / np.linalg.norm(impulse)
+        hit_piece(data, state, struck, point, impulse)
+        pieces = shown_pieces(data, state)
+        largest = max(pieces, key=lambda piece: len(piece.fragments))
+        for piece in pieces:
+            refined = [g for g in piece.fragments if body_of(data, g) >= 0]
+            if piece is not largest and refined:
+                return struck, point, impulse, refined[0]
+    raise AssertionError("no hit detaches a group holding a fragment with children")
+
+
+def _second_hit(data: RuntimeData, state: np.ndarray, fragment: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """A hit on ``fragment`` at one of its body's sites that splits it by a margin (ten times its threshold)."""
+    body = body_of(data, fragment)
+    view = body_view(data, body)
+    for _ in range(500):
+        point = view.sites[rng.integers(0, view.num_sites)].astype(np.float64)
+        impulse = rng.normal(size=3)
+        impulse *= 10.0 * body_threshold(data, body) / np.linalg.norm(impulse)
+        if hit_piece(data, state.copy(), fragment, point, impulse).split:
+            return point, impulse
+    raise AssertionError(f"no hit splits fragment {fragment}")
+
+
+def _steps(stdout: str) -> tuple[list[dict], list[list[str]]]:
+    """levels_scene.gd's report: per step {body index: (class, model frame (4, 4), fragments, names, shapes,
+    shown)}, and the "hit" lines' fields."""
+    steps: list[dict] = []
+    hits: list[list[str]] = []
+    current: dict = {}
+    for line in stdout.splitlines():
+        fields = line.split()
+        if fields[:1] == ["body"]:
+            frame = np.eye(4)
+            frame[:3, :4] = np.array([float(v) for v in fields[3:15]]).reshape(4, 3).T
+            f, n, s = fields.index("f"), fields.index("n"), fields.index("s")
+            current[int(fields[1])] = (fields[2], frame, [int(g) for g in fields[f + 1: n]], fields[n + 1: s],
+                                       [int(c) for c in fields[s + 1:]])
+        elif fields[:1] == ["shown"]:
+            current["shown"] = sorted(fields[1:])
+        elif fields == ["step"]:
+            steps.append(current)
+            current = {}
+        elif fields[:1] in (["hit"], ["hit-error"]):
+            hits.append(fields)
+    return steps, hits
+
+
+def _names(data: RuntimeData, fragments) -> list[str]:
+    return [data.fragment_names[g] if g < data.p else data.child_names[g - data.p] for g in fragments]
+
+
+def _check_step(data: RuntimeData, step: dict, state: np.ndarray, label: str) -> None:
+    """The bodies are the object's pieces, each with its fragments' meshes and shapes, free ones RigidBodies; the
+    meshes shown are exactly the shown fragments'."""
+    bodies = {k: v for k, v in step.items() if k != "shown"}
+    got = sorted(tuple(fragments) for _, _, fragments, _, _ in bodies.values())
+    assert got == sorted(piece.fragments for piece in shown_pieces(data, state)), label
+    for index, (kind, _, fragments, names, shapes) in bodies.items():
+        assert kind == ("StaticBody" if index == 0 else "RigidBody"), (label, index)  # no anchors: the rest static
+        assert sorted(names) == sorted(_names(data, fragments)), label
+        assert all(count >= 1 for count in shapes), (label, fragments, shapes)
+    assert step["shown"] == sorted(_names(data, np.flatnonzero(shown_fragments(data, state)))), label
+
+
+@pytest.mark.slow
+def test_fracture_body_breaks_a_flying_piece_into_its_children(pillar, tmp_path):
+    stem, data = pillar
+    rng = np.random.default_rng(5)
+    struck, point, impulse, fragment = _first_hit(data, rng)
+    state = new_object_state(data)
+    hit_piece(data, state, struck, point, impulse)
+    second_point, second_impulse = _second_hit(data, state, fragment, rng)
+
+    project = GodotProject(tmp_path / "project")
+    scene = project.add_file(stem + ".glb")
+    runtime = project.add_file(stem + ".fracture.json")
+    project.add_file(stem + ".fracture.bin")
+    project.import_resources()
+    lines = [" ".join([float_to_bits(float(c)) for c in (*p, *n)] + [str(g)])
+             for p, n, g in ((point, impulse, struck), (second_point, second_impulse, fragment))]
+    (tmp_path / "hits.txt").write_text("\n".join(lines) + "\n")
+    with open(SCENE_SCRIPT, encoding="utf-8") as fh:
+        run = project.run_script(fh.read(), scene, runtime, str(tmp_path / "hits.txt"), str(FRAMES),
+                                 name="levels_scene.gd", flags=("--fixed-fps", "60"))
+    assert not run.lines("setup-error"), run.lines("setup-error")
+    steps, hits = _steps(run.stdout)
+    assert len(steps) == 5 and [h[0] for h in hits] == ["hit", "hit"], run.stdout[-3000:]
+    setup, before_first, after_first, before_second, after_second = steps
+
+    # Setup: the intact asset, one static body of the level-1 fragments; no level-2 node shown.
+    reference = new_object_state(data)
+    for step in (setup, before_first):
+        _check_step(data, step, reference, "setup")
+        assert [kind for kind, *_ in (v for k, v in step.items() if k != "shown")] == ["StaticBody"]
+    # Each hit: the bodies are the pieces of the Python reader replayed with the inputs Godot's reader got.
+    for k, (fields, after) in enumerate(zip(hits, (after_first, after_second))):
+        used = [bits_to_float(b) for b in fields[fields.index("used") + 1:]]
+        want = hit_piece(data, reference, int(fields[2]), used[:3], used[3:])
+        assert (fields[1] == "1") == want.split, f"hit {k}"
+        _check_step(data, after, reference, f"after hit {k}")
+    assert np.allclose(used, [*second_point, *second_impulse], atol=1e-5)  # model space there and back
+
+    # The group holding `fragment` flew; the second hit split `fragment` where it was: its children's bodies
+    # start in the model frame of the body it left, and its own node is hidden.
+    flying = next(v for k, v in before_second.items() if k != "shown" and fragment in v[2])
+    start = next(v for k, v in after_first.items() if k != "shown" and fragment in v[2])
+    print(f"godot levels: bodies {[len(s) - 1 for s in steps]}, fragment {fragment} flew "
+          f"{np.linalg.norm(flying[1][:3, 3] - start[1][:3, 3]):.3f} m with {flying[2]}, shown after: "
+          f"{after_second['shown']}")
+    assert flying[0] == "RigidBody"
+    assert np.linalg.norm(flying[1][:3, 3] - start[1][:3, 3]) > 0.5  # half a second of free fall: 1.2 m
+    assert hits[1][1] == "1"
+    children = list(children_range(data, body_of(data, fragment)))
+    assert _names(data, [fragment])[0] not in after_second["shown"]
+    assert set(_names(data, children)) <= set(after_second["shown"])
+    child_bodies = [v for k, v in after_second.items() if k != "shown" and set(v[2]) & set(children)]
+    assert len(child_bodies) >= 2
+    for kind, frame, fragments, _, _ in child_bodies:
+        assert kind == "RigidBody" and set(fragments) <= set(children)
+        assert np.allclose(frame, flying[1], atol=FRAME_TOLERANCE), (frame, flying[1])
