@@ -45,7 +45,8 @@ var runtime = null  # FractureRuntime
 var error_message := ""
 # The damage state of a file with "anchors" or "damage" (an Array of bond healths, see FractureRuntime.hit);
 # null for other files, whose hits are judged one by one. Save it with runtime.state_to_bytes(state) and
-# restore it with runtime.state_from_bytes() before the first hit (bodies split at the next hit).
+# restore it with runtime.state_from_bytes() before the first hit (bodies split at the next hit). With levels it
+# is the object state (FractureRuntime.new_object_state()); restoring one is not supported.
 var state = null
 # The last hit's inputs and answer: {"point", "impulse"} (the asset's model space, what the reader got), with
 # levels also "struck" and "result" (FractureRuntime.hit_piece()'s answer).
