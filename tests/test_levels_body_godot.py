@@ -44,8 +44,9 @@ def pillar(tmp_path_factory) -> tuple[str, RuntimeData]:
     return str(out / "pillar"), load_runtime(str(out / "pillar.fracture.json"))
 
 
-def _first_hit(data: RuntimeData, rng) -> tuple[int, np.ndarray, np.ndarray, int]:
-    """A hit on the intact asset that detaches a group of two or more fragments, one with children (that one)."""
+def _first_hit(data: RuntimeData, rng, alone: bool) -> tuple[int, np.ndarray, np.ndarray, int]:
+    """A hit on the intact asset that detaches a fragment with children (that one): ``alone``, or in a group of
+    two or more fragments."""
     for _ in range(2000):
         state = new_object_state(data)
         point = data.sites[rng.integers(0, data.num_sites)].astype(np.float64)
@@ -57,9 +58,9 @@ def _first_hit(data: RuntimeData, rng) -> tuple[int, np.ndarray, np.ndarray, int
         largest = max(pieces, key=lambda piece: len(piece.fragments))
         for piece in pieces:
             refined = [g for g in piece.fragments if body_of(data, g) >= 0]
-            if piece is not largest and refined and len(piece.fragments) >= 2:
+            if piece is not largest and refined and (len(piece.fragments) == 1) == alone:
                 return struck, point, impulse, refined[0]
-    raise AssertionError("no hit detaches a group of two or more holding a fragment with children")
+    raise AssertionError(f"no hit detaches a fragment with children ({'alone' if alone else 'in a group'})")
 
 
 def _second_hit(data: RuntimeData, state: np.ndarray, fragment: int, rng) -> tuple[np.ndarray, np.ndarray]:
@@ -145,10 +146,12 @@ def _check_step(data: RuntimeData, step: dict, state: np.ndarray, label: str) ->
 
 
 @pytest.mark.slow
-def test_fracture_body_breaks_a_flying_piece_into_its_children(pillar, tmp_path):
+@pytest.mark.parametrize("alone", [False, True], ids=["in-a-group", "alone"])
+def test_fracture_body_breaks_a_flying_piece_into_its_children(pillar, tmp_path, alone):
+    """``alone``: the flying piece is the one fragment, so its body keeps a piece of the children."""
     stem, data = pillar
     rng = np.random.default_rng(5)
-    struck, point, impulse, fragment = _first_hit(data, rng)
+    struck, point, impulse, fragment = _first_hit(data, rng, alone)
     state = new_object_state(data)
     hit_piece(data, state, struck, point, impulse)
     second_point, second_impulse = _second_hit(data, state, fragment, rng)
@@ -194,7 +197,7 @@ def test_fracture_body_breaks_a_flying_piece_into_its_children(pillar, tmp_path)
     print(f"godot levels: {len(hits)} hits, bodies {[len(s) - 1 for s in steps]}, fragment {fragment} flew "
           f"{np.linalg.norm(flying[1][:3, 3] - start[1][:3, 3]):.3f} m with {flying[2]}, shown after: "
           f"{after_second['shown']}")
-    assert flying[0] == "RigidBody" and len(flying[2]) >= 2
+    assert flying[0] == "RigidBody" and (len(flying[2]) == 1) == alone
     assert np.abs(flying[1] - start[1]).max() > 0.02  # it moved (it may come to rest on the pillar's base)
     assert answers[1][1] == "1"
     children = list(children_range(data, body_of(data, fragment)))
