@@ -17,7 +17,7 @@ import os
 
 import numpy as np
 import pytest
-from engine_support import bits_to_float, float_to_bits
+from engine_support import bits_to_float, float_to_bits, impact_inputs, load_vectors, runtime_paths
 from godot_harness import GodotProject
 from structure_support import FAST
 
@@ -133,13 +133,14 @@ def _names(data: RuntimeData, fragments) -> list[str]:
 
 
 def _check_step(data: RuntimeData, step: dict, state: np.ndarray, label: str) -> None:
-    """The bodies are the object's pieces, each with its fragments' meshes and shapes, free ones RigidBodies; the
-    meshes shown are exactly the shown fragments'."""
+    """The bodies are the object's pieces, each with its fragments' meshes and shapes, anchored ones and the intact
+    body's rest StaticBodies, the others RigidBodies; the meshes shown are exactly the shown fragments'."""
     bodies = {k: v for k, v in step.items() if k != "shown"}
-    got = sorted(tuple(fragments) for _, _, fragments, _, _ in bodies.values())
-    assert got == sorted(piece.fragments for piece in shown_pieces(data, state)), label
+    pieces = {piece.fragments: piece.anchored for piece in shown_pieces(data, state)}
+    assert sorted(tuple(fragments) for _, _, fragments, _, _ in bodies.values()) == sorted(pieces), label
     for index, (kind, _, fragments, names, shapes) in bodies.items():
-        assert kind == ("StaticBody" if index == 0 else "RigidBody"), (label, index)  # no anchors: the rest static
+        static = index == 0 or pieces[tuple(fragments)]
+        assert kind == ("StaticBody" if static else "RigidBody"), (label, index)
         assert sorted(names) == sorted(_names(data, fragments)), label
         assert all(count >= 1 for count in shapes), (label, fragments, shapes)
     assert step["shown"] == sorted(_names(data, np.flatnonzero(shown_fragments(data, state)))), label
@@ -208,3 +209,65 @@ def test_fracture_body_breaks_a_flying_piece_into_its_children(pillar, tmp_path,
     for kind, frame, fragments, _, _ in child_bodies:
         assert kind == "RigidBody" and set(fragments) <= set(children)
         assert np.allclose(frame, flying[1], atol=FRAME_TOLERANCE), (frame, flying[1])
+
+
+def _boxes(data: RuntimeData, path) -> str:
+    """A fragments GLB of unit boxes, one node per fragment of every level, each child under its parent's node
+    (docs/FORMAT.md section 14.6), none overlapping: level 1 along x, children along y, grandchildren along z."""
+    trimesh = pytest.importorskip("trimesh")
+    scene = trimesh.Scene()
+    parent = np.asarray(data.levels["parent"])
+    for g in range(len(parent)):
+        at = np.eye(4)
+        if parent[g] < 0:
+            at[0, 3] = 3.0 * g
+        else:
+            siblings = np.flatnonzero(parent == parent[g])
+            at[1 + int(parent[parent[g]] >= 0), 3] = 1.5 * (1 + int(np.searchsorted(siblings, g)))
+        scene.add_geometry(trimesh.creation.box(extents=(1, 1, 1)), node_name=fragment_name(data, g),
+                           geom_name=f"mesh_{g}", transform=at,
+                           parent_node_name=None if parent[g] < 0 else fragment_name(data, int(parent[g])))
+    scene.export(path)
+    return str(path)
+
+
+@pytest.mark.parametrize("name", ["levels_dyadic", "levels_stress", "levels_random"])
+def test_fracture_body_runs_a_level_sequence(name, tmp_path):
+    """A conformance file's sequence of hits from a new object state with the most splits (refused fragments too;
+    hits with invalid inputs are the reader's business) through FractureBody on boxes: after every hit the
+    bodies are the Python reader's pieces (anchored ones static) and the meshes shown the shown fragments'."""
+    header, binary = runtime_paths(name)
+    data = load_runtime(header)
+    fresh = [seq for seq in load_vectors(name)["level_sequences"] if seq["start"] is None]
+    sequence = max(fresh, key=lambda seq: sum(bool(h.get("split")) for h in seq["hits"]))  # the first, of most splits
+    hits = [h for h in sequence["hits"] if h["expect"] == "ok" or h["error"] == "struck"]
+    project = GodotProject(tmp_path / "project")
+    scene = project.add_file(_boxes(data, tmp_path / f"{name}.glb"))
+    runtime = project.add_file(header)
+    project.add_file(binary)
+    project.import_resources()
+    lines = []
+    for h in hits:
+        point, impulse, threshold = impact_inputs(h)
+        extra = [] if threshold is None else [float_to_bits(threshold)]
+        lines.append(" ".join([float_to_bits(c) for c in (*point, *impulse)] + [str(h["struck"])] + extra))
+    (tmp_path / "hits.txt").write_text("\n".join(lines) + "\n")
+    with open(SCENE_SCRIPT, encoding="utf-8") as fh:
+        run = project.run_script(fh.read(), scene, runtime, str(tmp_path / "hits.txt"), "0",
+                                 name="levels_scene.gd", flags=("--fixed-fps", "60"))
+    assert not run.lines("setup-error"), run.lines("setup-error")
+    steps, answers = _steps(run.stdout)
+    assert len(steps) == 1 + 2 * len(hits) and len(answers) == len(hits), run.stdout[-3000:]
+    reference = new_object_state(data)
+    _check_step(data, steps[0], reference, "setup")
+    splits = 0
+    for k, (h, fields) in enumerate(zip(hits, answers)):
+        _check_step(data, steps[1 + 2 * k], reference, f"before hit {k}")
+        assert (fields[0] == "hit") == (h["expect"] == "ok"), (k, fields)
+        if fields[0] == "hit":
+            used = [bits_to_float(b) for b in fields[fields.index("used") + 1:]]
+            want = hit_piece(data, reference, h["struck"], used[:3], used[3:], impact_inputs(h)[2])
+            assert (fields[1] == "1") == want.split, f"hit {k}"
+            splits += want.split
+        _check_step(data, steps[2 + 2 * k], reference, f"after hit {k}")
+    assert splits >= 1

@@ -3,7 +3,7 @@
 #   godot3-server --fixed-fps 60 --path PROJECT --script res://levels_scene.gd -- SCENE.glb RUNTIME.json HITS FRAMES
 #
 # HITS has one hit per line: point x y z and impulse x y z in the asset's model space (16-hex-digit doubles),
-# then the fragment struck (global index). The hit goes to the body showing that fragment, wherever it is: the
+# then the fragment struck (global index), optionally the threshold (hex; default each level's). The hit goes to the body showing that fragment, wherever it is: the
 # script moves the point and impulse to world space through the body's model frame (what a physics engine
 # reports), and FractureBody.hit() moves them back. Between two hits it runs FRAMES physics frames (1/60 s each
 # with --fixed-fps 60). After setup, before each hit and after each hit it prints every body:
@@ -71,7 +71,8 @@ func _setup() -> bool:
 		var v := []
 		for i in range(6):
 			v.append(HexBits.from_bits(t[i]))
-		_hits.append([Vector3(v[0], v[1], v[2]), Vector3(v[3], v[4], v[5]), int(t[6])])
+		var threshold: float = HexBits.from_bits(t[7]) if t.size() > 7 else -1.0
+		_hits.append([Vector3(v[0], v[1], v[2]), Vector3(v[3], v[4], v[5]), int(t[6]), threshold])
 	_report()
 	return false
 
@@ -87,7 +88,7 @@ func _hit(h: Array) -> void:
 		return
 	var frame: Transform = _body.model_frame_of(target)
 	_body.error_message = ""
-	_body.hit(frame.xform(h[0]), frame.basis.xform(h[1]), target, -1.0, struck)
+	_body.hit(frame.xform(h[0]), frame.basis.xform(h[1]), target, h[3], struck)
 	if _body.error_message != "":
 		print("hit-error " + _body.error_message)
 		return
