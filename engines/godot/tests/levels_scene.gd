@@ -3,14 +3,17 @@
 #   godot3-server --fixed-fps 60 --path PROJECT --script res://levels_scene.gd -- SCENE.glb RUNTIME.json HITS FRAMES
 #
 # HITS has one hit per line: point x y z and impulse x y z in the asset's model space (16-hex-digit doubles),
-# then the fragment struck (global index), optionally the threshold (hex; default each level's). The hit goes to the body showing that fragment, wherever it is: the
-# script moves the point and impulse to world space through the body's model frame (what a physics engine
-# reports), and FractureBody.hit() moves them back. Between two hits it runs FRAMES physics frames (1/60 s each
-# with --fixed-fps 60). After setup, before each hit and after each hit it prints every body:
+# then the fragment struck (global index), optionally the threshold (hex; default each level's). The hit goes
+# to the body showing that fragment, wherever it is ("~<fragment>": that body, but the add-on picks the
+# fragment struck, FractureBody.hit()'s default): the script moves the point and impulse to world space through
+# the body's model frame (what a physics engine reports), and FractureBody.hit() moves them back. Between two
+# hits it runs FRAMES physics frames (1/60 s each with --fixed-fps 60). After setup, before each hit and after
+# each hit it prints every body:
 #   body <index> <class> <model frame: 12 numbers, basis columns x, y, z, then origin> f <fragments...>
 #     n <names of its fragment meshes...> s <collision shapes per fragment...>
-# then "shown <every MeshInstance under the FractureBody that is visible, by name, sorted>" and "step"; each hit prints
-# "hit <split 0/1> <struck> used <model-space point and impulse the reader got, hex bits>" (or "hit-error ...").
+# then "shown <every MeshInstance under the FractureBody that is visible, by name, sorted>" and "step"; each
+# hit prints "hit <split 0/1> <fragment struck> used <model-space point and impulse the reader got, hex bits>"
+# (or "hit-error ...").
 # "done" at the end.
 #
 # MIT licence, Copyright (c) fracture developers.
@@ -72,7 +75,9 @@ func _setup() -> bool:
 		for i in range(6):
 			v.append(HexBits.from_bits(t[i]))
 		var threshold: float = HexBits.from_bits(t[7]) if t.size() > 7 else -1.0
-		_hits.append([Vector3(v[0], v[1], v[2]), Vector3(v[3], v[4], v[5]), int(t[6]), threshold])
+		var pick: bool = t[6].begins_with("~")
+		_hits.append([Vector3(v[0], v[1], v[2]), Vector3(v[3], v[4], v[5]), int(t[6].trim_prefix("~")), threshold,
+				pick])
 	_report()
 	return false
 
@@ -88,14 +93,15 @@ func _hit(h: Array) -> void:
 		return
 	var frame: Transform = _body.model_frame_of(target)
 	_body.error_message = ""
-	_body.hit(frame.xform(h[0]), frame.basis.xform(h[1]), target, h[3], struck)
+	_body.hit(frame.xform(h[0]), frame.basis.xform(h[1]), target, h[3], -1 if h[4] else struck)
 	if _body.error_message != "":
 		print("hit-error " + _body.error_message)
 		return
 	var used := PoolStringArray()
 	for v in [_body.last_hit["point"], _body.last_hit["impulse"]]:
 		used.append_array(PoolStringArray([HexBits.to_bits(v.x), HexBits.to_bits(v.y), HexBits.to_bits(v.z)]))
-	print("hit %d %d used %s" % [1 if _body.last_hit["result"]["split"] else 0, struck, used.join(" ")])
+	print("hit %d %d used %s" % [1 if _body.last_hit["result"]["split"] else 0, _body.last_hit["struck"],
+			used.join(" ")])
 
 
 func _report() -> void:
