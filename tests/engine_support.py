@@ -51,10 +51,10 @@ def require_tool(name: str, package: str) -> str:
 # The format-2 features (docs/FORMAT.md section 11) each engine reader implements: its harness runs the
 # vector files that need them (``vector_names(READER_FEATURES[reader])``) and skips only the others.
 READER_FEATURES: dict[str, tuple[str, ...]] = {
-    "c": ("anchors", "damage", "stress"),
-    "csharp": ("anchors", "damage", "stress"),
-    "gdscript": ("anchors", "damage", "stress"),
-    "js": ("anchors", "damage", "stress"),
+    "c": ("anchors", "damage", "levels", "stress"),
+    "csharp": ("anchors", "damage", "levels", "stress"),
+    "gdscript": ("anchors", "damage", "levels", "stress"),
+    "js": ("anchors", "damage", "levels", "stress"),
 }
 
 

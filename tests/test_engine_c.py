@@ -29,13 +29,17 @@ from engine_support import (
     runtime_paths,
     vector_names,
 )
+from levels_support import body_input as levels_body_input
+from levels_support import check_bodies, check_children, levels_files
+from levels_support import check_sequences as check_level_sequences
+from levels_support import sequence_input as levels_sequence_input
 
 C_DIR = os.path.join(REPO, "engines", "c")
 SOURCES = [os.path.join(C_DIR, "fracture_runtime.c"), os.path.join(C_DIR, "tools", "fracture_check.c")]
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 SANITIZE = ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g"]
-# The format-2 features the C reader implements (engine_support.READER_FEATURES["c"] still lists "stress" only).
-FEATURES = ("anchors", "damage", "stress")
+# The format-2 features the C reader implements (as engine_support.READER_FEATURES["c"]).
+FEATURES = ("anchors", "damage", "levels", "stress")
 HEALTH_TOLERANCE = 1e-9  # docs/FORMAT.md section 12.5: healths within 1e-9 absolute, everything else equal
 SANITIZER_ENV = {"ASAN_OPTIONS": "detect_leaks=1:abort_on_error=0", "UBSAN_OPTIONS": "print_stacktrace=1"}
 
@@ -138,7 +142,7 @@ def check_description(header: str, output: str) -> None:
 
     data = load_runtime(header)
     line = next(line for line in output.splitlines() if line.startswith("describe "))
-    bits = {"stress": 1, "anchors": 2, "damage": 4}
+    bits = {"stress": 1, "anchors": 2, "damage": 4, "levels": 8}
     counts = [len(crack_segments_of(data.cracks, m)) for m in range(data.num_edges)]
     segments = np.asarray(data.cracks.get("crack_segments", np.zeros((0, 2, 3))), dtype=np.float64).ravel()
     c, r = data.damage.get("crack_level", 1.0), data.damage.get("damage_rate", 0.0)
@@ -391,6 +395,30 @@ def test_c_reader_under_sanitizers(sanitized_driver):
         result = run_driver(sanitized_driver, *runtime_paths(name), "", "--sweep")
         _assert_clean(result)
         assert result.stdout.startswith("sweep loads=")
+
+
+@pytest.mark.parametrize("mode", sorted(MODES))
+@pytest.mark.parametrize("name", levels_files(FEATURES))
+def test_c_reader_runs_the_levels_vectors(driver, name, mode):
+    """Section 14: every body's stateless impacts, the object sequences (fr_hit_piece, fr_object_pieces), names."""
+    vectors = load_vectors(name)
+    result = run_driver(driver, *runtime_paths(name), levels_body_input(vectors) + levels_sequence_input(vectors),
+                        "--structure", "--children", *MODES[mode])
+    _assert_clean(result)
+    assert check_bodies(vectors, result.stdout) == []
+    assert check_level_sequences(vectors, result.stdout) == []
+    assert check_children(runtime_paths(name)[0], result.stdout) == []
+
+
+def test_c_reader_levels_under_sanitizers(sanitized_driver):
+    for name in levels_files(FEATURES):
+        vectors = load_vectors(name)
+        result = run_driver(sanitized_driver, *runtime_paths(name),
+                            levels_body_input(vectors) + levels_sequence_input(vectors), "--structure")
+        _assert_clean(result)
+        assert check_level_sequences(vectors, result.stdout) == []
+    result = run_driver(sanitized_driver, *runtime_paths("levels_dyadic"), "", "--sweep")
+    _assert_clean(result)
 
 
 def test_c_header_compiles_as_cxx(tmp_path):

@@ -19,6 +19,10 @@ from engine_support import (
     runtime_paths,
     vector_names,
 )
+from levels_support import body_input as levels_body_input
+from levels_support import check_bodies, check_children, levels_files
+from levels_support import check_sequences as check_level_sequences
+from levels_support import sequence_input as levels_sequence_input
 
 # Section 12's driver protocol (--structure, start lines) is the C driver's: its test has the helpers.
 from test_engine_c import (
@@ -36,8 +40,8 @@ from test_engine_c import (
 )
 
 CS_DIR = os.path.join(REPO, "engines", "csharp")
-# The format-2 features the C# reader implements (engine_support.READER_FEATURES["csharp"] still lists "stress" only).
-FEATURES = ("anchors", "damage", "stress")
+# The format-2 features the C# reader implements (as engine_support.READER_FEATURES["csharp"]).
+FEATURES = ("anchors", "damage", "levels", "stress")
 SOURCES = [os.path.join(CS_DIR, "FractureRuntime.cs"), os.path.join(CS_DIR, "tools", "FractureCheck.cs")]
 
 
@@ -135,3 +139,16 @@ def test_csharp_reader_matches_the_reference_on_many_hits(driver, name):
 @pytest.mark.parametrize("case", corrupt_cases(FEATURES), ids=lambda c: c["name"])
 def test_csharp_reader_on_damaged_files(driver, case):
     check_damaged_file(case, lambda *args: run_driver(driver, *args))
+
+
+@pytest.mark.parametrize("mode", sorted(MODES))
+@pytest.mark.parametrize("name", levels_files(FEATURES))
+def test_csharp_reader_runs_the_levels_vectors(driver, name, mode):
+    """Section 14: every body's stateless impacts, the object sequences (HitPiece, ObjectPieces), child names."""
+    vectors = load_vectors(name)
+    result = run_driver(driver, *runtime_paths(name), levels_body_input(vectors) + levels_sequence_input(vectors),
+                        "--structure", "--children", *MODES[mode])
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert check_bodies(vectors, result.stdout) == []
+    assert check_level_sequences(vectors, result.stdout) == []
+    assert check_children(runtime_paths(name)[0], result.stdout) == []

@@ -27,6 +27,10 @@ from engine_support import (
     vector_names,
 )
 from godot_harness import GodotProject
+from levels_support import body_input as levels_body_input
+from levels_support import check_bodies, check_children, levels_files
+from levels_support import check_sequences as check_level_sequences
+from levels_support import sequence_input as levels_sequence_input
 from test_view_runtime_js import VARIANTS, check_structure_answers, structure_input, variant_vectors
 
 from fracture_cli.runtime.damage import hit, new_state, state_to_bytes
@@ -48,6 +52,11 @@ def conformance_output(tmp_path_factory) -> dict[str, list[str]]:
         impacts = root / f"{name}.impacts"
         impacts.write_text(structure_input(load_vectors(name)))
         jobs.append((name, *runtime_paths(name), str(impacts), ""))
+    for name in levels_files(READER_FEATURES["gdscript"]):
+        vectors = load_vectors(name)
+        impacts = root / f"{name}.levels"
+        impacts.write_text(levels_body_input(vectors) + levels_sequence_input(vectors))
+        jobs.append((f"levels-{name}", *runtime_paths(name), str(impacts), "--children"))
     for name, drop in VARIANTS:
         header, binary, vectors = variant_vectors(name, drop, root)
         impacts = root / f"{name}_no_{drop}.impacts"
@@ -87,6 +96,16 @@ def test_gdscript_reader_passes_the_vectors(conformance_output, name):
     assert check_structure_answers(vectors, "\n".join(conformance_output[name])) == []
 
 
+@pytest.mark.parametrize("name", levels_files(READER_FEATURES["gdscript"]))
+def test_gdscript_reader_runs_the_levels_vectors(conformance_output, name):
+    """Section 14: every body's stateless impacts, the object sequences (hit_piece, object_pieces), child names."""
+    vectors = load_vectors(name)
+    output = "\n".join(conformance_output[f"levels-{name}"])
+    assert check_bodies(vectors, output) == []
+    assert check_level_sequences(vectors, output) == []
+    assert check_children(runtime_paths(name)[0], output) == []
+
+
 @pytest.mark.parametrize(("name", "drop"), VARIANTS)
 def test_gdscript_reader_on_files_with_one_structure_feature(conformance_output, tmp_path, name, drop):
     """Anchors without damage (stateless hits crack nothing; a state only remembers breaks), damage without anchors."""
@@ -108,7 +127,7 @@ def test_gdscript_reader_on_damaged_files(conformance_output, case):
         assert lines and lines[0].startswith("load-error "), lines
         if case.get("only_crc"):
             assert not conformance_output[case["name"] + "+skip-crc"], "loads with the CRC check off"
-        if case["name"] == "feature_unknown":
+        if case["name"] == "feature_unknown" and "levels" not in READER_FEATURES["gdscript"]:
             assert "'levels'" in lines[0]
     else:
         assert lines == [], lines

@@ -26,6 +26,7 @@ from engine_support import (
     runtime_paths,
     vector_names,
 )
+from levels_support import body_input, check_bodies, check_children, check_sequences, levels_files, sequence_input
 from test_view_runtime_js import VARIANTS, check_structure_answers, structure_input, variant_vectors
 
 DRIVER = JS_DRIVER
@@ -59,3 +60,17 @@ def test_js_jump_table_on_files_with_one_structure_feature(tmp_path, name, drop)
 def test_js_jump_table_matches_the_reference_on_many_hits(name):
     impacts = random_impacts(name, 400)
     assert check_answers({"runtime": name, "impacts": impacts}, _answers(name, protocol_input(impacts))) == []
+
+
+@pytest.mark.parametrize("flags", [(), ("--jump-table",)], ids=["full", "table"])
+@pytest.mark.parametrize("name", levels_files(READER_FEATURES["js"]))
+def test_js_reader_runs_the_levels_vectors(name, flags):
+    """Section 14: every body's stateless impacts, the object sequences (hitPiece, objectPieces), child names."""
+    vectors = load_vectors(name)
+    result = subprocess.run([NODE, DRIVER, "--children", *flags, *runtime_paths(name)],
+                            input=body_input(vectors) + sequence_input(vectors), capture_output=True, text=True,
+                            timeout=300, check=False)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert check_bodies(vectors, result.stdout) == []
+    assert check_sequences(vectors, result.stdout) == []
+    assert check_children(runtime_paths(name)[0], result.stdout) == []

@@ -62,7 +62,7 @@ def _cases(header: dict, binary: bytes) -> list[tuple[str, dict, bytes, str]]:
     h = header
     return [
         ("ok", h, binary, ""),
-        ("feature_unknown", _edit_header(h, features=["levels", "stress"]), binary, "'levels'"),
+        ("feature_unknown", _edit_header(h, features=["stress", "teleport"]), binary, "'teleport'"),  # no reader has it
         ("features_empty", _edit_header(h, features=[]), binary, "no features"),
         ("features_missing", _edit_header(h, features=None), binary, "no features"),
         ("features_not_list", _edit_header(h, features="stress"), binary, "features"),

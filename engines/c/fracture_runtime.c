@@ -72,6 +72,7 @@ const char *fr_status_string(fr_status status)
     case FR_ERR_MEMORY: return "out of memory";
     case FR_ERR_INPUT: return "invalid impact (non-finite point or impulse, NaN or negative threshold)";
     case FR_ERR_STATE: return "invalid damage state (not e healths in [0, 1])";
+    case FR_ERR_FRAGMENT: return "the struck fragment is not shown (split, or inside an unbroken parent)";
     }
     return "unknown status";
 }
@@ -404,27 +405,41 @@ static int key_is(const char *key, size_t length, const char *name)
  */
 enum {
     A_SITES, A_B, A_W, A_EDGES, A_AREAS, A_PTR, A_BONDS, A_GAIN, A_STRENGTH, A_ANCHORED, A_CRACK_PTR, A_CRACK_SEGMENTS,
-    A_COUNT
+    /* Section 14 (feature "levels"): every body's data, concatenated; then its stress and crack arrays. */
+    A_PARENT, A_BODY_FRAGMENT, A_BODY_CHILD_PTR, A_BODY_SITE_PTR, A_BODY_SITES, A_BODY_B, A_BODY_W, A_BODY_EDGE_PTR,
+    A_BODY_EDGES, A_BODY_AREAS, A_BODY_PTR, A_BODY_BONDS, A_BODY_GAIN, A_BODY_STRENGTH, A_BODY_CRACK_PTR,
+    A_BODY_CRACK_SEGMENTS, A_COUNT
 };
 #define A_REQUIRED 5
 enum { DT_NONE, DT_F32, DT_I32, DT_OTHER };
 static const char *const ARRAY_NAMES[A_COUNT] = {"sites", "B", "W", "edges", "edge_areas", "site_bonds_ptr",
                                                  "site_bonds", "site_bond_gain", "bond_strength", "anchored",
-                                                 "crack_ptr", "crack_segments"};
-static const int ARRAY_RANK[A_COUNT] = {2, 3, 3, 2, 1, 1, 1, 2, 1, 1, 1, 3};
+                                                 "crack_ptr", "crack_segments", "parent", "body_fragment",
+                                                 "body_child_ptr", "body_site_ptr", "body_sites", "body_B", "body_W",
+                                                 "body_edge_ptr", "body_edges", "body_edge_areas",
+                                                 "body_site_bonds_ptr", "body_site_bonds", "body_site_bond_gain",
+                                                 "body_bond_strength", "body_crack_ptr", "body_crack_segments"};
+static const int ARRAY_RANK[A_COUNT] = {2, 3, 3, 2, 1, 1, 1, 2, 1, 1, 1, 3, 1, 1, 1, 1, 2, 3, 3, 1, 2, 1, 1, 1, 2, 1, 1, 3};
 static const int ARRAY_DTYPE[A_COUNT] = {DT_F32, DT_F32, DT_F32, DT_I32, DT_F32, DT_I32, DT_I32, DT_F32, DT_F32,
-                                         DT_I32, DT_I32, DT_F32};
-/* counts.site_bonds (index 4) only with the stress criterion, counts.crack_segments (5) with the crack arrays */
-#define COUNT_KEYS 6
+                                         DT_I32, DT_I32, DT_F32, DT_I32, DT_I32, DT_I32, DT_I32, DT_F32, DT_F32,
+                                         DT_F32, DT_I32, DT_I32, DT_F32, DT_I32, DT_I32, DT_F32, DT_F32, DT_I32,
+                                         DT_F32};
+/* counts.site_bonds (index 4) only with the stress criterion, counts.crack_segments (5) with the crack arrays;
+ * 6.. with feature "levels" (section 14.1) */
+#define COUNT_KEYS 13
+enum { C_BODIES = 6, C_ALL_FRAGMENTS, C_BODY_SITES, C_BODY_MODES, C_BODY_EDGES, C_BODY_SITE_BONDS,
+       C_BODY_CRACK_SEGMENTS };
 static const char *const COUNT_NAMES[COUNT_KEYS] = {"sites", "modes", "fragments", "edges", "site_bonds",
-                                                    "crack_segments"};
+                                                    "crack_segments", "bodies", "all_fragments", "body_sites",
+                                                    "body_modes", "body_edges", "body_site_bonds",
+                                                    "body_crack_segments"};
 #define NAME_MAX_SHOWN 64 /* bytes of an unknown feature or criterion name kept for the message */
 enum { CRIT_MODES, CRIT_STRESS, CRIT_OTHER };
 
 enum {
     K_FORMAT = 1, K_VERSION = 2, K_DIM = 4, K_COUNTS = 8, K_NAMES = 16, K_TRANSFORM = 32, K_THRESHOLD = 64,
     K_RADIUS = 128, K_BUFFER = 256, K_ARRAYS = 512, K_URI = 1024, K_LENGTH = 2048, K_CRC = 4096,
-    K_FEATURES = 8192, K_CRITERION = 16384, K_DAMAGE = 32768
+    K_FEATURES = 8192, K_CRITERION = 16384, K_DAMAGE = 32768, K_CHILD_NAMES = 65536, K_LEVELS = 131072
 };
 
 typedef struct array_entry {
@@ -456,6 +471,11 @@ typedef struct header {
     int damage_bad;       /* `damage` is not an object */
     unsigned damage_keys; /* 1: crack_level is a number, 2: damage_rate is a number */
     double crack_level, damage_rate;
+    /* Section 14: feature "levels". */
+    int has_levels, has_body_cracks, is_view; /* is_view: a body's view made by this reader (version 2, no features) */
+    const unsigned char *child_names_at, *levels_at; /* the child_names array and the levels object, re-read later */
+    int64_t child_name_count;
+    int child_name_bad;
 } header;
 
 /* A name read by j_string into a buffer of NAME_MAX_SHOWN bytes: NUL-terminated, truncated if longer. */
@@ -495,6 +515,8 @@ static int parse_features(jp *j, header *h)
             h->has_anchors = 1;
         } else if (!nul && key_is(name, n, "damage")) {
             h->has_damage = 1;
+        } else if (!nul && key_is(name, n, "levels")) {
+            h->has_levels = 1;
         } else if (!h->feature_unknown) {
             h->feature_unknown = 1;
             memcpy(h->unknown_name, name, sizeof name);
@@ -716,10 +738,27 @@ static int parse_top_key(jp *j, header *h, const char *key, size_t n)
     if (key_is(key, n, "features")) {
         /* duplicate keys: the last wins */
         h->features_bad = h->feature_count = h->has_stress = h->has_anchors = h->has_damage = h->feature_unknown = 0;
+        h->has_levels = 0;
         return parse_features(j, h);
     }
     if (key_is(key, n, "damage"))
         return parse_damage(j, h);
+    if (key_is(key, n, "child_names")) { /* counted here, copied into each body's view (section 14.3) */
+        header names;
+        memset(&names, 0, sizeof names);
+        h->seen |= K_CHILD_NAMES;
+        h->child_names_at = j->p;
+        if (!parse_names(j, &names, NULL, NULL))
+            return 0;
+        h->child_name_count = names.name_count;
+        h->child_name_bad = names.name_bad;
+        return 1;
+    }
+    if (key_is(key, n, "levels")) { /* read by load_levels */
+        h->seen |= K_LEVELS;
+        h->levels_at = j->p;
+        return j_skip(j);
+    }
     if (key_is(key, n, "criterion"))
         return parse_criterion(j, h);
     if (key_is(key, n, "counts"))
@@ -786,13 +825,13 @@ static int parse_object_of(jp *j, header *h, int which)
 static fr_status check_features(header *h, char *msg, size_t cap)
 {
     if (h->version < 2) {
-        h->has_stress = h->has_anchors = h->has_damage = 0;
+        h->has_stress = h->has_anchors = h->has_damage = h->has_levels = 0;
         h->criterion = CRIT_MODES;
         return FR_OK;
     }
     if (h->features_bad)
         return fail(msg, cap, FR_ERR_HEADER, "runtime header 'features' must be a list of strings");
-    if (h->feature_count == 0)
+    if (h->feature_count == 0 && !h->is_view)
         return fail(msg, cap, FR_ERR_FORMAT, "runtime file version %d lists no features; a file without any is "
                     "version 1", (int)h->version);
     if (h->feature_unknown)
@@ -811,13 +850,14 @@ static fr_status check_features(header *h, char *msg, size_t cap)
     return FR_OK;
 }
 
-static fr_status parse_header(const void *data, size_t size, header *h, char *msg, size_t cap)
+static fr_status parse_header(const void *data, size_t size, header *h, int is_view, char *msg, size_t cap)
 {
     jp j;
     int first = 1, more;
     char key[32];
     size_t n;
     memset(h, 0, sizeof *h);
+    h->is_view = is_view;
     if (data == NULL)
         return fail(msg, cap, FR_ERR_ARGUMENT, "no header data");
     j.p = (const unsigned char *)data;
@@ -861,7 +901,7 @@ fr_status fr_header_uri(const void *data, size_t size, char *uri, size_t uri_siz
     if (uri == NULL || uri_size == 0)
         return FR_ERR_ARGUMENT;
     uri[0] = 0;
-    status = parse_header(data, size, &h, NULL, 0);
+    status = parse_header(data, size, &h, 0, NULL, 0);
     if (status != FR_OK)
         return status;
     if (!uri_ok(&h))
@@ -922,6 +962,7 @@ struct fr_runtime {
     float *crack_segments;  /* (n, 2, 3) */
     size_t bytes;      /* size of the block */
     void *scratch;     /* the built-in workspace */
+    struct fr_levels *levels; /* section 14: the bodies (NULL without feature "levels"; see fracture_levels part) */
 };
 
 typedef struct dims {
@@ -990,7 +1031,13 @@ static int array_needed(const header *h, int i)
         return h->has_stress;
     if (i == A_ANCHORED)
         return h->has_anchors;
-    return h->has_cracks;
+    if (i <= A_CRACK_SEGMENTS)
+        return h->has_cracks;
+    if (i <= A_BODY_AREAS)
+        return h->has_levels;
+    if (i <= A_BODY_STRENGTH)
+        return h->has_levels && h->has_stress;
+    return h->has_body_cracks;
 }
 
 /*
@@ -1004,6 +1051,8 @@ static fr_status check_arrays(header *h, size_t binary_size, char *msg, size_t c
     if (h->has_cracks && !(h->arrays[A_CRACK_PTR].present && h->arrays[A_CRACK_SEGMENTS].present))
         return fail(msg, cap, FR_ERR_HEADER, "the crack arrays come together: %s missing",
                     h->arrays[A_CRACK_PTR].present ? "crack_segments" : "crack_ptr");
+    h->has_body_cracks = h->has_levels
+                         && (h->arrays[A_BODY_CRACK_PTR].present || h->arrays[A_BODY_CRACK_SEGMENTS].present);
     for (i = 0; i < A_COUNT; i++) {
         const array_entry *a = &h->arrays[i];
         uint64_t count = 1;
@@ -1674,8 +1723,13 @@ static void decode_names(fr_runtime *rt, header *h, int64_t name_bytes)
     (void)parse_names(&j, h, rt->names, rt->name_offsets);
 }
 
-fr_status fr_load(const void *header_data, size_t header_size, const void *binary, size_t binary_size,
-                  unsigned flags, const fr_allocator *allocator, fr_runtime **out, char *message, size_t message_size)
+static fr_status load_levels(fr_runtime *rt, const header *h, const unsigned char *bin, unsigned flags, char *msg,
+                             size_t cap);
+
+/* fr_load of a runtime file, or (is_view) of a body's view that load_levels made (section 14.3). */
+static fr_status load_file(const void *header_data, size_t header_size, const void *binary, size_t binary_size,
+                           unsigned flags, const fr_allocator *allocator, int is_view, fr_runtime **out, char *message,
+                           size_t message_size)
 {
     header h;
     dims dm;
@@ -1693,7 +1747,7 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
     if (out == NULL || (binary == NULL && binary_size > 0) || header_data == NULL)
         return fail(message, message_size, FR_ERR_ARGUMENT, "fr_load: NULL argument");
     *out = NULL;
-    status = parse_header(header_data, header_size, &h, message, message_size);
+    status = parse_header(header_data, header_size, &h, is_view, message, message_size);
     if (status == FR_OK)
         status = check_header(&h, binary, binary_size, flags, &dm, message, message_size);
     if (status != FR_OK)
@@ -1761,17 +1815,37 @@ fr_status fr_load(const void *header_data, size_t header_size, const void *binar
         build_jump_table(rt, &tt);
         al.free(al.user, temp);
     }
+    if (h.has_levels) {
+        rt->features |= FR_FEATURE_LEVELS;
+        status = load_levels(rt, &h, (const unsigned char *)binary, flags, message, message_size);
+        if (status != FR_OK) {
+            fr_free(rt);
+            return status;
+        }
+    }
     *out = rt;
     return FR_OK;
 }
 
-void fr_free(fr_runtime *rt)
+fr_status fr_load(const void *header_data, size_t header_size, const void *binary, size_t binary_size,
+                  unsigned flags, const fr_allocator *allocator, fr_runtime **out, char *message, size_t message_size)
 {
-    if (rt != NULL)
-        rt->allocator.free(rt->allocator.user, rt);
+    return load_file(header_data, header_size, binary, binary_size, flags, allocator, 0, out, message, message_size);
 }
 
-size_t fr_memory_size(const fr_runtime *rt) { return rt != NULL ? rt->bytes : 0; }
+static void free_levels(fr_runtime *rt);
+
+void fr_free(fr_runtime *rt)
+{
+    if (rt != NULL) {
+        free_levels(rt);
+        rt->allocator.free(rt->allocator.user, rt);
+    }
+}
+
+static size_t levels_memory(const fr_runtime *rt);
+
+size_t fr_memory_size(const fr_runtime *rt) { return rt != NULL ? rt->bytes + levels_memory(rt) : 0; }
 
 fr_info fr_get_info(const fr_runtime *rt)
 {
@@ -2400,5 +2474,801 @@ fr_status fr_hit(const fr_runtime *rt, double *health, const double point[3], co
     mode_outputs(rt, out->site, &s, &w, have_alpha, have_disp, out);
     if (out->anchored != NULL)
         anchored_groups(rt, out->groups, out->anchored);
+    return FR_OK;
+}
+
+/* ------------------------------------------------------------------ levels (section 14) */
+
+#define LEVELS_MAX 64 /* deepest level this reader accepts (a bake writes 2) */
+
+typedef struct fr_levels {
+    int32_t nb, p_all, E, count, max_children, max_bonds;
+    int32_t *parent;        /* (p_all,) */
+    int32_t *level;         /* (p_all,) 1 at level 1 */
+    int32_t *body_fragment; /* (nb,) -1 for body 0 */
+    int32_t *child_ptr;     /* (nb + 1,) global first child of each body */
+    int32_t *site_ptr;      /* (nb + 1,) rows of body_sites */
+    int32_t *edge_ptr;      /* (nb + 1,) rows of body_edges */
+    int32_t *state_ptr;     /* (nb + 1,) where each body's healths start in an object state */
+    int32_t *body_of;       /* (p_all,) the body breaking fragment g, or -1 */
+    int32_t *holding;       /* (p_all,) the body whose child g is */
+    double thresholds[LEVELS_MAX], radii[LEVELS_MAX];
+    int32_t radius_count;
+    fr_runtime **views;     /* (nb,) views[0] is NULL: body 0 is the runtime itself */
+    size_t bytes, scratch_bytes;
+    void *scratch;          /* the built-in piece workspace */
+} fr_levels;
+
+static void free_levels(fr_runtime *rt)
+{
+    fr_levels *lv = rt->levels;
+    int32_t b;
+    if (lv == NULL)
+        return;
+    for (b = 1; b < lv->nb; b++)
+        fr_free(lv->views[b]);
+    if (lv->scratch != NULL)
+        rt->allocator.free(rt->allocator.user, lv->scratch);
+    rt->allocator.free(rt->allocator.user, lv);
+    rt->levels = NULL;
+}
+
+static size_t levels_memory(const fr_runtime *rt)
+{
+    const fr_levels *lv = rt->levels;
+    size_t total;
+    int32_t b;
+    if (lv == NULL)
+        return 0;
+    total = lv->bytes + lv->scratch_bytes;
+    for (b = 1; b < lv->nb; b++)
+        total += fr_memory_size(lv->views[b]);
+    return total;
+}
+
+/* The header's `levels` object (section 14.1): count, thresholds, the optional impact_radii. */
+static fr_status read_levels_object(const header *h, fr_levels *lv, char *msg, size_t cap)
+{
+    jp j;
+    int first = 1, more, count_ok = 0, thresholds_seen = 0;
+    int64_t count = 0, n_thresholds = 0;
+    char key[16];
+    size_t n;
+    j.p = h->levels_at;
+    j.end = h->text_end;
+    j.depth = 0;
+    if (j_peek(&j) != '{' || !j_open(&j, '{'))
+        return fail(msg, cap, FR_ERR_HEADER, "the header's 'levels' must be an object");
+    while ((more = j_next_key(&j, &first, key, sizeof key, &n)) == 1) {
+        if (key_is(key, n, "count")) {
+            unsigned ok = 0;
+            if (!read_int(&j, &count, &ok, 1))
+                return fail(msg, cap, FR_ERR_JSON, "header is not valid JSON");
+            count_ok = ok != 0;
+        } else if (key_is(key, n, "thresholds") || key_is(key, n, "impact_radii")) {
+            const int radii = key_is(key, n, "impact_radii");
+            double *into = radii ? lv->radii : lv->thresholds;
+            int f = 1, m;
+            int64_t items = 0, good = 0;
+            if (j_peek(&j) != '[') {
+                if (!j_skip(&j))
+                    return fail(msg, cap, FR_ERR_JSON, "header is not valid JSON");
+                continue;
+            }
+            if (!j_open(&j, '['))
+                return fail(msg, cap, FR_ERR_JSON, "header is not valid JSON");
+            while ((m = j_next_item(&j, &f)) == 1) {
+                double v = 0;
+                unsigned ok = 0;
+                if (!read_double(&j, &v, &ok, 1))
+                    return fail(msg, cap, FR_ERR_JSON, "header is not valid JSON");
+                if (items < LEVELS_MAX)
+                    into[items] = v;
+                good += ok != 0 && (radii || (isfinite(v) && v >= 0));
+                items++;
+            }
+            if (m < 0)
+                return fail(msg, cap, FR_ERR_JSON, "header is not valid JSON");
+            if (radii) {
+                lv->radius_count = good == items && items <= LEVELS_MAX ? (int32_t)items : 0;
+            } else {
+                thresholds_seen = 1;
+                n_thresholds = good == items ? items : -1;
+            }
+        } else if (!j_skip(&j)) {
+            return fail(msg, cap, FR_ERR_JSON, "header is not valid JSON");
+        }
+    }
+    if (more != 0)
+        return fail(msg, cap, FR_ERR_JSON, "header is not valid JSON");
+    if (!count_ok || count != lv->count)
+        return fail(msg, cap, FR_ERR_HEADER, "levels.count must be the deepest level, %ld", (long)lv->count);
+    if (!thresholds_seen || n_thresholds != count)
+        return fail(msg, cap, FR_ERR_HEADER, "levels.thresholds must list %ld finite numbers >= 0, one per level",
+                    (long)count);
+    if (lv->thresholds[0] != h->default_threshold)
+        return fail(msg, cap, FR_ERR_HEADER, "levels.thresholds[0] must be default_threshold");
+    return FR_OK;
+}
+
+/* Whether ptr (n + 1 entries, read from the binary) starts at `first`, never decreases and ends at `end`. */
+static int ptr_ok(const unsigned char *ptr, int64_t n, int64_t first, int64_t end)
+{
+    int64_t i;
+    if (read_i32(ptr) != first || read_i32(ptr + 4 * n) != end)
+        return 0;
+    for (i = 0; i < n; i++)
+        if (read_i32(ptr + 4 * (i + 1)) < read_i32(ptr + 4 * i))
+            return 0;
+    return 1;
+}
+
+/* Section 14.1-14.2: the levels counts and shapes against each other. */
+static fr_status check_level_shapes(const header *h, const fr_runtime *rt, char *msg, size_t cap)
+{
+    const array_entry *A = h->arrays;
+    const int64_t nb = A[A_BODY_FRAGMENT].shape[0], p_all = A[A_PARENT].shape[0], S = A[A_BODY_SITES].shape[0];
+    const int64_t K = A[A_BODY_B].shape[1], E = A[A_BODY_EDGES].shape[0], C = p_all - rt->p;
+    const unsigned want = (1u << C_BODIES) | (1u << C_ALL_FRAGMENTS) | (1u << C_BODY_SITES) | (1u << C_BODY_MODES)
+                          | (1u << C_BODY_EDGES);
+    if ((h->counts_seen & want) != want || h->counts[C_BODIES] != nb || h->counts[C_ALL_FRAGMENTS] != p_all
+        || h->counts[C_BODY_SITES] != S || h->counts[C_BODY_MODES] != K || h->counts[C_BODY_EDGES] != E)
+        return fail(msg, cap, FR_ERR_SIZE, "header counts of the levels arrays do not match the arrays");
+    if (p_all <= rt->p || nb < 2 || p_all > INT32_MAX || S > INT32_MAX || E > INT32_MAX)
+        return fail(msg, cap, FR_ERR_SIZE, "a file with levels has more fragments than level 1 and at least two bodies");
+    if (!(h->seen & K_LEVELS))
+        return fail(msg, cap, FR_ERR_HEADER, "the feature 'levels' needs a header object 'levels'");
+    if (!(h->seen & K_CHILD_NAMES) || h->child_name_bad || h->child_name_count != C)
+        return fail(msg, cap, FR_ERR_HEADER, "child_names must be %ld strings without U+0000", (long)C);
+    if (A[A_BODY_CHILD_PTR].shape[0] != nb + 1 || A[A_BODY_SITE_PTR].shape[0] != nb + 1
+        || A[A_BODY_EDGE_PTR].shape[0] != nb + 1 || A[A_BODY_SITES].shape[1] != 3 || K < 1
+        || A[A_BODY_B].shape[2] != rt->d || A[A_BODY_W].shape[0] != K || A[A_BODY_W].shape[1] != C
+        || A[A_BODY_W].shape[2] != rt->d || A[A_BODY_EDGES].shape[1] != 2 || A[A_BODY_AREAS].shape[0] != E)
+        return fail(msg, cap, FR_ERR_SIZE, "levels array shapes do not agree with each other");
+    if (h->has_stress && (A[A_BODY_PTR].shape[0] != S + 1 || A[A_BODY_GAIN].shape[0] != A[A_BODY_BONDS].shape[0]
+                          || A[A_BODY_GAIN].shape[1] != 3 || A[A_BODY_STRENGTH].shape[0] != E
+                          || !(h->counts_seen & (1u << C_BODY_SITE_BONDS))
+                          || h->counts[C_BODY_SITE_BONDS] != A[A_BODY_BONDS].shape[0]))
+        return fail(msg, cap, FR_ERR_SIZE, "levels stress arrays do not agree with each other or counts");
+    if (h->has_body_cracks && (A[A_BODY_CRACK_PTR].shape[0] != E + 1 || A[A_BODY_CRACK_SEGMENTS].shape[1] != 2
+                               || A[A_BODY_CRACK_SEGMENTS].shape[2] != 3
+                               || !(h->counts_seen & (1u << C_BODY_CRACK_SEGMENTS))
+                               || h->counts[C_BODY_CRACK_SEGMENTS] != A[A_BODY_CRACK_SEGMENTS].shape[0]))
+        return fail(msg, cap, FR_ERR_SIZE, "levels crack arrays do not agree with each other or counts");
+    return FR_OK;
+}
+
+/* Section 14.2: the parent tree, the bodies' fragments and the offset tables, read into lv. */
+static fr_status check_level_tree(const header *h, const fr_runtime *rt, const unsigned char *bin, fr_levels *lv,
+                                  char *msg, size_t cap)
+{
+    const array_entry *A = h->arrays;
+    const int32_t p = rt->p, nb = lv->nb, p_all = lv->p_all;
+    int32_t g, b;
+    for (g = 0; g < p_all; g++)
+        lv->parent[g] = read_i32(bin + A[A_PARENT].offset + 4 * g);
+    for (b = 0; b < nb; b++)
+        lv->body_fragment[b] = read_i32(bin + A[A_BODY_FRAGMENT].offset + 4 * b);
+    for (b = 0; b <= nb; b++) {
+        lv->child_ptr[b] = read_i32(bin + A[A_BODY_CHILD_PTR].offset + 4 * b);
+        lv->site_ptr[b] = read_i32(bin + A[A_BODY_SITE_PTR].offset + 4 * b);
+        lv->edge_ptr[b] = read_i32(bin + A[A_BODY_EDGE_PTR].offset + 4 * b);
+    }
+    for (g = 0; g < p_all; g++) {
+        const int32_t up = lv->parent[g];
+        if (g < p ? up != -1 : up < 0 || up >= g)
+            return fail(msg, cap, FR_ERR_DATA, "parent must be -1 for the level-1 fragments and a smaller fragment "
+                        "index for every other");
+        lv->level[g] = up < 0 ? 1 : lv->level[up] + 1;
+        lv->count = lv->level[g] > lv->count ? lv->level[g] : lv->count;
+    }
+    if (lv->body_fragment[0] != -1 || lv->body_fragment[1] < 0 || lv->body_fragment[nb - 1] >= p_all)
+        return fail(msg, cap, FR_ERR_DATA, "body_fragment must be -1 for body 0, then fragment indices strictly "
+                    "increasing");
+    for (b = 2; b < nb; b++)
+        if (lv->body_fragment[b] <= lv->body_fragment[b - 1])
+            return fail(msg, cap, FR_ERR_DATA, "body_fragment must be -1 for body 0, then fragment indices strictly "
+                        "increasing");
+    if (!ptr_ok(bin + A[A_BODY_CHILD_PTR].offset, nb, 0, p_all) || lv->child_ptr[1] != p)
+        return fail(msg, cap, FR_ERR_DATA, "body_child_ptr must start at 0, then %ld, never decrease and end at %ld",
+                    (long)p, (long)p_all);
+    for (b = 0; b < nb; b++)
+        if (lv->child_ptr[b + 1] - lv->child_ptr[b] < 2)
+            return fail(msg, cap, FR_ERR_DATA, "every body must have at least 2 children (body %ld)", (long)b);
+    for (b = 1; b < nb; b++)
+        for (g = lv->child_ptr[b]; g < lv->child_ptr[b + 1]; g++)
+            if (lv->parent[g] != lv->body_fragment[b])
+                return fail(msg, cap, FR_ERR_DATA, "parent of every child must be the fragment of the body that "
+                            "holds it");
+    if (!ptr_ok(bin + A[A_BODY_SITE_PTR].offset, nb, 0, A[A_BODY_SITES].shape[0])
+        || !ptr_ok(bin + A[A_BODY_EDGE_PTR].offset, nb, 0, A[A_BODY_EDGES].shape[0]) || lv->site_ptr[1] != 0
+        || lv->edge_ptr[1] != 0)
+        return fail(msg, cap, FR_ERR_DATA, "body_site_ptr and body_edge_ptr must start at 0 (body 0 has no rows), "
+                    "never decrease and end at their arrays' lengths");
+    for (b = 1; b < nb; b++)
+        if (lv->site_ptr[b + 1] <= lv->site_ptr[b])
+            return fail(msg, cap, FR_ERR_DATA, "every body but body 0 needs at least one site (body %ld)", (long)b);
+    if (h->has_stress && !ptr_ok(bin + A[A_BODY_PTR].offset, A[A_BODY_SITES].shape[0], 0, A[A_BODY_BONDS].shape[0]))
+        return fail(msg, cap, FR_ERR_DATA, "body_site_bonds_ptr must start at 0, never decrease and end at N");
+    if (h->has_body_cracks
+        && !ptr_ok(bin + A[A_BODY_CRACK_PTR].offset, lv->E, 0, A[A_BODY_CRACK_SEGMENTS].shape[0]))
+        return fail(msg, cap, FR_ERR_DATA, "body_crack_ptr must start at 0, never decrease and end at n");
+    for (b = 1; b < nb && rt->anchored != NULL; b++)
+        if (lv->body_fragment[b] < p && rt->anchored[lv->body_fragment[b]] == 1)
+            return fail(msg, cap, FR_ERR_DATA, "an anchored fragment cannot be broken further (it has a body)");
+    return FR_OK;
+}
+
+typedef struct text {
+    char *at;
+    size_t length, capacity;
+} text;
+
+/* Append to a text (integers and fixed words only: no locale-dependent output). */
+static void put(text *t, const char *format, ...)
+{
+    va_list args;
+    int n;
+    va_start(args, format);
+    n = vsnprintf(t->at + t->length, t->capacity - t->length, format, args);
+    va_end(args);
+    if (n > 0)
+        t->length = t->length + (size_t)n < t->capacity ? t->length + (size_t)n : t->capacity - 1;
+}
+
+static void put_array(text *t, const char *name, const char *dtype, int64_t offset, int64_t length, int rank,
+                      int64_t a, int64_t b, int64_t c)
+{
+    put(t, "%s\"%s\":{\"dtype\":\"%s\",\"byte_offset\":%ld,\"byte_length\":%ld,\"shape\":[%ld", t->at[t->length - 1] == '{'
+        ? "" : ",", name, dtype, (long)offset, (long)length, (long)a);
+    if (rank > 1)
+        put(t, ",%ld", (long)b);
+    if (rank > 2)
+        put(t, ",%ld", (long)c);
+    put(t, "]}");
+}
+
+static void write_i32(unsigned char *p, int32_t value)
+{
+    const uint32_t u = (uint32_t)value;
+    p[0] = (unsigned char)u, p[1] = (unsigned char)(u >> 8), p[2] = (unsigned char)(u >> 16), p[3] = (unsigned char)(u >> 24);
+}
+
+/*
+ * Body b's view (section 14.3) as a runtime file of its own, loaded by load_file (so it passes every check of
+ * sections 2, 11 and 12): the rows of its sites, B, bonds, stress and crack arrays, its columns of body_W, its
+ * children's names copied as they are written in the header. Thresholds, radius, transform and damage are set
+ * on the loaded view (no number is printed).
+ */
+static fr_status make_view(fr_runtime *rt, const header *h, const unsigned char *bin, fr_levels *lv, int32_t b,
+                           unsigned flags, char *msg, size_t cap)
+{
+    const array_entry *A = h->arrays;
+    const int64_t p = rt->p, d = rt->d, K = A[A_BODY_B].shape[1], C = lv->p_all - p;
+    const int64_t s0 = lv->site_ptr[b], s1 = lv->site_ptr[b + 1], g0 = lv->child_ptr[b] - p;
+    const int64_t g1 = lv->child_ptr[b + 1] - p, e0 = lv->edge_ptr[b], e1 = lv->edge_ptr[b + 1];
+    const int64_t sb = s1 - s0, cb = g1 - g0, eb = e1 - e0;
+    const int stress = h->has_stress, cracks = h->has_body_cracks;
+    int64_t n0 = 0, nn = 0, c0 = 0, nc = 0, at[11], len[11], cursor = 0, i, k;
+    int a, first = 1, more;
+    unsigned char *binary;
+    text t;
+    jp j;
+    fr_status status;
+    char why[FR_MESSAGE_SIZE];
+    fr_runtime *view = NULL;
+    const int level = lv->level[lv->body_fragment[b]] + 1;
+    if (stress) {
+        n0 = read_i32(bin + A[A_BODY_PTR].offset + 4 * s0);
+        nn = read_i32(bin + A[A_BODY_PTR].offset + 4 * s1) - n0;
+    }
+    if (cracks) {
+        c0 = read_i32(bin + A[A_BODY_CRACK_PTR].offset + 4 * e0);
+        nc = read_i32(bin + A[A_BODY_CRACK_PTR].offset + 4 * e1) - c0;
+    }
+    len[0] = 12 * sb, len[1] = 4 * sb * K * d, len[2] = 4 * K * cb * d, len[3] = 8 * eb, len[4] = 4 * eb;
+    len[5] = stress ? 4 * (sb + 1) : 0, len[6] = 4 * nn, len[7] = 12 * nn, len[8] = stress ? 4 * eb : 0;
+    len[9] = cracks ? 4 * (eb + 1) : 0, len[10] = 24 * nc;
+    for (a = 0; a < 11; a++) {
+        at[a] = cursor;
+        cursor = round_up(cursor + len[a], 16);
+    }
+    t.capacity = (size_t)(h->text_end - h->child_names_at) + 4096;
+    t.length = 0;
+    t.at = (char *)rt->allocator.alloc(rt->allocator.user, t.capacity);
+    binary = (unsigned char *)rt->allocator.alloc(rt->allocator.user, (size_t)cursor + 16);
+    if (t.at == NULL || binary == NULL) {
+        if (t.at != NULL)
+            rt->allocator.free(rt->allocator.user, t.at);
+        if (binary != NULL)
+            rt->allocator.free(rt->allocator.user, binary);
+        return fail(msg, cap, FR_ERR_MEMORY, "out of memory");
+    }
+    memset(binary, 0, (size_t)cursor + 16);
+    memcpy(binary + at[0], bin + A[A_BODY_SITES].offset + 12 * s0, (size_t)len[0]);
+    memcpy(binary + at[1], bin + A[A_BODY_B].offset + 4 * s0 * K * d, (size_t)len[1]);
+    for (k = 0; k < K; k++)
+        memcpy(binary + at[2] + 4 * k * cb * d, bin + A[A_BODY_W].offset + 4 * (k * C * d + g0 * d),
+               (size_t)(4 * cb * d));
+    memcpy(binary + at[3], bin + A[A_BODY_EDGES].offset + 8 * e0, (size_t)len[3]);
+    memcpy(binary + at[4], bin + A[A_BODY_AREAS].offset + 4 * e0, (size_t)len[4]);
+    if (stress) {
+        for (i = 0; i <= sb; i++)
+            write_i32(binary + at[5] + 4 * i, (int32_t)(read_i32(bin + A[A_BODY_PTR].offset + 4 * (s0 + i)) - n0));
+        memcpy(binary + at[6], bin + A[A_BODY_BONDS].offset + 4 * n0, (size_t)len[6]);
+        memcpy(binary + at[7], bin + A[A_BODY_GAIN].offset + 12 * n0, (size_t)len[7]);
+        memcpy(binary + at[8], bin + A[A_BODY_STRENGTH].offset + 4 * e0, (size_t)len[8]);
+    }
+    if (cracks) {
+        for (i = 0; i <= eb; i++)
+            write_i32(binary + at[9] + 4 * i,
+                      (int32_t)(read_i32(bin + A[A_BODY_CRACK_PTR].offset + 4 * (e0 + i)) - c0));
+        memcpy(binary + at[10], bin + A[A_BODY_CRACK_SEGMENTS].offset + 24 * c0, (size_t)len[10]);
+    }
+    put(&t, "{\"format\":\"fracture-modes-runtime\",\"version\":2,\"features\":[%s%s%s],\"criterion\":\"%s\","
+        "\"dim\":%ld,\"counts\":{\"sites\":%ld,\"modes\":%ld,\"fragments\":%ld,\"edges\":%ld", stress ? "\"stress\"" : "",
+        stress && h->has_damage ? "," : "", h->has_damage ? "\"damage\"" : "", stress ? "stress" : "modes", (long)d,
+        (long)sb, (long)K, (long)cb, (long)eb);
+    if (stress)
+        put(&t, ",\"site_bonds\":%ld", (long)nn);
+    if (cracks)
+        put(&t, ",\"crack_segments\":%ld", (long)nc);
+    put(&t, "},\"transform\":[1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1],\"default_threshold\":0,\"impact_radius\":0,");
+    if (h->has_damage)
+        put(&t, "\"damage\":{\"crack_level\":1,\"damage_rate\":0},");
+    put(&t, "\"fragment_names\":[");
+    j.p = h->child_names_at, j.end = h->text_end, j.depth = 0;
+    (void)j_open(&j, '['); /* parsed once already: a list of strings */
+    for (i = 0; i < g1 && (more = j_next_item(&j, &first)) == 1; i++) {
+        const unsigned char *start;
+        j_ws(&j);
+        start = j.p;
+        (void)j_skip(&j);
+        if (i >= g0 && t.length + (size_t)(j.p - start) + 2 < t.capacity) {
+            if (i > g0)
+                t.at[t.length++] = ',';
+            memcpy(t.at + t.length, start, (size_t)(j.p - start));
+            t.length += (size_t)(j.p - start);
+        }
+    }
+    put(&t, "],\"buffer\":{\"uri\":\"view.fracture.bin\",\"byte_length\":%ld},\"arrays\":{", (long)cursor);
+    put_array(&t, "sites", "float32", at[0], len[0], 2, sb, 3, 0);
+    put_array(&t, "B", "float32", at[1], len[1], 3, sb, K, d);
+    put_array(&t, "W", "float32", at[2], len[2], 3, K, cb, d);
+    put_array(&t, "edges", "int32", at[3], len[3], 2, eb, 2, 0);
+    put_array(&t, "edge_areas", "float32", at[4], len[4], 1, eb, 0, 0);
+    if (stress) {
+        put_array(&t, "site_bonds_ptr", "int32", at[5], len[5], 1, sb + 1, 0, 0);
+        put_array(&t, "site_bonds", "int32", at[6], len[6], 1, nn, 0, 0);
+        put_array(&t, "site_bond_gain", "float32", at[7], len[7], 2, nn, 3, 0);
+        put_array(&t, "bond_strength", "float32", at[8], len[8], 1, eb, 0, 0);
+    }
+    if (cracks) {
+        put_array(&t, "crack_ptr", "int32", at[9], len[9], 1, eb + 1, 0, 0);
+        put_array(&t, "crack_segments", "float32", at[10], len[10], 3, nc, 2, 3);
+    }
+    put(&t, "}}");
+    status = load_file(t.at, t.length, binary, (size_t)cursor, flags | FR_LOAD_SKIP_CRC, &rt->allocator, 1, &view, why,
+                       sizeof why);
+    rt->allocator.free(rt->allocator.user, t.at);
+    rt->allocator.free(rt->allocator.user, binary);
+    if (status != FR_OK)
+        return fail(msg, cap, status, "body %ld: %s", (long)b, why);
+    view->default_threshold = lv->thresholds[level - 1];
+    view->impact_radius = lv->radius_count >= level ? lv->radii[level - 1] : rt->impact_radius;
+    memcpy(view->transform, rt->transform, sizeof view->transform);
+    view->crack_level = rt->crack_level;
+    view->damage_rate = rt->damage_rate;
+    view->damage_q = rt->damage_q;
+    lv->views[b] = view;
+    return FR_OK;
+}
+
+/* Bytes of the piece workspace of a runtime with levels (see piece_scratch). */
+typedef struct piece_layout {
+    uint64_t view, trial, cracked, groups, uf, order, cursor, keep, split, open, size;
+} piece_layout;
+
+static piece_layout piece_plan(const fr_runtime *rt)
+{
+    piece_layout w;
+    uint64_t cursor = 0, view = fr_workspace_size(rt);
+    int32_t b, nb = rt->levels != NULL ? rt->levels->nb : 1, p_all = rt->levels != NULL ? rt->levels->p_all : rt->p;
+    int32_t c = rt->levels != NULL ? rt->levels->max_children : rt->p;
+    int32_t e = rt->levels != NULL ? rt->levels->max_bonds : rt->e;
+    for (b = 1; b < nb; b++)
+        view = fr_workspace_size(rt->levels->views[b]) > view ? fr_workspace_size(rt->levels->views[b]) : view;
+    w.view = take(&cursor, view);
+    w.trial = take(&cursor, 8u * (uint64_t)e);
+    w.cracked = take(&cursor, (uint64_t)e);
+    w.groups = take(&cursor, 4u * (uint64_t)c);
+    w.uf = take(&cursor, 4u * (uint64_t)c);
+    w.order = take(&cursor, 4u * (uint64_t)c);
+    w.cursor = take(&cursor, 4u * (uint64_t)c);
+    w.keep = take(&cursor, (uint64_t)c);
+    w.split = take(&cursor, (uint64_t)p_all);
+    w.open = take(&cursor, (uint64_t)p_all);
+    w.size = take(&cursor, 0);
+    return w;
+}
+
+static fr_status load_levels(fr_runtime *rt, const header *h, const unsigned char *bin, unsigned flags, char *msg,
+                             size_t cap)
+{
+    const int64_t nb = h->arrays[A_BODY_FRAGMENT].shape[0], p_all = h->arrays[A_PARENT].shape[0];
+    uint64_t cursor = sizeof(fr_levels), o_parent, o_level, o_frag, o_child, o_site, o_edge, o_state, o_of, o_hold, o_views;
+    unsigned char *block;
+    fr_levels *lv;
+    fr_status status = check_level_shapes(h, rt, msg, cap);
+    int32_t b, g;
+    if (status != FR_OK)
+        return status;
+    o_parent = take(&cursor, 4u * (uint64_t)p_all);
+    o_level = take(&cursor, 4u * (uint64_t)p_all);
+    o_frag = take(&cursor, 4u * (uint64_t)nb);
+    o_child = take(&cursor, 4u * (uint64_t)(nb + 1));
+    o_site = take(&cursor, 4u * (uint64_t)(nb + 1));
+    o_edge = take(&cursor, 4u * (uint64_t)(nb + 1));
+    o_state = take(&cursor, 4u * (uint64_t)(nb + 1));
+    o_of = take(&cursor, 4u * (uint64_t)p_all);
+    o_hold = take(&cursor, 4u * (uint64_t)p_all);
+    o_views = take(&cursor, sizeof(fr_runtime *) * (uint64_t)nb);
+    cursor = take(&cursor, 0);
+    if (cursor > (uint64_t)(SIZE_MAX / 2) || (block = (unsigned char *)rt->allocator.alloc(rt->allocator.user,
+                                                                                           (size_t)cursor)) == NULL)
+        return fail(msg, cap, FR_ERR_MEMORY, "out of memory");
+    memset(block, 0, (size_t)cursor);
+    lv = (fr_levels *)block;
+    rt->levels = lv; /* freed by fr_free from here on */
+    lv->bytes = (size_t)cursor;
+    lv->nb = (int32_t)nb, lv->p_all = (int32_t)p_all, lv->E = (int32_t)h->arrays[A_BODY_EDGES].shape[0];
+    lv->parent = (int32_t *)(block + o_parent), lv->level = (int32_t *)(block + o_level);
+    lv->body_fragment = (int32_t *)(block + o_frag), lv->child_ptr = (int32_t *)(block + o_child);
+    lv->site_ptr = (int32_t *)(block + o_site), lv->edge_ptr = (int32_t *)(block + o_edge);
+    lv->state_ptr = (int32_t *)(block + o_state), lv->body_of = (int32_t *)(block + o_of);
+    lv->holding = (int32_t *)(block + o_hold), lv->views = (fr_runtime **)(block + o_views);
+    status = check_level_tree(h, rt, bin, lv, msg, cap);
+    if (status == FR_OK && lv->count > LEVELS_MAX)
+        status = fail(msg, cap, FR_ERR_DATA, "more than %d levels", LEVELS_MAX);
+    if (status == FR_OK)
+        status = read_levels_object(h, lv, msg, cap);
+    if (status != FR_OK)
+        return status;
+    for (g = 0; g < lv->p_all; g++)
+        lv->body_of[g] = -1, lv->holding[g] = 0;
+    lv->max_children = rt->p, lv->max_bonds = rt->e;
+    for (b = 1; b < (int32_t)nb; b++) {
+        lv->body_of[lv->body_fragment[b]] = b;
+        for (g = lv->child_ptr[b]; g < lv->child_ptr[b + 1]; g++)
+            lv->holding[g] = b;
+        lv->state_ptr[b] = rt->e + lv->edge_ptr[b];
+        status = make_view(rt, h, bin, lv, b, flags, msg, cap); /* views not made yet are NULL: fr_free skips them */
+        if (status != FR_OK)
+            return status;
+        lv->max_children = lv->views[b]->p > lv->max_children ? lv->views[b]->p : lv->max_children;
+        lv->max_bonds = lv->views[b]->e > lv->max_bonds ? lv->views[b]->e : lv->max_bonds;
+    }
+    lv->state_ptr[0] = 0;
+    lv->state_ptr[nb] = rt->e + lv->E;
+    lv->scratch_bytes = (size_t)piece_plan(rt).size;
+    lv->scratch = rt->allocator.alloc(rt->allocator.user, lv->scratch_bytes + 16);
+    if (lv->scratch == NULL)
+        return fail(msg, cap, FR_ERR_MEMORY, "out of memory");
+    return FR_OK;
+}
+
+/* ---- the levels API */
+
+fr_levels_info fr_get_levels_info(const fr_runtime *rt)
+{
+    fr_levels_info info;
+    memset(&info, 0, sizeof info);
+    if (rt == NULL)
+        return info;
+    if (rt->levels == NULL) {
+        info.bodies = 1, info.all_fragments = rt->p, info.state_size = rt->e;
+        info.max_children = rt->p, info.max_bonds = rt->e, info.count = 1;
+        return info;
+    }
+    info.bodies = rt->levels->nb, info.all_fragments = rt->levels->p_all, info.state_size = rt->e + rt->levels->E;
+    info.max_children = rt->levels->max_children, info.max_bonds = rt->levels->max_bonds;
+    info.count = rt->levels->count;
+    return info;
+}
+
+const fr_runtime *fr_body(const fr_runtime *rt, int32_t body)
+{
+    if (rt == NULL || body < 0 || body >= (rt->levels != NULL ? rt->levels->nb : 1))
+        return NULL;
+    return body == 0 ? rt : rt->levels->views[body];
+}
+
+int32_t fr_body_fragment(const fr_runtime *rt, int32_t body)
+{
+    return rt != NULL && rt->levels != NULL && body > 0 && body < rt->levels->nb ? rt->levels->body_fragment[body] : -1;
+}
+
+int32_t fr_body_first(const fr_runtime *rt, int32_t body)
+{
+    if (rt == NULL || body < 0)
+        return -1;
+    if (rt->levels == NULL)
+        return body == 0 ? 0 : body == 1 ? rt->p : -1;
+    return body <= rt->levels->nb ? rt->levels->child_ptr[body] : -1;
+}
+
+int32_t fr_body_of(const fr_runtime *rt, int32_t fragment)
+{
+    return rt != NULL && rt->levels != NULL && fragment >= 0 && fragment < rt->levels->p_all
+               ? rt->levels->body_of[fragment] : -1;
+}
+
+int32_t fr_body_holding(const fr_runtime *rt, int32_t fragment)
+{
+    if (rt == NULL || fragment < 0 || fragment >= fr_get_levels_info(rt).all_fragments)
+        return -1;
+    return rt->levels != NULL ? rt->levels->holding[fragment] : 0;
+}
+
+int32_t fr_parent(const fr_runtime *rt, int32_t fragment)
+{
+    return rt != NULL && rt->levels != NULL && fragment >= 0 && fragment < rt->levels->p_all
+               ? rt->levels->parent[fragment] : -1;
+}
+
+int32_t fr_state_offset(const fr_runtime *rt, int32_t body)
+{
+    if (rt == NULL || body < 0)
+        return -1;
+    if (rt->levels == NULL)
+        return body == 0 ? 0 : body == 1 ? rt->e : -1;
+    return body <= rt->levels->nb ? rt->levels->state_ptr[body] : -1;
+}
+
+const char *fr_any_fragment_name(const fr_runtime *rt, int32_t fragment)
+{
+    int32_t b = fr_body_holding(rt, fragment);
+    if (b < 0)
+        return NULL;
+    return fr_fragment_name(fr_body(rt, b), fragment - fr_body_first(rt, b));
+}
+
+void fr_new_object_state(const fr_runtime *rt, double *health)
+{
+    int32_t m, n = fr_get_levels_info(rt).state_size;
+    if (health != NULL)
+        for (m = 0; m < n; m++)
+            health[m] = 1.0;
+}
+
+fr_status fr_check_object_state(const fr_runtime *rt, const double *health, size_t count)
+{
+    const int32_t n = fr_get_levels_info(rt).state_size;
+    int32_t m, ok = 1;
+    if (rt == NULL || (health == NULL && n > 0))
+        return FR_ERR_ARGUMENT;
+    if (count != (size_t)n)
+        return FR_ERR_STATE;
+    for (m = 0; m < n; m++)
+        ok &= (health[m] >= 0.0) & (health[m] <= 1.0);
+    return ok ? FR_OK : FR_ERR_STATE;
+}
+
+size_t fr_piece_workspace_size(const fr_runtime *rt) { return rt != NULL ? (size_t)piece_plan(rt).size : 0; }
+
+typedef struct piece_scratch {
+    void *view;
+    double *trial;
+    uint8_t *cracked, *keep, *split, *open;
+    int32_t *groups, *uf, *order, *cursor;
+} piece_scratch;
+
+static piece_scratch piece_scratch_at(const fr_runtime *rt, void *workspace)
+{
+    const piece_layout w = piece_plan(rt);
+    unsigned char *base = (unsigned char *)(workspace != NULL ? workspace
+                                            : rt->levels != NULL ? rt->levels->scratch : NULL);
+    piece_scratch s;
+    s.view = base + w.view;
+    s.trial = (double *)(base + w.trial);
+    s.cracked = base + w.cracked, s.keep = base + w.keep, s.split = base + w.split, s.open = base + w.open;
+    s.groups = (int32_t *)(base + w.groups), s.uf = (int32_t *)(base + w.uf);
+    s.order = (int32_t *)(base + w.order), s.cursor = (int32_t *)(base + w.cursor);
+    return s;
+}
+
+/* Groups (into `groups`, the smallest local index) of a body's children over its bonds with health > 0 between
+ * two kept children (keep NULL: all); returns the number of groups. */
+static int32_t body_components(const fr_runtime *view, const double *health, const uint8_t *keep, int32_t *groups)
+{
+    int32_t m;
+    memcpy(groups, view->identity, sizeof(int32_t) * (size_t)view->p);
+    for (m = 0; m < view->e; m++) {
+        const int32_t P = view->edges[2 * m], Q = view->edges[2 * m + 1];
+        if (health[m] > 0 && (keep == NULL || (keep[P] && keep[Q])))
+            unite(groups, P, Q);
+    }
+    return label(groups, view->p, groups);
+}
+
+static int is_split(const fr_runtime *rt, const double *health, int32_t fragment, int32_t *uf)
+{
+    const int32_t b = rt->levels->body_of[fragment];
+    return b >= 0 && body_components(rt->levels->views[b], health + rt->levels->state_ptr[b], NULL, uf) >= 2;
+}
+
+/* Append the pieces of body b's kept children (components over bonds that hold between two kept ones). */
+static void emit_pieces(const fr_runtime *rt, const double *health, int32_t body, const uint8_t *keep,
+                        const piece_scratch *s, fr_pieces *out)
+{
+    const fr_runtime *view = fr_body(rt, body);
+    const int32_t first = fr_body_first(rt, body), c = view->p, start = out->count;
+    int32_t j, count = 0;
+    (void)body_components(view, health + fr_state_offset(rt, body), keep, s->groups);
+    for (j = 0; j < c; j++)
+        if (keep[j] && s->groups[j] == j) {
+            s->order[j] = count;
+            out->offsets[start + count + 1] = 0;
+            if (out->bodies != NULL)
+                out->bodies[start + count] = body;
+            if (out->anchored != NULL)
+                out->anchored[start + count] = 0;
+            count++;
+        }
+    for (j = 0; j < c; j++)
+        if (keep[j])
+            out->offsets[start + s->order[s->groups[j]] + 1]++;
+    for (j = 0; j < count; j++) {
+        out->offsets[start + j + 1] += out->offsets[start + j];
+        s->cursor[j] = out->offsets[start + j];
+    }
+    for (j = 0; j < c; j++)
+        if (keep[j]) {
+            const int32_t piece = s->order[s->groups[j]];
+            out->fragments[s->cursor[piece]++] = first + j;
+            if (out->anchored != NULL && body == 0 && rt->anchored != NULL && rt->anchored[j])
+                out->anchored[start + piece] = 1;
+        }
+    out->count += count;
+}
+
+/* Split flags of every fragment with a body, and `open` (every ancestor split) of every fragment. */
+static void split_and_open(const fr_runtime *rt, const double *health, const piece_scratch *s)
+{
+    const fr_levels *lv = rt->levels;
+    int32_t b, g;
+    if (lv == NULL) {
+        memset(s->split, 0, (size_t)rt->p);
+        memset(s->open, 1, (size_t)rt->p);
+        return;
+    }
+    memset(s->split, 0, (size_t)lv->p_all);
+    for (b = 1; b < lv->nb; b++)
+        s->split[lv->body_fragment[b]] = (uint8_t)is_split(rt, health, lv->body_fragment[b], s->uf);
+    for (g = 0; g < lv->p_all; g++)
+        s->open[g] = (uint8_t)(g < rt->p || (s->open[lv->parent[g]] && s->split[lv->parent[g]]));
+}
+
+fr_status fr_object_pieces(const fr_runtime *rt, const double *health, void *workspace, fr_pieces *out)
+{
+    piece_scratch s;
+    int32_t b, j;
+    if (rt == NULL || out == NULL || out->fragments == NULL || out->offsets == NULL)
+        return FR_ERR_ARGUMENT;
+    if (fr_check_object_state(rt, health, (size_t)fr_get_levels_info(rt).state_size) != FR_OK)
+        return FR_ERR_STATE;
+    if (rt->levels == NULL && workspace == NULL) /* no built-in piece workspace without levels */
+        return FR_ERR_ARGUMENT;
+    s = piece_scratch_at(rt, workspace);
+    split_and_open(rt, health, &s);
+    out->count = 0;
+    out->offsets[0] = 0;
+    for (b = 0; b < fr_get_levels_info(rt).bodies; b++) {
+        const int32_t first = fr_body_first(rt, b), c = fr_body(rt, b)->p;
+        for (j = 0; j < c; j++)
+            s.keep[j] = (uint8_t)(s.open[first + j] && !s.split[first + j]);
+        emit_pieces(rt, health, b, s.keep, &s, out);
+    }
+    return FR_OK;
+}
+
+fr_status fr_hit_piece(const fr_runtime *rt, double *health, int32_t struck, const double point[3],
+                       const double impulse[3], const double *threshold, void *workspace, fr_piece_hit *out)
+{
+    const fr_levels *lv;
+    const fr_runtime *view, *child_view;
+    piece_scratch s;
+    fr_impact trial_out;
+    fr_status status;
+    double *hb;
+    int32_t b, first, j, m, root, up, child_body, broken = 0, cracked = 0;
+    if (rt == NULL || health == NULL || point == NULL || impulse == NULL || out == NULL || out->body.groups == NULL
+        || out->pieces.fragments == NULL || out->pieces.offsets == NULL || (rt->levels == NULL && workspace == NULL))
+        return FR_ERR_ARGUMENT;
+    lv = rt->levels;
+    if (fr_check_object_state(rt, health, (size_t)fr_get_levels_info(rt).state_size) != FR_OK)
+        return FR_ERR_STATE;
+    if (struck < 0 || struck >= fr_get_levels_info(rt).all_fragments)
+        return FR_ERR_FRAGMENT;
+    s = piece_scratch_at(rt, workspace);
+    /* Step 1: struck is shown: not split, every ancestor split. */
+    if (lv != NULL) {
+        if (is_split(rt, health, struck, s.uf))
+            return FR_ERR_FRAGMENT;
+        for (up = lv->parent[struck]; up >= 0; up = lv->parent[up])
+            if (!is_split(rt, health, up, s.uf))
+                return FR_ERR_FRAGMENT;
+    }
+    /* Step 2: the piece G holding struck among its shown siblings, and body b's hit on a copy of its healths. */
+    b = fr_body_holding(rt, struck);
+    view = fr_body(rt, b);
+    first = fr_body_first(rt, b);
+    hb = health + fr_state_offset(rt, b);
+    for (j = 0; j < view->p; j++)
+        s.keep[j] = (uint8_t)(lv == NULL || !is_split(rt, health, first + j, s.uf));
+    (void)body_components(view, hb, s.keep, s.groups);
+    root = s.groups[struck - first];
+    for (j = 0; j < view->p; j++)
+        s.keep[j] = (uint8_t)(s.keep[j] && s.groups[j] == root);
+    if (view->e > 0)
+        memcpy(s.trial, hb, sizeof(double) * (size_t)view->e);
+    trial_out = out->body;
+    trial_out.groups = s.groups;
+    trial_out.broken = NULL;
+    trial_out.cracked = s.cracked;
+    trial_out.anchored = NULL;
+    status = fr_hit(view, s.trial, point, impulse, threshold != NULL ? *threshold : view->default_threshold, s.view,
+                    &trial_out);
+    if (status != FR_OK) /* inputs refused before anything changed */
+        return status;
+    for (m = 0; m < view->e; m++) {
+        const int within = s.keep[view->edges[2 * m]] && s.keep[view->edges[2 * m + 1]];
+        int is_broken, is_cracked;
+        if (within)
+            hb[m] = s.trial[m];
+        is_broken = hb[m] <= 0;
+        is_cracked = !is_broken && ((s.cracked[m] && within) || hb[m] < 1);
+        broken += is_broken;
+        cracked += is_cracked;
+        if (out->body.broken != NULL)
+            out->body.broken[m] = (uint8_t)is_broken;
+        if (out->body.cracked != NULL)
+            out->body.cracked[m] = (uint8_t)is_cracked;
+    }
+    out->body.site = trial_out.site;
+    out->body.num_broken = broken;
+    out->body.num_cracked = cracked;
+    out->body.num_groups = body_components(view, hb, NULL, out->body.groups);
+    if (out->body.anchored != NULL)
+        anchored_groups(view, out->body.groups, out->body.anchored);
+    out->body_index = b;
+    /* Step 3: struck's own body, on all its bonds. */
+    child_body = fr_body_of(rt, struck);
+    out->child_body = child_body;
+    out->split = 0;
+    if (child_body >= 0) {
+        fr_impact child = out->child;
+        child_view = lv->views[child_body];
+        if (child.groups == NULL)
+            child.groups = s.uf;
+        (void)fr_hit(child_view, health + lv->state_ptr[child_body], point, impulse,
+                     threshold != NULL ? *threshold : child_view->default_threshold, s.view, &child);
+        if (out->child.groups == NULL)
+            child.groups = NULL;
+        out->child = child;
+        out->split = child.num_groups >= 2;
+    }
+    /* Step 4: the pieces that replace G. */
+    out->pieces.count = 0;
+    out->pieces.offsets[0] = 0;
+    if (out->split)
+        s.keep[struck - first] = 0;
+    emit_pieces(rt, health, b, s.keep, &s, &out->pieces);
+    if (out->split) {
+        const int32_t cfirst = lv->child_ptr[child_body];
+        for (j = 0; j < lv->views[child_body]->p; j++)
+            s.keep[j] = (uint8_t)!is_split(rt, health, cfirst + j, s.uf);
+        emit_pieces(rt, health, child_body, s.keep, &s, &out->pieces);
+    }
     return FR_OK;
 }

@@ -6,8 +6,8 @@
  * about a microsecond, without allocating. Specification: docs/FORMAT.md of the
  * fracture repository (format version 1, and version 2 with the features "stress":
  * the stress criterion of section 11, "anchors" and "damage": structures and damage
- * that adds up over hits, section 12, with the optional crack arrays). Usable from C
- * and C++.
+ * that adds up over hits, section 12, with the optional crack arrays, and "levels":
+ * fragments that break again, section 14). Usable from C and C++.
  *
  * MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
  *
@@ -53,7 +53,8 @@ typedef enum fr_status {
     FR_ERR_DATA,      /* a non-finite value or an edge index out of range in the binary */
     FR_ERR_MEMORY,    /* the allocator returned NULL */
     FR_ERR_INPUT,     /* fr_project, fr_hit: non-finite point or impulse, NaN or negative threshold */
-    FR_ERR_STATE      /* fr_hit and the state functions: a damage state that is not e values in [0, 1] */
+    FR_ERR_STATE,     /* fr_hit and the state functions: a damage state that is not e values in [0, 1] */
+    FR_ERR_FRAGMENT   /* fr_hit_piece: the struck fragment is not shown (split, or inside an unbroken parent) */
 } fr_status;
 
 /* A short English name of a status ("ok", "invalid JSON header", ...). */
@@ -113,6 +114,7 @@ fr_status fr_header_uri(const void *header, size_t header_size, char *uri, size_
 #define FR_FEATURE_STRESS 1   /* criterion "stress" */
 #define FR_FEATURE_ANCHORS 2  /* fragments bonded to the world (fr_anchored) */
 #define FR_FEATURE_DAMAGE 4   /* hits below a bond's strength crack it and lower its health (fr_hit) */
+#define FR_FEATURE_LEVELS 8   /* fragments that break again: bodies, object states, fr_hit_piece (section 14) */
 
 typedef struct fr_info {
     int32_t sites, modes, fragments, edges, dim;  /* s, k, p, e, d */
@@ -211,6 +213,75 @@ fr_status fr_state_from_bytes(const fr_runtime *rt, const void *bytes, size_t si
  */
 fr_status fr_hit(const fr_runtime *rt, double *health, const double point[3], const double impulse[3],
                  double threshold, void *workspace, fr_impact *out);
+
+/*
+ * Levels (docs/FORMAT.md section 14, feature "levels"). A *body* is a set of fragments (its children)
+ * with its own impact data: body 0 is the whole asset (the runtime itself, its p level-1 fragments),
+ * body b >= 1 breaks fragment fr_body_fragment(rt, b) into fragments fr_body_first(rt, b) ..
+ * fr_body_first(rt, b + 1) - 1. Fragments are numbered over every level (global index g < p_all).
+ * fr_body(rt, b) is body b's view, a runtime of its own (sites, modes, bonds among its children in
+ * local indices, its level's default threshold, the children's names): fr_project and fr_hit run on
+ * it unchanged. Without levels there is one body (0) and p_all = p. Views belong to `rt`.
+ */
+typedef struct fr_levels_info {
+    int32_t bodies;        /* nb, body 0 included (1 without levels) */
+    int32_t all_fragments; /* p_all */
+    int32_t state_size;    /* e + E: doubles in an object state */
+    int32_t max_children;  /* largest child count of a body (body 0's is p) */
+    int32_t max_bonds;     /* largest bond count of a body (body 0's is e) */
+    int32_t count;         /* the deepest level (1 without levels) */
+} fr_levels_info;
+
+fr_levels_info fr_get_levels_info(const fr_runtime *rt);
+const fr_runtime *fr_body(const fr_runtime *rt, int32_t body);     /* NULL out of range; body 0: rt */
+int32_t fr_body_fragment(const fr_runtime *rt, int32_t body);      /* -1 for body 0 (or out of range) */
+int32_t fr_body_first(const fr_runtime *rt, int32_t body);         /* first child; body == bodies: p_all */
+int32_t fr_body_of(const fr_runtime *rt, int32_t fragment);        /* the body breaking it, -1: none (a leaf) */
+int32_t fr_body_holding(const fr_runtime *rt, int32_t fragment);   /* the body whose child it is; -1 out of range */
+int32_t fr_parent(const fr_runtime *rt, int32_t fragment);         /* -1 at level 1 (or out of range) */
+int32_t fr_state_offset(const fr_runtime *rt, int32_t body);       /* body's healths in an object state */
+const char *fr_any_fragment_name(const fr_runtime *rt, int32_t fragment); /* any level; NULL out of range */
+
+/* Object state (section 14.4): state_size doubles, every body's bond healths (body 0's first). */
+void fr_new_object_state(const fr_runtime *rt, double *health);
+fr_status fr_check_object_state(const fr_runtime *rt, const double *health, size_t count);
+
+/*
+ * Pieces (section 14.4): rigid bodies of sibling fragments. Caller-provided arrays, sized p_all (offsets
+ * p_all + 1); piece i holds fragments[offsets[i] .. offsets[i+1]-1] (global, ascending), children of
+ * bodies[i]; anchored[i]: keep it static. `bodies` and `anchored` may be NULL.
+ */
+typedef struct fr_pieces {
+    int32_t *fragments, *offsets, *bodies;
+    uint8_t *anchored;
+    int32_t count; /* out */
+} fr_pieces;
+
+/* Every piece of an object (body by body, by first fragment); FR_ERR_STATE for an invalid state. Workspace as
+ * fr_hit_piece's. */
+fr_status fr_object_pieces(const fr_runtime *rt, const double *health, void *workspace, fr_pieces *out);
+
+/*
+ * Hit the piece holding the shown fragment `struck` (section 14.5): point and impulse in the asset's
+ * model space (the piece's rigid transform undone), threshold NULL for each body's default. `health` is
+ * the object state, updated in place (refused hits leave it unchanged: FR_ERR_INPUT, FR_ERR_STATE,
+ * FR_ERR_FRAGMENT). `body` answers for the body holding `struck` (local indices, arrays sized
+ * max_children / max_bonds; after the hit: broken = every broken bond, groups over all its children);
+ * `child` for struck's own body when it has one (child_body >= 0). `pieces`: what struck's piece became.
+ * Does not allocate; workspace: fr_piece_workspace_size(rt) bytes (16-byte aligned) or NULL for the
+ * runtime's own (not thread-safe; only a file with levels has one: pass a workspace otherwise).
+ * The caller's `body.alpha` / `body.displacement` (optional) need the largest modes / children * d of
+ * any body. Cost: two body hits plus union-finds over the struck piece's body (0.5 us at level 2).
+ */
+typedef struct fr_piece_hit {
+    fr_impact body, child; /* groups required in both (sized max_children) */
+    int32_t body_index, child_body, split;
+    fr_pieces pieces;
+} fr_piece_hit;
+
+size_t fr_piece_workspace_size(const fr_runtime *rt);
+fr_status fr_hit_piece(const fr_runtime *rt, double *health, int32_t struck, const double point[3],
+                       const double impulse[3], const double *threshold, void *workspace, fr_piece_hit *out);
 
 #ifdef __cplusplus
 }

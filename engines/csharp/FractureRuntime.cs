@@ -5,7 +5,7 @@
 // "which fragments break off" for a hit without allocating. Specification: docs/FORMAT.md of the
 // fracture repository (format version 1, and version 2 with the features "stress": the stress criterion
 // of section 11, "anchors" and "damage": structures and damage that adds up over hits, section 12, with
-// the optional crack arrays).
+// the optional crack arrays, and "levels": fragments that break again, section 14).
 //
 // MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
 //
@@ -40,6 +40,7 @@ namespace Fracture
         Data,      // a non-finite value or an edge index out of range in the binary
         Input,     // Project, Hit: non-finite point or impulse, NaN or negative threshold
         State,     // Hit and the state methods: a damage state that is not e values in [0, 1]
+        Fragment,  // HitPiece: the struck fragment is not shown (split, or inside an unbroken parent)
     }
 
     /// <summary>A runtime file that cannot be used; <see cref="Status"/> says which check failed.</summary>
@@ -102,13 +103,52 @@ namespace Fracture
         }
     }
 
+    /// <summary>Sibling fragments that move together (docs/FORMAT.md section 14.4): one rigid body in the game.</summary>
+    public sealed class FracturePiece
+    {
+        /// <summary>The body whose children they are (0: level-1 fragments).</summary>
+        public readonly int Body;
+        /// <summary>Global fragment indices, ascending.</summary>
+        public readonly List<int> Fragments = new List<int>();
+        /// <summary>Whether the piece holds a fragment bonded to the world (level 1 only: keep it static).</summary>
+        public bool Anchored;
+
+        public FracturePiece(int body) { Body = body; }
+    }
+
+    /// <summary>What one hit on a piece did (docs/FORMAT.md section 14.5).</summary>
+    public sealed class FracturePieceHit
+    {
+        public readonly int Struck, Body, ChildBody;
+        /// <summary>Body's answer after the hit (local indices; Groups over all its children).</summary>
+        public readonly FractureImpact Result;
+        /// <summary>The struck fragment's own body's answer, null when it has no children.</summary>
+        public readonly FractureImpact ChildResult;
+        /// <summary>Whether the struck fragment broke into its children.</summary>
+        public readonly bool Split;
+        /// <summary>The pieces the hit piece became: its fragments regrouped, then its children's pieces.</summary>
+        public readonly List<FracturePiece> Pieces;
+
+        public FracturePieceHit(int struck, int body, FractureImpact result, int childBody, FractureImpact childResult,
+                                bool split, List<FracturePiece> pieces)
+        {
+            Struck = struck;
+            Body = body;
+            Result = result;
+            ChildBody = childBody;
+            ChildResult = childResult;
+            Split = split;
+            Pieces = pieces;
+        }
+    }
+
     /// <summary>A loaded, validated runtime file (immutable: Project may run on several threads).</summary>
     public sealed class FractureRuntime
     {
         /// <summary>Highest file format version this reader reads (2: the features of docs/FORMAT.md sections 11-12).</summary>
         public const int FormatVersion = 2;
         /// <summary>The version-2 features this reader implements.</summary>
-        public static readonly string[] KnownFeatures = { "anchors", "damage", "stress" };
+        public static readonly string[] KnownFeatures = { "anchors", "damage", "levels", "stress" };
         const double BoundSlack = 1e-9;
         const int KdLeaf = 16;
         /// <summary>Largest d = 1 jump table Load builds, in bytes (see <see cref="Load"/>).</summary>
@@ -378,6 +418,8 @@ namespace Fracture
                 for (int m = 0; m < Edges; m++)
                     allBroken[m] = true;
             }
+            if (h.Levels)
+                ReadLevels(h, binary, compact);
         }
 
         // site_bonds_ptr starts at 0, never decreases and ends at nnz; site_bonds are edge indices, strictly
@@ -1203,6 +1245,498 @@ namespace Fracture
 
         // ------------------------------------------------------------------ header
 
+        // ------------------------------------------------------------------ levels (docs/FORMAT.md section 14)
+        //
+        // A body is a set of fragments (its children) with its own impact data: body 0 is this runtime (the p
+        // level-1 fragments), body b >= 1 breaks fragment BodyFragment(b) into fragments BodyFirst(b) ..
+        // BodyFirst(b + 1) - 1 (global indices over every level). Body(b) is body b's view, a runtime of its own
+        // (loaded and checked as a file), on which Project and Hit run in local indices. An object state is one
+        // double[] of every body's bond healths; HitPiece hits the piece holding a shown fragment (section 14.5)
+        // and ObjectPieces lists the rigid bodies a game shows (section 14.4). These allocate (a few small arrays
+        // per call), unlike Project and Hit.
+
+        static readonly string[] LevelArrays = { "parent", "body_fragment", "body_child_ptr", "body_site_ptr", "body_sites",
+            "body_B", "body_W", "body_edge_ptr", "body_edges", "body_edge_areas", "body_site_bonds_ptr", "body_site_bonds",
+            "body_site_bond_gain", "body_bond_strength", "body_crack_ptr", "body_crack_segments" };
+        static readonly int[] LevelRanks = { 1, 1, 1, 1, 2, 3, 3, 1, 2, 1, 1, 1, 2, 1, 1, 3 };
+        static readonly bool[] LevelIsInt = { true, true, true, true, false, false, false, true, true, false, true, true, false,
+            false, true, false };
+
+        int[] lvParent, lvBodyFragment, lvChildPtr, lvStateOffsets, lvBodyOf, lvHolding;
+        FractureRuntime[] lvViews;
+        string[] childNames;
+
+        /// <summary>Bodies in the file (1 without levels, body 0 included).</summary>
+        public int NumBodies { get { return lvViews != null ? lvViews.Length : 1; } }
+        /// <summary>Fragments of every level (p_all; p without levels).</summary>
+        public int AllFragments { get { return lvParent != null ? lvParent.Length : Fragments; } }
+        /// <summary>The deepest level (1 without levels).</summary>
+        public int LevelCount { get; private set; }
+        /// <summary>Body b's view (body 0: this runtime), or null.</summary>
+        public FractureRuntime Body(int b) { return b == 0 ? this : lvViews != null && b > 0 && b < lvViews.Length ? lvViews[b] : null; }
+        /// <summary>The fragment body b breaks (-1 for body 0).</summary>
+        public int BodyFragment(int b) { return lvBodyFragment != null && b > 0 ? lvBodyFragment[b] : -1; }
+        /// <summary>Body b's first child (global); BodyFirst(NumBodies) is AllFragments.</summary>
+        public int BodyFirst(int b) { return lvChildPtr != null ? lvChildPtr[b] : b == 0 ? 0 : Fragments; }
+        /// <summary>The body breaking fragment g into its children, -1 for a leaf.</summary>
+        public int BodyOf(int g) { return lvBodyOf != null ? lvBodyOf[g] : -1; }
+        /// <summary>The body whose child fragment g is (0 at level 1).</summary>
+        public int BodyHolding(int g) { return lvHolding != null ? lvHolding[g] : 0; }
+        /// <summary>Fragment g's parent, -1 at level 1.</summary>
+        public int Parent(int g) { return lvParent != null ? lvParent[g] : -1; }
+        /// <summary>The GLB node name of fragment g (any level).</summary>
+        public string AnyFragmentName(int g) { return g < Fragments ? names[g] : childNames[g - Fragments]; }
+        /// <summary>Where body b's healths start in an object state.</summary>
+        public int StateOffset(int b) { return lvStateOffsets != null ? lvStateOffsets[b] : b == 0 ? 0 : Edges; }
+
+        static bool PtrOk(int[] ptr, int first, long end)
+        {
+            if (ptr[0] != first || ptr[ptr.Length - 1] != end)
+                return false;
+            for (int i = 1; i < ptr.Length; i++)
+                if (ptr[i] < ptr[i - 1])
+                    return false;
+            return true;
+        }
+
+        static string JsonString(string value)
+        {
+            var text = new StringBuilder("\"");
+            foreach (char c in value)
+            {
+                if (c == '"' || c == '\\')
+                    text.Append('\\').Append(c);
+                else if (c < 0x20)
+                    text.Append("\\u").Append(((int)c).ToString("x4", CultureInfo.InvariantCulture));
+                else
+                    text.Append(c);
+            }
+            return text.Append('"').ToString();
+        }
+
+        static string Number(double value) { return value.ToString("G17", CultureInfo.InvariantCulture); }
+
+        void ReadLevels(Header h, byte[] binary, bool compact)
+        {
+            bool stress = h.Stress, cracks = false;
+            object value;
+            var table = h.Top["arrays"] as Dictionary<string, object>;
+            var entries = new ArrayEntry[LevelArrays.Length];
+            for (int i = 0; i < LevelArrays.Length; i++)
+                if (table.TryGetValue(LevelArrays[i], out value) && value is Dictionary<string, object>)
+                    entries[i] = Header.ReadEntry((Dictionary<string, object>)value);
+            cracks = table.ContainsKey("body_crack_ptr") || table.ContainsKey("body_crack_segments");
+            var ints = new int[LevelArrays.Length][];
+            var floats = new float[LevelArrays.Length][];
+            for (int i = 0; i < LevelArrays.Length; i++)
+            {
+                if ((i >= 10 && i < 14 && !stress) || (i >= 14 && !cracks))
+                    continue;
+                Header.CheckEntry(entries[i], LevelArrays[i], LevelIsInt[i], LevelRanks[i], binary.LongLength);
+                if (LevelIsInt[i])
+                    ints[i] = ReadInts(binary, entries[i]);
+                else
+                    floats[i] = ReadFloats(binary, entries[i], LevelArrays[i]);
+            }
+            int p = Fragments, d = Dim;
+            int[] parent = ints[0], owner = ints[1], child = ints[2], sitePtr = ints[3], edgePtr = ints[7];
+            int pAll = parent.Length, nb = owner.Length, C = pAll - p;
+            long S = entries[4].Shape[0], K = entries[5].Shape[1], E = entries[8].Shape[0];
+            var counts = h.Top["counts"] as Dictionary<string, object>;
+            Func<string, long> count = key => { long got; return counts.TryGetValue(key, out value) && Json.AsInteger(value, out got) ? got : -1; };
+            if (count("bodies") != nb || count("all_fragments") != pAll || count("body_sites") != S || count("body_modes") != K ||
+                count("body_edges") != E)
+                throw Fail(FractureStatus.Size, "header counts of the levels arrays do not match the arrays");
+            if (pAll <= p || nb < 2)
+                throw Fail(FractureStatus.Size, "a file with levels has more fragments than level 1 and at least two bodies");
+            var info = h.Top.TryGetValue("levels", out value) ? value as Dictionary<string, object> : null;
+            if (info == null)
+                throw Fail(FractureStatus.Header, "the feature 'levels' needs a header object 'levels'");
+            var nameList = h.Top.TryGetValue("child_names", out value) ? value as List<object> : null;
+            if (nameList == null || nameList.Count != C || nameList.Exists(n => !(n is string)))
+                throw Fail(FractureStatus.Header, "child_names must be " + C + " strings");
+            Func<int, long[], bool> same = (i, shape) =>
+            {
+                if (entries[i].Shape.Length != shape.Length)
+                    return false;
+                for (int r = 0; r < shape.Length; r++)
+                    if (entries[i].Shape[r] != shape[r])
+                        return false;
+                return true;
+            };
+            if (!same(2, new long[] { nb + 1 }) || !same(3, new long[] { nb + 1 }) || !same(7, new long[] { nb + 1 }) ||
+                !same(4, new long[] { S, 3 }) || K < 1 || !same(5, new long[] { S, K, d }) || !same(6, new long[] { K, C, d }) ||
+                !same(8, new long[] { E, 2 }) || !same(9, new long[] { E }))
+                throw Fail(FractureStatus.Size, "levels array shapes do not agree with each other");
+            long N = stress ? entries[11].Shape[0] : 0, segments = cracks ? entries[15].Shape[0] : 0;
+            if (stress && (!same(10, new long[] { S + 1 }) || !same(12, new long[] { N, 3 }) || !same(13, new long[] { E }) ||
+                           count("body_site_bonds") != N))
+                throw Fail(FractureStatus.Size, "levels stress arrays do not agree with each other or counts");
+            if (cracks && (!same(14, new long[] { E + 1 }) || !same(15, new long[] { segments, 2, 3 }) ||
+                           count("body_crack_segments") != segments))
+                throw Fail(FractureStatus.Size, "levels crack arrays do not agree with each other or counts");
+            var level = new int[pAll];
+            int deepest = 1;
+            for (int g = 0; g < pAll; g++)
+            {
+                if (g < p ? parent[g] != -1 : !(parent[g] >= 0 && parent[g] < g))
+                    throw Fail(FractureStatus.Data, "parent must be -1 for the level-1 fragments and a smaller fragment index for every other");
+                level[g] = parent[g] < 0 ? 1 : level[parent[g]] + 1;
+                deepest = Math.Max(deepest, level[g]);
+            }
+            bool ok = owner[0] == -1 && owner[1] >= 0 && owner[nb - 1] < pAll;
+            for (int b = 2; ok && b < nb; b++)
+                ok = owner[b] > owner[b - 1];
+            if (!ok)
+                throw Fail(FractureStatus.Data, "body_fragment must be -1 for body 0, then fragment indices strictly increasing");
+            if (!PtrOk(child, 0, pAll) || child[1] != p)
+                throw Fail(FractureStatus.Data, "body_child_ptr must start at 0, then " + p + ", and end at " + pAll);
+            for (int b = 0; b < nb; b++)
+                if (child[b + 1] - child[b] < 2)
+                    throw Fail(FractureStatus.Data, "every body must have at least 2 children (body " + b + ")");
+            for (int b = 1; b < nb; b++)
+                for (int g = child[b]; g < child[b + 1]; g++)
+                    if (parent[g] != owner[b])
+                        throw Fail(FractureStatus.Data, "parent of every child must be the fragment of the body that holds it");
+            if (!PtrOk(sitePtr, 0, S) || !PtrOk(edgePtr, 0, E) || sitePtr[1] != 0 || edgePtr[1] != 0)
+                throw Fail(FractureStatus.Data, "body_site_ptr and body_edge_ptr must start at 0 (body 0 has no rows) and end at their arrays' lengths");
+            for (int b = 1; b < nb; b++)
+                if (sitePtr[b + 1] <= sitePtr[b])
+                    throw Fail(FractureStatus.Data, "body " + b + " has no sites");
+            if (stress && !PtrOk(ints[10], 0, N))
+                throw Fail(FractureStatus.Data, "body_site_bonds_ptr must start at 0, never decrease and end at N");
+            if (cracks && !PtrOk(ints[14], 0, segments))
+                throw Fail(FractureStatus.Data, "body_crack_ptr must start at 0, never decrease and end at n");
+            for (int b = 1; b < nb; b++)
+                if (anchored != null && owner[b] < p && anchored[owner[b]] == 1)
+                    throw Fail(FractureStatus.Data, "an anchored fragment cannot be broken further (it has a body)");
+            long levelCount;
+            if (!info.TryGetValue("count", out value) || !Json.AsInteger(value, out levelCount) || levelCount != deepest)
+                throw Fail(FractureStatus.Header, "levels.count must be the deepest level, " + deepest);
+            var thresholdList = info.TryGetValue("thresholds", out value) ? value as List<object> : null;
+            var thresholds = new double[deepest];
+            if (thresholdList == null || thresholdList.Count != deepest)
+                throw Fail(FractureStatus.Header, "levels.thresholds must list " + deepest + " finite numbers >= 0, one per level");
+            for (int i = 0; i < deepest; i++)
+                if (!Json.AsNumber(thresholdList[i], out thresholds[i]) || !IsFinite(thresholds[i]) || thresholds[i] < 0)
+                    throw Fail(FractureStatus.Header, "levels.thresholds must list " + deepest + " finite numbers >= 0, one per level");
+            if (thresholds[0] != DefaultThreshold)
+                throw Fail(FractureStatus.Header, "levels.thresholds[0] must be default_threshold");
+            var radiusList = info.TryGetValue("impact_radii", out value) ? value as List<object> : null;
+            LevelCount = deepest;
+            lvParent = parent;
+            lvBodyFragment = owner;
+            lvChildPtr = child;
+            lvBodyOf = new int[pAll];
+            lvHolding = new int[pAll];
+            lvStateOffsets = new int[nb + 1];
+            childNames = new string[C];
+            for (int c = 0; c < C; c++)
+                childNames[c] = (string)nameList[c];
+            for (int g = 0; g < pAll; g++)
+                lvBodyOf[g] = -1;
+            for (int b = 1; b < nb; b++)
+            {
+                lvBodyOf[owner[b]] = b;
+                for (int g = child[b]; g < child[b + 1]; g++)
+                    lvHolding[g] = b;
+                lvStateOffsets[b] = Edges + edgePtr[b];
+            }
+            lvStateOffsets[nb] = Edges + (int)E;
+            var views = new FractureRuntime[nb];
+            views[0] = this;
+            for (int b = 1; b < nb; b++)
+            {
+                int bodyLevel = level[owner[b]] + 1;
+                double radius = ImpactRadius, r;
+                if (radiusList != null && radiusList.Count >= bodyLevel && Json.AsNumber(radiusList[bodyLevel - 1], out r))
+                    radius = r;
+                views[b] = MakeView(b, ints, floats, (int)K, C, stress, cracks, thresholds[bodyLevel - 1], radius, compact, h);
+            }
+            lvViews = views;
+        }
+
+        FractureRuntime MakeView(int b, int[][] ints, float[][] floats, int K, int C, bool stress, bool cracks, double threshold,
+                                 double radius, bool compact, Header h)
+        {
+            int p = Fragments, d = Dim;
+            int s0 = ints[3][b], s1 = ints[3][b + 1], g0 = ints[2][b] - p, g1 = ints[2][b + 1] - p, e0 = ints[7][b], e1 = ints[7][b + 1];
+            int sb = s1 - s0, cb = g1 - g0, eb = e1 - e0;
+            var arrays = new List<KeyValuePair<string, object>>(); // name -> (int[] or float[], shape)
+            var shapes = new List<long[]>();
+            Action<string, object, long[]> add = (name, values, shape) =>
+            {
+                arrays.Add(new KeyValuePair<string, object>(name, values));
+                shapes.Add(shape);
+            };
+            var W = new float[K * cb * d];
+            for (int k = 0; k < K; k++)
+                Array.Copy(floats[6], (k * C + g0) * d, W, k * cb * d, cb * d);
+            add("sites", Slice(floats[4], 3 * s0, 3 * sb), new long[] { sb, 3 });
+            add("B", Slice(floats[5], s0 * K * d, sb * K * d), new long[] { sb, K, d });
+            add("W", W, new long[] { K, cb, d });
+            add("edges", Slice(ints[8], 2 * e0, 2 * eb), new long[] { eb, 2 });
+            add("edge_areas", Slice(floats[9], e0, eb), new long[] { eb });
+            var counts = new StringBuilder();
+            counts.Append("\"sites\":" + sb + ",\"modes\":" + K + ",\"fragments\":" + cb + ",\"edges\":" + eb);
+            if (stress)
+            {
+                int n0 = ints[10][s0], n1 = ints[10][s1];
+                var ptr = Slice(ints[10], s0, sb + 1);
+                for (int i = 0; i < ptr.Length; i++)
+                    ptr[i] -= n0;
+                add("site_bonds_ptr", ptr, new long[] { sb + 1 });
+                add("site_bonds", Slice(ints[11], n0, n1 - n0), new long[] { n1 - n0 });
+                add("site_bond_gain", Slice(floats[12], 3 * n0, 3 * (n1 - n0)), new long[] { n1 - n0, 3 });
+                add("bond_strength", Slice(floats[13], e0, eb), new long[] { eb });
+                counts.Append(",\"site_bonds\":" + (n1 - n0));
+            }
+            if (cracks)
+            {
+                int c0 = ints[14][e0], c1 = ints[14][e1];
+                var ptr = Slice(ints[14], e0, eb + 1);
+                for (int i = 0; i < ptr.Length; i++)
+                    ptr[i] -= c0;
+                add("crack_ptr", ptr, new long[] { eb + 1 });
+                add("crack_segments", Slice(floats[15], 6 * c0, 6 * (c1 - c0)), new long[] { c1 - c0, 2, 3 });
+                counts.Append(",\"crack_segments\":" + (c1 - c0));
+            }
+            long size = 0;
+            var table = new StringBuilder();
+            var offsets = new long[arrays.Count];
+            for (int i = 0; i < arrays.Count; i++)
+            {
+                int length = arrays[i].Value is int[] ? ((int[])arrays[i].Value).Length : ((float[])arrays[i].Value).Length;
+                offsets[i] = size;
+                table.Append((i > 0 ? "," : "") + JsonString(arrays[i].Key) + ":{\"dtype\":\"" + (arrays[i].Value is int[] ? "int32" : "float32") +
+                             "\",\"byte_offset\":" + size + ",\"byte_length\":" + 4 * length + ",\"shape\":[" +
+                             string.Join(",", Array.ConvertAll(shapes[i], x => x.ToString(CultureInfo.InvariantCulture))) + "]}");
+                size += (4L * length + 15) / 16 * 16;
+            }
+            var bytes = new byte[size];
+            for (int i = 0; i < arrays.Count; i++)
+            {
+                var bits = new Bits32();
+                var asInts = arrays[i].Value as int[];
+                var asFloats = arrays[i].Value as float[];
+                int length = asInts != null ? asInts.Length : asFloats.Length;
+                for (int j = 0; j < length; j++)
+                {
+                    if (asInts != null)
+                        bits.Int = asInts[j];
+                    else
+                        bits.Float = asFloats[j];
+                    for (int c = 0; c < 4; c++)
+                        bytes[offsets[i] + 4 * j + c] = (byte)(bits.Int >> (8 * c));
+                }
+            }
+            var features = new List<string>();
+            if (stress)
+                features.Add("\"stress\"");
+            if (HasDamage)
+                features.Add("\"damage\"");
+            var names = new string[cb];
+            for (int c = 0; c < cb; c++)
+                names[c] = JsonString(childNames[g0 + c]);
+            string text = "{\"format\":\"fracture-modes-runtime\",\"version\":2,\"features\":[" + string.Join(",", features.ToArray()) +
+                          "],\"criterion\":\"" + Criterion + "\",\"dim\":" + d + ",\"counts\":{" + counts + "},\"fragment_names\":[" +
+                          string.Join(",", names) + "],\"transform\":[" + string.Join(",", Array.ConvertAll(transform, Number)) +
+                          "],\"default_threshold\":" + Number(threshold) + ",\"impact_radius\":" + Number(radius) +
+                          (HasDamage ? ",\"damage\":{\"crack_level\":" + Number(CrackLevel) + ",\"damage_rate\":" + Number(DamageRate) + "}" : "") +
+                          ",\"buffer\":{\"uri\":\"view.fracture.bin\",\"byte_length\":" + size + "},\"arrays\":{" + table + "}}";
+            try
+            {
+                return new FractureRuntime(Header.Parse(Encoding.UTF8.GetBytes(text), true), bytes, false, compact);
+            }
+            catch (FractureRuntimeException exception)
+            {
+                throw Fail(exception.Status, "body " + b + ": " + exception.Message);
+            }
+        }
+
+        static T[] Slice<T>(T[] source, int start, int length)
+        {
+            var out_ = new T[length];
+            Array.Copy(source, start, out_, 0, length);
+            return out_;
+        }
+
+        /// <summary>A fresh object state (section 14.4): every body's bond healths, all 1.</summary>
+        public double[] NewObjectState()
+        {
+            var state = new double[StateOffset(NumBodies)];
+            for (int i = 0; i < state.Length; i++)
+                state[i] = 1.0;
+            return state;
+        }
+
+        /// <summary>Ok when <paramref name="state"/> holds e + E healths in [0, 1]; else State.</summary>
+        public FractureStatus CheckObjectState(double[] state)
+        {
+            if (state == null)
+                return FractureStatus.Argument;
+            if (state.Length != StateOffset(NumBodies))
+                return FractureStatus.State;
+            foreach (double h in state)
+                if (!(h >= 0.0 && h <= 1.0))
+                    return FractureStatus.State;
+            return FractureStatus.Ok;
+        }
+
+        // Groups (smallest local index) of body b's children over bonds with health > 0 between two kept children.
+        int[] BodyGroups(double[] state, int b, bool[] keep)
+        {
+            FractureRuntime view = Body(b);
+            int offset = StateOffset(b);
+            var groups = (int[])view.identity.Clone();
+            for (int m = 0; m < view.Edges; m++)
+            {
+                int P = view.edges[2 * m], Q = view.edges[2 * m + 1];
+                if (state[offset + m] > 0 && (keep == null || (keep[P] && keep[Q])))
+                    Unite(groups, P, Q);
+            }
+            Label(groups, view.Fragments, groups);
+            return groups;
+        }
+
+        static int CountRoots(int[] groups)
+        {
+            int count = 0;
+            for (int j = 0; j < groups.Length; j++)
+                count += groups[j] == j ? 1 : 0;
+            return count;
+        }
+
+        /// <summary>Whether fragment g broke into its children (its body's unbroken bonds leave two or more groups).</summary>
+        public bool IsSplit(double[] state, int g)
+        {
+            int b = BodyOf(g);
+            return b >= 0 && CountRoots(BodyGroups(state, b, null)) >= 2;
+        }
+
+        bool Opened(double[] state, int g)
+        {
+            for (int a = Parent(g); a >= 0; a = Parent(a))
+                if (!IsSplit(state, a))
+                    return false;
+            return true;
+        }
+
+        /// <summary>Whether fragment g is shown: not split, every ancestor split.</summary>
+        public bool IsShown(double[] state, int g)
+        {
+            return g >= 0 && g < AllFragments && !IsSplit(state, g) && Opened(state, g);
+        }
+
+        bool[] ShownChildren(double[] state, int b)
+        {
+            int first = BodyFirst(b);
+            var keep = new bool[Body(b).Fragments];
+            for (int j = 0; j < keep.Length; j++)
+                keep[j] = !IsSplit(state, first + j);
+            return keep;
+        }
+
+        List<FracturePiece> PiecesOf(double[] state, int b, bool[] keep)
+        {
+            int[] groups = BodyGroups(state, b, keep);
+            int first = BodyFirst(b);
+            var pieces = new List<FracturePiece>();
+            var byRoot = new Dictionary<int, FracturePiece>();
+            for (int j = 0; j < groups.Length; j++) // by smallest member: a group's root comes first
+            {
+                if (!keep[j])
+                    continue;
+                FracturePiece piece;
+                if (!byRoot.TryGetValue(groups[j], out piece))
+                {
+                    byRoot[groups[j]] = piece = new FracturePiece(b);
+                    pieces.Add(piece);
+                }
+                piece.Fragments.Add(first + j);
+                if (b == 0 && anchored != null && anchored[j] == 1)
+                    piece.Anchored = true;
+            }
+            return pieces;
+        }
+
+        /// <summary>Every piece of the object (section 14.4): body by body, each by its first fragment.</summary>
+        public List<FracturePiece> ObjectPieces(double[] state)
+        {
+            if (CheckObjectState(state) != FractureStatus.Ok)
+                throw new ArgumentException("not an object state of this runtime file");
+            var pieces = new List<FracturePiece>();
+            for (int b = 0; b < NumBodies; b++)
+                if (b == 0 || (IsSplit(state, BodyFragment(b)) && Opened(state, BodyFragment(b))))
+                    pieces.AddRange(PiecesOf(state, b, ShownChildren(state, b)));
+            return pieces;
+        }
+
+        /// <summary>
+        /// Hit the piece holding the shown fragment <paramref name="struck"/> (docs/FORMAT.md section 14.5): point and
+        /// impulse in the asset's model space, threshold null for each body's default. <paramref name="state"/> (an
+        /// object state) is updated in place and left as it was when the hit is refused (Input, State, Fragment).
+        /// </summary>
+        public FractureStatus HitPiece(double[] state, int struck, double px, double py, double pz, double nx, double ny,
+                                       double nz, double? threshold, out FracturePieceHit hit)
+        {
+            hit = null;
+            FractureStatus status = CheckObjectState(state);
+            if (status != FractureStatus.Ok)
+                return status;
+            if (!IsShown(state, struck))
+                return FractureStatus.Fragment;
+            int b = BodyHolding(struck), first = BodyFirst(b), offset = StateOffset(b);
+            FractureRuntime view = Body(b);
+            bool[] keep = ShownChildren(state, b);
+            int[] before = BodyGroups(state, b, keep);
+            var inside = new bool[keep.Length];
+            for (int j = 0; j < keep.Length; j++)
+                inside[j] = keep[j] && before[j] == before[struck - first];
+            var trial = new double[view.Edges];
+            Array.Copy(state, offset, trial, 0, view.Edges);
+            var result = new FractureImpact(view);
+            status = view.Hit(trial, px, py, pz, nx, ny, nz, threshold ?? view.DefaultThreshold, result);
+            if (status != FractureStatus.Ok) // inputs refused before anything changed
+                return status;
+            result.NumBroken = result.NumCracked = 0;
+            for (int m = 0; m < view.Edges; m++)
+            {
+                bool within = inside[view.edges[2 * m]] && inside[view.edges[2 * m + 1]];
+                if (within)
+                    state[offset + m] = trial[m];
+                result.Broken[m] = state[offset + m] <= 0;
+                result.Cracked[m] = !result.Broken[m] && ((result.Cracked[m] && within) || state[offset + m] < 1);
+                result.NumBroken += result.Broken[m] ? 1 : 0;
+                result.NumCracked += result.Cracked[m] ? 1 : 0;
+            }
+            int[] groups = BodyGroups(state, b, null);
+            Array.Copy(groups, result.Groups, groups.Length);
+            result.NumGroups = CountRoots(groups);
+            view.AnchoredGroups(result);
+            int childBody = BodyOf(struck);
+            FractureImpact childResult = null;
+            bool split = false;
+            if (childBody >= 0)
+            {
+                FractureRuntime childView = Body(childBody);
+                var health = new double[childView.Edges];
+                int childOffset = StateOffset(childBody);
+                Array.Copy(state, childOffset, health, 0, health.Length);
+                childResult = new FractureImpact(childView);
+                childView.Hit(health, px, py, pz, nx, ny, nz, threshold ?? childView.DefaultThreshold, childResult);
+                Array.Copy(health, 0, state, childOffset, health.Length);
+                split = childResult.NumGroups >= 2;
+            }
+            if (split)
+                inside[struck - first] = false;
+            List<FracturePiece> pieces = PiecesOf(state, b, inside);
+            if (split)
+                pieces.AddRange(PiecesOf(state, childBody, ShownChildren(state, childBody)));
+            hit = new FracturePieceHit(struck, b, result, childBody, childResult, split, pieces);
+            return FractureStatus.Ok;
+        }
+
         internal sealed class ArrayEntry
         {
             public string DType;
@@ -1226,6 +1760,8 @@ namespace Fracture
             public bool Stress; // version 2 with feature "stress" and criterion "stress"
             public bool Anchors, Damage; // version 2 with feature "anchors", "damage"
             public bool Cracks; // version 2 whose table lists crack_ptr or crack_segments
+            public bool Levels, IsView; // feature "levels"; a body's view made by this reader (no features needed)
+            public Dictionary<string, object> Top; // the whole header (the levels keys are read by ReadLevels)
             public object DamageObject; // the header's "damage" value (checked by CheckDamage)
             public double CrackLevel, DamageRate;
             public long Dim, ByteLength, Crc, SiteBondsCount = -1, CrackSegmentsCount = -1;
@@ -1236,7 +1772,7 @@ namespace Fracture
             public readonly double[] Transform = new double[16];
             public readonly ArrayEntry[] Arrays = new ArrayEntry[12];
 
-            public static Header Parse(byte[] bytes)
+            public static Header Parse(byte[] bytes, bool isView = false)
             {
                 string text;
                 try
@@ -1260,7 +1796,10 @@ namespace Fracture
                     throw Fail(FractureStatus.Format, "runtime file version is not supported (this reader knows 1.." +
                                                       FormatVersion + ")");
                 var h = new Header();
-                List<object> features = CheckFeatures(top, version);
+                List<object> features = CheckFeatures(top, version, isView);
+                h.Levels = features.Contains("levels");
+                h.IsView = isView;
+                h.Top = top;
                 h.Stress = features.Contains("stress");
                 h.Anchors = features.Contains("anchors");
                 h.Damage = features.Contains("damage");
@@ -1273,7 +1812,7 @@ namespace Fracture
             // Section 11: version 2 lists the features it needs (refused by name when unknown) and a criterion;
             // version 1 ignores both keys. Like the reference reader, a file that lists "stress" must use
             // criterion "stress" (the stress arrays come with the criterion). Returns the features.
-            static List<object> CheckFeatures(Dictionary<string, object> top, long version)
+            static List<object> CheckFeatures(Dictionary<string, object> top, long version, bool isView)
             {
                 if (version < 2)
                     return new List<object>();
@@ -1281,7 +1820,7 @@ namespace Fracture
                 var features = top.TryGetValue("features", out value) ? value as List<object> : new List<object>();
                 if (features == null || features.Exists(f => !(f is string)))
                     throw Fail(FractureStatus.Header, "runtime header 'features' must be a list of strings");
-                if (features.Count == 0)
+                if (features.Count == 0 && !isView)
                     throw Fail(FractureStatus.Format, "runtime file version " + version +
                                                       " lists no features; a file without any is version 1");
                 foreach (object feature in features)
@@ -1383,7 +1922,7 @@ namespace Fracture
                 return i < 5 || (i < 9 ? Stress : i == 9 ? Anchors : Cracks);
             }
 
-            static ArrayEntry ReadEntry(Dictionary<string, object> entry)
+            internal static ArrayEntry ReadEntry(Dictionary<string, object> entry)
             {
                 var a = new ArrayEntry();
                 object value;
@@ -1417,6 +1956,26 @@ namespace Fracture
             {
                 if (Uri == null || Uri.Length == 0 || Uri == "." || Uri == ".." || Uri.IndexOfAny(new[] { '/', '\\', ':', '\0' }) >= 0)
                     throw Fail(FractureStatus.Header, "buffer.uri must be a plain file name next to the header");
+            }
+
+            // One array entry: present, its dtype and rank, byte_length = 4 * product(shape), inside the file.
+            internal static void CheckEntry(ArrayEntry a, string name, bool isInt, int rank, long binarySize)
+            {
+                if (a == null || a.DType == null || a.Shape == null)
+                    throw Fail(FractureStatus.Header, "array '" + name + "' entry is missing or malformed");
+                if (a.DType != (isInt ? "int32" : "float32"))
+                    throw Fail(FractureStatus.Header, "array '" + name + "' has the wrong dtype");
+                if (a.Shape.Length != rank)
+                    throw Fail(FractureStatus.Size, "array '" + name + "' has " + a.Shape.Length + " dimensions, expected " + rank);
+                if (!a.ShapeOk)
+                    throw Fail(FractureStatus.Size, "array '" + name + "' has a negative or non-integer size");
+                long count = 1;
+                foreach (long n in a.Shape)
+                    count = n != 0 && count > (1L << 40) / n ? (1L << 40) + 1 : count * n;
+                if (a.Length < 0 || count * 4 != a.Length)
+                    throw Fail(FractureStatus.Size, "array '" + name + "': shape and byte_length do not agree");
+                if (a.Offset < 0 || a.Offset % 16 != 0 || a.Offset > binarySize || a.Length > binarySize - a.Offset)
+                    throw Fail(FractureStatus.Size, "array '" + name + "' lies outside the binary file or is not 16-byte aligned");
             }
 
             public void CheckArrays(long binarySize)

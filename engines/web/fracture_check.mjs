@@ -21,6 +21,10 @@
 //   health <e healths as 16 hex digits>     (after a refused hit too: the state it left)
 // On a file with feature "anchors" or "damage", and in a sequence, every "ok" line is followed by
 //   more c <cracked bond indices...> n <anchored flag of each fragment...>
+// Levels (docs/FORMAT.md section 14), the lines of tests/levels_support.py: "body <b> <impact>" (a stateless
+// impact on body b's view), "object new" / "object <health bits...>" (the object state), "hit <struck> <impact>"
+// (hitPiece, answered "piece ok ..." or "piece error ... h ...", with every piece after the hit); --children
+// prints "children <hex of each child name...>".
 // --bench=ROUNDS times every impact ROUNDS times (process.hrtime around each project call with
 // { displacement: false }, after one untimed round) and prints "median_ns <x> p99_ns <x> calls <n>".
 
@@ -84,14 +88,53 @@ function answer(runtime, line, state, structured) {
   return lines;
 }
 
+// A "hit" line: hitPiece on the object state, answered with every piece of the object after it.
+function pieceAnswer(runtime, tokens, object) {
+  const health = () => ['h', ...Array.from(object, toBits)].join(' ');
+  let hit;
+  try {
+    if (tokens.length !== 9) throw new Error(`expected 9 tokens, got ${tokens.length}`);
+    const values = tokens.slice(2, 8).map(fromBits);
+    const threshold = tokens[8] === '-' ? undefined : fromBits(tokens[8]);
+    hit = runtime.hitPiece(object, Number(tokens[1]), values.slice(0, 3), values.slice(3, 6), threshold);
+  } catch (err) {
+    return `piece error ${err.message.replace(/\s+/g, '_')} ${health()}`;
+  }
+  const pieces = runtime.objectPieces(object);
+  return ['piece ok', hit.body, hit.result.site, hit.childBody, hit.childResult ? hit.childResult.site : -1, hit.split ? 1 : 0,
+    'b', ...indices(hit.result.broken), 'c', ...(hit.childResult ? indices(hit.childResult.broken) : []),
+    'p', ...pieces.map((piece) => piece.fragments.join(',')), 'y', ...pieces.map((piece) => (piece.anchored ? 1 : 0)),
+    health()].join(' ');
+}
+
 // Every input line's answers; "state" lines switch to hits on a damage state.
 function answerAll(runtime, input) {
   const structured = runtime.anchored !== null || runtime.damage !== null;
   const out = [];
   let state = null;
+  let object = runtime.newObjectState();
   for (const line of input.split('\n')) {
     const tokens = line.trim().split(/\s+/).filter(Boolean);
     if (!tokens.length) continue;
+    if (tokens[0] === 'object') {
+      try {
+        const next = tokens[1] === 'new' ? runtime.newObjectState() : Float64Array.from(tokens.slice(1), fromBits);
+        runtime.checkObjectState(next);
+        object = next;
+      } catch (err) {
+        out.push(`object-error ${err.message}`);
+      }
+      continue;
+    }
+    if (tokens[0] === 'hit') {
+      out.push(pieceAnswer(runtime, tokens, object));
+      continue;
+    }
+    if (tokens[0] === 'body') {
+      const body = runtime.body(Number(tokens[1]));
+      out.push(...answer(body, tokens.slice(2).join(' '), null, body.anchored !== null || body.damage !== null));
+      continue;
+    }
     if (tokens[0] === 'state') {
       try {
         state = tokens[1] === '-' ? runtime.newState() : Float64Array.from(tokens.slice(1), fromBits);
@@ -151,6 +194,11 @@ function main(argv) {
   }
   const out = [];
   if (flags.includes('--names')) out.push(['names', ...runtime.fragmentNames.map(hexName)].join(' '));
+  if (flags.includes('--children')) {
+    const names = [];
+    for (let g = runtime.numFragments; g < runtime.numAllFragments; g++) names.push(hexName(runtime.anyFragmentName(g)));
+    out.push(['children', ...names].join(' '));
+  }
   out.push(...answerAll(runtime, readFileSync(0, 'utf-8')));
   process.stdout.write(out.map((l) => `${l}\n`).join(''));
   return 0;

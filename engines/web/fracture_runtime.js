@@ -29,7 +29,7 @@
 export const FORMAT_NAME = 'fracture-modes-runtime';
 export const FORMAT_VERSION = 2;  // the newest version this reader reads
 /** The version-2 features this reader implements (docs/FORMAT.md sections 11 and 12). */
-export const KNOWN_FEATURES = ['anchors', 'damage', 'stress'];
+export const KNOWN_FEATURES = ['anchors', 'damage', 'levels', 'stress'];
 
 // name -> [dtype, number of dimensions]; also the order of the arrays in the binary file.
 const ARRAY_LAYOUT = [
@@ -52,6 +52,9 @@ const ANCHOR_LAYOUT = [['anchored', 'int32', 1]];
 const CRACK_LAYOUT = [['crack_ptr', 'int32', 1], ['crack_segments', 'float32', 3]];
 
 /** A runtime file that is malformed, truncated, of another format or inconsistent. */
+// Marks a body's view (docs/FORMAT.md section 14.3) that parseRuntime makes itself: version 2 without features.
+const VIEW = Symbol('fracture body view');
+
 export class RuntimeFileError extends Error {
   constructor(message) {
     super(message);
@@ -195,7 +198,7 @@ function checkFeatures(h) {
   if (!Array.isArray(features) || !features.every((f) => typeof f === 'string')) {
     fail("runtime header 'features' must be a list of strings");
   }
-  if (features.length === 0) fail(`runtime file version ${h.version} lists no features; a file without any is version 1`);
+  if (features.length === 0 && !h[VIEW]) fail(`runtime file version ${h.version} lists no features; a file without any is version 1`);
   for (const name of features) {
     if (!KNOWN_FEATURES.includes(name)) fail(`runtime file needs feature '${name}', which this reader does not implement`);
   }
@@ -282,6 +285,7 @@ function readArray(name, dtype, ndim, entry, view, shapes) {
  */
 export function parseRuntime(header, binary, options = {}) {
   const h = asHeader(header);
+  if (options[VIEW]) h[VIEW] = true;
   checkHeader(h);
   const bytes = asBytes(binary);
   if (bytes.byteLength !== h.buffer.byte_length) {
@@ -305,6 +309,7 @@ export function parseRuntime(header, binary, options = {}) {
   }
   readStructure(h, arrays, view, shapes);
   const runtime = new FractureRuntime(h, arrays);
+  if (featuresOf(h).includes('levels')) runtime._readLevels(h, view, options);
   // Not with "damage": every hit then updates a state from each bond's measure, which the table does not keep.
   if (options.jumpTable && runtime.criterion === 'modes' && runtime.dim === 1 && !runtime.damage && runtime.numEdges > 0 &&
       runtime.numEdges <= 0xffff && runtime.numFragments <= 0x7fff) runtime._buildJumpTable();
@@ -895,3 +900,320 @@ function countGroups(groups) {
   for (let j = 0; j < groups.length; j++) if (groups[j] === j) count++;
   return count;
 }
+
+// ------------------------------------------------------------------ levels (docs/FORMAT.md section 14)
+//
+// A body is a set of fragments (its children) with its own impact data: body 0 is this runtime (the
+// p level-1 fragments), body b >= 1 breaks fragment bodyFragment[b] into fragments childPtr[b] ..
+// childPtr[b+1]-1 (global indices over every level). body(b) is body b's view, a FractureRuntime of its
+// own (parseRuntime checks it as a file), on which project() and hit() run in local indices. An object
+// state is one Float64Array of every body's bond healths; hitPiece() hits the piece holding a shown
+// fragment (section 14.5) and objectPieces() lists the rigid bodies a game shows (section 14.4).
+
+const LEVEL_ARRAYS = [['parent', 'int32', 1], ['body_fragment', 'int32', 1], ['body_child_ptr', 'int32', 1],
+  ['body_site_ptr', 'int32', 1], ['body_sites', 'float32', 2], ['body_B', 'float32', 3], ['body_W', 'float32', 3],
+  ['body_edge_ptr', 'int32', 1], ['body_edges', 'int32', 2], ['body_edge_areas', 'float32', 1]];
+const LEVEL_STRESS = [['body_site_bonds_ptr', 'int32', 1], ['body_site_bonds', 'int32', 1],
+  ['body_site_bond_gain', 'float32', 2], ['body_bond_strength', 'float32', 1]];
+const LEVEL_CRACKS = [['body_crack_ptr', 'int32', 1], ['body_crack_segments', 'float32', 3]];
+
+function ptrOk(ptr, first, end) {
+  if (ptr[0] !== first || ptr[ptr.length - 1] !== end) return false;
+  for (let i = 1; i < ptr.length; i++) if (ptr[i] < ptr[i - 1]) return false;
+  return true;
+}
+
+// A body's view as a header object and binary bytes (arrays 16-byte aligned), for parseRuntime.
+function viewFile(header, arrays) {
+  let size = 0;
+  const table = {};
+  for (const [name, dtype, shape] of arrays) {
+    const length = 4 * shape.reduce((a, n) => a * n, 1);
+    table[name] = { dtype, shape, byte_offset: size, byte_length: length };
+    size += Math.ceil(length / 16) * 16;
+  }
+  const bytes = new Uint8Array(size);
+  const out = new DataView(bytes.buffer);
+  for (const [name, dtype, , values] of arrays) {
+    const at = table[name].byte_offset;
+    for (let i = 0; i < values.length; i++) {
+      if (dtype === 'int32') out.setInt32(at + 4 * i, values[i], true);
+      else out.setFloat32(at + 4 * i, values[i], true);
+    }
+  }
+  return [{ ...header, buffer: { uri: 'view.fracture.bin', byte_length: size }, arrays: table }, bytes];
+}
+
+Object.assign(FractureRuntime.prototype, {
+  _readLevels(h, view, options) {
+    const c = h.counts;
+    const stress = this.criterion === 'stress';
+    const cracks = LEVEL_CRACKS.some(([name]) => h.arrays[name] !== undefined);
+    const layout = [...LEVEL_ARRAYS, ...(stress ? LEVEL_STRESS : []), ...(cracks ? LEVEL_CRACKS : [])];
+    const a = {};
+    for (const [name, dtype, ndim] of layout) {
+      const entry = h.arrays[name];
+      const shapes = { [name]: entry && Array.isArray(entry.shape) ? entry.shape : [] };
+      a[name] = readArray(name, dtype, ndim, entry, view, shapes);
+      a[name].shape = entry.shape;
+    }
+    const p = this.numFragments;
+    const d = this.dim;
+    const pAll = a.parent.length;
+    const nb = a.body_fragment.length;
+    const S = a.body_sites.shape[0];
+    const K = a.body_B.shape[1];
+    const E = a.body_edges.shape[0];
+    const C = pAll - p;
+    if (c.bodies !== nb || c.all_fragments !== pAll || c.body_sites !== S || c.body_modes !== K || c.body_edges !== E) {
+      fail('header counts of the levels arrays do not match the arrays');
+    }
+    if (pAll <= p || nb < 2) fail('a file with levels has more fragments than level 1 and at least two bodies');
+    const info = h.levels;
+    if (!info || typeof info !== 'object' || Array.isArray(info)) fail("the feature 'levels' needs a header object 'levels'");
+    const names = h.child_names;
+    if (!Array.isArray(names) || names.length !== C || !names.every((n) => typeof n === 'string')) {
+      fail(`child_names must be ${C} strings`);
+    }
+    const same = (name, shape) => a[name].shape.join(',') === shape.join(',');
+    if (!same('body_child_ptr', [nb + 1]) || !same('body_site_ptr', [nb + 1]) || !same('body_edge_ptr', [nb + 1]) ||
+        !same('body_sites', [S, 3]) || K < 1 || !same('body_B', [S, K, d]) || !same('body_W', [K, C, d]) ||
+        !same('body_edges', [E, 2]) || !same('body_edge_areas', [E])) fail('levels array shapes do not agree with each other');
+    const N = stress ? a.body_site_bonds.length : 0;
+    if (stress && (!same('body_site_bonds_ptr', [S + 1]) || !same('body_site_bond_gain', [N, 3]) ||
+        !same('body_bond_strength', [E]) || c.body_site_bonds !== N)) fail('levels stress arrays do not agree');
+    const n = cracks ? a.body_crack_segments.shape[0] : 0;
+    if (cracks && (!same('body_crack_ptr', [E + 1]) || !same('body_crack_segments', [n, 2, 3]) ||
+        c.body_crack_segments !== n)) fail('levels crack arrays do not agree');
+    const { parent, body_fragment: owner, body_child_ptr: child, body_site_ptr: sitePtr, body_edge_ptr: edgePtr } = a;
+    const level = new Int32Array(pAll);
+    let deepest = 1;
+    for (let g = 0; g < pAll; g++) {
+      if (g < p ? parent[g] !== -1 : !(parent[g] >= 0 && parent[g] < g)) {
+        fail('parent must be -1 for the level-1 fragments and a smaller fragment index for every other');
+      }
+      level[g] = parent[g] < 0 ? 1 : level[parent[g]] + 1;
+      deepest = Math.max(deepest, level[g]);
+    }
+    let ok = owner[0] === -1 && owner[1] >= 0 && owner[nb - 1] < pAll;
+    for (let b = 2; ok && b < nb; b++) ok = owner[b] > owner[b - 1];
+    if (!ok) fail('body_fragment must be -1 for body 0, then fragment indices strictly increasing');
+    if (!ptrOk(child, 0, pAll) || child[1] !== p) fail(`body_child_ptr must start at 0, then ${p}, and end at ${pAll}`);
+    for (let b = 0; b < nb; b++) if (child[b + 1] - child[b] < 2) fail(`every body must have at least 2 children (body ${b})`);
+    for (let b = 1; b < nb; b++) {
+      for (let g = child[b]; g < child[b + 1]; g++) {
+        if (parent[g] !== owner[b]) fail('parent of every child must be the fragment of the body that holds it');
+      }
+    }
+    if (!ptrOk(sitePtr, 0, S) || !ptrOk(edgePtr, 0, E) || sitePtr[1] !== 0 || edgePtr[1] !== 0) {
+      fail('body_site_ptr and body_edge_ptr must start at 0 (body 0 has no rows) and end at their arrays\' lengths');
+    }
+    for (let b = 1; b < nb; b++) if (sitePtr[b + 1] <= sitePtr[b]) fail(`body ${b} has no sites`);
+    if (stress && !ptrOk(a.body_site_bonds_ptr, 0, N)) fail('body_site_bonds_ptr must start at 0, never decrease and end at N');
+    if (cracks && !ptrOk(a.body_crack_ptr, 0, n)) fail('body_crack_ptr must start at 0, never decrease and end at n');
+    for (let b = 1; b < nb; b++) {
+      if (this.anchored && owner[b] < p && this.anchored[owner[b]] === 1) fail('an anchored fragment cannot be broken further');
+    }
+    if (!Number.isInteger(info.count) || info.count !== deepest) fail(`levels.count must be the deepest level, ${deepest}`);
+    const thresholds = info.thresholds;
+    if (!Array.isArray(thresholds) || thresholds.length !== deepest ||
+        !thresholds.every((t) => typeof t === 'number' && Number.isFinite(t) && t >= 0)) {
+      fail(`levels.thresholds must list ${deepest} finite numbers >= 0, one per level`);
+    }
+    if (thresholds[0] !== this.defaultThreshold) fail('levels.thresholds[0] must be default_threshold');
+    const radii = Array.isArray(info.impact_radii) ? info.impact_radii : [];
+    this.levels = { count: deepest, parent, level, bodyFragment: owner, childPtr: child, numAllFragments: pAll,
+      bodyOf: new Int32Array(pAll).fill(-1), holding: new Int32Array(pAll), stateOffsets: new Int32Array(nb + 1),
+      views: [this], childNames: names.slice() };
+    const lv = this.levels;
+    for (let b = 1; b < nb; b++) {
+      lv.bodyOf[owner[b]] = b;
+      for (let g = child[b]; g < child[b + 1]; g++) lv.holding[g] = b;
+      lv.stateOffsets[b] = this.numEdges + edgePtr[b];
+    }
+    lv.stateOffsets[nb] = this.numEdges + E;
+    const features = [...(stress ? ['stress'] : []), ...(this.damage ? ['damage'] : [])];
+    for (let b = 1; b < nb; b++) {
+      const [s0, s1, g0, g1, e0, e1] = [sitePtr[b], sitePtr[b + 1], child[b] - p, child[b + 1] - p, edgePtr[b], edgePtr[b + 1]];
+      const [sb, cb, eb] = [s1 - s0, g1 - g0, e1 - e0];
+      const bodyLevel = level[owner[b]] + 1;
+      const W = new Float64Array(K * cb * d);
+      for (let k = 0; k < K; k++) W.set(a.body_W.subarray((k * C + g0) * d, (k * C + g1) * d), k * cb * d);
+      const arrays = [['sites', 'float32', [sb, 3], a.body_sites.subarray(3 * s0, 3 * s1)],
+        ['B', 'float32', [sb, K, d], a.body_B.subarray(s0 * K * d, s1 * K * d)], ['W', 'float32', [K, cb, d], W],
+        ['edges', 'int32', [eb, 2], a.body_edges.subarray(2 * e0, 2 * e1)],
+        ['edge_areas', 'float32', [eb], a.body_edge_areas.subarray(e0, e1)]];
+      const counts = { sites: sb, modes: K, fragments: cb, edges: eb };
+      if (stress) {
+        const ptr = a.body_site_bonds_ptr.subarray(s0, s1 + 1);
+        const [n0, n1] = [ptr[0], ptr[ptr.length - 1]];
+        counts.site_bonds = n1 - n0;
+        arrays.push(['site_bonds_ptr', 'int32', [sb + 1], ptr.map((x) => x - n0)],
+          ['site_bonds', 'int32', [n1 - n0], a.body_site_bonds.subarray(n0, n1)],
+          ['site_bond_gain', 'float32', [n1 - n0, 3], a.body_site_bond_gain.subarray(3 * n0, 3 * n1)],
+          ['bond_strength', 'float32', [eb], a.body_bond_strength.subarray(e0, e1)]);
+      }
+      if (cracks) {
+        const ptr = a.body_crack_ptr.subarray(e0, e1 + 1);
+        const [c0, c1] = [ptr[0], ptr[ptr.length - 1]];
+        counts.crack_segments = c1 - c0;
+        arrays.push(['crack_ptr', 'int32', [eb + 1], ptr.map((x) => x - c0)],
+          ['crack_segments', 'float32', [c1 - c0, 2, 3], a.body_crack_segments.subarray(6 * c0, 6 * c1)]);
+      }
+      const [viewHeader, bytes] = viewFile({ format: FORMAT_NAME, version: 2, features, criterion: this.criterion,
+        dim: d, counts, fragment_names: names.slice(g0, g1), transform: this.transform,
+        default_threshold: thresholds[bodyLevel - 1],
+        impact_radius: Number.isFinite(radii[bodyLevel - 1]) ? radii[bodyLevel - 1] : this.impactRadius,
+        damage: h.damage }, arrays);
+      try {
+        lv.views.push(parseRuntime(viewHeader, bytes, { checkCrc: false, jumpTable: options.jumpTable, [VIEW]: true }));
+      } catch (err) {
+        fail(`body ${b}: ${err.message}`);
+      }
+    }
+  },
+
+  /** Body b's view (body 0: this runtime). */
+  body(b) { return this.levels ? this.levels.views[b] : b === 0 ? this : undefined; },
+  /** The first child (global) of body b; b = numBodies gives p_all. */
+  bodyFirst(b) { return this.levels ? this.levels.childPtr[b] : b === 0 ? 0 : this.numFragments; },
+  /** The body breaking fragment g into its children, -1 for a leaf. */
+  bodyOf(g) { return this.levels ? this.levels.bodyOf[g] : -1; },
+  /** The body whose child fragment g is (0 at level 1). */
+  bodyHolding(g) { return this.levels ? this.levels.holding[g] : 0; },
+  /** Fragment g's parent, -1 at level 1. */
+  parentOf(g) { return this.levels ? this.levels.parent[g] : -1; },
+  /** The GLB node name of fragment g (any level). */
+  anyFragmentName(g) { return g < this.numFragments ? this.fragmentNames[g] : this.levels.childNames[g - this.numFragments]; },
+  _stateOffset(b) { return this.levels ? this.levels.stateOffsets[b] : b === 0 ? 0 : this.numEdges; },
+  _bodyHealth(state, b) { return state.subarray(this._stateOffset(b), this._stateOffset(b + 1)); },
+
+  /** A fresh object state (section 14.4): every body's bond healths, all 1. */
+  newObjectState() { return new Float64Array(this._stateOffset(this.numBodies)).fill(1); },
+
+  /** Throw unless state is an object state of this file: a Float64Array of e + E healths in [0, 1]. */
+  checkObjectState(state) {
+    const size = this._stateOffset(this.numBodies);
+    if (!(state instanceof Float64Array) || state.length !== size) {
+      throw new TypeError(`an object state must be a Float64Array of ${size} bond healths (every body's)`);
+    }
+    for (let i = 0; i < size; i++) if (!(state[i] >= 0 && state[i] <= 1)) throw new RangeError(`an object state holds healths in [0, 1]; entry ${i} has ${state[i]}`);
+  },
+
+  // Groups (smallest local index) of body b's children over bonds with health > 0 between two kept children.
+  _bodyGroups(state, b, keep = null) {
+    const view = this.body(b);
+    const health = this._bodyHealth(state, b);
+    const parent = new Int32Array(view.numFragments).map((_, j) => j);
+    for (let m = 0; m < view.numEdges; m++) {
+      const [P, Q] = [view.edges[2 * m], view.edges[2 * m + 1]];
+      if (health[m] > 0 && (keep === null || (keep[P] && keep[Q]))) {
+        const [x, y] = [root(parent, P), root(parent, Q)];
+        if (x !== y) parent[Math.max(x, y)] = Math.min(x, y);
+      }
+    }
+    for (let j = 0; j < parent.length; j++) parent[j] = root(parent, j);
+    return parent;
+  },
+
+  /** Whether fragment g broke into its children (its body's unbroken bonds leave two or more groups). */
+  isSplit(state, g) {
+    const b = this.bodyOf(g);
+    return b >= 0 && countGroups(this._bodyGroups(state, b)) >= 2;
+  },
+
+  /** Whether fragment g is shown: not split, every ancestor split. */
+  isShown(state, g) {
+    if (!(Number.isInteger(g) && g >= 0 && g < this.numAllFragments) || this.isSplit(state, g)) return false;
+    for (let a = this.parentOf(g); a >= 0; a = this.parentOf(a)) if (!this.isSplit(state, a)) return false;
+    return true;
+  },
+
+  // The pieces of body b's kept children: { body, fragments (global, ascending), anchored }.
+  _piecesOf(state, b, keep) {
+    const groups = this._bodyGroups(state, b, keep);
+    const first = this.bodyFirst(b);
+    const byRoot = new Map();
+    for (let j = 0; j < groups.length; j++) {
+      if (!keep[j]) continue;
+      if (!byRoot.has(groups[j])) byRoot.set(groups[j], { body: b, fragments: [], anchored: false });
+      const piece = byRoot.get(groups[j]);
+      piece.fragments.push(first + j);
+      if (b === 0 && this.anchored && this.anchored[j] === 1) piece.anchored = true;
+    }
+    return [...byRoot.values()];  // insertion order: by smallest member
+  },
+
+  /** Every piece of the object (section 14.4): body by body, each by its first fragment. */
+  objectPieces(state) {
+    this.checkObjectState(state);
+    const out = [];
+    for (let b = 0; b < this.numBodies; b++) {
+      const first = this.bodyFirst(b);
+      const count = this.body(b).numFragments;
+      if (b > 0 && !(this.isSplit(state, this.levels.bodyFragment[b]) && this._opened(state, this.levels.bodyFragment[b]))) continue;
+      const keep = new Uint8Array(count).map((_, j) => (this.isSplit(state, first + j) ? 0 : 1));
+      out.push(...this._piecesOf(state, b, keep));
+    }
+    return out;
+  },
+
+  // Whether every ancestor of g is split.
+  _opened(state, g) {
+    for (let a = this.parentOf(g); a >= 0; a = this.parentOf(a)) if (!this.isSplit(state, a)) return false;
+    return true;
+  },
+
+  /**
+   * Hit the piece holding the shown fragment `struck` (docs/FORMAT.md section 14.5); `state` (an object
+   * state) is updated in place, and left as it was when the hit is refused (invalid inputs, state, or a
+   * fragment that is not shown). Point and impulse in the asset's model space; threshold undefined: each
+   * body's default. Returns { body, result (body's answer over all its children, local indices),
+   * childBody (-1: none), childResult, split, pieces (what struck's piece became) }.
+   */
+  hitPiece(state, struck, point, impulse, threshold) {
+    this.checkObjectState(state);
+    if (!this.isShown(state, struck)) throw new RangeError(`fragment ${struck} is not shown (split, or inside an unbroken parent)`);
+    const b = this.bodyHolding(struck);
+    const view = this.body(b);
+    const first = this.bodyFirst(b);
+    const keep = new Uint8Array(view.numFragments).map((_, j) => (this.isSplit(state, first + j) ? 0 : 1));
+    const before = this._bodyGroups(state, b, keep);
+    const inside = keep.map((k, j) => (k && before[j] === before[struck - first] ? 1 : 0));
+    const health = this._bodyHealth(state, b);
+    const trial = Float64Array.from(health);
+    const hit = view.hit(trial, point, impulse, threshold);  // checks the inputs before anything changes
+    const broken = new Uint8Array(view.numEdges);
+    const cracked = new Uint8Array(view.numEdges);
+    for (let m = 0; m < view.numEdges; m++) {
+      const within = inside[view.edges[2 * m]] && inside[view.edges[2 * m + 1]];
+      if (within) health[m] = trial[m];
+      broken[m] = health[m] <= 0 ? 1 : 0;
+      cracked[m] = !broken[m] && ((hit.cracked[m] && within) || health[m] < 1) ? 1 : 0;
+    }
+    const groups = this._bodyGroups(state, b);
+    const result = { ...hit, groups, numGroups: countGroups(groups), broken, cracked, anchored: view._anchoredOf(groups) };
+    const childBody = this.bodyOf(struck);
+    let childResult = null;
+    let split = false;
+    if (childBody >= 0) {
+      childResult = this.body(childBody).hit(this._bodyHealth(state, childBody), point, impulse, threshold);
+      split = childResult.numGroups >= 2;
+    }
+    if (split) inside[struck - first] = 0;
+    const pieces = this._piecesOf(state, b, inside);
+    if (split) {
+      const cfirst = this.bodyFirst(childBody);
+      const ckeep = new Uint8Array(this.body(childBody).numFragments).map((_, j) => (this.isSplit(state, cfirst + j) ? 0 : 1));
+      pieces.push(...this._piecesOf(state, childBody, ckeep));
+    }
+    return { struck, body: b, result, childBody, childResult, split, pieces };
+  },
+});
+
+// Getters (Object.assign would copy their values): bodies in the file (1 without levels), and fragments of
+// every level (p_all; p without levels).
+Object.defineProperties(FractureRuntime.prototype, {
+  numBodies: { get() { return this.levels ? this.levels.views.length : 1; } },
+  numAllFragments: { get() { return this.levels ? this.levels.numAllFragments : this.numFragments; } },
+});

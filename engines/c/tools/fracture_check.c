@@ -24,6 +24,15 @@
  *   describe f <features bits> c <crack_level bits> r <damage_rate bits> y <anchored flags, or -> n <segments
  *   of each bond...> s <coordinates of every bond's segments, as double bits...>
  *
+ * Levels (docs/FORMAT.md section 14): "body <b> <impact>" answers a stateless impact on body b's view
+ * (fr_project on fr_body, local indices, with its --structure line); "object new" or "object <health
+ * bits...>" sets an object state (else "object-error <status>"); "hit <struck> <impact>" is fr_hit_piece on it:
+ *   piece ok <body> <site> <child_body> <child_site> <split> b <broken...> c <child broken...>
+ *     p <fragments of each piece, comma-separated...> y <anchored flag of each piece...> h <health bits...>
+ *   piece error <status> h <health bits...>
+ * where the pieces are every piece of the object after the hit (fr_object_pieces). --children prints
+ * "children <hex of each child name...>" (fragments p .. p_all - 1) after the names.
+ *
  * --sweep loads every truncation of the header, many of the binary, and thousands of deterministic
  * mutations (31 in 32 with FR_LOAD_COMPACT), projecting a few hits on whatever loads: run under AddressSanitizer
  * and UBSan, it shows a damaged file is an error code and never a bad memory access.
@@ -198,6 +207,110 @@ static int answer(const fr_runtime *rt, char *line, double *health, int structur
     return 1;
 }
 
+static void print_health(const double *health, int32_t n)
+{
+    int32_t j;
+    printf(" h");
+    for (j = 0; j < n; j++)
+        print_bits(health[j]);
+    printf("\n");
+}
+
+/* A "hit" line: fr_hit_piece on the object state, then every piece (fr_object_pieces). */
+static int hit_piece(const fr_runtime *rt, char *line, double *health)
+{
+    static unsigned calls = 0;
+    const fr_levels_info lv = fr_get_levels_info(rt);
+    char *tokens[8];
+    int n = 0, j, i;
+    double point[3], impulse[3], threshold;
+    fr_piece_hit out;
+    fr_pieces all;
+    fr_status status;
+    void *workspace = malloc(fr_piece_workspace_size(rt) + 16);
+    int32_t *groups = (int32_t *)malloc(sizeof(int32_t) * (size_t)lv.max_children);
+    int32_t *child_groups = (int32_t *)malloc(sizeof(int32_t) * (size_t)lv.max_children);
+    uint8_t *broken = (uint8_t *)malloc((size_t)lv.max_bonds + 1), *child_broken = (uint8_t *)malloc((size_t)lv.max_bonds + 1);
+    int32_t *fragments = (int32_t *)malloc(sizeof(int32_t) * (size_t)lv.all_fragments * 4);
+    uint8_t *anchored = (uint8_t *)malloc((size_t)lv.all_fragments);
+    char *token;
+    for (token = strtok(line + 4, " \t\r\n"); token != NULL && n < 8; token = strtok(NULL, " \t\r\n"))
+        tokens[n++] = token;
+    if (n < 8 || workspace == NULL || groups == NULL || child_groups == NULL || broken == NULL || child_broken == NULL
+        || fragments == NULL || anchored == NULL) {
+        free(workspace), free(groups), free(child_groups), free(broken), free(child_broken), free(fragments), free(anchored);
+        return -1;
+    }
+    for (j = 0; j < 3; j++) {
+        point[j] = from_bits(tokens[1 + j]);
+        impulse[j] = from_bits(tokens[4 + j]);
+    }
+    threshold = strcmp(tokens[7], "-") == 0 ? 0.0 : from_bits(tokens[7]);
+    memset(&out, 0, sizeof out);
+    out.body.groups = groups;
+    out.body.broken = broken;
+    out.child.groups = child_groups;
+    out.child.broken = child_broken;
+    out.pieces.fragments = fragments;
+    out.pieces.offsets = fragments + lv.all_fragments;
+    status = fr_hit_piece(rt, health, (int32_t)atol(tokens[0]), point, impulse, strcmp(tokens[7], "-") == 0 ? NULL
+                          : &threshold, (calls++ % 2) ? workspace : NULL, &out); /* both scratch paths */
+    if (status != FR_OK) {
+        printf("piece error %s", fr_status_string(status));
+    } else {
+        const fr_runtime *body = fr_body(rt, out.body_index), *child = fr_body(rt, out.child_body);
+        printf("piece ok %d %d %d %d %d b", (int)out.body_index, (int)out.body.site, (int)out.child_body,
+               out.child_body >= 0 ? (int)out.child.site : -1, (int)out.split);
+        for (j = 0; j < fr_get_info(body).edges; j++)
+            if (broken[j])
+                printf(" %d", j);
+        printf(" c");
+        for (j = 0; child != NULL && j < fr_get_info(child).edges; j++)
+            if (child_broken[j])
+                printf(" %d", j);
+        memset(&all, 0, sizeof all);
+        all.fragments = fragments;
+        all.offsets = fragments + lv.all_fragments;
+        all.anchored = anchored;
+        printf(" p");
+        if (fr_object_pieces(rt, health, workspace, &all) == FR_OK) {
+            for (i = 0; i < all.count; i++)
+                for (j = all.offsets[i]; j < all.offsets[i + 1]; j++)
+                    printf("%s%d", j == all.offsets[i] ? " " : ",", (int)all.fragments[j]);
+            printf(" y");
+            for (i = 0; i < all.count; i++)
+                printf(" %d", (int)all.anchored[i]);
+        }
+    }
+    print_health(health, lv.state_size);
+    free(workspace), free(groups), free(child_groups), free(broken), free(child_broken), free(fragments), free(anchored);
+    return 1;
+}
+
+/* An "object" line: a fresh object state or one given as health bits (refused: "object-error", state kept). */
+static void object_state(const fr_runtime *rt, char *line, double *health)
+{
+    const int32_t size = fr_get_levels_info(rt).state_size;
+    double *values = (double *)malloc(sizeof(double) * (size_t)size + 8);
+    char *token = strtok(line + 6, " \t\r\n");
+    size_t n = 0;
+    if (values == NULL)
+        return;
+    if (token != NULL && strcmp(token, "new") == 0) {
+        fr_new_object_state(rt, health);
+        free(values);
+        return;
+    }
+    for (; token != NULL; token = strtok(NULL, " \t\r\n"), n++)
+        if (n < (size_t)size)
+            values[n] = from_bits(token);
+    if (fr_check_object_state(rt, values, n) == FR_OK)
+        memcpy(health, values, sizeof(double) * n);
+    else
+        printf("object-error %s\n", fr_status_string(FR_ERR_STATE));
+    free(values);
+}
+
 /* The --describe line: section 12's data through the accessors. */
 static void describe(const fr_runtime *rt)
 {
@@ -329,7 +442,8 @@ static int sweep(const unsigned char *h, size_t hn, const unsigned char *b, size
 int main(int argc, char **argv)
 {
     const char *paths[2] = {NULL, NULL};
-    int i, names = 0, do_sweep = 0, count = 0, structure = 0, stateful = 0, do_describe = 0;
+    int i, names = 0, do_sweep = 0, count = 0, structure = 0, stateful = 0, do_describe = 0, children = 0;
+    double *object;
     unsigned flags = 0;
     unsigned char *h, *b;
     size_t hn = 0, bn = 0;
@@ -344,6 +458,7 @@ int main(int argc, char **argv)
         else if (strcmp(argv[i], "--compact") == 0) flags |= FR_LOAD_COMPACT;
         else if (strcmp(argv[i], "--structure") == 0) structure = 1;
         else if (strcmp(argv[i], "--describe") == 0) do_describe = 1;
+        else if (strcmp(argv[i], "--children") == 0) children = 1;
         else if (count < 2) paths[count++] = argv[i];
     }
     if (count != 2) {
@@ -379,20 +494,49 @@ int main(int argc, char **argv)
         }
         printf("\n");
     }
+    if (children) {
+        printf("children");
+        for (i = fr_get_info(rt).fragments; i < fr_get_levels_info(rt).all_fragments; i++) {
+            const unsigned char *s = (const unsigned char *)fr_any_fragment_name(rt, i);
+            printf(" ");
+            if (*s == 0)
+                printf("-");
+            for (; *s; s++)
+                printf("%02x", *s);
+        }
+        printf("\n");
+    }
     if (do_describe)
         describe(rt);
+    object = (double *)malloc(sizeof(double) * (size_t)fr_get_levels_info(rt).state_size + 8);
+    fr_new_object_state(rt, object);
     health = (double *)malloc(sizeof(double) * (size_t)fr_get_info(rt).edges + 1);
     fr_new_state(rt, health); /* until a "start" line loads another */
     while (health != NULL && fgets(line, sizeof line, stdin) != NULL) {
         if (strncmp(line, "start", 5) == 0) {
             start_state(rt, line, health);
             stateful = 1;
+        } else if (strncmp(line, "object", 6) == 0 && object != NULL) {
+            object_state(rt, line, object);
+        } else if (strncmp(line, "hit ", 4) == 0 && object != NULL) {
+            if (hit_piece(rt, line, object) < 0) {
+                fprintf(stderr, "bad hit line\n");
+                return 64;
+            }
+        } else if (strncmp(line, "body ", 5) == 0) {
+            char *rest = line + 5;
+            const fr_runtime *body = fr_body(rt, (int32_t)strtol(rest, &rest, 10));
+            if (body == NULL || answer(body, rest, NULL, structure) < 0) {
+                fprintf(stderr, "bad body line\n");
+                return 64;
+            }
         } else if (answer(rt, line, stateful ? health : NULL, structure) < 0) {
             fprintf(stderr, "bad impact line\n");
             return 64;
         }
     }
     free(health);
+    free(object);
     fr_free(rt);
     free(h);
     free(b);

@@ -15,6 +15,8 @@
 // --describe prints section 12's data as the C driver does: "describe f <features bits: stress 1, anchors 2,
 // damage 4> c <CrackLevel bits> r <DamageRate bits> y <anchored flags, or -> n <segments of each bond> s
 // <coordinates of every bond's segments>".
+// Levels (docs/FORMAT.md section 14): the "body", "object" and "hit" lines and --children of
+// tests/levels_support.py (HitPiece, ObjectPieces).
 // --bench times every impact ROUNDS times (Stopwatch around each Project call, groups only) and
 // prints "median_ns <x> p99_ns <x> calls <n>", like fracture_bench.c.
 //
@@ -74,10 +76,15 @@ static class FractureCheck
         }
         if (Array.IndexOf(args, "--describe") >= 0)
             Describe(output, runtime);
+        if (Array.IndexOf(args, "--children") >= 0)
+        {
+            output.Append("children");
+            for (int g = runtime.Fragments; g < runtime.AllFragments; g++)
+                output.Append(' ').Append(Hex(runtime.AnyFragmentName(g)));
+            output.Append('\n');
+        }
         bool structure = Array.IndexOf(args, "--structure") >= 0;
-        var impact = new FractureImpact(runtime);
-        var groupsOnly = new FractureImpact(runtime) { ComputeDisplacement = false };
-        double[] health = null, copy = runtime.NewState();
+        double[] health = null, objectState = runtime.NewObjectState();
         string line;
         while ((line = Console.In.ReadLine()) != null)
         {
@@ -104,6 +111,42 @@ static class FractureCheck
                     output.Append("start-error ").Append(loaded).Append('\n');
                 continue;
             }
+            if (t[0] == "object") // levels (tests/levels_support.py): the object state of the next hits
+            {
+                double[] next = t.Length == 2 && t[1] == "new" ? runtime.NewObjectState() : new double[t.Length - 1];
+                for (int i = 1; i < t.Length && !(t.Length == 2 && t[1] == "new"); i++)
+                    next[i - 1] = FromBits(t[i]);
+                if (runtime.CheckObjectState(next) == FractureStatus.Ok)
+                    objectState = next;
+                else
+                    output.Append("object-error State\n");
+                continue;
+            }
+            if (t[0] == "hit")
+            {
+                HitPiece(runtime, t, objectState, output);
+                continue;
+            }
+            if (t[0] == "body")
+            {
+                var rest = new string[t.Length - 2];
+                Array.Copy(t, 2, rest, 0, rest.Length);
+                Answer(runtime.Body(int.Parse(t[1], CultureInfo.InvariantCulture)), rest, null, structure, output);
+                continue;
+            }
+            Answer(runtime, t, health, structure, output);
+        }
+        Console.Out.Write(output.ToString());
+        return 0;
+    }
+
+    // One impact line: Project, or Hit on `health` when a state was started.
+    static void Answer(FractureRuntime runtime, string[] t, double[] health, bool structure, StringBuilder output)
+    {
+        var impact = new FractureImpact(runtime);
+        var groupsOnly = new FractureImpact(runtime) { ComputeDisplacement = false };
+        double[] copy = runtime.NewState();
+        {
             double threshold = t[6] == "-" ? runtime.DefaultThreshold : FromBits(t[6]);
             double px = FromBits(t[0]), py = FromBits(t[1]), pz = FromBits(t[2]);
             double nx = FromBits(t[3]), ny = FromBits(t[4]), nz = FromBits(t[5]);
@@ -116,7 +159,7 @@ static class FractureCheck
                 output.Append("error ").Append(status).Append('\n');
                 if (structure)
                     AppendStructure(output, null, health);
-                continue;
+                return;
             }
             // The same hit asking for less (and on a copy of the state before it): the same answer and state.
             if (health != null)
@@ -130,7 +173,7 @@ static class FractureCheck
                 output.Append("error inconsistent\n");
                 if (structure)
                     AppendStructure(output, null, health);
-                continue;
+                return;
             }
             output.Append("ok ").Append(impact.Site).Append(' ').Append(impact.NumGroups).Append(" g");
             foreach (int g in impact.Groups)
@@ -149,13 +192,57 @@ static class FractureCheck
             if (structure)
                 AppendStructure(output, impact, health);
         }
-        Console.Out.Write(output.ToString());
-        return 0;
+    }
+
+    static string Hex(string name)
+    {
+        byte[] utf8 = Encoding.UTF8.GetBytes(name);
+        return utf8.Length == 0 ? "-" : BitConverter.ToString(utf8).Replace("-", "").ToLowerInvariant();
+    }
+
+    // A "hit" line (tests/levels_support.py): HitPiece on the object state, then every piece of the object.
+    static void HitPiece(FractureRuntime runtime, string[] t, double[] state, StringBuilder output)
+    {
+        FracturePieceHit hit;
+        double[] v = new double[6];
+        for (int i = 0; i < 6; i++)
+            v[i] = FromBits(t[2 + i]);
+        double? threshold = t[8] == "-" ? (double?)null : FromBits(t[8]);
+        FractureStatus status = runtime.HitPiece(state, int.Parse(t[1], CultureInfo.InvariantCulture), v[0], v[1], v[2], v[3],
+                                                 v[4], v[5], threshold, out hit);
+        if (status != FractureStatus.Ok)
+        {
+            output.Append("piece error ").Append(status);
+        }
+        else
+        {
+            output.Append("piece ok ").Append(hit.Body).Append(' ').Append(hit.Result.Site).Append(' ').Append(hit.ChildBody)
+                  .Append(' ').Append(hit.ChildResult != null ? hit.ChildResult.Site : -1).Append(' ').Append(hit.Split ? 1 : 0).Append(" b");
+            for (int m = 0; m < hit.Result.Broken.Length; m++)
+                if (hit.Result.Broken[m])
+                    output.Append(' ').Append(m);
+            output.Append(" c");
+            for (int m = 0; hit.ChildResult != null && m < hit.ChildResult.Broken.Length; m++)
+                if (hit.ChildResult.Broken[m])
+                    output.Append(' ').Append(m);
+            var pieces = runtime.ObjectPieces(state);
+            output.Append(" p");
+            foreach (FracturePiece piece in pieces)
+                output.Append(' ').Append(string.Join(",", piece.Fragments.ConvertAll(g => g.ToString(CultureInfo.InvariantCulture)).ToArray()));
+            output.Append(" y");
+            foreach (FracturePiece piece in pieces)
+                output.Append(piece.Anchored ? " 1" : " 0");
+        }
+        output.Append(" h");
+        foreach (double h in state)
+            output.Append(' ').Append(Bits(h));
+        output.Append('\n');
     }
 
     static void Describe(StringBuilder output, FractureRuntime runtime)
     {
-        int features = (runtime.Criterion == "stress" ? 1 : 0) | (runtime.HasAnchors ? 2 : 0) | (runtime.HasDamage ? 4 : 0);
+        int features = (runtime.Criterion == "stress" ? 1 : 0) | (runtime.HasAnchors ? 2 : 0) | (runtime.HasDamage ? 4 : 0) |
+                       (runtime.NumBodies > 1 ? 8 : 0);
         output.Append("describe f ").Append(features).Append(" c ").Append(Bits(runtime.CrackLevel));
         output.Append(" r ").Append(Bits(runtime.DamageRate)).Append(runtime.HasAnchors ? " y" : " y -");
         for (int j = 0; runtime.HasAnchors && j < runtime.Fragments; j++)

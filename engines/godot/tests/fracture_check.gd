@@ -14,6 +14,9 @@
 # "health <e hex healths>". On a file with "anchors" or "damage", and in a sequence, every "ok" line is
 # followed by "more c <cracked bond indices...> n <anchored flag of each fragment...>".
 #
+# Levels (docs/FORMAT.md section 14): the "body", "object" and "hit" lines and the "--children" flag of
+# tests/levels_support.py (hit_piece, object_pieces).
+#
 # MIT licence, Copyright (c) fracture developers.
 extends SceneTree
 
@@ -61,6 +64,13 @@ func _run_job(header: String, binary: String, impacts_path: String, flags: PoolS
 			var hex: String = (name as String).to_utf8().hex_encode()
 			names += " " + (hex if hex != "" else "-")
 		lines.append(names)
+	if "--children" in flags:
+		var children := "children"
+		for g in range(runtime.fragments, runtime.all_fragments()):
+			var hex: String = runtime.any_fragment_name(g).to_utf8().hex_encode()
+			children += " " + (hex if hex != "" else "-")
+		lines.append(children)
+	var object_state: Array = runtime.new_object_state()
 	var structured: bool = runtime.has_damage or not runtime.anchored.empty()
 	var state = null  # an Array during a sequence
 	var impacts := File.new()
@@ -73,6 +83,28 @@ func _run_job(header: String, binary: String, impacts_path: String, flags: PoolS
 				if problem != "":
 					lines.append("state-error " + problem)
 					state = null
+				continue
+			if t.size() >= 2 and t[0] == "object":
+				var next: Array = runtime.new_object_state() if t[1] == "new" else _doubles(t, 1, t.size())
+				if runtime.check_object_state(next) == "":
+					object_state = next
+				else:
+					lines.append("object-error " + runtime.check_object_state(next))
+				continue
+			if t.size() == 9 and t[0] == "hit":
+				lines.append(_piece(runtime, t, object_state))
+				continue
+			if t.size() == 9 and t[0] == "body":
+				var view = runtime.body(int(t[1]))
+				var rest := PoolStringArray()
+				for i in range(2, 9):
+					rest.append(t[i])
+				var body_hit: Dictionary = view.project(HexBits.from_bits(rest[0]), HexBits.from_bits(rest[1]),
+						HexBits.from_bits(rest[2]), HexBits.from_bits(rest[3]), HexBits.from_bits(rest[4]),
+						HexBits.from_bits(rest[5]), view.default_threshold if rest[6] == "-" else HexBits.from_bits(rest[6]))
+				lines.append(_answer(body_hit))
+				if body_hit["ok"] and (view.has_damage or not view.anchored.empty()):
+					lines.append(_more(body_hit))
 				continue
 			if t.size() < 7:
 				continue
@@ -100,6 +132,43 @@ func _run_job(header: String, binary: String, impacts_path: String, flags: PoolS
 					health.append(HexBits.to_bits(h))
 				lines.append(health.join(" "))
 	return lines
+
+
+# A "hit" line: hit_piece on the object state, then every piece of the object.
+func _piece(runtime, t: PoolStringArray, state: Array) -> String:
+	var v := _doubles(t, 2, 8)
+	var threshold = null if t[8] == "-" else HexBits.from_bits(t[8])
+	var res: Dictionary = runtime.hit_piece(state, int(t[1]), v[0], v[1], v[2], v[3], v[4], v[5], threshold)
+	var parts := PoolStringArray(["piece"])
+	if not res["ok"]:
+		parts.append("error")
+		parts.append(res["error"].replace(" ", "_"))
+	else:
+		var child = res["child_result"]
+		parts.append_array(PoolStringArray(["ok", str(res["body"]), str(res["result"]["site"]), str(res["child_body"]),
+				str(child["site"] if child != null else -1), "1" if res["split"] else "0", "b"]))
+		for m in range(res["result"]["broken"].size()):
+			if res["result"]["broken"][m]:
+				parts.append(str(m))
+		parts.append("c")
+		if child != null:
+			for m in range(child["broken"].size()):
+				if child["broken"][m]:
+					parts.append(str(m))
+		var pieces: Array = runtime.object_pieces(state)
+		parts.append("p")
+		for piece in pieces:
+			var members := PoolStringArray()
+			for g in piece["fragments"]:
+				members.append(str(g))
+			parts.append(members.join(","))
+		parts.append("y")
+		for piece in pieces:
+			parts.append("1" if piece["anchored"] else "0")
+	parts.append("h")
+	for h in state:
+		parts.append(HexBits.to_bits(h))
+	return parts.join(" ")
 
 
 # The doubles of the hex tokens t[begin] .. t[end - 1].

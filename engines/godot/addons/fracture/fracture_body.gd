@@ -12,6 +12,14 @@
 # whose group holds an anchored fragment (bonded to the world) stay StaticBodies, only free pieces
 # become RigidBodies; cracked bonds are drawn as lines along the file's crack segments.
 #
+# Levels (runtime format version 2, feature "levels", docs/FORMAT.md section 14): the body keeps one object
+# state and every hit goes through FractureRuntime.hit_piece() on the fragment struck (pass it as `struck`, e.g.
+# the "fragment" metadata of the CollisionShape the physics engine reports; default: the body's fragment
+# nearest the point). The level-2 nodes of the GLB (children of their parent's node) are taken out of the scene
+# at setup and come back when their parent splits: its node leaves its body and each new piece of its children
+# becomes a RigidBody (the body it split from keeps its largest remaining piece, or, left empty, the largest
+# piece of the children). A hit on any body breaks only that body and the fragment struck (section 14.5).
+#
 # Collision shapes per fragment, first match wins: the fragment's imported "-convcolonly" parts
 # (StaticBody children Godot's importer makes from nodes named "<fragment>-convcolonly" or
 # "<fragment>_<nn>-convcolonly"), then Unreal-style "UCX_<fragment>_<nn>" meshes, then a convex
@@ -37,15 +45,20 @@ var runtime = null  # FractureRuntime
 var error_message := ""
 # The damage state of a file with "anchors" or "damage" (an Array of bond healths, see FractureRuntime.hit);
 # null for other files, whose hits are judged one by one. Save it with runtime.state_to_bytes(state) and
-# restore it with runtime.state_from_bytes() before the first hit (bodies split at the next hit).
+# restore it with runtime.state_from_bytes() before the first hit (bodies split at the next hit). With levels it
+# is the object state (FractureRuntime.new_object_state()); restoring one is not supported.
 var state = null
+# The last hit's inputs and answer: {"point", "impulse"} (the asset's model space, what the reader got), with
+# levels also "struck" and "result" (FractureRuntime.hit_piece()'s answer).
+var last_hit := {}
 
 var _scene: Spatial
 var _meshes := []  # MeshInstance of each fragment
 var _rest := []  # Transform of each fragment mesh in the model frame (the scene root at setup)
 var _shapes := []  # per fragment: Array of [Shape, Transform in the model frame]
 var _volumes := []  # per fragment: bounding-box volume of its mesh (for masses)
-var _body_of := []  # body index of each fragment
+var _body_of := []  # body index of each fragment (global index with levels), -1 while it is not shown
+var _levels := false  # the file has levels: fragments are every level's, the state an object state
 var _bodies := []  # PhysicsBody nodes
 var _model_to_body := []  # per body: Transform from the model frame to the body's local frame
 
@@ -67,7 +80,9 @@ func setup() -> int:
 	if _scene == null:
 		error_message = "no fragments scene under the FractureBody"
 		return ERR_DOES_NOT_EXIST
-	for name in runtime.fragment_names:
+	_levels = runtime.body_count() > 1
+	for g in range(runtime.all_fragments()):
+		var name: String = runtime.any_fragment_name(g)
 		var mesh := _find_named(_scene, name) as MeshInstance
 		if mesh == null:
 			error_message = "fragment '%s' of the runtime file is not in the scene" % name
@@ -77,14 +92,27 @@ func setup() -> int:
 		_shapes.append(_collect_shapes(mesh, name))
 		var box: AABB = mesh.get_aabb()
 		_volumes.append(box.size.x * box.size.y * box.size.z)
-		_body_of.append(0)
+		_body_of.append(0 if g < runtime.fragments else -1)
 	_remove_collision_helpers(_scene)
+	for g in range(runtime.fragments, _meshes.size()):  # level 2 and deeper: hidden until the parent splits
+		_meshes[g].get_parent().remove_child(_meshes[g])
 	var anchors: bool = not runtime.anchored.empty()
-	state = runtime.new_state() if anchors or runtime.has_damage else null
+	if _levels:
+		state = runtime.new_object_state()
+	else:
+		state = runtime.new_state() if anchors or runtime.has_damage else null
 	var intact: PhysicsBody = StaticBody.new() if static_rest or anchors else RigidBody.new()
 	intact.name = "intact"
-	_add_body(intact, _scene.global_transform, _scene.global_transform, range(_meshes.size()))
+	_add_body(intact, _scene.global_transform, _scene.global_transform, range(runtime.fragments))
 	return OK
+
+
+# Hidden fragment nodes (out of the scene tree) are freed with the FractureBody.
+func _notification(what: int) -> void:
+	if what == NOTIFICATION_PREDELETE:
+		for mesh in _meshes:
+			if is_instance_valid(mesh) and mesh.get_parent() == null:
+				mesh.free()
 
 
 func _first_spatial_child():
@@ -167,11 +195,15 @@ func _remove_collision_helpers(node: Node) -> void:
 func _add_body(body: PhysicsBody, at: Transform, model_frame: Transform, members: Array) -> void:
 	add_child(body)
 	body.global_transform = at
-	var index := _bodies.size()
-	var model_to_body: Transform = at.affine_inverse() * model_frame
 	_bodies.append(body)
-	_model_to_body.append(model_to_body)
-	var volume := 0.0
+	_model_to_body.append(at.affine_inverse() * model_frame)
+	_attach(_bodies.size() - 1, members)
+
+
+# Give body `index` the meshes and collision shapes of the fragments `members` (RigidBody: mass from all of its).
+func _attach(index: int, members: Array) -> void:
+	var body: PhysicsBody = _bodies[index]
+	var model_to_body: Transform = _model_to_body[index]
 	for j in members:
 		_body_of[j] = index
 		var mesh: MeshInstance = _meshes[j]
@@ -185,8 +217,10 @@ func _add_body(body: PhysicsBody, at: Transform, model_frame: Transform, members
 			shape.transform = model_to_body * part[1]
 			shape.set_meta("fragment", j)
 			body.add_child(shape)
-		volume += _volumes[j]
 	if body is RigidBody:
+		var volume := 0.0
+		for j in members_of(index):
+			volume += _volumes[j]
 		body.mass = max(volume * density, 0.001)
 
 
@@ -204,10 +238,25 @@ func bodies() -> Array:
 	return _bodies.duplicate()
 
 
+# Where the asset's model frame is for `body` (world space): every body keeps the model frame, so a model-space
+# point p of its fragments is at model_frame_of(body).xform(p).
+func model_frame_of(body: PhysicsBody) -> Transform:
+	var index := _bodies.find(body)
+	return body.global_transform * _model_to_body[index] if index >= 0 else Transform()
+
+
+# The GLB node name of fragment `g` (a global index with levels).
+func fragment_name(g: int) -> String:
+	return runtime.any_fragment_name(g)
+
+
 # Break where hit: world point and impulse (any unit; the threshold's). `body` is the piece that
 # was hit (default: the intact object). Returns the new bodies (empty when nothing breaks): RigidBodies,
 # and with "anchors" StaticBodies for pieces that broke apart but are each still held by the world.
-func hit(world_point: Vector3, world_impulse: Vector3, body: PhysicsBody = null, hit_threshold := -1.0) -> Array:
+# With levels, `struck` is the fragment hit (a global index, shown in `body`; the CollisionShape's "fragment"
+# metadata), default -1: the body's fragment nearest the point.
+func hit(world_point: Vector3, world_impulse: Vector3, body: PhysicsBody = null, hit_threshold := -1.0,
+		struck := -1) -> Array:
 	if runtime == null:
 		return []
 	var index := 0 if body == null else _bodies.find(body)
@@ -218,6 +267,9 @@ func hit(world_point: Vector3, world_impulse: Vector3, body: PhysicsBody = null,
 	var to_model: Transform = model_frame.affine_inverse()
 	var point: Vector3 = to_model.xform(world_point)
 	var impulse: Vector3 = model_frame.basis.orthonormalized().xform_inv(world_impulse)  # rotate only
+	last_hit = {"point": point, "impulse": impulse}
+	if _levels:
+		return _hit_levels(index, point, impulse, world_point, world_impulse, hit_threshold, struck)
 	var t: float = hit_threshold if hit_threshold >= 0.0 else (threshold if threshold >= 0.0 else runtime.default_threshold)
 	var result: Dictionary
 	if state != null:
@@ -243,13 +295,59 @@ func hit(world_point: Vector3, world_impulse: Vector3, body: PhysicsBody = null,
 	return new_bodies
 
 
+# A hit on body `index` of a file with levels (docs/FORMAT.md section 14.5), model-space point and impulse.
+func _hit_levels(index: int, point: Vector3, impulse: Vector3, world_point: Vector3, world_impulse: Vector3,
+		hit_threshold: float, struck: int) -> Array:
+	var t = hit_threshold if hit_threshold >= 0.0 else (threshold if threshold >= 0.0 else null)  # null: per level
+	if struck < 0:
+		var members := members_of(index)
+		var singles := []
+		for g in members:
+			singles.append([g])
+		struck = members[_nearest_piece(singles, point)]
+	elif struck >= _body_of.size() or _body_of[struck] != index:
+		error_message = "fragment %d is not shown in the body hit" % struck
+		return []
+	var answer: Dictionary = runtime.hit_piece(state, struck, point.x, point.y, point.z, impulse.x, impulse.y,
+			impulse.z, t)
+	last_hit["struck"] = struck
+	last_hit["result"] = answer
+	if not answer["ok"]:
+		error_message = answer["error"]
+		return []
+	# What the struck body became: its own body's pieces (the largest first, as _split()), then the children's.
+	var own := []
+	var children := []
+	var anchored := {}
+	for piece in answer["pieces"]:
+		if piece["body"] == answer["body"]:
+			own.append(piece["fragments"])
+		else:
+			children.append(piece["fragments"])
+		for g in piece["fragments"]:
+			anchored[g] = 1 if piece["anchored"] else 0
+	own.sort_custom(self, "_larger_first")
+	children.sort_custom(self, "_larger_first")
+	var new_bodies := []
+	if answer["split"]:  # the struck fragment's node leaves; its children's come in
+		_detach(index, [struck])
+		_body_of[struck] = -1
+	if own.size() + children.size() > 1:
+		new_bodies = _break_body(index, own + children, anchored, world_point, world_impulse * impulse_scale)
+	_draw_level_cracks()
+	if not new_bodies.empty():
+		emit_signal("fractured", new_bodies)
+	return new_bodies
+
+
 # Split body `index` into `pieces` (from _split(): the largest first). A static body keeps its largest
 # anchored piece (without anchors: its largest piece); every other piece gets a new body: a StaticBody
 # when anchored, else a RigidBody whose origin is the piece's centre of mass (Godot 3 turns a RigidBody
 # about its origin; each fragment node's origin is its centre of mass, docs/FORMAT.md section 10).
 # `impulse` at `world_point` goes to the free piece that was struck (the one nearest the point); when
-# the struck piece stays held, the free ones share it.
-func _break_body(index: int, pieces: Array, anchored: Array, world_point: Vector3, impulse: Vector3) -> Array:
+# the struck piece stays held, the free ones share it. `anchored[j]` is 1 for every fragment j of an anchored
+# piece (an Array over the fragments, or with levels a Dictionary over the pieces' fragments).
+func _break_body(index: int, pieces: Array, anchored, world_point: Vector3, impulse: Vector3) -> Array:
 	var target: PhysicsBody = _bodies[index]
 	var model_frame: Transform = target.global_transform * _model_to_body[index]
 	var keep := 0
@@ -276,11 +374,17 @@ func _break_body(index: int, pieces: Array, anchored: Array, world_point: Vector
 		if not held:
 			at = model_frame * Transform(Basis(), _centre_of(pieces[k]))
 		_add_body(piece_body, at, model_frame, pieces[k])
+		if not held and target is RigidBody:  # a flying piece's pieces fly on with it
+			var arm: Vector3 = piece_body.global_transform.origin - target.global_transform.origin
+			piece_body.linear_velocity = target.linear_velocity + target.angular_velocity.cross(arm)
+			piece_body.angular_velocity = target.angular_velocity
 		if not held and impulse != Vector3.ZERO and (k == struck or not struck_free):
 			var share: Vector3 = impulse if struck_free else impulse / float(free)
 			piece_body.apply_impulse(world_point - piece_body.global_transform.origin, share)
 		out.append(piece_body)
-	if target is RigidBody:
+	if _body_of[pieces[keep][0]] != index:  # levels: the body's fragment split, it keeps a piece of its children
+		_attach(index, pieces[keep])
+	elif target is RigidBody:
 		var volume := 0.0
 		for j in pieces[keep]:
 			volume += _volumes[j]
@@ -321,6 +425,39 @@ func _nearest_piece(pieces: Array, point: Vector3) -> int:
 func _draw_cracks(cracked: Array) -> void:
 	if runtime.crack_ptr.empty():
 		return
+	var segments := []  # per body: the vertices of its lines
+	for _i in range(_bodies.size()):
+		segments.append([])
+	for m in range(runtime.edges_count):
+		if cracked[m]:
+			segments[_body_of[runtime.edges[2 * m]]] += runtime.crack_segments_of(m)
+	_draw_lines(segments)
+
+
+# With levels: the cracked bonds (0 < health < 1) of every body whose two fragments are shown in one body.
+func _draw_level_cracks() -> void:
+	var segments := []
+	for _i in range(_bodies.size()):
+		segments.append([])
+	var any := false
+	var offset := 0
+	for b in range(runtime.body_count()):
+		var view = runtime.body(b)
+		var first: int = runtime.body_first(b)
+		if not view.crack_ptr.empty():
+			any = true
+			for m in range(view.edges_count):
+				var health: float = state[offset + m]
+				var i: int = _body_of[first + view.edges[2 * m]]
+				if health > 0.0 and health < 1.0 and i >= 0 and i == _body_of[first + view.edges[2 * m + 1]]:
+					segments[i] += view.crack_segments_of(m)
+		offset += view.edges_count
+	if any:
+		_draw_lines(segments)
+
+
+# Draw `segments[i]` (pairs of model-space points) in body i's "cracks" child.
+func _draw_lines(segments: Array) -> void:
 	var material := SpatialMaterial.new()
 	material.flags_unshaded = true
 	material.albedo_color = crack_color
@@ -333,15 +470,11 @@ func _draw_cracks(cracked: Array) -> void:
 		lines.transform = _model_to_body[i]
 		lines.material_override = material
 		lines.clear()
-		var count := 0
 		lines.begin(Mesh.PRIMITIVE_LINES)
-		for m in range(runtime.edges_count):
-			if cracked[m] and _body_of[runtime.edges[2 * m]] == i:
-				for v in runtime.crack_segments_of(m):
-					lines.add_vertex(v)
-				count += runtime.crack_ptr[m + 1] - runtime.crack_ptr[m]
+		for v in segments[i]:
+			lines.add_vertex(v)
 		lines.end()
-		lines.set_meta("segments", count)
+		lines.set_meta("segments", segments[i].size() / 2)
 
 
 # Fragments of body `index` grouped by the unbroken edges between them; the largest group first
@@ -396,4 +529,5 @@ func _detach(index: int, members: Array) -> void:
 			body.remove_child(child)
 			child.queue_free()
 	for j in members:
-		body.remove_child(_meshes[j])
+		if _meshes[j].get_parent() == body:
+			body.remove_child(_meshes[j])

@@ -3,7 +3,7 @@
 # Loads `<stem>.fracture.json` + `<stem>.fracture.bin`, validates them and answers "which
 # fragments break off" for a hit (docs/FORMAT.md of the fracture repository, format version 1, and
 # version 2 with features "stress", the stress criterion of section 11, "anchors" and "damage",
-# structures and damage that adds up, section 12).
+# structures and damage that adds up, section 12, and "levels", fragments that break again, section 14).
 # All arithmetic in GDScript floats (64-bit doubles); never through Vector3 (32-bit floats).
 #
 #   var runtime = FractureRuntime.new()
@@ -23,7 +23,7 @@ extends Reference
 class_name FractureRuntime
 
 const FORMAT_VERSION := 2  # the newest version this reader reads
-const KNOWN_FEATURES := ["anchors", "damage", "stress"]  # the version-2 features this reader implements
+const KNOWN_FEATURES := ["anchors", "damage", "levels", "stress"]  # the version-2 features this reader implements
 # The five arrays of section 2, the four of the stress criterion (section 11, with feature "stress"),
 # then those of section 12: anchored (feature "anchors") and the optional crack arrays.
 const ARRAY_NAMES := ["sites", "B", "W", "edges", "edge_areas", "site_bonds_ptr", "site_bonds", "site_bond_gain",
@@ -84,6 +84,7 @@ var _bond_gain := PoolRealArray()
 var _bond_strength := PoolRealArray()
 var _stress := false  # set by _parse_header for the file being loaded
 var _features := []  # set by _parse_header for the file being loaded
+var _view := false  # a body's view made by _read_levels (version 2 without features)
 var _damage_factor := 0.0  # q = r / (1 - c) of section 12.4, once per file (0 when c = 1)
 
 # JSON parsing state (a strict RFC 8259 parser over the header's bytes).
@@ -143,12 +144,17 @@ func _fail(message: String):
 # Parse, validate and prepare a runtime file from its two files' bytes. OK or ERR_INVALID_DATA.
 func load_bytes(header: PoolByteArray, binary: PoolByteArray, check_crc := true) -> int:
 	error_message = ""
-	var top = _parse_header(header)
+	return _load_parsed(_parse_header(header), binary, check_crc)
+
+
+func _load_parsed(top, binary: PoolByteArray, check_crc: bool) -> int:
 	if top == null or _check(top, binary, check_crc) == null:
 		return ERR_INVALID_DATA
 	_build_kd_tree()
 	_whole_graph()
 	_edge_bounds()
+	if "levels" in _features and _read_levels(top, binary) == null:
+		return ERR_INVALID_DATA
 	return OK
 
 
@@ -184,7 +190,7 @@ func _check_features(top: Dictionary, version: int):
 	for name in features:
 		if not name is String:
 			return _fail("runtime header 'features' must be a list of strings")
-	if features.empty():
+	if features.empty() and not _view:
 		return _fail("runtime file version %d lists no features; a file without any is version 1" % version)
 	for name in features:
 		if not name in KNOWN_FEATURES:
@@ -428,7 +434,7 @@ func _check_structure(top: Dictionary, table: Dictionary, counts: Dictionary, pe
 		if r == null or not _finite(r) or r < 0.0:
 			return _fail("damage.damage_rate must be a finite number >= 0")
 		out["damage"] = [c, r]
-	if _features.empty() or (not table.has("crack_ptr") and not table.has("crack_segments")):
+	if (_features.empty() and not _view) or (not table.has("crack_ptr") and not table.has("crack_segments")):
 		return out
 	if not table.has("crack_ptr") or not table.has("crack_segments"):
 		return _fail("the crack arrays come together: crack_ptr and crack_segments")
@@ -1293,3 +1299,506 @@ func _break(disp: Array, t: float, broken: Array) -> PoolIntArray:
 	for j in range(fragments):
 		parent[j] = parent[parent[j]]  # parent[j] <= j, so one increasing pass resolves every root
 	return PoolIntArray(parent)
+
+
+# ---------------------------------------------------------------- levels (docs/FORMAT.md section 14)
+#
+# A body is a set of fragments (its children) with its own impact data: body 0 is this runtime (the p
+# level-1 fragments), body b >= 1 breaks fragment body_fragment(b) into fragments body_first(b) ..
+# body_first(b + 1) - 1 (global indices over every level). body(b) is body b's view, a FractureRuntime of
+# its own (loaded and checked as a file), on which project() and hit() run in local indices. An object
+# state is one Array of every body's bond healths; hit_piece() hits the piece holding a shown fragment
+# (section 14.5) and object_pieces() lists the rigid bodies a game shows (section 14.4).
+#
+#   var state: Array = runtime.new_object_state()
+#   var res = runtime.hit_piece(state, struck, x, y, z, nx, ny, nz)   # struck: the fragment whose collider was hit
+#   # res.split: struck broke into its children; res.pieces: [{"body", "fragments", "anchored"}, ...]
+
+const LEVEL_ARRAYS := ["parent", "body_fragment", "body_child_ptr", "body_site_ptr", "body_sites", "body_B", "body_W",
+		"body_edge_ptr", "body_edges", "body_edge_areas", "body_site_bonds_ptr", "body_site_bonds",
+		"body_site_bond_gain", "body_bond_strength", "body_crack_ptr", "body_crack_segments"]
+const LEVEL_RANKS := [1, 1, 1, 1, 2, 3, 3, 1, 2, 1, 1, 1, 2, 1, 1, 3]
+const LEVEL_INTS := [0, 1, 2, 3, 7, 8, 10, 11, 14]
+
+var level_count := 1  # the deepest level
+var child_names := []  # the names of fragments p .. p_all - 1
+var _lv_parent := []
+var _lv_owner := []      # body_fragment
+var _lv_child_ptr := []
+var _lv_state := []      # where each body's healths start in an object state (nb + 1 entries)
+var _lv_body_of := []
+var _lv_holding := []
+var _lv_views := []      # views[0] is null: body 0 is this runtime
+
+
+# One levels array entry (dtype, rank, length, inside the file); its shape, or null.
+func _check_level_array(entry, i: int, size: int):
+	var name: String = LEVEL_ARRAYS[i]
+	if not entry is Dictionary or not entry.get("shape") is Array:
+		return _fail("array '%s' entry is missing or malformed" % name)
+	if entry.get("dtype") != ("int32" if i in LEVEL_INTS else "float32"):
+		return _fail("array '%s' has the wrong dtype" % name)
+	var shape := []
+	var count := 1
+	for n in entry["shape"]:
+		var v = _integer(n)
+		if v == null or v < 0:
+			return _fail("array '%s' has a negative or non-integer size" % name)
+		shape.append(v)
+		count = (1 << 40) + 1 if v != 0 and count > (1 << 40) / v else count * v
+	if shape.size() != LEVEL_RANKS[i]:
+		return _fail("array '%s' has %d dimensions, expected %d" % [name, shape.size(), LEVEL_RANKS[i]])
+	var offset = _integer(entry.get("byte_offset"))
+	var length = _integer(entry.get("byte_length"))
+	if length == null or count * 4 != length:
+		return _fail("array '%s': shape and byte_length do not agree" % name)
+	if offset == null or offset < 0 or offset % 16 != 0 or offset > size or length > size - offset:
+		return _fail("array '%s' lies outside the binary file or is not 16-byte aligned" % name)
+	return shape
+
+
+func _ptr_ok(ptr, first: int, end: int) -> bool:
+	if ptr[0] != first or ptr[ptr.size() - 1] != end:
+		return false
+	for i in range(1, ptr.size()):
+		if ptr[i] < ptr[i - 1]:
+			return false
+	return true
+
+
+func _int(value) -> Dictionary:
+	return {"int": value}
+
+
+func _read_levels(top: Dictionary, binary: PoolByteArray):
+	var table: Dictionary = top["arrays"]
+	var counts: Dictionary = top["counts"]
+	var cracks: bool = table.has("body_crack_ptr") or table.has("body_crack_segments")
+	var shapes := {}
+	var a := {}
+	var peer := StreamPeerBuffer.new()
+	peer.data_array = binary
+	for i in range(LEVEL_ARRAYS.size()):
+		if (i >= 10 and i < 14 and not _stress) or (i >= 14 and not cracks):
+			continue
+		var name: String = LEVEL_ARRAYS[i]
+		var shape = _check_level_array(table.get(name), i, binary.size())
+		if shape == null:
+			return null
+		var entry: Dictionary = table[name]
+		var values = _read_array(peer, _integer(entry["byte_offset"]), _integer(entry["byte_length"]) / 4, i in LEVEL_INTS)
+		if values == null:
+			return _fail("array '%s' has non-finite values" % name)
+		shapes[name] = shape
+		a[name] = values
+	var p := fragments
+	var d := dim
+	var parent: PoolIntArray = a["parent"]
+	var owner: PoolIntArray = a["body_fragment"]
+	var child: PoolIntArray = a["body_child_ptr"]
+	var site_ptr: PoolIntArray = a["body_site_ptr"]
+	var edge_ptr: PoolIntArray = a["body_edge_ptr"]
+	var p_all := parent.size()
+	var nb := owner.size()
+	var S: int = shapes["body_sites"][0]
+	var K: int = shapes["body_B"][1]
+	var E: int = shapes["body_edges"][0]
+	var C := p_all - p
+	if _integer(counts.get("bodies")) != nb or _integer(counts.get("all_fragments")) != p_all \
+			or _integer(counts.get("body_sites")) != S or _integer(counts.get("body_modes")) != K \
+			or _integer(counts.get("body_edges")) != E:
+		return _fail("header counts of the levels arrays do not match the arrays")
+	if p_all <= p or nb < 2:
+		return _fail("a file with levels has more fragments than level 1 and at least two bodies")
+	var info = top.get("levels")
+	if not info is Dictionary:
+		return _fail("the feature 'levels' needs a header object 'levels'")
+	var names = top.get("child_names")
+	if not names is Array or names.size() != C:
+		return _fail("child_names must be %d strings" % C)
+	for name in names:
+		if not name is String:
+			return _fail("child_names must be %d strings" % C)
+	if shapes["body_child_ptr"] != [nb + 1] or shapes["body_site_ptr"] != [nb + 1] or shapes["body_edge_ptr"] != [nb + 1] \
+			or shapes["body_sites"] != [S, 3] or K < 1 or shapes["body_B"] != [S, K, d] or shapes["body_W"] != [K, C, d] \
+			or shapes["body_edges"] != [E, 2] or shapes["body_edge_areas"] != [E]:
+		return _fail("levels array shapes do not agree with each other")
+	var N: int = shapes["body_site_bonds"][0] if _stress else 0
+	if _stress and (shapes["body_site_bonds_ptr"] != [S + 1] or shapes["body_site_bond_gain"] != [N, 3] \
+			or shapes["body_bond_strength"] != [E] or _integer(counts.get("body_site_bonds")) != N):
+		return _fail("levels stress arrays do not agree with each other or counts")
+	var n: int = shapes["body_crack_segments"][0] if cracks else 0
+	if cracks and (shapes["body_crack_ptr"] != [E + 1] or shapes["body_crack_segments"] != [n, 2, 3] \
+			or _integer(counts.get("body_crack_segments")) != n):
+		return _fail("levels crack arrays do not agree with each other or counts")
+	var level := []
+	level.resize(p_all)
+	var deepest := 1
+	for g in range(p_all):
+		if (parent[g] != -1) if g < p else not (parent[g] >= 0 and parent[g] < g):
+			return _fail("parent must be -1 for the level-1 fragments and a smaller fragment index for every other")
+		level[g] = 1 if parent[g] < 0 else level[parent[g]] + 1
+		deepest = int(max(deepest, level[g]))
+	var ok: bool = owner[0] == -1 and owner[1] >= 0 and owner[nb - 1] < p_all
+	for b in range(2, nb):
+		ok = ok and owner[b] > owner[b - 1]
+	if not ok:
+		return _fail("body_fragment must be -1 for body 0, then fragment indices strictly increasing")
+	if not _ptr_ok(child, 0, p_all) or child[1] != p:
+		return _fail("body_child_ptr must start at 0, then %d, and end at %d" % [p, p_all])
+	for b in range(nb):
+		if child[b + 1] - child[b] < 2:
+			return _fail("every body must have at least 2 children (body %d)" % b)
+	for b in range(1, nb):
+		for g in range(child[b], child[b + 1]):
+			if parent[g] != owner[b]:
+				return _fail("parent of every child must be the fragment of the body that holds it")
+	if not _ptr_ok(site_ptr, 0, S) or not _ptr_ok(edge_ptr, 0, E) or site_ptr[1] != 0 or edge_ptr[1] != 0:
+		return _fail("body_site_ptr and body_edge_ptr must start at 0 (body 0 has no rows) and end at their arrays' lengths")
+	for b in range(1, nb):
+		if site_ptr[b + 1] <= site_ptr[b]:
+			return _fail("body %d has no sites" % b)
+	if _stress and not _ptr_ok(a["body_site_bonds_ptr"], 0, N):
+		return _fail("body_site_bonds_ptr must start at 0, never decrease and end at N")
+	if cracks and not _ptr_ok(a["body_crack_ptr"], 0, n):
+		return _fail("body_crack_ptr must start at 0, never decrease and end at n")
+	for b in range(1, nb):
+		if not anchored.empty() and owner[b] < p and anchored[owner[b]] == 1:
+			return _fail("an anchored fragment cannot be broken further (it has a body)")
+	if _integer(info.get("count")) != deepest:
+		return _fail("levels.count must be the deepest level, %d" % deepest)
+	var thresholds = info.get("thresholds")
+	if not thresholds is Array or thresholds.size() != deepest:
+		return _fail("levels.thresholds must list %d finite numbers >= 0, one per level" % deepest)
+	for i in range(deepest):
+		var t = _number(thresholds[i])
+		if t == null or not _finite(t) or t < 0.0:
+			return _fail("levels.thresholds must list %d finite numbers >= 0, one per level" % deepest)
+	if _number(thresholds[0]) != default_threshold:
+		return _fail("levels.thresholds[0] must be default_threshold")
+	var radii = info.get("impact_radii", [])
+	level_count = deepest
+	child_names = names
+	_lv_parent = Array(parent)
+	_lv_owner = Array(owner)
+	_lv_child_ptr = Array(child)
+	_lv_body_of = []
+	_lv_holding = []
+	for _g in range(p_all):
+		_lv_body_of.append(-1)
+		_lv_holding.append(0)
+	_lv_state = [0]
+	for b in range(1, nb):
+		_lv_body_of[owner[b]] = b
+		for g in range(child[b], child[b + 1]):
+			_lv_holding[g] = b
+		_lv_state.append(edges_count + edge_ptr[b])
+	_lv_state.append(edges_count + E)
+	_lv_views = [null]
+	for b in range(1, nb):
+		var body_level: int = level[owner[b]] + 1
+		var radius = _number(radii[body_level - 1]) if radii is Array and radii.size() >= body_level else null
+		var view = _make_view(b, a, K, C, cracks, _number(thresholds[body_level - 1]),
+				radius if radius != null else impact_radius, top)
+		if view == null:
+			return null
+		_lv_views.append(view)
+	return true
+
+
+func _slice(values, start: int, count: int) -> Array:
+	var out := []
+	for i in range(start, start + count):
+		out.append(values[i])
+	return out
+
+
+# Body b's view (section 14.3): a header Dictionary (as the JSON parser makes them) and binary, loaded by a new
+# FractureRuntime as a file of its own.
+func _make_view(b: int, a: Dictionary, K: int, C: int, cracks: bool, threshold: float, radius: float, top: Dictionary):
+	var p := fragments
+	var d := dim
+	var s0: int = a["body_site_ptr"][b]
+	var s1: int = a["body_site_ptr"][b + 1]
+	var g0: int = a["body_child_ptr"][b] - p
+	var g1: int = a["body_child_ptr"][b + 1] - p
+	var e0: int = a["body_edge_ptr"][b]
+	var e1: int = a["body_edge_ptr"][b + 1]
+	var sb := s1 - s0
+	var cb := g1 - g0
+	var eb := e1 - e0
+	var W := []
+	for k in range(K):
+		W += _slice(a["body_W"], (k * C + g0) * d, cb * d)
+	var arrays := [["sites", false, [sb, 3], _slice(a["body_sites"], 3 * s0, 3 * sb)],
+			["B", false, [sb, K, d], _slice(a["body_B"], s0 * K * d, sb * K * d)], ["W", false, [K, cb, d], W],
+			["edges", true, [eb, 2], _slice(a["body_edges"], 2 * e0, 2 * eb)],
+			["edge_areas", false, [eb], _slice(a["body_edge_areas"], e0, eb)]]
+	var counts := {"sites": _int(sb), "modes": _int(K), "fragments": _int(cb), "edges": _int(eb)}
+	var features := []
+	if _stress:
+		var n0: int = a["body_site_bonds_ptr"][s0]
+		var n1: int = a["body_site_bonds_ptr"][s1]
+		var ptr := _slice(a["body_site_bonds_ptr"], s0, sb + 1)
+		for i in range(ptr.size()):
+			ptr[i] -= n0
+		arrays += [["site_bonds_ptr", true, [sb + 1], ptr],
+				["site_bonds", true, [n1 - n0], _slice(a["body_site_bonds"], n0, n1 - n0)],
+				["site_bond_gain", false, [n1 - n0, 3], _slice(a["body_site_bond_gain"], 3 * n0, 3 * (n1 - n0))],
+				["bond_strength", false, [eb], _slice(a["body_bond_strength"], e0, eb)]]
+		counts["site_bonds"] = _int(n1 - n0)
+		features.append("stress")
+	if has_damage:
+		features.append("damage")
+	if cracks:
+		var c0: int = a["body_crack_ptr"][e0]
+		var c1: int = a["body_crack_ptr"][e1]
+		var ptr := _slice(a["body_crack_ptr"], e0, eb + 1)
+		for i in range(ptr.size()):
+			ptr[i] -= c0
+		arrays += [["crack_ptr", true, [eb + 1], ptr],
+				["crack_segments", false, [c1 - c0, 2, 3], _slice(a["body_crack_segments"], 6 * c0, 6 * (c1 - c0))]]
+		counts["crack_segments"] = _int(c1 - c0)
+	var peer := StreamPeerBuffer.new()  # little-endian
+	var entries := {}
+	for array in arrays:
+		var at := peer.get_size()
+		for x in array[3]:
+			if array[1]:
+				peer.put_32(x)
+			else:
+				peer.put_float(x)
+		var length := peer.get_size() - at
+		while peer.get_size() % 16 != 0:
+			peer.put_u8(0)
+		var shape := []
+		for v in array[2]:
+			shape.append(_int(v))
+		entries[array[0]] = {"dtype": "int32" if array[1] else "float32", "shape": shape, "byte_offset": _int(at),
+				"byte_length": _int(length)}
+	var view_top := {"format": "fracture-modes-runtime", "version": _int(2), "features": features, "criterion": criterion,
+			"dim": _int(d), "counts": counts, "fragment_names": child_names.slice(g0, g1 - 1) if cb > 0 else [],
+			"transform": top["transform"], "default_threshold": threshold, "impact_radius": radius,
+			"buffer": {"uri": "view.fracture.bin", "byte_length": _int(peer.get_size())}, "arrays": entries}
+	if has_damage:
+		view_top["damage"] = top["damage"]
+	var view = get_script().new()
+	view._view = true
+	if view._check_features(view_top, 2) == null or view._load_parsed(view_top, peer.data_array, false) != OK:
+		return _fail("body %d: %s" % [b, view.error_message])
+	return view
+
+
+func body_count() -> int:
+	return _lv_views.size() if not _lv_views.empty() else 1
+
+
+func all_fragments() -> int:
+	return _lv_parent.size() if not _lv_parent.empty() else fragments
+
+
+# Body b's view (body 0: this runtime).
+func body(b: int):
+	return self if b == 0 else _lv_views[b]
+
+
+func body_fragment(b: int) -> int:
+	return -1 if b == 0 else _lv_owner[b]
+
+
+func body_first(b: int) -> int:
+	if _lv_child_ptr.empty():
+		return 0 if b == 0 else fragments
+	return _lv_child_ptr[b]
+
+
+# The body breaking fragment g into its children, -1 for a leaf.
+func body_of(g: int) -> int:
+	return -1 if _lv_body_of.empty() else _lv_body_of[g]
+
+
+# The body whose child fragment g is (0 at level 1).
+func body_holding(g: int) -> int:
+	return 0 if _lv_holding.empty() else _lv_holding[g]
+
+
+func parent_of(g: int) -> int:
+	return -1 if _lv_parent.empty() else _lv_parent[g]
+
+
+# The GLB node name of fragment g (any level).
+func any_fragment_name(g: int) -> String:
+	return fragment_names[g] if g < fragments else child_names[g - fragments]
+
+
+func _state_offset(b: int) -> int:
+	if _lv_state.empty():
+		return 0 if b == 0 else edges_count
+	return _lv_state[b]
+
+
+# A fresh object state (section 14.4): every body's bond healths, all 1.0.
+func new_object_state() -> Array:
+	var state := []
+	for _i in range(_state_offset(body_count())):
+		state.append(1.0)
+	return state
+
+
+# Why `state` is not an object state of this file, or "".
+func check_object_state(state) -> String:
+	var size := _state_offset(body_count())
+	if typeof(state) != TYPE_ARRAY or state.size() != size:
+		return "an object state must be an Array of %d bond healths (every body's)" % size
+	for h in state:
+		if not typeof(h) in [TYPE_REAL, TYPE_INT] or not (h >= 0 and h <= 1):
+			return "an object state holds numbers in [0, 1]; this one has %s" % str(h)
+	return ""
+
+
+# Groups (smallest local index) of body b's children over bonds with health > 0 between two kept children.
+func _body_groups(state: Array, b: int, keep) -> Array:
+	var view = body(b)
+	var offset := _state_offset(b)
+	var parent := []
+	for j in range(view.fragments):
+		parent.append(j)
+	for m in range(view.edges_count):
+		var P: int = view.edges[2 * m]
+		var Q: int = view.edges[2 * m + 1]
+		if state[offset + m] > 0 and (keep == null or (keep[P] and keep[Q])):
+			var x := _root(parent, P)
+			var y := _root(parent, Q)
+			if x < y:
+				parent[y] = x
+			elif y < x:
+				parent[x] = y
+	for j in range(parent.size()):
+		parent[j] = parent[parent[j]]
+	return parent
+
+
+func _roots(groups: Array) -> int:
+	var count := 0
+	for j in range(groups.size()):
+		if groups[j] == j:
+			count += 1
+	return count
+
+
+# Whether fragment g broke into its children (its body's unbroken bonds leave two or more groups).
+func is_split(state: Array, g: int) -> bool:
+	var b := body_of(g)
+	return b >= 0 and _roots(_body_groups(state, b, null)) >= 2
+
+
+func _opened(state: Array, g: int) -> bool:
+	var up := parent_of(g)
+	while up >= 0:
+		if not is_split(state, up):
+			return false
+		up = parent_of(up)
+	return true
+
+
+# Whether fragment g is shown: not split, every ancestor split.
+func is_shown(state: Array, g: int) -> bool:
+	return g >= 0 and g < all_fragments() and not is_split(state, g) and _opened(state, g)
+
+
+func _shown_children(state: Array, b: int) -> Array:
+	var first := body_first(b)
+	var keep := []
+	for j in range(body(b).fragments):
+		keep.append(not is_split(state, first + j))
+	return keep
+
+
+# The pieces of body b's kept children: {"body", "fragments" (global, ascending), "anchored"}, by first fragment.
+func _pieces_of(state: Array, b: int, keep: Array) -> Array:
+	var groups := _body_groups(state, b, keep)
+	var first := body_first(b)
+	var pieces := []
+	var by_root := {}
+	for j in range(groups.size()):
+		if not keep[j]:
+			continue
+		if not by_root.has(groups[j]):
+			by_root[groups[j]] = pieces.size()
+			pieces.append({"body": b, "fragments": [], "anchored": false})
+		var piece: Dictionary = pieces[by_root[groups[j]]]
+		piece["fragments"].append(first + j)
+		if b == 0 and not anchored.empty() and anchored[j] == 1:
+			piece["anchored"] = true
+	return pieces
+
+
+# Every piece of the object (section 14.4): body by body, each by its first fragment.
+func object_pieces(state: Array) -> Array:
+	var out := []
+	for b in range(body_count()):
+		if b == 0 or (is_split(state, body_fragment(b)) and _opened(state, body_fragment(b))):
+			out += _pieces_of(state, b, _shown_children(state, b))
+	return out
+
+
+# Hit the piece holding the shown fragment `struck` (docs/FORMAT.md section 14.5): point and impulse in the
+# asset's model space (undo the piece's rigid transform), threshold null for each body's default. `state` is
+# updated in place, unchanged when the hit is refused ({"ok": false, "error": ...}). Answers {"ok", "body",
+# "result" (body's answer after the hit, local indices), "child_body" (-1: none), "child_result", "split",
+# "pieces" (what struck's piece became)}.
+func hit_piece(state, struck: int, px: float, py: float, pz: float, nx: float, ny: float, nz: float,
+		threshold = null) -> Dictionary:
+	var problem := check_object_state(state)
+	if problem != "":
+		return {"ok": false, "error": problem}
+	if not is_shown(state, struck):
+		return {"ok": false, "error": "fragment %d is not shown (split, or inside an unbroken parent)" % struck}
+	var b := body_holding(struck)
+	var view = body(b)
+	var first := body_first(b)
+	var offset := _state_offset(b)
+	var keep := _shown_children(state, b)
+	var before := _body_groups(state, b, keep)
+	var inside := []
+	for j in range(keep.size()):
+		inside.append(keep[j] and before[j] == before[struck - first])
+	var trial: Array = state.slice(offset, offset + view.edges_count - 1) if view.edges_count > 0 else []
+	var result: Dictionary = view.hit(trial, px, py, pz, nx, ny, nz,
+			view.default_threshold if threshold == null else threshold)
+	if not result["ok"]:
+		return result
+	var broken := []
+	var cracked := []
+	for m in range(view.edges_count):
+		var within: bool = inside[view.edges[2 * m]] and inside[view.edges[2 * m + 1]]
+		if within:
+			state[offset + m] = trial[m]
+		broken.append(state[offset + m] <= 0)
+		cracked.append(not broken[m] and ((result["cracked"][m] and within) or state[offset + m] < 1))
+	var groups := _body_groups(state, b, null)
+	result["broken"] = broken
+	result["cracked"] = cracked
+	result["groups"] = PoolIntArray(groups)
+	result["num_groups"] = _roots(groups)
+	result["anchored"] = view._anchored_of(PoolIntArray(groups))
+	var child_body := body_of(struck)
+	var child_result = null
+	var split := false
+	if child_body >= 0:
+		var child_view = body(child_body)
+		var child_offset := _state_offset(child_body)
+		var health: Array = state.slice(child_offset, child_offset + child_view.edges_count - 1) \
+				if child_view.edges_count > 0 else []
+		child_result = child_view.hit(health, px, py, pz, nx, ny, nz,
+				child_view.default_threshold if threshold == null else threshold)
+		for m in range(health.size()):
+			state[child_offset + m] = health[m]
+		split = child_result["num_groups"] >= 2
+	if split:
+		inside[struck - first] = false
+	var pieces := _pieces_of(state, b, inside)
+	if split:
+		pieces += _pieces_of(state, child_body, _shown_children(state, child_body))
+	return {"ok": true, "struck": struck, "body": b, "result": result, "child_body": child_body,
+			"child_result": child_result, "split": split, "pieces": pieces}
