@@ -15,6 +15,32 @@ from pattern_matrix import ASSETS, KINDS, bake_cell
 
 CELLS = [(asset, kind, noise) for asset in ASSETS for kind in KINDS for noise in (False, True)]
 
+# The cells that fail today, each with what fails (the first whole-matrix run, 2026-12-03; strict: a cell that
+# starts passing fails the test until it leaves this table). Three causes: the triangle budget (twice the input's
+# triangles plus 64 per fragment) where planar cuts cross the outer surface at many places (slices, bricks on the
+# pillar and the thin-walled vase) or where the noisy faults cannot be simplified further without a fragment
+# intersecting itself; the noise folding a fault near a junction, so the regions overlap (the fragments' volume
+# comes out 1.7e-6 above the input's, already in the fragments stage) or a fragment pinches along an edge.
+BUDGET = "triangle budget missed: {} triangles written against {}"
+KNOWN = {
+    ("pillar.glb", "slices", False): BUDGET.format(14700, 12740),
+    ("vase.obj", "slices", False): BUDGET.format(7872, 6720),
+    ("vase.obj", "bricks", False): BUDGET.format(8080, 6912),
+    ("chair.glb", "bricks", True): BUDGET.format(12610, 6152),
+    ("pillar.glb", "slices", True): BUDGET.format(19314, 12740),
+    ("vase.obj", "voronoi", True): BUDGET.format(7384, 6656),
+    ("vase.obj", "slices", True): BUDGET.format(8236, 6720),
+    ("vase.obj", "bricks", True): BUDGET.format(8932, 6912),
+    ("wall.glb", "voronoi", True): BUDGET.format(4042, 3792),
+    ("wall.glb", "profile", True): BUDGET.format(8648, 3600),
+    ("pillar.glb", "voronoi", True): "the fragments stage refuses: fragment_006 would be written with an edge of "
+                                     "three faces and two bodies (the noise folds a fault onto the surface)",
+    ("pillar.glb", "clustered", True): "volume error 1.7e-6: the noisy regions overlap (fragments stage: 0.0335452 "
+                                       "of the input's 0.0335451)",
+    ("pillar.glb", "profile", True): "volume error 1.8e-6: the noisy regions overlap; a pinched fragment split, two "
+                                     "slivers left out",
+}
+
 
 def in_make_test(asset: str, kind: str, noise: bool) -> bool:
     """Whether a cell is in the default run: the checkerboard of (asset, kind), noise on the even squares."""
@@ -23,7 +49,9 @@ def in_make_test(asset: str, kind: str, noise: bool) -> bool:
 
 
 def _param(asset: str, kind: str, noise: bool):
-    marks = () if in_make_test(asset, kind, noise) else (pytest.mark.full_matrix,)
+    marks: list = [] if in_make_test(asset, kind, noise) else [pytest.mark.full_matrix]
+    if (asset, kind, noise) in KNOWN:
+        marks.append(pytest.mark.xfail(reason=KNOWN[asset, kind, noise], strict=True))
     return pytest.param(asset, kind, noise, marks=marks, id=f"{asset}-{kind}-{'noise' if noise else 'plain'}")
 
 
