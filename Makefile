@@ -145,6 +145,9 @@ PATTERN_INPUTS := $(PACKAGE_SOURCES) $(wildcard recipes/*.toml) $(wildcard sampl
 
 docs-pattern-images: $(PATTERN_IMAGES)
 
+# The bakes' stamps stay (make would delete them as intermediates, and bake again for the next picture).
+.PRECIOUS: build/patterns/%/.baked
+
 build/patterns/%/.baked: $(PATTERN_INPUTS) | $(STAMP)
 	$(FRACTURE) -q bake $(PATTERN_BAKE_$*) -o build/patterns/$*
 	@touch $@
