@@ -11,7 +11,8 @@ LOCK       := requirements.lock
 PYTEST_ARGS ?=
 
 .SECONDEXPANSION:
-.PHONY: install lock web test lint demo bench goldens assets asset-reports gltf-validator check clean docs-images
+.PHONY: install lock web test lint demo bench goldens assets asset-reports gltf-validator check clean docs-images \
+        docs-pattern-images
 
 PACKAGE_SOURCES := $(shell find fracture_cli -name '*.py' -not -path '*/__pycache__/*' | sort)
 
@@ -124,6 +125,36 @@ docs/preview_chair.png: $(DEMO)
 docs/view_chair.png: $(DEMO) web/screenshot.py web/e2e.cjs | $(WEB_VENDOR)/BUILD.json
 	@command -v chromium >/dev/null 2>&1 || { echo "the screenshot needs Debian's chromium (apt-get install chromium)"; exit 1; }
 	$(PY) web/screenshot.py build/demo chair $@
+
+# The README's picture of each authored pattern kind (issue 32): a bake of a sample asset with that kind, then
+# `fracture preview --panels fragments` of it (the fragments on the asset, exploded, and an impact). Each kind's
+# bake is the asset, the recipe and the --set values below, as the README quotes them; again only when the
+# package sources, the recipes or the lock changed.
+PATTERN_KINDS := voronoi clustered radial slices bricks profile
+PATTERN_BAKE_voronoi   := sample_assets/pillar.glb -r stone --set pattern.kind=voronoi --set pattern.count=24
+PATTERN_BAKE_clustered := sample_assets/pillar.glb -r stone --set pattern.kind=clustered --set pattern.clusters=2 \
+                          --set pattern.count=8 --set pattern.spread=0.12 --set pattern.background=4
+PATTERN_BAKE_radial    := sample_assets/pane.glb -r glass_pane
+PATTERN_BAKE_slices    := sample_assets/pillar.glb -r stone --set pattern.kind=slices --set pattern.slice_axes=y \
+                          --set pattern.slices=5
+PATTERN_BAKE_bricks    := sample_assets/wall.glb -r brick_wall
+PATTERN_BAKE_profile   := sample_assets/wall.glb -r stone --set pattern.kind=profile --set pattern.cuts=6 \
+                          --set 'pattern.profiles=[{ points = [[0.0, 0.0], [0.3, 0.08], [0.6, -0.08], [1.0, 0.0]] }]'
+PATTERN_IMAGES := $(foreach kind,$(PATTERN_KINDS),docs/pattern_$(kind).png)
+PATTERN_INPUTS := $(PACKAGE_SOURCES) $(wildcard recipes/*.toml) $(wildcard sample_assets/*.glb) $(LOCK)
+
+docs-pattern-images: $(PATTERN_IMAGES)
+
+# The bakes' stamps stay (make would delete them as intermediates, and bake again for the next picture).
+.PRECIOUS: build/patterns/%/.baked
+
+build/patterns/%/.baked: $(PATTERN_INPUTS) | $(STAMP)
+	$(FRACTURE) -q bake $(PATTERN_BAKE_$*) -o build/patterns/$*
+	@touch $@
+
+docs/pattern_%.png: build/patterns/%/.baked
+	$(FRACTURE) preview build/patterns/$*/$(basename $(notdir $(firstword $(PATTERN_BAKE_$*)))).fracture.json \
+	  -o $@ --size 720 280 --panels fragments
 
 bench: install
 	$(PY) bench/run.py --out bench/RESULTS.md

@@ -11,6 +11,8 @@ the stress criterion to come): hit fragment detached >= 95%, locality <= 0.3 at 
 
 --no-bake (and --quick) sweeps the manifest bakes committed under tests/data/runtime_conformance/
 instead of baking (minutes); --default-recipe adds a row per asset baked with the default recipe.
+Baking, the authored patterns of issue 32 get rows too (:data:`PATTERN_BAKES`): a voronoi pattern on the
+pillar and the chair, the radial glass_pane recipe on the pane, the bricks of brick_wall on the wall.
 """
 
 from __future__ import annotations
@@ -31,6 +33,13 @@ from fracture_cli.atlas import run_atlas  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFORMANCE = os.path.join(REPO, "tests", "data", "runtime_conformance")
+# Issue 32's pattern bakes: (asset, recipe, --set values, label).
+PATTERN_BAKES = (
+    ("pillar.glb", "stone", ("pattern.kind=voronoi", "pattern.count=24"), "stone, voronoi 24"),
+    ("chair.glb", "wood", ("pattern.kind=voronoi", "pattern.count=24"), "wood, voronoi 24"),
+    ("pane.glb", "glass_pane", (), "glass_pane: radial"),
+    ("wall.glb", "brick_wall", (), "brick_wall: bricks"),
+)
 COLUMNS = ("hit_detached", "hit_on_largest", "hit_detached_others", "locality_2x", "locality_8x",
            "first_break_splits", "graded_median", "graded_p10",
            "b0_median", "d1_median")
@@ -41,10 +50,11 @@ def _manifest() -> dict[str, str]:
         return dict(tomllib.load(fh)["assets"])
 
 
-def _bake(asset: str, recipe: str, out: str) -> str:
-    """Bake one sample asset in a fresh process; returns its runtime file."""
+def _bake(asset: str, recipe: str, out: str, settings: tuple[str, ...] = ()) -> str:
+    """Bake one sample asset in a fresh process (``settings``: ``--set`` values); returns its runtime file."""
+    sets = [arg for value in settings for arg in ("--set", value)]
     subprocess.run([sys.executable, "-m", "fracture_cli", "-q", "bake", os.path.join(REPO, "sample_assets", asset),
-                    "-o", out, "--recipe", recipe], check=True, cwd=REPO)
+                    "-o", out, "--recipe", recipe, *sets], check=True, cwd=REPO)
     return os.path.join(out, os.path.splitext(asset)[0] + ".fracture.json")
 
 
@@ -105,6 +115,14 @@ def run(quick: bool = False, bake: bool = True, default_recipe: bool = False) ->
                 else:
                     json_path = os.path.join(CONFORMANCE, f"{stem}.fracture.json")
                 lines.append(_row(f"{asset} ({recipe})", json_path))
+        if bake:
+            for asset, recipe, settings, label in PATTERN_BAKES:
+                out = os.path.join(tmp, f"{os.path.splitext(asset)[0]}-pattern-{recipe}")
+                lines.append(_row(f"{asset} ({label})", _bake(asset, recipe, out, settings)))
+    if bake:
+        lines += ["", "The pattern rows (issue 32): the cells of an authored pattern are the pieces and the modes are "
+                  "solved on them (docs/ALGORITHM.md section 9), so the same figures say whether a pattern breaks "
+                  "by the hit."]
     return "\n".join(lines) + "\n"
 
 

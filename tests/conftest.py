@@ -26,6 +26,8 @@ def pytest_configure(config):
 def pytest_addoption(parser):
     parser.addoption("--update-goldens", action="store_true", default=False,
                      help="rewrite tests/golden/*.json from the current output instead of comparing")
+    parser.addoption("--full-matrix", action="store_true", default=False,
+                     help="bake the whole pattern matrix (tests/test_pattern_matrix.py), not only its half")
 
 
 @pytest.fixture

@@ -128,6 +128,32 @@ def read_glb_fragments(path: str) -> list[GlbFragment]:
     return out
 
 
+def read_collision_parts(path: str) -> list[tuple[str, np.ndarray]]:
+    """Every convex part of a GLB's ``OMI_physics_shape`` colliders: ``(owner node name, world corners (k, 3))``."""
+    with open(path, "rb") as fh:
+        doc, binary = _glb_chunks(fh.read())
+    shapes = doc.get("extensions", {}).get("OMI_physics_shape", {}).get("shapes", [])
+    out: list[tuple[str, np.ndarray]] = []
+
+    def visit(index: int, parent: np.ndarray, owner: str) -> None:
+        node = doc["nodes"][index]
+        M = parent @ _node_matrix(node)
+        collider = node.get("extensions", {}).get("OMI_physics_body", {}).get("collider")
+        if collider is not None:
+            shape = shapes[collider["shape"]]
+            mesh = doc["meshes"][shape[shape["type"]]["mesh"]]
+            points = np.vstack([_accessor(doc, binary, p["attributes"]["POSITION"]).astype(np.float64)
+                                for p in mesh["primitives"]])
+            out.append((owner, points @ M[:3, :3].T + M[:3, 3]))
+        for child in node.get("children", []):
+            visit(child, M, node.get("name", owner))
+
+    scene = doc["scenes"][doc.get("scene", 0)]
+    for root in scene["nodes"]:
+        visit(root, np.eye(4), "")
+    return out
+
+
 def read_triangles(path: str) -> np.ndarray:
     """World-space triangles (m, 3, 3) of an input file: GLB and binary STL read here, other formats by trimesh."""
     lower = path.lower()

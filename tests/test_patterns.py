@@ -18,7 +18,6 @@ from fracture_cli.pipeline.bake import bake
 from fracture_cli.pipeline.recipe import load_recipe
 from fracture_cli.pipeline.runner import Runner
 from fracture_cli.runtime.format import load_runtime
-from fracture_cli.runtime.impact import project_impact
 from fracture_cli.stages.pattern import PatternOptions, pattern
 from fracture_cli.stages.pattern.cells import held_volumes
 
@@ -44,8 +43,8 @@ def box(tmp_path_factory) -> str:
     return path
 
 
-def _bake(asset: str, out: str, recipe: str = "default", sets=()) -> dict:
-    result = bake(asset, out, load_recipe(recipe, [*FAST, *sets]))
+def _bake(asset: str, out: str, recipe: str = "default", sets=(), fast=FAST) -> dict:
+    result = bake(asset, out, load_recipe(recipe, [*fast, *sets]))
     return result.report
 
 
@@ -72,9 +71,9 @@ def test_every_kind_bakes_closed_single_body_fragments(kind, box, tmp_path):
           report["checks"]["collision_max_overlap"])
 
 
-@pytest.mark.xfail(strict=True, reason="the collision stage leaves parts of two fragments overlapping by 72% here "
-                   "(a coarse 600-face cage; 0 with a 2000-face cage): a collision-stage case, reported in issue 32")
 def test_collision_parts_of_a_coarse_radial_box_do_not_overlap(box, tmp_path):
+    # Two parts of one fragment overlapped by 72% here: the decomposition numbered the halves of a piece that
+    # shared its cell as cells of their own, and the separation skipped their pairs with the cell's other piece.
     report = _bake(box, str(tmp_path / "o"), sets=["pattern.kind=radial", *KINDS["radial"]])
     assert report["checks"]["collision_max_overlap"] < 0.01
 
@@ -102,8 +101,8 @@ def _hashes(out: str) -> dict:
 @pytest.fixture(scope="module")
 def pane_bake(tmp_path_factory):
     out = str(tmp_path_factory.mktemp("pane"))
-    report = _bake(os.path.join(SAMPLE_ASSETS, "pane.glb"), out, "glass_pane",
-                   ["pattern.rings=2", "pattern.spokes=6"])
+    # The recipe's pattern and modes (what decides where it breaks), on a coarser cage.
+    report = _bake(os.path.join(SAMPLE_ASSETS, "pane.glb"), out, "glass_pane", fast=["cage.target_faces=600"])
     return out, report
 
 
@@ -113,32 +112,55 @@ def test_glass_pane_recipe_bakes_the_pane(pane_bake):
     assert report["recipe"]["parameters"]["pattern"]["kind"] == "radial"
 
 
-def _broken_bond_distance(data, report, point, direction) -> float:
-    """Mean distance from the pane's centre of the bonds a hit at ``point`` breaks (smallest impulse that breaks)."""
-    centres = np.array([(np.asarray(f["bbox_min"]) + np.asarray(f["bbox_max"])) / 2 for f in report["fragments"]])
-    middle = centres.mean(axis=0)
-    for magnitude in np.geomspace(0.05, 500.0, 30):
-        result = project_impact(data, point, tuple(magnitude * np.asarray(direction)))
-        if result.broken.any():
-            bonds = np.asarray(data.edges)[result.broken]
-            mid = (centres[bonds[:, 0]] + centres[bonds[:, 1]]) / 2
-            return float(np.linalg.norm((mid - middle)[:, :2], axis=1).mean())
-    raise AssertionError("no impulse broke a bond")
+# "Near" for the pane hit (fractions of the pane's in-plane diagonal): what comes off first lies within NEAR of
+# the hit, and a hit near a corner detaches pieces at least FAR from the pane's centre.
+NEAR, FAR = 0.15, 0.25
 
 
-def test_a_hit_near_the_panes_centre_breaks_bonds_near_the_centre(pane_bake):
+def _first_detachment(data, glb: str, point, direction=(0.0, 0.0, -1.0)) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The atlas's analysis of one hit at its first detachment (just above ``d1``): the detached fragments'
+    centroids (k, 3), the hit point (3,), and whether the fragment hit (nearest centroid) is among them."""
+    from fracture_cli.atlas.hits import analyse_hit, detached, groups_at, nearest_fragment, rest_groups
+    from fracture_cli.atlas.layout import fragment_layout
+    from fracture_cli.atlas.sweep import JUST_ABOVE
+
+    layout = fragment_layout(data, glb)
+    assert layout.centroids is not None
+    hit = analyse_hit(data, np.asarray(point, dtype=np.float64), direction)
+    assert np.isfinite(hit.d1), "no impulse detaches anything"
+    gone = detached(groups_at(data, hit, hit.d1 * JUST_ABOVE), rest_groups(data), layout.volumes)
+    return layout.centroids[gone], hit.point, bool(gone[nearest_fragment(layout.centroids, hit.point)])
+
+
+def test_a_hit_near_the_panes_centre_breaks_near_its_centre(pane_bake):
+    """Hit the pane's front face at the site nearest its centre, impulse into the pane: at the first detachment
+    the fragment hit comes off and every detached fragment's centroid lies within NEAR of the pane's in-plane
+    diagonal from the hit; hit near a corner, what comes off first is at least FAR from the centre."""
     out, report = pane_bake
     data = load_runtime(os.path.join(out, "pane.fracture.json"))
+    glb = os.path.join(out, "pane.glb")
     sites = np.asarray(data.sites, dtype=np.float64)
     lo, hi = sites.min(axis=0), sites.max(axis=0)
-    front = sites[sites[:, 2] >= hi[2] - 1e-6]
-    centre = front[np.argmin(np.linalg.norm(front[:, :2] - (lo[:2] + hi[:2]) / 2, axis=1))]
+    middle = (lo + hi) / 2
+    diagonal = float(np.linalg.norm((hi - lo)[:2]))  # the pane faces +z: its plane is x, y
+    front = sites[sites[:, 2] > middle[2] + 0.25 * (hi[2] - lo[2])]  # the front face's sites
+    centre = front[np.argmin(np.linalg.norm(front[:, :2] - middle[:2], axis=1))]
     corner = front[np.argmin(np.linalg.norm(front[:, :2] - (lo[:2] + 0.1 * (hi[:2] - lo[:2])), axis=1))]
-    near = _broken_bond_distance(data, report, centre, (0.0, 0.0, -1.0))
-    far = _broken_bond_distance(data, report, corner, (0.0, 0.0, -1.0))
-    diagonal = float(np.linalg.norm(hi - lo))
-    assert near < 0.2 * diagonal, (near, far)
-    assert near < far
+    offset = float(np.linalg.norm(centre[:2] - middle[:2])) / diagonal
+    print(f"hit site {offset:.3f} of the diagonal from the centre")
+    assert offset < 0.1  # the contact sites nearest the centre (a coarse bake has few)
+
+    near, point, hit_detached = _first_detachment(data, glb, centre)
+    reach = np.linalg.norm(near[:, :2] - point[:2], axis=1) / diagonal
+    print(f"centre hit: {len(near)} fragment(s) detached, farthest centroid {reach.max():.3f} of the diagonal")
+    assert hit_detached and len(near) >= 1
+    assert reach.max() < NEAR, reach
+
+    far, _, _ = _first_detachment(data, glb, corner)
+    away = np.linalg.norm(far[:, :2] - middle[:2], axis=1) / diagonal
+    print(f"corner hit: {len(far)} fragment(s) detached, nearest centroid {away.min():.3f} of the diagonal "
+          "from the centre")
+    assert away.min() > FAR, away
 
 
 def test_brick_wall_recipe_bakes_the_wall(tmp_path):

@@ -62,6 +62,21 @@ def test_preview_command_size_and_determinism(baked, tmp_path):
     assert a.read_bytes() == b.read_bytes()
 
 
+def test_preview_fragments_panels_are_one_row_with_the_pattern_kind(baked, tmp_path):
+    out, stem = baked
+    target = tmp_path / "fragments.png"
+    result = CliRunner().invoke(cli, ["preview", str(out / f"{stem}.fracture.json"), "-o", str(target),
+                                      "--size", "720", "280", "--panels", "fragments"])
+    assert result.exit_code == 0, result.output
+    image = Image.open(target)
+    assert image.size == (720, 280)
+    assert "pattern: modes" in image.info["Title"] and "fragments" in image.info["Title"]
+    pixels = np.asarray(image.convert("RGB"))
+    # Three panels side by side: something drawn in each third.
+    for third in range(3):
+        assert (pixels[40:, third * 240:(third + 1) * 240] < 240).any(axis=2).mean() > 0.02
+
+
 def test_impact_png(baked, tmp_path):
     out, stem = baked
     runtime = str(out / f"{stem}.fracture.json")

@@ -216,7 +216,10 @@ def impact_cmd(runtime_file: str, point: tuple[float, float, float] | None,
               help="Output PNG.")
 @click.option("--size", nargs=2, type=int, default=(1600, 1000), show_default=True, metavar="W H",
               help="Image size in pixels.")
-def preview_cmd(runtime_file: str, out_png: str, size: tuple[int, int]) -> Processor:
+@click.option("--panels", type=click.Choice(["all", "fragments"]), default="all", show_default=True,
+              help="'all': input, exploded fragments, an impact and the first modes; 'fragments': the exploded "
+                   "fragments and the impact only, in one row (the README's picture of each pattern kind).")
+def preview_cmd(runtime_file: str, out_png: str, size: tuple[int, int], panels: str) -> Processor:
     """Render a PNG of a bake: input, exploded fragments, modes, an example impact."""
 
     def process(chain: Chain) -> None:
@@ -225,7 +228,7 @@ def preview_cmd(runtime_file: str, out_png: str, size: tuple[int, int]) -> Proce
 
         check_preview_size(size, "--size")
         guard_beside(runtime_file, [out_png], glb=True, report=True)
-        render_preview(runtime_file, out_png, width=size[0], height=size[1])
+        render_preview(runtime_file, out_png, width=size[0], height=size[1], panels=panels)
         log.info("preview: wrote %s", out_png)
 
     return process

@@ -209,7 +209,8 @@ def pick_example_impact(data, center: np.ndarray):
 
 
 def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: int = 1000,
-                   impact: tuple | None = None, max_modes: int = 6, report: dict | None = None) -> dict:
+                   impact: tuple | None = None, max_modes: int = 6, report: dict | None = None,
+                   panels: str = "all") -> dict:
     """Render the preview PNG of a bake.
 
     Parameters
@@ -230,6 +231,10 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
         default ``<stem>.report.json`` beside the runtime file, if present. A
         bake passes its own: it renders the preview in its staging folder,
         before the report is written there.
+    panels : {"all", "fragments"}, optional (default "all")
+        ``"all"``: input, exploded fragments and the impact above the first
+        modes; ``"fragments"``: the exploded fragments and the impact in one
+        row, under a short title (no modes).
 
     Returns
     -------
@@ -266,22 +271,31 @@ def render_preview(json_path: str, png_path: str, *, width: int = 1600, height: 
 
     fig = plt.figure(figsize=(width / 100.0, height / 100.0), dpi=100)
     fig.patch.set_facecolor("white")
-    grid = fig.add_gridspec(2, 4, height_ratios=[1.0, 1.0], hspace=0.12, wspace=0.02,
-                            left=0.01, right=0.99, top=0.9, bottom=0.02)
-    _draw_input(fig.add_subplot(grid[0, 0]), frags, view, height // 2)
-    _draw_exploded(fig.add_subplot(grid[0, 1:3]), frags, view, height // 2)
-    groups = _draw_impact(fig.add_subplot(grid[0, 3]), data, frags, view, impact, height // 2)
-    k = min(data.k, max_modes)
-    sub = grid[1, :].subgridspec(1, max(k, 1), wspace=0.02)
-    for i in range(k):
-        _draw_mode(fig.add_subplot(sub[0, i]), data, frags, view, i, width // max(k, 1))
-
     counts = report.get("counts", {})
     recipe = report.get("recipe", {}).get("name", "?")
-    title = (f"{os.path.basename(stem_path)}  |  recipe: {recipe}  |  {len(frags)} fragments, {data.k} modes, "
-             f"{counts.get('tets', '?')} tets, cage {counts.get('cage_faces', '?')} faces  |  "
-             f"radius {data.radius:g}, threshold {data.default_threshold:g}")
-    fig.suptitle(title, fontsize=13)
+    k = 0
+    if panels == "fragments":
+        grid = fig.add_gridspec(1, 3, wspace=0.02, left=0.01, right=0.99, top=0.84, bottom=0.01)
+        _draw_assembled(fig.add_subplot(grid[0, 0]), frags, view, height)
+        _draw_exploded(fig.add_subplot(grid[0, 1]), frags, view, height, fontsize=9, title="exploded")
+        groups = _draw_impact(fig.add_subplot(grid[0, 2]), data, frags, view, impact, height, fontsize=9)
+        kind = report.get("recipe", {}).get("parameters", {}).get("pattern", {}).get("kind", "modes")
+        title = f"{os.path.basename(stem_path)}  |  recipe: {recipe}  |  pattern: {kind}  |  {len(frags)} fragments"
+        fig.suptitle(title, fontsize=10, y=0.985)
+    else:
+        grid = fig.add_gridspec(2, 4, height_ratios=[1.0, 1.0], hspace=0.12, wspace=0.02,
+                                left=0.01, right=0.99, top=0.9, bottom=0.02)
+        _draw_input(fig.add_subplot(grid[0, 0]), frags, view, height // 2)
+        _draw_exploded(fig.add_subplot(grid[0, 1:3]), frags, view, height // 2)
+        groups = _draw_impact(fig.add_subplot(grid[0, 3]), data, frags, view, impact, height // 2)
+        k = min(data.k, max_modes)
+        sub = grid[1, :].subgridspec(1, max(k, 1), wspace=0.02)
+        for i in range(k):
+            _draw_mode(fig.add_subplot(sub[0, i]), data, frags, view, i, width // max(k, 1))
+        title = (f"{os.path.basename(stem_path)}  |  recipe: {recipe}  |  {len(frags)} fragments, {data.k} modes, "
+                 f"{counts.get('tets', '?')} tets, cage {counts.get('cage_faces', '?')} faces  |  "
+                 f"radius {data.radius:g}, threshold {data.default_threshold:g}")
+        fig.suptitle(title, fontsize=13)
     with atomic_path(png_path) as tmp:
         # The title also as the PNG's Title text, so it can be read back without looking at pixels.
         fig.savefig(tmp, format="png", dpi=100, metadata={"Software": None, "Title": title})
@@ -306,7 +320,16 @@ def _draw_input(ax: Any, frags: list, view: _View, pixels: int) -> None:
     ax.set_title("input", fontsize=11)
 
 
-def _draw_exploded(ax: Any, frags: list, view: _View, pixels: int) -> None:
+def _draw_assembled(ax: Any, frags: list, view: _View, pixels: int) -> None:
+    """The asset assembled, each fragment's outer faces in its colour (the pattern as it shows on the surface)."""
+    colors = palette(len(frags))
+    cols = [np.repeat(colors[j][None], len(f.outer), 0) for j, f in enumerate(frags)]
+    draw_triangles(ax, np.concatenate([f.outer for f in frags]), np.concatenate(cols), center=view.center,
+                   extent=view.radius * 1.05, pixels=pixels)
+    ax.set_title("fragments", fontsize=9)
+
+
+def _draw_exploded(ax: Any, frags: list, view: _View, pixels: int, fontsize: int = 11, title: str = "") -> None:
     """Exploded fragments, interior faces tinted darker."""
     colors = palette(len(frags))
     push = (view.centroids - view.center) * 0.6
@@ -317,10 +340,11 @@ def _draw_exploded(ax: Any, frags: list, view: _View, pixels: int) -> None:
         cols += [np.repeat(colors[j][None], len(f.outer), 0), np.repeat((colors[j] * 0.55)[None], len(f.inner), 0)]
     draw_triangles(ax, np.concatenate(tris), np.concatenate(cols), center=view.center, extent=view.radius * 1.7,
                    pixels=pixels)
-    ax.set_title(f"{len(frags)} fragments (exploded; darker = interior faces)", fontsize=11)
+    ax.set_title(title or f"{len(frags)} fragments (exploded; darker = interior faces)", fontsize=fontsize)
 
 
-def _draw_impact(ax: Any, data: Any, frags: list, view: _View, impact: tuple | None, pixels: int) -> int:
+def _draw_impact(ax: Any, data: Any, frags: list, view: _View, impact: tuple | None, pixels: int,
+                 fontsize: int = 11) -> int:
     """An impact (given, or :func:`pick_example_impact`) and the groups it breaks into; returns their number."""
     # on first use: the viewer's start-up loads no geometry
     from fracture_cli.runtime.impact import project_impact
@@ -344,7 +368,7 @@ def _draw_impact(ax: Any, data: Any, frags: list, view: _View, impact: tuple | N
     tail = project((point - impulse / max(np.linalg.norm(impulse), 1e-12) * view.radius * 0.6)[None], view.center)[0]
     ax.annotate("", xy=p2, xytext=tail, arrowprops=dict(arrowstyle="-|>", color="crimson", lw=2.5))
     ax.plot([p2[0]], [p2[1]], "o", color="crimson", ms=7)
-    ax.set_title(f"impact |n|={np.linalg.norm(impulse):.3g}: {len(group_ids)} group(s)", fontsize=11)
+    ax.set_title(f"impact |n|={np.linalg.norm(impulse):.3g}: {len(group_ids)} group(s)", fontsize=fontsize)
     return int(len(group_ids))
 
 

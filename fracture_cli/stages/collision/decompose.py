@@ -71,7 +71,9 @@ def decomposition_cells(solid: manifold3d.Manifold, max_parts: int, concavity: f
 
     Pieces in different cells cannot overlap, nor can their hulls (a cell is
     convex); pieces of one cell (the components of one side of a cut, or of
-    the solid) may interlock.
+    the solid) may interlock. A piece that shares its cell is cut within that
+    cell: its halves keep the cell's number, since the other pieces there may
+    reach into either half-space of the cut.
     """
     leaves, cells, _ = decomposition_hulls(solid, max_parts, concavity, intrusion, max_intrusion)
     return leaves, cells
@@ -109,8 +111,14 @@ def decomposition_hulls(solid: manifold3d.Manifold, max_parts: int, concavity: f
         pieces = [p for side in sides for p in side]
         leaves[worst:worst + 1] = pieces
         hulls[worst:worst + 1] = [p.hull() for p in pieces]
-        cells[worst:worst + 1] = [next_cell + k for k, side in enumerate(sides) for _ in side]
-        next_cell += len(sides)
+        if cells.count(cells[worst]) == 1:
+            # Alone in its cell: the cut splits the cell into two cells, one per side, that no other piece is in.
+            cells[worst:worst + 1] = [next_cell + k for k, side in enumerate(sides) for _ in side]
+            next_cell += len(sides)
+        else:
+            # Its cell also holds other pieces (components of one side of an earlier cut, which may interlock):
+            # they can reach into either side of this cut, so the halves stay in that cell, with them.
+            cells[worst:worst + 1] = [cells[worst]] * len(pieces)
         waste[worst:worst + 1] = [excess(p, h) for p, h in zip(pieces, hulls[worst:worst + len(pieces)])]
     return leaves, cells, hulls
 

@@ -1,0 +1,66 @@
+"""Issue 32's matrix: every pattern kind bakes every sample asset, noise on and off (tests/pattern_matrix.py).
+
+Every (asset, kind) pair is baked in ``make test``, half of them with noise on the faults and half without, in a
+checkerboard (:func:`in_make_test`): every asset and every kind is checked both ways. The other half of the
+matrix runs with ``--full-matrix`` (and in ``make bench``: bench/bench_patterns.py writes the whole table).
+The bakes of one asset in one worker share a stage cache, so its cage and tets are made once.
+"""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+from pattern_matrix import ASSETS, KINDS, bake_cell
+
+CELLS = [(asset, kind, noise) for asset in ASSETS for kind in KINDS for noise in (False, True)]
+
+# The cells that fail today, each with what fails (bench/RESULTS.md, "Pattern matrix", 2026-12-03; strict: a cell
+# that starts passing fails the test until it leaves this table). One cause: the triangle budget (twice the input's
+# triangles plus 64 per fragment) is missed where planar cuts cross the outer surface along long curves (slices on
+# the pillar, slices and bricks on the thin-walled vase) and the faults in the vase's wall cannot be simplified
+# further without fragments intersecting themselves; noise adds to it. (Six noisy cells failed before the faults
+# stage held the noise back where moved faults cross: volume 1.7e-6 over, a refused fragment, budgets.)
+BUDGET = "triangle budget missed: {} triangles written against {}"
+KNOWN = {
+    ("pillar.glb", "slices", False): BUDGET.format(14700, 12740),
+    ("vase.obj", "slices", False): BUDGET.format(7872, 6720),
+    ("vase.obj", "bricks", False): BUDGET.format(8080, 6912),
+    ("pillar.glb", "slices", True): BUDGET.format(17598, 12740),
+    ("vase.obj", "voronoi", True): BUDGET.format(7354, 6656),
+    ("vase.obj", "slices", True): BUDGET.format(8232, 6720),
+    ("vase.obj", "bricks", True): BUDGET.format(8880, 6912),
+}
+
+
+def in_make_test(asset: str, kind: str, noise: bool) -> bool:
+    """Whether a cell is in the default run: the checkerboard of (asset, kind), noise on the even squares."""
+    square = list(ASSETS).index(asset) + list(KINDS).index(kind)
+    return noise == (square % 2 == 0)
+
+
+def _param(asset: str, kind: str, noise: bool):
+    marks: list = [] if in_make_test(asset, kind, noise) else [pytest.mark.full_matrix]
+    if (asset, kind, noise) in KNOWN:
+        marks.append(pytest.mark.xfail(reason=KNOWN[asset, kind, noise], strict=True))
+    return pytest.param(asset, kind, noise, marks=marks, id=f"{asset}-{kind}-{'noise' if noise else 'plain'}")
+
+
+@pytest.fixture(scope="module")
+def caches(tmp_path_factory) -> dict[str, str]:
+    """A stage cache folder per asset, for this worker's bakes."""
+    root = tmp_path_factory.mktemp("matrix-cache")
+    return {asset: str(root / os.path.splitext(asset)[0]) for asset in ASSETS}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("asset", "kind", "noise"), [_param(*cell) for cell in CELLS])
+def test_every_kind_bakes_every_sample_asset(asset, kind, noise, caches, tmp_path, request):
+    if not in_make_test(asset, kind, noise) and not request.config.getoption("--full-matrix"):
+        pytest.skip("the other half of the matrix: --full-matrix (or make bench)")
+    result = bake_cell(asset, kind, noise, str(tmp_path / "out"), cache_dir=caches[asset])
+    print(f"{asset} {kind} noise={noise}: {result.fragments} fragments, {result.triangles} / {result.budget} "
+          f"triangles, volume error {result.volume_error:.1e}, overlap {100 * result.overlap:.3f}% of "
+          f"{result.parts} parts, {result.seconds:.1f} s")
+    assert result.ok, result.problems
+    assert result.fragments >= 2
