@@ -345,7 +345,8 @@ CASES = [
     ("crack_count_wrong", "structure", _edit(["counts", "crack_segments"], 5), "rejected",
      "counts.crack_segments differs from crack_segments' rows"),
     ("feature_unknown", "structure", _edit(["features"], ["anchors", "damage", "levels"]), "rejected",
-     "a feature this reader does not implement ('levels')"),
+     "feature 'levels' on a structure file without the levels object "
+     "(a reader without levels refuses the feature by name)"),
     ("ok_structure_without_cracks", "structure",
      lambda h, b: _edit(["arrays", "crack_ptr"], ...)(*_edit(["arrays", "crack_segments"], ...)(h, b)),
      "ok", "the crack arrays are optional (drawing only)"),
