@@ -31,3 +31,27 @@ def test_console_exit_keeps_the_exit_code_and_the_output(tmp_path):
     shown = subprocess.run([sys.executable, "-m", "fracture_cli", "recipes", "show", "default", "--set",
                             "modes.num_modes=5"], capture_output=True, text=True, cwd=REPO)
     assert shown.returncode == 0 and "num_modes = 5" in shown.stdout
+
+
+_FIRST_STAGE = """
+import os, sys
+from fracture_cli.pipeline import runner
+
+def first(self, name):
+    heavy = ('numba', 'open3d', 'scipy', 'trimesh')
+    print(sorted(m for m in heavy if m in sys.modules), flush=True)
+    os._exit(0)
+
+runner.Runner.step = first
+from fracture_cli.cli import main
+main(sys.argv[1:])
+"""
+
+
+def test_start_up_loads_no_heavy_package_before_the_first_stage(tmp_path):
+    """Issue 33: resolving the recipe (every stage's options, levels included) loads none of the packages whose
+    import costs tenths of a second; the stage that needs one imports it."""
+    out = subprocess.run([sys.executable, "-c", _FIRST_STAGE, "-q", "bake", os.path.join(REPO, "sample_assets",
+                          "chair.glb"), "-r", "wood", "--set", "levels.count=2", "-o", str(tmp_path / "out")],
+                         capture_output=True, text=True, cwd=REPO)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr

@@ -13,8 +13,9 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from fracture_cli.checks import checked_fragments
-from fracture_cli.stages.levels import Context, levels
+from fracture_cli.stages.levels import levels
 from fracture_cli.stages.levels.bodies import with_levels
+from fracture_cli.stages.levels.refine import Context
 
 if TYPE_CHECKING:  # pipeline/__init__.py imports this module on first use
     from fracture_cli.pipeline import PipelineState

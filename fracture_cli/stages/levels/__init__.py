@@ -15,13 +15,16 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fracture_cli.geometry import trigeom
 from fracture_cli.stages.levels.options import STAGE, LevelsOptions
-from fracture_cli.stages.levels.refine import Context, Plan, Refinement, plan_refinement, refine_fragment
 from fracture_cli.system import parallel
+
+if TYPE_CHECKING:  # resolving a recipe imports this package for its options: refine (numba) loads only in a bake
+    from fracture_cli.stages.levels.refine import Context, Refinement
 
 log = logging.getLogger(__name__)
 
@@ -94,6 +97,9 @@ def levels(ctx: Context, anchored: np.ndarray | None = None) -> Levels:
     chosen = candidates(volumes, anchored, options)
     skipped: dict[int, str] = {}
     # Step 1 (cheap): how many children each would get; the cap is applied to those counts first.
+    # only a bake with levels loads the refinement and its compiled kernels (start-up, issue 33)
+    from fracture_cli.stages.levels.refine import plan_refinement, refine_fragment
+
     plans = parallel.ordered_map(plan_refinement, chosen, ctx)
     accepted, leaves = [], p
     for index, plan in zip(chosen, plans):
@@ -125,4 +131,4 @@ def levels(ctx: Context, anchored: np.ndarray | None = None) -> Levels:
                   options=options)
 
 
-__all__ = ["STAGE", "Context", "Levels", "LevelsOptions", "Plan", "Refinement", "candidates", "levels"]
+__all__ = ["STAGE", "Levels", "LevelsOptions", "candidates", "levels"]
