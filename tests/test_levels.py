@@ -31,6 +31,7 @@ from fracture_cli.runtime import levels as lv
 from fracture_cli.runtime.format import load_runtime
 from fracture_cli.runtime.impact import project_impact
 from fracture_cli.stages import levels as stage
+from fracture_cli.stages.levels import refine as refine_module
 from fracture_cli.stages.levels.options import LevelsOptions
 from fracture_cli.stages.levels.submesh import (
     covering_tets,
@@ -124,16 +125,16 @@ def test_leaf_cap_is_enforced_in_the_rule_order(monkeypatch):
     actual = {0: 3, 1: 4, 2: 3, 3: 7}  # ... and its cut (fragment 3 falls into more bodies)
 
     def plan(ctx, index):
-        return stage.Plan(fragment=index, tets=np.zeros(0), U=np.zeros((1, 0, 1)),
+        return refine_module.Plan(fragment=index, tets=np.zeros(0), U=np.zeros((1, 0, 1)),
                           pieces=dataclasses.replace(_pieces(expected[index])))
 
     def refine(ctx, plan):
-        return stage.Refinement(fragment=plan.fragment, children=_FakeChildren((None,) * actual[plan.fragment]),
+        return refine_module.Refinement(fragment=plan.fragment, children=_FakeChildren((None,) * actual[plan.fragment]),
                                 parts=(), physics=(), body={}, checks={})
 
-    monkeypatch.setattr(stage, "plan_refinement", plan)
-    monkeypatch.setattr(stage, "refine_fragment", refine)
-    ctx = stage.Context(tet_mesh=None, tet_piece=None, eta=None, fragments=frags,
+    monkeypatch.setattr(refine_module, "plan_refinement", plan)
+    monkeypatch.setattr(refine_module, "refine_fragment", refine)
+    ctx = refine_module.Context(tet_mesh=None, tet_piece=None, eta=None, fragments=frags,
                         options=LevelsOptions(count=2, min_volume=0.0, max_leaves=14), stages={}, radius=0.05,
                         threshold=1.0)
     result = stage.levels(ctx)
