@@ -870,17 +870,14 @@ static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, d
     if (!plus) return CLIP_SAME;
     if (!minus) return CLIP_EMPTY;
     int32_t nv = 0, ncross = 0;
-    for (int32_t i = 0; i < snv; ++i) {
+    for (int32_t i = 0; i < snv; ++i) { /* the kept corners, without a branch (a dropped one is overwritten) */
+        int32_t kept = side[i] <= 0;
         cross_head[i] = -1;
-        if (side[i] <= 0) {
-            renumber[i] = nv;
-            dv[3 * nv] = sv[3 * i];
-            dv[3 * nv + 1] = sv[3 * i + 1];
-            dv[3 * nv + 2] = sv[3 * i + 2];
-            nv++;
-        } else {
-            renumber[i] = -1;
-        }
+        renumber[i] = kept ? nv : -1;
+        dv[3 * nv] = sv[3 * i];
+        dv[3 * nv + 1] = sv[3 * i + 1];
+        dv[3 * nv + 2] = sv[3 * i + 2];
+        nv += kept;
     }
     int32_t kept_vertices = nv, nf = 0, nl = 0, dropped = 0;
     doff[0] = 0;
@@ -1275,7 +1272,7 @@ static void cut_piece(hit *h, int32_t k) {
     piece_poly(d, k, base);
     unsigned char *record_start = h->a->base + h->a->low;
     size_t low_before = h->a->low;
-    int32_t nrec = 0, nkept = 0, has_outer = 0;
+    int32_t nrec = 0, nkept = 0, has_outer = 0, witness = 0; /* witness: a corner inside the last plane tested */
     for (int32_t n = 0; n < ncells; ++n) {
         int32_t i = h->cand[n], empty = 0;
         const double *planes = h->planes + 4 * h->nb_off[i];
@@ -1283,12 +1280,10 @@ static void cut_piece(hit *h, int32_t k) {
         for (int32_t e = 0; e < nplanes && !empty; ++e) empty = dot3(planes + 4 * e, c) - planes[4 * e + 3] > r;
         for (int32_t e = 0; e < nplanes && !empty; ++e) { /* or every corner lies beyond a plane */
             const double *plane = planes + 4 * e;
-            double least = INFINITY;
-            for (int32_t v = 0; v < base->nv && least > eps; ++v) {
-                double dist = dot3(plane, base->v + 3 * v) - plane[3];
-                if (dist < least) least = dist;
-            }
-            empty = least > eps;
+            if (dot3(plane, base->v + 3 * witness) - plane[3] <= eps) continue; /* the last corner found inside */
+            empty = 1;
+            for (int32_t v = 0; v < base->nv && empty; ++v)
+                if (v != witness && dot3(plane, base->v + 3 * v) - plane[3] <= eps) { witness = v; empty = 0; }
         }
         if (empty) continue;
         const poly *cur = clip_by(h, base, planes, nplanes, c, r, eps);
