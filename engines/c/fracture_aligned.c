@@ -1067,10 +1067,11 @@ typedef struct hit {
     const int32_t *wall_off, *walls; /* per cell (offsets relative to the pattern), its boundary planes */
     double *tri_a, *tri_b, *tri_c; /* (ccap, 8) polygon buffers for the triangles */
     int32_t *tri_tags;             /* (ccap,) their corners' nearest cells for split_polygon */
-    int32_t *cells, *kept;
+    int32_t *cells, *kept; /* cells: the triangles made in each cell so far */
     double *dists;
     unsigned char *parts_begin;
     size_t tri_count;
+    int32_t outer_tris;  /* the triangles made in the rest of the object so far */
     int overflow, limit;
 } hit;
 
@@ -1144,6 +1145,7 @@ static void push_triangle(hit *h, int32_t cell, int32_t material, const double *
     t->material = material;
     t->fragment = cell; /* the cell until the fragments are numbered */
     h->tri_count++;
+    if (cell < h->S) h->cells[cell]++; else h->outer_tris++;
 }
 
 static void push_polygon(hit *h, int32_t cell, int32_t material, const double *corners, int32_t count) {
@@ -1355,7 +1357,11 @@ static void cut_piece(hit *h, int32_t k) {
         }
         int32_t count = 3, whole = 1; /* whole: still the stored triangle, inside its sphere (ts, tr) */
         const double *ts = d->tri_sphere + 4 * (size_t)t;
-        double tr = ts[3], tmargin = 1e-4 * tr + 1e-12 * ((fabs(ts[0]) + fabs(ts[1])) + fabs(ts[2]) + 2.0 * tr);
+        double tr = 0.0, tmargin = 0.0;
+        if (nwalls > 0) { /* (only then: no boundary plane, no sphere to read) */
+            tr = ts[3];
+            tmargin = 1e-4 * tr + 1e-12 * ((fabs(ts[0]) + fabs(ts[1])) + fabs(ts[2]) + 2.0 * tr);
+        }
         for (int32_t n = 0; n < nwalls && count > 0; ++n) {
             const double *plane = h->boundary + 4 * h->near_walls[n];
             if (whole) { /* the sides clip_both would find, from the sphere when it lies clear of the plane */
@@ -1478,6 +1484,7 @@ static fra_status setup(const fra_data *d, int32_t q, const double *point, const
     h->sites = (double *)grab(a, sizeof(double) * 3 * (size_t)h->S, &ok);
     h->dists = (double *)grab(a, sizeof(double) * (size_t)h->S, &ok);
     h->cells = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->S, &ok);
+    for (int32_t i = 0; ok && i < h->S; ++i) h->cells[i] = 0;
     h->kept = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->S, &ok);
     h->planes = (double *)grab(a, sizeof(double) * 4 * (size_t)N, &ok);
     size_t levels = (size_t)(h->S < 128 ? h->S : 128) + 1;
@@ -1567,10 +1574,15 @@ fra_status fra_fracture(const fra_data *d, int32_t q, const double point[3], con
     int32_t *cell_tris = (int32_t *)grab(&a, sizeof(int32_t) * (size_t)S, &ok);
     int32_t *cell_frag = (int32_t *)grab(&a, sizeof(int32_t) * (size_t)S, &ok);
     if (!ok) { out->arena_needed = 2 * arena_size + 4096; return FRA_ERR_ARENA; }
-    for (int32_t i = 0; i < S; ++i) cell_parts[i] = cell_tris[i] = 0;
+    int32_t *cell_whole = (int32_t *)h.dists; /* (S,) doubles, free now: room for S + 1 counts */
+    for (int32_t i = 0; i < S; ++i) {
+        cell_parts[i] = cell_whole[i] = 0;
+        cell_tris[i] = i < h.S ? h.cells[i] : h.outer_tris; /* counted as they were made */
+    }
     for (unsigned char *at = h.parts_begin; at < parts_end; at += ((part_record *)at)->size) {
         part_record *r = (part_record *)at;
         cell_parts[r->cell]++;
+        cell_whole[r->cell] += r->whole;
         nparts++;
         nwhole += r->whole;
         nvert += r->nv;
@@ -1579,7 +1591,6 @@ fra_status fra_fracture(const fra_data *d, int32_t q, const double point[3], con
     }
     size_t ntri = h.tri_count;
     fra_triangle *tris = (fra_triangle *)(a.base + tri_top - ntri * sizeof(fra_triangle));
-    for (size_t t = 0; t < ntri; ++t) cell_tris[tris[t].fragment]++;
     for (int32_t i = 0; i < S; ++i) cell_frag[i] = cell_parts[i] ? nfrag++ : -1;
     out->fragments = (fra_fragment *)grab(&a, sizeof(fra_fragment) * (size_t)nfrag, &ok);
     out->parts = (fra_part *)grab(&a, sizeof(fra_part) * (size_t)nparts, &ok);
@@ -1603,16 +1614,14 @@ fra_status fra_fracture(const fra_data *d, int32_t q, const double point[3], con
         f->part_count = f->whole_count = f->triangle_count = 0;
         part_at += cell_parts[i];
         tri_at += cell_tris[i];
+        f->whole_count = cell_whole[i];
+        cell_whole[i] = whole_at; /* now: the next free slot */
+        whole_at += f->whole_count;
         cell_tris[i] = f->triangle_first; /* now: the next free slot */
         cell_parts[i] = f->part_first;
     }
-    for (int32_t i = 0; i < S; ++i)
-        if (cell_frag[i] >= 0) {
-            out->fragments[cell_frag[i]].whole_first = whole_at;
-            for (unsigned char *at = h.parts_begin; at < parts_end; at += ((part_record *)at)->size)
-                if (((part_record *)at)->cell == i && ((part_record *)at)->whole) out->whole_pieces[whole_at++] = ((part_record *)at)->piece;
-            out->fragments[cell_frag[i]].whole_count = whole_at - out->fragments[cell_frag[i]].whole_first;
-        }
+    for (unsigned char *at = h.parts_begin; at < parts_end; at += ((part_record *)at)->size)
+        if (((part_record *)at)->whole) out->whole_pieces[cell_whole[((part_record *)at)->cell]++] = ((part_record *)at)->piece;
     int32_t vert_at = 0, face_at = 0, loop_at = 0;
     out->face_loop_offsets[0] = 0;
     for (unsigned char *at = h.parts_begin; at < parts_end; at += ((part_record *)at)->size) {
