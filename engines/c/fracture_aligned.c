@@ -870,17 +870,14 @@ static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, d
     if (!plus) return CLIP_SAME;
     if (!minus) return CLIP_EMPTY;
     int32_t nv = 0, ncross = 0;
-    for (int32_t i = 0; i < snv; ++i) {
+    for (int32_t i = 0; i < snv; ++i) { /* the kept corners, without a branch (a dropped one is overwritten) */
+        int32_t kept = side[i] <= 0;
         cross_head[i] = -1;
-        if (side[i] <= 0) {
-            renumber[i] = nv;
-            dv[3 * nv] = sv[3 * i];
-            dv[3 * nv + 1] = sv[3 * i + 1];
-            dv[3 * nv + 2] = sv[3 * i + 2];
-            nv++;
-        } else {
-            renumber[i] = -1;
-        }
+        renumber[i] = kept ? nv : -1;
+        dv[3 * nv] = sv[3 * i];
+        dv[3 * nv + 1] = sv[3 * i + 1];
+        dv[3 * nv + 2] = sv[3 * i + 2];
+        nv += kept;
     }
     int32_t kept_vertices = nv, nf = 0, nl = 0, dropped = 0;
     doff[0] = 0;
@@ -1070,10 +1067,11 @@ typedef struct hit {
     const int32_t *wall_off, *walls; /* per cell (offsets relative to the pattern), its boundary planes */
     double *tri_a, *tri_b, *tri_c; /* (ccap, 8) polygon buffers for the triangles */
     int32_t *tri_tags;             /* (ccap,) their corners' nearest cells for split_polygon */
-    int32_t *cells, *kept;
+    int32_t *cells, *kept; /* cells: the triangles made in each cell so far */
     double *dists;
     unsigned char *parts_begin;
     size_t tri_count;
+    int32_t outer_tris;  /* the triangles made in the rest of the object so far */
     int overflow, limit;
 } hit;
 
@@ -1147,6 +1145,7 @@ static void push_triangle(hit *h, int32_t cell, int32_t material, const double *
     t->material = material;
     t->fragment = cell; /* the cell until the fragments are numbered */
     h->tri_count++;
+    if (cell < h->S) h->cells[cell]++; else h->outer_tris++;
 }
 
 static void push_polygon(hit *h, int32_t cell, int32_t material, const double *corners, int32_t count) {
@@ -1275,7 +1274,7 @@ static void cut_piece(hit *h, int32_t k) {
     piece_poly(d, k, base);
     unsigned char *record_start = h->a->base + h->a->low;
     size_t low_before = h->a->low;
-    int32_t nrec = 0, nkept = 0, has_outer = 0;
+    int32_t nrec = 0, nkept = 0, has_outer = 0, witness = 0; /* witness: a corner inside the last plane tested */
     for (int32_t n = 0; n < ncells; ++n) {
         int32_t i = h->cand[n], empty = 0;
         const double *planes = h->planes + 4 * h->nb_off[i];
@@ -1283,12 +1282,10 @@ static void cut_piece(hit *h, int32_t k) {
         for (int32_t e = 0; e < nplanes && !empty; ++e) empty = dot3(planes + 4 * e, c) - planes[4 * e + 3] > r;
         for (int32_t e = 0; e < nplanes && !empty; ++e) { /* or every corner lies beyond a plane */
             const double *plane = planes + 4 * e;
-            double least = INFINITY;
-            for (int32_t v = 0; v < base->nv && least > eps; ++v) {
-                double dist = dot3(plane, base->v + 3 * v) - plane[3];
-                if (dist < least) least = dist;
-            }
-            empty = least > eps;
+            if (dot3(plane, base->v + 3 * witness) - plane[3] <= eps) continue; /* the last corner found inside */
+            empty = 1;
+            for (int32_t v = 0; v < base->nv && empty; ++v)
+                if (v != witness && dot3(plane, base->v + 3 * v) - plane[3] <= eps) { witness = v; empty = 0; }
         }
         if (empty) continue;
         const poly *cur = clip_by(h, base, planes, nplanes, c, r, eps);
@@ -1360,7 +1357,11 @@ static void cut_piece(hit *h, int32_t k) {
         }
         int32_t count = 3, whole = 1; /* whole: still the stored triangle, inside its sphere (ts, tr) */
         const double *ts = d->tri_sphere + 4 * (size_t)t;
-        double tr = ts[3], tmargin = 1e-4 * tr + 1e-12 * ((fabs(ts[0]) + fabs(ts[1])) + fabs(ts[2]) + 2.0 * tr);
+        double tr = 0.0, tmargin = 0.0;
+        if (nwalls > 0) { /* (only then: no boundary plane, no sphere to read) */
+            tr = ts[3];
+            tmargin = 1e-4 * tr + 1e-12 * ((fabs(ts[0]) + fabs(ts[1])) + fabs(ts[2]) + 2.0 * tr);
+        }
         for (int32_t n = 0; n < nwalls && count > 0; ++n) {
             const double *plane = h->boundary + 4 * h->near_walls[n];
             if (whole) { /* the sides clip_both would find, from the sphere when it lies clear of the plane */
@@ -1483,6 +1484,7 @@ static fra_status setup(const fra_data *d, int32_t q, const double *point, const
     h->sites = (double *)grab(a, sizeof(double) * 3 * (size_t)h->S, &ok);
     h->dists = (double *)grab(a, sizeof(double) * (size_t)h->S, &ok);
     h->cells = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->S, &ok);
+    for (int32_t i = 0; ok && i < h->S; ++i) h->cells[i] = 0;
     h->kept = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->S, &ok);
     h->planes = (double *)grab(a, sizeof(double) * 4 * (size_t)N, &ok);
     size_t levels = (size_t)(h->S < 128 ? h->S : 128) + 1;
@@ -1572,10 +1574,15 @@ fra_status fra_fracture(const fra_data *d, int32_t q, const double point[3], con
     int32_t *cell_tris = (int32_t *)grab(&a, sizeof(int32_t) * (size_t)S, &ok);
     int32_t *cell_frag = (int32_t *)grab(&a, sizeof(int32_t) * (size_t)S, &ok);
     if (!ok) { out->arena_needed = 2 * arena_size + 4096; return FRA_ERR_ARENA; }
-    for (int32_t i = 0; i < S; ++i) cell_parts[i] = cell_tris[i] = 0;
+    int32_t *cell_whole = (int32_t *)h.dists; /* (S,) doubles, free now: room for S + 1 counts */
+    for (int32_t i = 0; i < S; ++i) {
+        cell_parts[i] = cell_whole[i] = 0;
+        cell_tris[i] = i < h.S ? h.cells[i] : h.outer_tris; /* counted as they were made */
+    }
     for (unsigned char *at = h.parts_begin; at < parts_end; at += ((part_record *)at)->size) {
         part_record *r = (part_record *)at;
         cell_parts[r->cell]++;
+        cell_whole[r->cell] += r->whole;
         nparts++;
         nwhole += r->whole;
         nvert += r->nv;
@@ -1584,7 +1591,6 @@ fra_status fra_fracture(const fra_data *d, int32_t q, const double point[3], con
     }
     size_t ntri = h.tri_count;
     fra_triangle *tris = (fra_triangle *)(a.base + tri_top - ntri * sizeof(fra_triangle));
-    for (size_t t = 0; t < ntri; ++t) cell_tris[tris[t].fragment]++;
     for (int32_t i = 0; i < S; ++i) cell_frag[i] = cell_parts[i] ? nfrag++ : -1;
     out->fragments = (fra_fragment *)grab(&a, sizeof(fra_fragment) * (size_t)nfrag, &ok);
     out->parts = (fra_part *)grab(&a, sizeof(fra_part) * (size_t)nparts, &ok);
@@ -1608,16 +1614,14 @@ fra_status fra_fracture(const fra_data *d, int32_t q, const double point[3], con
         f->part_count = f->whole_count = f->triangle_count = 0;
         part_at += cell_parts[i];
         tri_at += cell_tris[i];
+        f->whole_count = cell_whole[i];
+        cell_whole[i] = whole_at; /* now: the next free slot */
+        whole_at += f->whole_count;
         cell_tris[i] = f->triangle_first; /* now: the next free slot */
         cell_parts[i] = f->part_first;
     }
-    for (int32_t i = 0; i < S; ++i)
-        if (cell_frag[i] >= 0) {
-            out->fragments[cell_frag[i]].whole_first = whole_at;
-            for (unsigned char *at = h.parts_begin; at < parts_end; at += ((part_record *)at)->size)
-                if (((part_record *)at)->cell == i && ((part_record *)at)->whole) out->whole_pieces[whole_at++] = ((part_record *)at)->piece;
-            out->fragments[cell_frag[i]].whole_count = whole_at - out->fragments[cell_frag[i]].whole_first;
-        }
+    for (unsigned char *at = h.parts_begin; at < parts_end; at += ((part_record *)at)->size)
+        if (((part_record *)at)->whole) out->whole_pieces[cell_whole[((part_record *)at)->cell]++] = ((part_record *)at)->piece;
     int32_t vert_at = 0, face_at = 0, loop_at = 0;
     out->face_loop_offsets[0] = 0;
     for (unsigned char *at = h.parts_begin; at < parts_end; at += ((part_record *)at)->size) {
