@@ -201,8 +201,8 @@ def test_writer_versions_and_reader_refuses_unknown_features(tmp_path):
                         fragment_names=data.fragment_names)
     plain_header = json.loads(encode(plain, "x.fracture.bin")[0])
     assert plain_header["version"] == 1 and "features" not in plain_header and "criterion" not in plain_header
-    parsed["features"] = ["levels", "stress"]
-    with pytest.raises(RuntimeFileError, match="needs feature 'levels'"):
+    parsed["features"] = ["stress", "teleport"]
+    with pytest.raises(RuntimeFileError, match="needs feature 'teleport'"):
         decode(json.dumps(parsed).encode(), binary)
     parsed["features"] = []
     with pytest.raises(RuntimeFileError, match="lists no features"):
