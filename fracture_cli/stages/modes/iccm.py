@@ -320,7 +320,8 @@ def _modes_fast(face_tets: np.ndarray, areas: np.ndarray, eta2: np.ndarray, volu
         U[i, :, a] = per_axis_modes[a][j][:, 0]
         per_mode.append(dict(per_axis_stats[a][j]))
     return U, {**_summary(per_mode), "max_flow_backend": backend, "lp_backend": lp_backend(),
-               "chains": len(chains), "workers": min(len(chains), parallel.current_jobs())}
+               # an upper bound: a bake's map forks only where the work left pays for a pool (system.parallel)
+               "chains": len(chains), "max_workers": min(len(chains), parallel.current_jobs())}
 
 
 def _axis_chain(_shared: None, task: _ChainTask) -> tuple[list[np.ndarray], list[dict], str]:
