@@ -259,10 +259,14 @@ func _check(top: Dictionary, binary: PoolByteArray, check_crc: bool):
 
 # One arrays entry: dtype, rank, byte_length = 4 * product(shape), inside the file, 16-byte aligned.
 func _check_array(entry, i: int, size: int):
-	var name: String = ARRAY_NAMES[i]
+	return _check_entry(entry, ARRAY_NAMES[i], i in INT_ARRAYS, ARRAY_RANKS[i], size)
+
+
+# An entry of the header's arrays table (the base arrays', the features', the levels'): its shape, or null.
+func _check_entry(entry, name: String, is_int: bool, rank: int, size: int):
 	if not entry is Dictionary or not entry.get("shape") is Array:
 		return _fail("array '%s' entry is missing or malformed" % name)
-	if entry.get("dtype") != ("int32" if i in INT_ARRAYS else "float32"):
+	if entry.get("dtype") != ("int32" if is_int else "float32"):
 		return _fail("array '%s' has the wrong dtype" % name)
 	var shape := []
 	var count := 1
@@ -272,8 +276,8 @@ func _check_array(entry, i: int, size: int):
 			return _fail("array '%s' has a negative or non-integer size" % name)
 		shape.append(v)
 		count = (1 << 40) + 1 if v != 0 and count > (1 << 40) / v else count * v  # saturate
-	if shape.size() != ARRAY_RANKS[i]:
-		return _fail("array '%s' has %d dimensions, expected %d" % [name, shape.size(), ARRAY_RANKS[i]])
+	if shape.size() != rank:
+		return _fail("array '%s' has %d dimensions, expected %d" % [name, shape.size(), rank])
 	var offset = _integer(entry.get("byte_offset"))
 	var length = _integer(entry.get("byte_length"))
 	if length == null or count * 4 != length:
@@ -1333,28 +1337,7 @@ var _lv_views := []      # views[0] is null: body 0 is this runtime
 
 # One levels array entry (dtype, rank, length, inside the file); its shape, or null.
 func _check_level_array(entry, i: int, size: int):
-	var name: String = LEVEL_ARRAYS[i]
-	if not entry is Dictionary or not entry.get("shape") is Array:
-		return _fail("array '%s' entry is missing or malformed" % name)
-	if entry.get("dtype") != ("int32" if i in LEVEL_INTS else "float32"):
-		return _fail("array '%s' has the wrong dtype" % name)
-	var shape := []
-	var count := 1
-	for n in entry["shape"]:
-		var v = _integer(n)
-		if v == null or v < 0:
-			return _fail("array '%s' has a negative or non-integer size" % name)
-		shape.append(v)
-		count = (1 << 40) + 1 if v != 0 and count > (1 << 40) / v else count * v
-	if shape.size() != LEVEL_RANKS[i]:
-		return _fail("array '%s' has %d dimensions, expected %d" % [name, shape.size(), LEVEL_RANKS[i]])
-	var offset = _integer(entry.get("byte_offset"))
-	var length = _integer(entry.get("byte_length"))
-	if length == null or count * 4 != length:
-		return _fail("array '%s': shape and byte_length do not agree" % name)
-	if offset == null or offset < 0 or offset % 16 != 0 or offset > size or length > size - offset:
-		return _fail("array '%s' lies outside the binary file or is not 16-byte aligned" % name)
-	return shape
+	return _check_entry(entry, LEVEL_ARRAYS[i], i in LEVEL_INTS, LEVEL_RANKS[i], size)
 
 
 func _ptr_ok(ptr, first: int, end: int) -> bool:
