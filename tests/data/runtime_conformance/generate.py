@@ -257,27 +257,13 @@ def _midpoint_tie(rt: reference.Runtime, rng):
     return None
 
 
-def _typical_jump(rt: reference.Runtime, point, direction) -> float:
-    """Largest |jump| of a unit impulse at ``point`` (to scale impulses so some edges break); stress: ``g / S``."""
-    if rt.criterion == "stress":
-        v = reference.nearest(rt, point)[0]
-        m = max(abs(c) for c in direction)
-        n = [c / m for c in direction]
-        strength = rt.stress[3]
-        ratios = [g / m / strength[e] for e, g in reference.stress_gains(rt, v, n) if g > 0 and strength[e] > 0]
-        return max(ratios, default=0.0) or 1.0
-    result = reference.project(rt, point, direction, math.inf)
-    jumps = [abs(result.displacement[P][c] - result.displacement[Q][c]) for P, Q in rt.edges for c in range(rt.d)]
-    return max(jumps, default=0.0) or 1.0
-
-
 def designed_impacts(rt: reference.Runtime, rng) -> list[dict]:
     """The hand-picked cases every file gets (ties, extremes, invalid inputs)."""
     site0 = list(rt.sites[0])
     lo = [min(s[c] for s in rt.sites) for c in range(3)]
     u = _unit(rng)
     T = rt.default_threshold
-    strong = [c * 2 * T / _typical_jump(rt, site0, u) for c in u]
+    strong = [c * 2 * T / reference_levels.typical_load(rt, site0, u) for c in u]
     cases = [
         ("zero impulse at a site", site0, [0.0, 0.0, 0.0], None),
         ("zero impulse, threshold 0", site0, [0.0, -0.0, 0.0], 0.0),
@@ -336,7 +322,8 @@ def random_impacts(rt: reference.Runtime, count: int, seed: int) -> list[dict]:
     while len(impacts) < count:
         point = (sites[rng.integers(len(sites))] + rng.normal(scale=spread, size=3)).tolist()
         direction = _unit(rng)
-        magnitude = rt.default_threshold / _typical_jump(rt, point, direction) * float(rng.choice([0.7, 1.3, 2.5, 6.0]))
+        magnitude = (rt.default_threshold / reference_levels.typical_load(rt, point, direction)
+                     * float(rng.choice([0.7, 1.3, 2.5, 6.0])))
         impulse = [c * magnitude for c in direction]
         threshold = None if len(impacts) % 3 else float(np.float32(rt.default_threshold * rng.uniform(0.5, 2)))
         if reference_damage.safe(reference_damage.solve(rt, point, impulse, threshold)):
