@@ -47,6 +47,17 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* A fragment name as " <hex of its UTF-8 bytes>", "-" for the empty name (names may hold any character). */
+static void print_hex_name(const char *name)
+{
+    const unsigned char *s = (const unsigned char *)name;
+    printf(" ");
+    if (*s == 0)
+        printf("-");
+    for (; *s; s++)
+        printf("%02x", *s);
+}
+
 static void print_bits(double v)
 {
     uint64_t u;
@@ -485,24 +496,14 @@ int main(int argc, char **argv)
     if (names) {
         printf("names");
         for (i = 0; i < fr_get_info(rt).fragments; i++) {
-            const unsigned char *s = (const unsigned char *)fr_fragment_name(rt, i);
-            printf(" ");
-            if (*s == 0)
-                printf("-");
-            for (; *s; s++)
-                printf("%02x", *s);
+            print_hex_name(fr_fragment_name(rt, i));
         }
         printf("\n");
     }
     if (children) {
         printf("children");
         for (i = fr_get_info(rt).fragments; i < fr_get_levels_info(rt).all_fragments; i++) {
-            const unsigned char *s = (const unsigned char *)fr_any_fragment_name(rt, i);
-            printf(" ");
-            if (*s == 0)
-                printf("-");
-            for (; *s; s++)
-                printf("%02x", *s);
+            print_hex_name(fr_any_fragment_name(rt, i));
         }
         printf("\n");
     }
