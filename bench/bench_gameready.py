@@ -141,8 +141,9 @@ def _rest_in_godot(fragments: Fragments, shapes) -> tuple[float, float]:
     from bench_recipes import rest_in_godot
 
     from fracture_cli.io.gltf import glb_bytes
+    from fracture_cli.io.names import fragment_name
     from fracture_cli.io.physics import FragmentPhysics, physics_extender
-    from fracture_cli.io.write import fragment_name, split_by_material
+    from fracture_cli.io.write import split_by_material
 
     norm = fragments.normalization
     nodes, physics = [], []

@@ -148,7 +148,7 @@ def test_isolated_tiny_body_is_kept():
 def test_runtime_repeats_a_split_piece_and_takes_bonds_from_the_meshes():
     """Two fragments of one piece get its column of W; bonds come from the fragment graph, not the piece graph."""
     from fracture_cli.errors import StageError
-    from fracture_cli.stages.runtime import _restrict_to_fragments
+    from fracture_cli.stages.runtime.build import _restrict_to_fragments
     from fracture_cli.types import Pieces
 
     W = np.arange(6, dtype=np.float64).reshape(2, 3, 1)

@@ -15,8 +15,9 @@ import pytest
 from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.geometry.trigeom import vertex_normals
 from fracture_cli.io.gltf import glb_bytes
+from fracture_cli.io.names import fragment_name
 from fracture_cli.io.physics import FragmentPhysics, physics_extender
-from fracture_cli.io.write import fragment_name, split_by_material
+from fracture_cli.io.write import split_by_material
 from fracture_cli.stages.collision.convex import collision_shapes
 from fracture_cli.types import Material, Normalization
 

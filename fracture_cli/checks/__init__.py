@@ -132,7 +132,7 @@ def require_sound(checks: list[MeshCheck], fragments: Fragments | None = None) -
         they were.
     """
     # numba kernels load on first use
-    from fracture_cli.io.write import fragment_name
+    from fracture_cli.io.names import fragment_name
 
     bad = [i for i, c in enumerate(checks) if not c.watertight]
     if bad:

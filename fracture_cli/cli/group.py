@@ -128,8 +128,8 @@ def guard_chain(processors: list[Processor | None]) -> None:
     """Refuse a chain whose outputs would replace a file it reads or a published bake set's file."""
     # on first use: keeps `fracture` start-up light
     from fracture_cli.io.inputs import input_files
+    from fracture_cli.io.names import surface_outputs
     from fracture_cli.io.preflight import guard_outputs
-    from fracture_cli.io.write import surface_outputs
     from fracture_cli.pipeline.bake import stem_of
 
     steps = [p for p in processors if isinstance(p, Step)]

@@ -53,11 +53,10 @@ from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.hulls import hull_mesh
 from fracture_cli.geometry.mass import MassProperties, mass_properties, quaternion_xyzw
 from fracture_cli.io.gltf import ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, UINT16
+from fracture_cli.io.names import COLLISION_FORMATS
 from fracture_cli.types import Fragments
 
 PIVOTS = ("center_of_mass", "bbox")  # a fragment node's origin: its centre of mass or its bounding-box centre
-# How collision parts are written into the GLB (the collision stage's ``format`` option).
-COLLISION_FORMATS = ("omi", "godot", "unreal", "none")
 
 __all__ = ["COLLISION_FORMATS", "PIVOTS", "FragmentPhysics", "fragment_physics", "node_extras", "node_origin",
            "physics_extender", "runtime_arrays"]

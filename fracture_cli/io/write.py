@@ -12,6 +12,7 @@ import numpy as np
 from fracture_cli.errors import InputError
 from fracture_cli.io.atomic import atomic_path, write_bytes_atomic
 from fracture_cli.io.gltf import Primitive, glb_bytes
+from fracture_cli.io.names import child_name, fragment_name, mtl_name
 from fracture_cli.io.physics import OMI_BODY, FragmentPhysics, node_origin
 from fracture_cli.types import Fragments, Normalization, SurfaceMesh
 
@@ -102,22 +103,6 @@ def save_surface(path: str | os.PathLike, surface: SurfaceMesh) -> None:
         mesh.export(tmp, file_type=ext[1:])
 
 
-def surface_outputs(path: str) -> list[str]:
-    """Every file :func:`save_surface` may write for ``path``: the file, and for an OBJ its ``<stem>.mtl``.
-
-    The output guard checks all of them before any work.
-    """
-    if os.path.splitext(path)[1].lower() != ".obj":
-        return [path]
-    return [path, os.path.join(os.path.dirname(path), _mtl_name(path))]
-
-
-def _mtl_name(path: str) -> str:
-    """The material library of an OBJ output: named after it (no spaces: ``mtllib`` splits on them)."""
-    stem = os.path.splitext(os.path.basename(path))[0]
-    return "_".join(stem.split()) + ".mtl" if stem.strip() else "material.mtl"
-
-
 def _save_obj(path: str, mesh, uvs) -> None:
     """Write an OBJ (with UVs: and its ``<stem>.mtl``), each file atomically, nothing else beside it.
 
@@ -128,35 +113,17 @@ def _save_obj(path: str, mesh, uvs) -> None:
     import trimesh
     from trimesh.exchange.obj import export_obj
 
-    mtl = _mtl_name(path)
+    mtl = mtl_name(path)
     if uvs is not None:
         material = trimesh.visual.material.SimpleMaterial(name=mtl[: -len(".mtl")])
         mesh.visual = trimesh.visual.TextureVisuals(uv=uvs, material=material)
     text, companions = export_obj(mesh, return_texture=True, mtl_name=mtl)
     folder = os.path.dirname(path)
     for name, data in companions.items():
-        if name != mtl:  # only the library surface_outputs() names is written
+        if name != mtl:  # only the library fracture_cli.io.names.surface_outputs() names is written
             continue
         write_bytes_atomic(os.path.join(folder, name), data)
     write_bytes_atomic(path, text.encode("utf-8"))
-
-
-def fragment_name(index: int, stem: str | None = None) -> str:
-    """Stable node name of fragment ``index`` (export order): ``<stem>_fragment_###``, or ``fragment_###``.
-
-    The asset's stem keeps two baked assets in one scene from colliding (an
-    importer would rename the second ``fragment_000.001`` and the runtime
-    file's names would no longer match).
-    """
-    return f"{stem}_fragment_{index:03d}" if stem else f"fragment_{index:03d}"
-
-
-def child_name(parent: str, index: int) -> str:
-    """The node name of a fragment's ``index``-th child: ``<parent>_c00``, ``<parent>_c01``, ... (docs/FORMAT.md 14.6).
-
-    ``_c`` keeps it apart from the parent's collision-part nodes (``<parent>_00``, ``UCX_<parent>_00``).
-    """
-    return f"{parent}_c{index:02d}"
 
 
 def prefixed_materials(materials, stem: str | None):

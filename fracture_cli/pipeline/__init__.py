@@ -310,8 +310,8 @@ def _anchors(state: PipelineState, options: AnchorOptions) -> PipelineState:
 def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
     # on first use: `fracture --help` loads no stage
     from fracture_cli.geometry import trigeom
+    from fracture_cli.io.names import fragment_name
     from fracture_cli.io.physics import fragment_physics, runtime_arrays
-    from fracture_cli.io.write import fragment_name
     from fracture_cli.stages.fragments.interfaces import fragments_graph
     from fracture_cli.stages.runtime import runtime, with_structure
 

@@ -31,9 +31,9 @@ from fracture_cli import __version__
 from fracture_cli.errors import FractureError, UsageError
 from fracture_cli.geometry import trigeom
 from fracture_cli.io.inputs import estimate_output_bytes, input_files
+from fracture_cli.io.names import fragment_name
 from fracture_cli.io.outputs import output_set
 from fracture_cli.io.preflight import check_inputs_untouched, guard_outputs, preflight
-from fracture_cli.io.write import fragment_name
 from fracture_cli.pipeline import STAGE_NAMES, STEPS, PipelineState
 from fracture_cli.pipeline.cache import file_sha256
 from fracture_cli.pipeline.recipe import Recipe

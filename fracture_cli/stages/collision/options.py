@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from fracture_cli.io.physics import COLLISION_FORMATS
+from fracture_cli.io.names import COLLISION_FORMATS
 from fracture_cli.options import option
 
 STAGE = "collision"

@@ -19,9 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fracture_cli.geometry import trigeom
 from fracture_cli.stages.levels.options import STAGE, LevelsOptions
-from fracture_cli.system import parallel
 
 if TYPE_CHECKING:  # resolving a recipe imports this package for its options: refine (numba) loads only in a bake
     from fracture_cli.stages.levels.refine import Context, Refinement
@@ -93,13 +91,16 @@ def levels(ctx: Context, anchored: np.ndarray | None = None) -> Levels:
     p = len(frags.fragments)
     if options.count < 2:
         return Levels(leaves=p, options=options)
+    # only a bake with levels loads the geometry, the worker pool, the refinement and its compiled kernels (start-up,
+    # issue 33: a recipe reads LevelsOptions from this package)
+    from fracture_cli.geometry import trigeom
+    from fracture_cli.stages.levels.refine import plan_refinement, refine_fragment
+    from fracture_cli.system import parallel
+
     volumes = np.array([trigeom.signed_volume(f.vertices, f.faces) for f in frags.fragments])
     chosen = candidates(volumes, anchored, options)
     skipped: dict[int, str] = {}
     # Step 1 (cheap): how many children each would get; the cap is applied to those counts first.
-    # only a bake with levels loads the refinement and its compiled kernels (start-up, issue 33)
-    from fracture_cli.stages.levels.refine import plan_refinement, refine_fragment
-
     plans = parallel.ordered_map(plan_refinement, chosen, ctx)
     accepted, leaves = [], p
     for index, plan in zip(chosen, plans):

@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 
 from fracture_cli.errors import StageError
+from fracture_cli.io.names import child_name
 from fracture_cli.io.physics import runtime_arrays
-from fracture_cli.io.write import child_name
 from fracture_cli.runtime.data import RuntimeData, check_runtime
 from fracture_cli.stages.levels import Levels
 from fracture_cli.stages.levels.options import STAGE

@@ -45,7 +45,7 @@ from fracture_cli.stages.levels.submesh import (
 )
 from fracture_cli.stages.modes import modes
 from fracture_cli.stages.pieces import PiecesOptions, pieces
-from fracture_cli.stages.runtime import site_coefficients
+from fracture_cli.stages.runtime.build import site_coefficients
 from fracture_cli.stages.simplify import simplify, skipped
 from fracture_cli.stages.smooth import smooth
 from fracture_cli.system import detmath

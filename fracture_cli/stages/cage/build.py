@@ -1,8 +1,7 @@
-"""The ``cage`` stage: a coarse closed surface that strictly contains the input.
+"""The ``cage`` stage's work: the binary search on the offset (paper Algorithm 2) and its checks.
 
-A binary search on an offset ``d`` (paper Algorithm 2): offset surface of the
-input at distance ``d`` -> decimate -> reject if broken -> check containment
--> TetGen. The tightest ``d`` that passes every check wins.
+:func:`fracture_cli.stages.cage.cage` is the stage's entry point (its docstring says what is made);
+this module does it, so that the package itself loads nothing heavy.
 """
 
 from __future__ import annotations
@@ -10,7 +9,6 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -21,7 +19,7 @@ from fracture_cli.geometry import trigeom
 from fracture_cli.geometry.edgelengths import longest_edges
 from fracture_cli.geometry.rows import group_rows, used_vertices
 from fracture_cli.geometry.scenes import surface_scene
-from fracture_cli.options import option
+from fracture_cli.stages.cage.options import STAGE, CageOptions
 from fracture_cli.stages.tetra import tetgen as _tetgen
 from fracture_cli.types import Cage, SurfaceMesh
 
@@ -29,8 +27,6 @@ if TYPE_CHECKING:
     from fracture_cli.geometry.surface_query import SurfaceQuery
 
 log = logging.getLogger(__name__)
-
-STAGE = "cage"
 
 # Input triangles whose distance to a cage, bounded below from their corners' clearance, exceeds this
 # cannot touch it (the bound is exact up to float64 rounding; the margin dates from float32 distances).
@@ -43,28 +39,6 @@ FACE_COUNT_TOLERANCE = 0.10
 # (-O0: it only improves tet quality, which the tetra stage does once, and it
 # can take minutes on some cages), quiet.
 SEARCH_SWITCHES = "pYO0Q"
-
-DECIMATORS = ("fast-simplification", "open3d")
-
-
-@dataclass(frozen=True)
-class CageOptions:
-    """Options of the ``cage`` stage. Lengths are relative to the input's bounding-box diagonal."""
-
-    target_faces: int = option(2000, "number of cage triangles (the result is within 10%)", min=100, max=200_000)
-    grid_resolution: int = option(
-        0, "distance-grid cells along the bounding-box diagonal; 0 = automatic (about 2.2 sqrt(target_faces))",
-        min=0, max=1024)
-    initial_offset: float = option(0.01, "first offset tried; doubled until a cage is found, then bisected",
-                                   min=0.0, max=1.0, min_exclusive=True)
-    tolerance: float = option(0.002, "stop bisecting when the offset bracket is narrower than this",
-                              min=0.0, max=1.0, min_exclusive=True)
-    max_iterations: int = option(12, "largest number of offsets tried", min=1, max=100)
-    max_offset: float = option(0.5, "give up rather than try an offset larger than this", min=0.0, max=10.0,
-                               min_exclusive=True)
-    tetgen_timeout: float = option(60.0, "seconds before one TetGen run is abandoned", min=1.0, max=3600.0)
-    decimator: str = option("fast-simplification", "quadric decimation library", choices=DECIMATORS)
-
 
 def auto_grid_resolution(target_faces: int) -> int:
     """Distance-grid cells along the diagonal for a cage of ``target_faces`` triangles.
@@ -284,49 +258,8 @@ class _ContainmentCheck:
         return None
 
 
-def cage(surface: SurfaceMesh, options: CageOptions = CageOptions()) -> Cage:
-    """Build a nested cage: a closed manifold surface of about ``target_faces`` triangles strictly containing the input.
-
-    Parameters
-    ----------
-    surface : SurfaceMesh
-        The input, in normalized coordinates; may be open, non-manifold or
-        made of several parts (only its triangles matter).
-    options : CageOptions, optional
-        ``target_faces`` (default 2000), ``grid_resolution`` (default 0 =
-        automatic), ``initial_offset`` (default 0.01), ``tolerance`` (default
-        0.002), ``max_iterations`` (default 12), ``max_offset`` (default 0.5),
-        ``tetgen_timeout`` (default 60 s), ``decimator`` (default
-        "fast-simplification").
-
-    Returns
-    -------
-    Cage
-        ``vertices (n, 3) float64``, outward ``faces (m, 3) int64``, the offset
-        used and one log entry per tried offset.
-
-    Raises
-    ------
-    StageError
-        If no offset up to ``max_offset`` gave a valid cage within
-        ``max_iterations`` tries.
-
-    Notes
-    -----
-    ALGORITHM.md section 1 (paper Algorithm 2). Each try: unsigned distance on
-    a grid, outer sheet of its level set ``d`` by marching cubes, quadric
-    decimation, rejection of non-manifold or self-intersecting results (the
-    paper's "self-union" step; decimation sometimes folds the surface and
-    manifold3d does not repair a single self-intersecting mesh), a strict
-    containment check independent of the construction, and a boundary-preserving
-    TetGen run (``pYO0Q``) in a crash-safe child process. Distances and the
-    inside vote are :mod:`fracture_cli.geometry.surface_query`'s (exact float64, the same
-    bits on every machine; open3d is loaded only for ``decimator = "open3d"``),
-    on one hierarchy of the input that the pieces stage and the report's checks
-    reuse (:func:`fracture_cli.geometry.scenes.surface_scene`). Containment is not
-    monotone in ``d``, so the search brackets upward from ``initial_offset``
-    (doubling), then bisects, keeping the tightest success seen.
-    """
+def nested_cage(surface: SurfaceMesh, options: CageOptions) -> Cage:
+    """The stage's work (:func:`fracture_cli.stages.cage.cage`)."""
     vertices = np.asarray(surface.vertices, dtype=np.float64)
     faces = np.asarray(surface.faces, dtype=np.int64)
     if len(faces) == 0 or len(vertices) == 0:
