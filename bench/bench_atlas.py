@@ -12,7 +12,8 @@ the stress criterion to come): hit fragment detached >= 95%, locality <= 0.3 at 
 --no-bake (and --quick) sweeps the manifest bakes committed under tests/data/runtime_conformance/
 instead of baking (minutes); --default-recipe adds a row per asset baked with the default recipe.
 Baking, the authored patterns of issue 32 get rows too (:data:`PATTERN_BAKES`): a voronoi pattern on the
-pillar and the chair, the radial glass_pane recipe on the pane, the bricks of brick_wall on the wall.
+pillar and the chair, the radial glass_pane recipe on the pane, the bricks of brick_wall on the wall; and
+stress bakes with two levels of fracture (:data:`LEVEL_BAKES`).
 """
 
 from __future__ import annotations
@@ -40,6 +41,12 @@ PATTERN_BAKES = (
     ("pane.glb", "glass_pane", (), "glass_pane: radial"),
     ("wall.glb", "brick_wall", (), "brick_wall: bricks"),
 )
+# Levels (issue 34) swept as the runtime's hit_piece answers them (fracture_cli/atlas/leaves.py): the fragment hit
+# breaks into its children too; with the stress criterion, the children's default threshold as baked and at 0.1x.
+LEVEL_BAKES = tuple(
+    (asset, recipe, ("runtime.criterion=stress", "levels.count=2", *extra), f"{recipe}, stress, 2 levels{label}")
+    for asset, recipe in (("chair.glb", "wood"), ("pillar.glb", "stone"), ("vase.obj", "ceramic"))
+    for extra, label in (((), ""), (("levels.threshold_factor=0.1",), ", children at 0.1 T")))
 COLUMNS = ("hit_detached", "hit_on_largest", "hit_detached_others", "locality_2x", "locality_8x",
            "first_break_splits", "graded_median", "graded_p10",
            "b0_median", "d1_median")
@@ -69,9 +76,9 @@ def _cell(figures: dict, key: str) -> str:
     return f"{value:.3g}"
 
 
-def _row(label: str, json_path: str) -> str:
+def _row(label: str, json_path: str, criterion: str = "modes") -> str:
     t0 = time.perf_counter()
-    result = run_atlas(json_path)
+    result = run_atlas(json_path, criterion=criterion)
     seconds = time.perf_counter() - t0
     summary = result.summary
     figures = summary["figures"]
@@ -119,10 +126,19 @@ def run(quick: bool = False, bake: bool = True, default_recipe: bool = False) ->
             for asset, recipe, settings, label in PATTERN_BAKES:
                 out = os.path.join(tmp, f"{os.path.splitext(asset)[0]}-pattern-{recipe}")
                 lines.append(_row(f"{asset} ({label})", _bake(asset, recipe, out, settings)))
+            for asset, recipe, settings, label in LEVEL_BAKES:
+                out = os.path.join(tmp, f"{os.path.splitext(asset)[0]}-levels-{len(lines)}")
+                lines.append(_row(f"{asset} ({label})", _bake(asset, recipe, out, settings), "stress"))
     if bake:
         lines += ["", "The pattern rows (issue 32): the cells of an authored pattern are the pieces and the modes are "
                   "solved on them (docs/ALGORITHM.md section 9), so the same figures say whether a pattern breaks "
-                  "by the hit."]
+                  "by the hit.",
+                  "",
+                  "The level rows (issues 30, 34): with `levels.count = 2` a hit on a fragment with children breaks "
+                  "it too (docs/FORMAT.md section 14.5) and the figures count the leaves shown "
+                  "(fracture_cli/atlas/leaves.py): the fragment hit is the child the hit lands on once its parent "
+                  "has split. `levels.threshold_factor = 0.1` makes the children's bonds ten times weaker than the "
+                  "level-1 bonds (as Chaos's damage thresholds per level)."]
     return "\n".join(lines) + "\n"
 
 

@@ -12,6 +12,7 @@ from fracture_cli.atlas import run_atlas
 from fracture_cli.atlas.criterion import criterion_named, modes_breaking_impulses
 from fracture_cli.atlas.hits import analyse_hit, detached, groups_at, maximum_spanning_forest, rest_groups
 from fracture_cli.atlas.layout import fragment_layout
+from fracture_cli.atlas.leaves import StruckHit
 from fracture_cli.atlas.summary import FIGURE_KEYS, failed_requirements, parse_requirement, rounded
 from fracture_cli.atlas.sweep import atlas_figures, farthest_point_sites, quantile, sweep_hits
 from fracture_cli.errors import RuntimeFileError, UsageError
@@ -154,7 +155,7 @@ def test_no_bonds_and_zero_threshold():
     single = conformance("single")
     hit = analyse_hit(single, 0, (0.0, -1.0, 0.0))
     assert hit.b0 == hit.d1 == hit.everything == np.inf
-    figures = atlas_figures(single, fragment_layout(single), (hit,))
+    figures = atlas_figures(single, fragment_layout(single), (StruckHit(hit=hit, struck=None),))
     assert figures.detaching_hits == 0 and figures.graded_median is None
     data = row_of_three()
     zero = RuntimeData(**{**{f: getattr(data, f) for f in ("sites", "B", "W", "edges", "edge_areas",
@@ -162,7 +163,7 @@ def test_no_bonds_and_zero_threshold():
     hit = analyse_hit(zero, 0, (1.0, 0.0, 0.0))
     assert hit.b0 == hit.d1 == 0.0
     assert project_impact(zero, zero.sites[0], (1e-300, 0.0, 0.0)).broken.all()
-    assert atlas_figures(zero, fragment_layout(zero), (hit,)).b0_median is None
+    assert atlas_figures(zero, fragment_layout(zero), (StruckHit(hit=hit, struck=None),)).b0_median is None
 
 
 def test_farthest_point_sites_are_spread_and_deterministic():

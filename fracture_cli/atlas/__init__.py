@@ -15,6 +15,7 @@ Modules, one concern each:
 * :mod:`~fracture_cli.atlas.criterion`: breaking impulses per bond (the modes criterion; the plug-in interface);
 * :mod:`~fracture_cli.atlas.hits`: one hit: ``b0``, ``d1``, everything, groups, detached fragments, hit fragment;
 * :mod:`~fracture_cli.atlas.layout`: fragment volumes and centroids (game-ready arrays, GLB, or none);
+* :mod:`~fracture_cli.atlas.leaves`: files with levels: the fragment hit breaks into its children too;
 * :mod:`~fracture_cli.atlas.sweep`: the sweep and the figures, every definition in its docstring;
 * :mod:`~fracture_cli.atlas.summary`: the JSON summary and the ``KEY<=VALUE`` gate;
 * :mod:`~fracture_cli.atlas.render`: the PNG;

@@ -9,8 +9,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli.atlas.criterion import criterion_named
-from fracture_cli.atlas.hits import HitAnalysis, analyse_hit
+from fracture_cli.atlas.hits import analyse_hit
 from fracture_cli.atlas.layout import fragment_layout
+from fracture_cli.atlas.leaves import StruckHit
 from fracture_cli.atlas.summary import (
     SUMMARY_FORMAT,
     SUMMARY_VERSION,
@@ -44,15 +45,15 @@ class AtlasResult:
         The JSON summary (:func:`fracture_cli.atlas.summary.summary_json` prints it).
     failures : tuple of str
         The requirements that do not hold, one line each (empty: the gate passes).
-    hits : tuple of HitAnalysis
-        The sweep's hits, in site order.
+    hits : tuple of StruckHit
+        The sweep's hits, in site order (with the struck fragment's children's answer where the file has levels).
     png_path : str or None
         The PNG written, if any.
     """
 
     summary: dict
     failures: tuple[str, ...]
-    hits: tuple[HitAnalysis, ...]
+    hits: tuple[StruckHit, ...]
     png_path: str | None = None
 
     @property
@@ -143,7 +144,7 @@ def run_atlas(runtime_json_path: str | os.PathLike, *, sites: int = DEFAULT_SITE
                  "requested": int(sites), "used": len(hits)},
         "layout": layout.source,
         "figures": figures,
-        "examples": [{"site": h.site, "b0": relative(h.b0), "d1": relative(h.d1),
+        "examples": [{"site": h.hit.site, "b0": relative(h.b0), "d1": relative(h.d1),
                       "everything": relative(h.everything)} for h in examples],
         "requirements": {"checked": [str(r) for r in requirements], "failed": list(failures)},
     }
@@ -156,7 +157,7 @@ def run_atlas(runtime_json_path: str | os.PathLike, *, sites: int = DEFAULT_SITE
         stem = os.path.basename(glb_path)[: -len(".glb")]
         title = (f"{stem}  |  break atlas, criterion {criterion}  |  {data.p} fragments, {data.num_edges} bonds, "
                  f"threshold T = {threshold:g}  |  bottom: what comes off at 2 x b0")
-        render_atlas(data, layout, site_d1, examples, png_path, glb_path=glb_path, title=title)
+        render_atlas(data, layout, site_d1, tuple(h.hit for h in examples), png_path, glb_path=glb_path, title=title)
         written = os.fspath(png_path)
     for line in failures:
         log.info("atlas: requirement failed: %s", line)

@@ -10,7 +10,11 @@ of mass, :mod:`fracture_cli.atlas.layout`), i.e. into the surface, or straight
 down ``(0, -1, 0)`` when the site is the centre. ``T`` is the file's default
 threshold. The per-hit quantities ``b0``, ``d1``, ``everything``, groups,
 detached fragments and the hit fragment are defined in
-:mod:`fracture_cli.atlas.hits`.
+:mod:`fracture_cli.atlas.hits`; on a file with levels (docs/FORMAT.md section 14)
+the fragment hit breaks too when it has children, as the runtime's ``hit_piece``
+does, and the figures count *leaves* (:mod:`fracture_cli.atlas.leaves`): the
+fragment hit is then its child the hit lands on once it has split, and ``b0``,
+``d1`` and ``everything`` are over both bodies' bonds.
 
 Figures (keys of the JSON summary; ``None`` when no hit qualifies or the file
 has no fragment positions):
@@ -50,8 +54,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli.atlas.criterion import BreakingImpulses, modes_breaking_impulses
-from fracture_cli.atlas.hits import HitAnalysis, analyse_hit, detached, groups_at, rest_groups
+from fracture_cli.atlas.hits import analyse_hit, rest_groups
 from fracture_cli.atlas.layout import FragmentLayout
+from fracture_cli.atlas.leaves import StruckHit, leaves_at, struck_hit
 from fracture_cli.runtime.format import RuntimeData
 
 DEFAULT_SITES = 200
@@ -119,11 +124,14 @@ def inward_direction(point: np.ndarray, center: np.ndarray) -> np.ndarray:
 
 
 def sweep_hits(data: RuntimeData, layout: FragmentLayout, sites: np.ndarray,
-               criterion: BreakingImpulses = modes_breaking_impulses) -> tuple[HitAnalysis, ...]:
-    """Analyse one inward hit at each of ``sites`` (indices); see the module docstring."""
+               criterion: BreakingImpulses = modes_breaking_impulses) -> tuple[StruckHit, ...]:
+    """Analyse one inward hit at each of ``sites`` (indices), with the struck fragment's children where the file
+    has levels (:mod:`fracture_cli.atlas.leaves`); see the module docstring."""
     center = layout.asset_center(data)
     points = np.asarray(data.sites, dtype=np.float64)
-    return tuple(analyse_hit(data, points[v], inward_direction(points[v], center), criterion)
+    child_layouts: dict[int, FragmentLayout] = {}
+    return tuple(struck_hit(data, layout, analyse_hit(data, points[v], inward_direction(points[v], center),
+                                                      criterion), criterion, child_layouts)
                  for v in np.asarray(sites).tolist())
 
 
@@ -145,18 +153,16 @@ def quantile(values, q: float) -> float | None:
     return float(a[low] + fraction * (a[low + 1] - a[low]))
 
 
-def locality(data: RuntimeData, layout: FragmentLayout, hit: HitAnalysis, magnitude: float,
+def locality(data: RuntimeData, layout: FragmentLayout, hit: StruckHit, magnitude: float,
              rest: np.ndarray) -> float | None:
-    """Mean distance from the hit to the detached fragments over the mean to all fragments; None if none detach."""
-    if layout.centroids is None:
+    """Mean distance from the hit to the detached leaves over the mean to all leaves shown; None if none detach."""
+    leaves = leaves_at(data, layout, hit, magnitude, rest)
+    if leaves.centroids is None or not leaves.detached.any():
         return None
-    gone = detached(groups_at(data, hit, magnitude), rest, layout.volumes)
-    if not gone.any():
-        return None
-    delta = layout.centroids - hit.point
+    delta = leaves.centroids - hit.hit.point
     distance = np.sqrt((delta[:, 0] * delta[:, 0] + delta[:, 1] * delta[:, 1]) + delta[:, 2] * delta[:, 2])
     overall = float(distance.mean())
-    return float(distance[gone].mean()) / overall if overall > 0.0 else None
+    return float(distance[leaves.detached].mean()) / overall if overall > 0.0 else None
 
 
 def _share(flags: list[bool]) -> float | None:
@@ -167,7 +173,7 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(values)) if values else None
 
 
-def atlas_figures(data: RuntimeData, layout: FragmentLayout, hits: tuple[HitAnalysis, ...]) -> AtlasFigures:
+def atlas_figures(data: RuntimeData, layout: FragmentLayout, hits: tuple[StruckHit, ...]) -> AtlasFigures:
     """The figures of a sweep (module docstring)."""
     rest = rest_groups(data)
     threshold = float(data.default_threshold)
@@ -175,12 +181,11 @@ def atlas_figures(data: RuntimeData, layout: FragmentLayout, hits: tuple[HitAnal
     detaching = [h for h in hits if np.isfinite(h.d1)]
     hit_flags, on_largest = [], []
     largest = int(np.argmax(layout.volumes))
-    if layout.centroids is not None:
-        for h in detaching:
-            gone = detached(groups_at(data, h, just_above(h.d1)), rest, layout.volumes)
-            struck = layout.hit_fragment(h.point)
-            hit_flags.append(bool(gone[struck]))
-            on_largest.append(struck == largest)
+    for h in detaching:
+        leaves = leaves_at(data, layout, h, just_above(h.d1), rest)
+        if h.struck is not None and leaves.struck is not None:
+            hit_flags.append(bool(leaves.detached[leaves.struck]))
+            on_largest.append(h.struck == largest)
     localities: dict[float, list[float]] = {}
     for factor in LOCALITY_FACTORS:
         values = [locality(data, layout, h, factor * h.b0, rest) for h in breaking]
@@ -202,9 +207,9 @@ def atlas_figures(data: RuntimeData, layout: FragmentLayout, hits: tuple[HitAnal
     )
 
 
-def example_hits(hits: tuple[HitAnalysis, ...]) -> tuple[HitAnalysis, ...]:
+def example_hits(hits: tuple[StruckHit, ...]) -> tuple[StruckHit, ...]:
     """Up to three detaching hits: the lowest, the median and the highest ``d1`` (ties by site, then order)."""
-    detaching = sorted((h for h in hits if np.isfinite(h.d1)), key=lambda h: (h.d1, h.site))
+    detaching = sorted((h for h in hits if np.isfinite(h.d1)), key=lambda h: (h.d1, h.hit.site))
     if not detaching:
         return ()
     picks = sorted({0, (len(detaching) - 1) // 2, len(detaching) - 1})
