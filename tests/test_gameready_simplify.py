@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 
@@ -15,6 +16,7 @@ from fracture_cli.pipeline import STAGE_NAMES
 from fracture_cli.pipeline.recipe import load_recipe
 from fracture_cli.stages.simplify import SimplifyOptions, triangle_budget
 from fracture_cli.stages.simplify.budget import Limits, shares
+from fracture_cli.stages.simplify.faultmatch import bad_faces, pinched_positions
 from fracture_cli.stages.simplify.faults import simplify_faults, valid
 from fracture_cli.types import Fragment, Fragments, Material, Normalization, SurfaceMesh
 
@@ -159,6 +161,25 @@ def test_budget_shares_what_stuck_fragments_leave():
     # Fragment 0 cannot go further: the others share what it leaves (192 for 1 and 2: 64 and 128, about).
     assert limits.over(np.array([200, 100, 100]), np.array([True, False, False])).tolist() == [1]
     assert Limits(max_triangles=150).over(np.array([200, 100, 160]), np.array([False, False, True])).tolist() == [0]
+
+
+def test_a_fragment_touching_itself_at_a_vertex_may_go_on_doing_so_there():
+    """Two tetrahedra meeting at one apex, each with its own copy of it (as the booleans cut such a body): the
+    apex is the one pinch, allowed where it was and nowhere else."""
+    apex = np.zeros(3)
+    base = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    V = np.vstack([apex, base, apex, -base])
+    tet = np.array([[0, 2, 1], [0, 3, 2], [0, 1, 3], [1, 2, 3]])
+    F = np.vstack([tet, tet[:, ::-1] + 4])  # the second mirrored through the apex: its faces turn
+    fragment = Fragment(vertices=V, faces=F, uvs=_uv(V), normals=np.zeros_like(V),
+                        material_ids=np.zeros(len(F), dtype=np.int32), piece=0)
+    pinches = pinched_positions(fragment)
+    assert pinches is not None and pinches.tolist() == [[0.0, 0.0, 0.0]]
+    assert len(bad_faces(fragment)) == len(F)
+    assert bad_faces(fragment, pinches=pinches) is None
+    assert len(bad_faces(fragment, pinches=np.array([[1.0, 0.0, 0.0]]))) == len(F)
+    # Not closed (a face gone): nothing to allow.
+    assert pinched_positions(dataclasses.replace(fragment, faces=F[1:], material_ids=fragment.material_ids[1:])) is None
 
 
 def test_zero_tolerance_changes_nothing():

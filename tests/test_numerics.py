@@ -33,7 +33,7 @@ LIBM = {"exp", "exp2", "expm1", "log", "log2", "log10", "log1p", "sin", "cos", "
         "power", "float_power", "cbrt", "hypot", "degrees_to_radians", "logaddexp", "erf", "gamma", "lgamma"}
 # `**` whose operands are ints (exact integer arithmetic), by file and expression.
 INT_POWERS = {"system/detmath.py": {"(-1) ** i"}, "geometry/boxlevels.py": {"_RATIO ** int(k)"},
-              "stages/simplify/faults.py": {"2 ** _BUDGET_ROUNDS"}}
+              "stages/simplify/fit.py": {"2 ** BUDGET_ROUNDS"}}
 
 # Kernel choices any x86-64 machine with AVX2 can force (and, with the pin, must not change a byte).
 FORCED = {

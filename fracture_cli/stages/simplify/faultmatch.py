@@ -47,21 +47,68 @@ def valid(fragment: Fragment) -> bool:
     return bad_faces(fragment) is None
 
 
-def bad_faces(fragment: Fragment, changed: np.ndarray | None = None) -> np.ndarray | None:
+def bad_faces(fragment: Fragment, changed: np.ndarray | None = None,
+              pinches: np.ndarray | None = None) -> np.ndarray | None:
     """None if the fragment is valid (see :func:`valid`); else the faces (k,) at fault, all if it is not closed.
 
     ``changed`` (c,): only intersections involving one of these faces count (the others are as they were
-    checked before); None checks every pair. Pairs the floating-point test reports are tested again exactly
+    checked before); None checks every pair. ``pinches`` (p, 3): positions where the fragment may touch
+    itself at a vertex (several fans of faces, as it was cut: :func:`pinched_positions`); None allows none.
+    Pairs the floating-point test reports are tested again exactly
     (:func:`~fracture_cli.geometry.exactgeom.real_pairs`): needles the booleans leave (height ~1e-10 of their edges)
     "intersect" the faces they share a corner with by rounding alone, and would keep fragments as cut.
     """
     V, weld = unique_rows(fragment.vertices, return_inverse=True)
     W = weld.reshape(-1)[fragment.faces]
-    if not (edge_manifold_closed(W) and vertex_manifold(W)):
+    if not edge_manifold_closed(W):
+        return np.arange(len(W))
+    if not vertex_manifold(W) and not _pinched_within(V, W, pinches):
         return np.arange(len(W))
     pairs = self_intersections(V, W) if changed is None else self_intersections_among(V, W, changed)
     pairs = real_pairs(V, W, pairs)
     return np.unique(pairs) if len(pairs) else None
+
+
+def pinched_positions(fragment: Fragment) -> np.ndarray | None:
+    """Positions (p, 3) where the fragment, welded by position, touches itself at a vertex; None if it is not
+    even closed and edge-manifold so welded."""
+    V, weld = unique_rows(fragment.vertices, return_inverse=True)
+    W = weld.reshape(-1)[fragment.faces]
+    if not edge_manifold_closed(W):
+        return None
+    return V[_fan_counts(W, len(V)) > 1]
+
+
+def _pinched_within(V: np.ndarray, W: np.ndarray, pinches: np.ndarray | None) -> bool:
+    """Whether every vertex of ``W`` (m, 3) (positions ``V``) with several fans is at one of ``pinches`` (p, 3)
+    (within :data:`~fracture_cli.geometry.tolerances.WELD`: the welded complex may hold a pinch one weld apart)."""
+    if pinches is None or len(pinches) == 0:
+        return False
+    pinched = np.flatnonzero(_fan_counts(W, len(V)) > 1)
+    distance, _ = cKDTree(pinches).query(V[pinched])
+    return bool(np.all(distance <= tol.WELD))
+
+
+def _fan_counts(W: np.ndarray, n: int) -> np.ndarray:
+    """Fans of faces (n,) around each vertex of a closed, edge-manifold ``W`` (m, 3) (0 for unused vertices).
+
+    Corners are joined across every edge: the corner at ``a`` of the face with half-edge (a, b) and that of
+    the face with (b, a), likewise at ``b``; a vertex has as many fans as its corners have components.
+    """
+    m = len(W)
+    corner = np.arange(3 * m).reshape(m, 3)
+    a, b = W.reshape(-1), np.roll(W, -1, axis=1).reshape(-1)  # half-edge (a, b) starts at corner i
+    at_a, at_b = corner.reshape(-1), np.roll(corner, -1, axis=1).reshape(-1)
+    key = a * n + b
+    order = np.argsort(key)
+    twin = order[np.searchsorted(key[order], b * n + a)]  # closed and edge-manifold: every half-edge has one
+    graph = sp.coo_matrix((np.ones(2 * len(a)), (np.concatenate([at_a, at_b]), np.concatenate([at_b[twin],
+                                                                                              at_a[twin]]))),
+                          shape=(3 * m, 3 * m))
+    _, label = connected_components(graph, directed=False)
+    owner = W.reshape(-1)
+    pairs = np.unique(np.column_stack([owner, label]), axis=0)
+    return np.bincount(pairs[:, 0], minlength=n)
 
 
 def weld(positions: np.ndarray, owner: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:

@@ -23,13 +23,17 @@ are most of a bake's triangles (chair, wood: 32,000 for a 2,500-triangle input).
    it get their tolerance doubled, a few times, and are simplified further;
    with ``fit_budget``, likewise the fragments above their share of the
    asset's budget (twice the input's triangles plus 64 per fragment) while
-   the asset is above it.
+   the asset is above it (:mod:`.fit`: a fragment that comes out invalid
+   there first gets the vertices behind its bad faces pinned, and is held
+   whole only if that does not mend it).
 4. **Rebuild and check.** Each fragment is rebuilt (fault vertices split per
    plane, flat normals, box-projected UVs as the fragments stage makes them)
    and checked closed, manifold and free of self-intersections; when one is
    not, everything is simplified again with the vertices whose collapses made
    its bad faces held to a quarter of the tolerance, then locked, at last with
-   every vertex of that fragment locked (which leaves it as it was cut).
+   every vertex of that fragment locked (which leaves it as it was cut). A
+   fragment that touches itself at a vertex as cut may go on doing so there
+   (those vertices are locked; the stage moves the copies apart after).
 """
 
 from __future__ import annotations
@@ -50,12 +54,14 @@ from fracture_cli.stages.simplify.decimate import SurfaceComplex
 from fracture_cli.stages.simplify.faultmatch import (
     bad_faces,
     closed_when_welded,
+    pinched_positions,
     share_unmatched,
     source_groups,
     twins,
     valid,
     weld,
 )
+from fracture_cli.stages.simplify.fit import rounds, within_budget
 from fracture_cli.stages.simplify.rebuild import Classified, fragment_rows, rebuild, uv_scale
 from fracture_cli.system import parallel
 from fracture_cli.types import Fragment, Fragments, SurfaceMesh
@@ -67,8 +73,6 @@ log = logging.getLogger(__name__)
 # Tries after the first when a fragment comes out invalid: the vertices whose collapses made its bad faces get
 # a quarter of the tolerance (cumulative), the next to last try locks them, the last one its whole fragment.
 _RETRIES = 4
-# Times a fragment above its triangle budget gets its tolerance doubled.
-_BUDGET_ROUNDS = 6
 
 
 @dataclass(frozen=True)
@@ -182,12 +186,12 @@ def _valid_simplification(fragments: Fragments, surface: SurfaceMesh, classified
     """The simplified fragments, every one valid; how many retries that took and how many stay over budget.
 
     First to ``tolerance`` and ``limits.max_triangles`` (:func:`_within_tolerance`), then, while the asset is
-    above ``limits.budget``, further (:func:`_within_budget`).
+    above ``limits.budget``, further (:func:`~fracture_cli.stages.simplify.fit.within_budget`).
     """
     checker = _Checker(fragments, classified, welded, interior, gid, offsets)
     tried, results, attempt, over = _within_tolerance(checker, tolerance, Limits(limits.max_triangles))
     if tolerance > 0 and limits.budget > 0 and sum(len(f.faces) for f in results) > limits.budget:
-        results = _within_budget(checker, tried, tolerance, limits, results)
+        results = within_budget(checker, tried, tolerance, limits, results)
     return results, attempt, over
 
 
@@ -210,6 +214,8 @@ class _Checker:
         self.gid, self.offsets = gid, offsets
         self.uv_scale = uv_scale(fragments, interior)
         self.known: dict[int, set] = {}  # faces (corner ids) of fragments that intersected themselves as cut
+        # Positions (p, 3) where a fragment touched itself at a vertex as cut: allowed to go on doing so.
+        self.pinches: dict[int, np.ndarray] = {}
         self.first: dict[int, tuple] | None = None  # the faces of the first try, all checked
         self.valid_faces: set[bytes] = set()
         self._pristine: SurfaceComplex | None = None
@@ -242,15 +248,16 @@ class _Checker:
                    np.flatnonzero([first.get(t) != complex_.faces[t] for t in face_ids[k].tolist()]) for k in todo]
         self.first = dict(complex_.faces) if first is None else first
         # The fragments are checked on their own, in parallel; what was bad before is judged here.
-        found_all = parallel.ordered_map(_bad_faces_item, [(results[k], c) for k, c in zip(todo, changed)])
-        # Where some faces are bad, which of the fragment as cut were bad already (:func:`_known_bad`), in parallel.
+        found_all = parallel.ordered_map(_bad_faces_item, [(results[k], c, self.pinches.get(k))
+                                                           for k, c in zip(todo, changed)])
+        # Where some faces are bad, which of the fragment as cut were bad already (:func:`_cut_faces`), in parallel.
         cut = [k for k, found in zip(todo, found_all)
                if found is not None and len(found) != len(results[k].faces) and k not in self.known]
-        for k, was in zip(cut, parallel.ordered_map(_bad_faces_item, [(fragments.fragments[k], None) for k in cut])):
+        for k, was in zip(cut, parallel.ordered_map(_bad_faces_item, [(fragments.fragments[k], None,
+                                                                       self.pinches.get(k)) for k in cut])):
             self.known[k] = _cut_faces(fragments, k, was, self.gid, self.offsets)
         for k, found in zip(todo, found_all):
-            b = _new_bad_faces(found, results[k], face_ids[k], complex_, self.known, k, fragments, self.gid,
-                               self.offsets)
+            b = _new_bad_faces(found, results[k], face_ids[k], complex_, self.known.get(k, set()))
             if b is None:
                 self.valid_faces.add(signatures[k])
             else:
@@ -258,12 +265,36 @@ class _Checker:
         return [fragments.fragments[k] if k in as_cut else f for k, f in enumerate(results)], list(face_ids), bad
 
 
+def _pinched(checker: _Checker, locked: set) -> set[int]:
+    """The fragments not closed and edge-manifold once welded by position, to keep as cut.
+
+    A fragment that only touches itself at a vertex (cones of one body meeting at a point, as a region of the
+    cut can) is simplified all the same: its vertices there are ``locked`` (updated) and the check lets them
+    go on touching (:attr:`_Checker.pinches`; the simplify stage moves the copies apart after). Keeping it as
+    cut would keep every fault it shares as cut.
+    """
+    fragments, gid, offsets = checker.fragments, checker.gid, checker.offsets
+    as_cut = set()
+    for k, fragment in enumerate(fragments.fragments):
+        if closed_when_welded(fragment):
+            continue
+        pinches = pinched_positions(fragment)
+        if pinches is None:
+            as_cut.add(k)
+            continue
+        checker.pinches[k] = pinches
+        at = np.flatnonzero(cKDTree(pinches).query(fragment.vertices)[0] == 0.0)
+        locked.update(np.unique(gid[at + offsets[k]]).tolist())
+    return as_cut
+
+
 def _within_tolerance(checker: _Checker, tolerance: float,
                       limits: Limits) -> tuple[_Tried, list[Fragment], int, int]:
     """Simplify to ``tolerance`` (and ``limits``) until every fragment is valid.
 
-    Fragments not closed and manifold once their vertices are welded by position even as cut (bodies touching
-    along an edge, which only the fragments' own vertex copies keep apart), or that intersect where no
+    Fragments not closed and edge-manifold once their vertices are welded by position even as cut (bodies
+    touching along an edge, which only the fragments' own vertex copies keep apart; :func:`_pinched`), or that
+    intersect where no
     collapse changed a face (the weld moved a vertex), are returned as they were cut (all their vertices
     locked). The first try is checked whole, later ones only where their faces differ from the first's;
     after :data:`_RETRIES` tries every fragment still invalid is locked whole, and one still invalid then is
@@ -279,7 +310,7 @@ def _within_tolerance(checker: _Checker, tolerance: float,
     fragments, gid, offsets = checker.fragments, checker.gid, checker.offsets
     locked = set(checker.classified.locked)
     count = len(fragments.fragments)
-    as_cut = {k for k, f in enumerate(fragments.fragments) if not closed_when_welded(f)}
+    as_cut = _pinched(checker, locked)
     whole: set[int] = set()  # fragments locked whole
     for k in sorted(as_cut):
         locked.update(np.unique(gid[fragments.fragments[k].faces + offsets[k]]).tolist())
@@ -310,57 +341,6 @@ def _within_tolerance(checker: _Checker, tolerance: float,
         attempt += 1
 
 
-def _within_budget(checker: _Checker, tried: _Tried, tolerance: float, limits: Limits,
-                   results: list[Fragment]) -> list[Fragment]:
-    """Simplify the fragments above their share of ``limits.budget`` further, every fragment still valid.
-
-    Goes on from (a copy of) the valid simplification ``tried`` (``results``). A fragment that turns
-    invalid is held as it was in ``tried`` (every vertex of its faces kept), its shared faults included,
-    and the rest is simplified again (the last fit's budget collapses redone first where still allowed);
-    when every fragment is held, that is ``results``.
-    """
-    count = len(results)
-    held = set(tried.as_cut)
-    owners = checker.classified.owners
-    later: _Fitted | None = None
-    while len(held) < count:
-        hold = {x for t, f in tried.complex_.faces.items() if held.intersection(owners[t]) for x in f}
-        later = _fit(checker, tried, tolerance, limits, hold, frozenset(held), later)
-        fitted, _, bad = checker.check(later.complex_, tried.as_cut)
-        if not bad:
-            return fitted
-        log.debug("faults: %d fragment(s) invalid within the budget; holding them as they were", len(bad))
-        held.update(bad)
-    return results
-
-
-@dataclass(frozen=True)
-class _Fitted:
-    """A complex simplified for the budget (:func:`_fit`)."""
-
-    complex_: SurfaceComplex
-    bound: dict  # the tolerance each fragment ended with
-    start: int  # collapses of ``complex_.done`` that made the valid try (the budget's follow)
-
-
-def _fit(checker: _Checker, tried: _Tried, tolerance: float, limits: Limits, hold: set, held: frozenset[int],
-         later: _Fitted | None) -> _Fitted:
-    """The valid try's complex (a copy), the vertices ``hold`` (of fragments ``held``) locked, simplified to
-    the budget; ``later``: an earlier fit whose budget collapses are redone first, at its tolerances."""
-    count = len(checker.fragments.fragments)
-    complex_ = tried.complex_.copy()
-    complex_.locked |= hold
-    bound = {k: tolerance for k in range(count)}
-    start = len(complex_.done)
-    if later is not None:
-        bound = {k: tolerance if k in held else b for k, b in later.bound.items()}
-        complex_.replay(later.complex_.done[later.start:], bound, later.complex_.final_refusals())
-        complex_.decimate(bound)
-    _rounds(complex_, checker.classified, limits, bound, tolerance, held)
-    complex_.flip_needles(set(tried.as_cut) | held)
-    return _Fitted(complex_, bound, start)
-
-
 def _decimate(checker: _Checker, locked: set, damp: dict, tolerance: float, limits: Limits, count: int,
               earlier: SurfaceComplex | None = None) -> tuple[SurfaceComplex, int]:
     """The complex after collapses to ``tolerance``, then to the limits; and how many fragments stay above
@@ -376,42 +356,9 @@ def _decimate(checker: _Checker, locked: set, damp: dict, tolerance: float, limi
     if earlier is not None:
         complex_.replay(earlier.done, bound, earlier.final_refusals())
     complex_.decimate(bound)
-    sizes = _rounds(complex_, checker.classified, limits, bound, tolerance)
+    sizes = rounds(complex_, checker.classified, limits, bound, tolerance)
     over = int(np.sum(sizes > limits.max_triangles)) if limits.max_triangles > 0 else 0
     return complex_, over
-
-
-def _rounds(complex_: SurfaceComplex, classified: Classified, limits: Limits, bound: dict, tolerance: float,
-            held: frozenset[int] = frozenset()) -> np.ndarray:
-    """Double the tolerance (``bound``, per fragment, updated) of the fragments over ``limits`` and simplify
-    them further, until none is; the fragments' triangles (count,) at the end.
-
-    A fragment goes no further once its tolerance is :data:`_BUDGET_ROUNDS` doublings up, when all its
-    vertices are locked, or when it is ``held``.
-    """
-    count = len(bound)
-    sizes = _sizes(complex_, classified, count)
-    if not limits.active:
-        return sizes
-    limit = tolerance * 2**_BUDGET_ROUNDS
-    # Fragments with every vertex locked (kept as cut) cannot give anything: the others share what they leave.
-    stuck = np.ones(count, dtype=bool)
-    for t, f in complex_.faces.items():
-        if not complex_.locked.issuperset(f):
-            stuck[list(classified.owners[t])] = False
-    stuck[sorted(held)] = True
-    for _ in range(_BUDGET_ROUNDS):
-        stuck |= np.array([bound[k] >= limit for k in range(count)])
-        todo = limits.over(sizes, stuck)
-        if not len(todo):
-            break
-        for k in todo.tolist():
-            bound[k] *= 2.0
-        chosen = set(todo.tolist())
-        vertices = {x for t, f in complex_.faces.items() if chosen.intersection(classified.owners[t]) for x in f}
-        complex_.decimate(bound, sorted(vertices))
-        sizes = _sizes(complex_, classified, count)
-    return sizes
 
 
 def _outer_area(classified: Classified, welded: np.ndarray, count: int) -> np.ndarray:
@@ -422,40 +369,24 @@ def _outer_area(classified: Classified, welded: np.ndarray, count: int) -> np.nd
     return np.bincount(classified.owner_pair[outer, 0], weights=area, minlength=count)
 
 
-def _sizes(complex_: SurfaceComplex, classified: Classified, count: int) -> np.ndarray:
-    """Triangles (count,) of each fragment in the complex as it is (a fault face counts for both sides)."""
-    sizes = np.zeros(count, dtype=np.int64)
-    for t in complex_.faces:
-        for k in classified.owners[t]:
-            sizes[k] += 1
-    return sizes
-
-
-def _bad_faces_item(_: None, item: tuple[Fragment, np.ndarray | None]) -> np.ndarray | None:
-    fragment, changed = item
-    return bad_faces(fragment, changed)
+def _bad_faces_item(_: None, item: tuple[Fragment, np.ndarray | None, np.ndarray | None]) -> np.ndarray | None:
+    fragment, changed, pinches = item
+    return bad_faces(fragment, changed, pinches)
 
 
 def _new_bad_faces(bad: np.ndarray | None, fragment: Fragment, ids: np.ndarray, complex_: SurfaceComplex,
-                   known: dict, k: int, fragments: Fragments, gid: np.ndarray,
-                   offsets: np.ndarray) -> np.ndarray | None:
+                   was: set) -> np.ndarray | None:
     """Of the faces ``bad`` making a rebuilt fragment invalid (:func:`bad_faces`), those not so before.
 
     A fragment cut with faces that already intersect (rare: folds the booleans left) is not held against
-    the simplification: faces of it that no collapse touched, and that were bad before, are let through.
+    the simplification: faces of it that no collapse touched, and that were bad before (``was``: sorted
+    global corner ids, :func:`_cut_faces`, found by :meth:`_Checker.check` for every fragment with some bad
+    faces), are let through.
     """
     if bad is None or len(bad) == len(fragment.faces):
         return bad
-    was = _known_bad(fragments, k, known, gid, offsets)
     new = [i for i, t in zip(bad.tolist(), ids[bad].tolist()) if tuple(sorted(complex_.faces[t])) not in was]
     return np.array(new, dtype=np.int64) if new else None
-
-
-def _known_bad(fragments: Fragments, k: int, known: dict, gid: np.ndarray, offsets: np.ndarray) -> set:
-    """The faces (sorted global corner ids) of fragment ``k`` that intersect as cut (memoized in ``known``)."""
-    if k not in known:
-        known[k] = _cut_faces(fragments, k, bad_faces(fragments.fragments[k]), gid, offsets)
-    return known[k]
 
 
 def _cut_faces(fragments: Fragments, k: int, was: np.ndarray | None, gid: np.ndarray, offsets: np.ndarray) -> set:
