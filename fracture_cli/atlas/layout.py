@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli.atlas.hits import nearest_fragment
+from fracture_cli.geometry.parts import gameready_parts, nearest_part, part_planes
 from fracture_cli.runtime.format import RuntimeData
 
 log = logging.getLogger(__name__)
@@ -68,10 +69,7 @@ class FragmentLayout:
         """
         if self.part_planes is None:
             return None if self.centroids is None else nearest_fragment(self.centroids, point)
-        x = np.append(np.asarray(point, dtype=np.float64), 1.0)
-        values = [min((float((planes @ x).max()) for planes in parts), default=np.inf)
-                  for parts in self.part_planes]
-        return int(np.argmin(values))
+        return nearest_part(self.part_planes, point)
 
     def asset_center(self, data: RuntimeData) -> np.ndarray:
         """The asset's centre (3,): volume-weighted mean of the centroids, else the mean contact site."""
@@ -107,29 +105,8 @@ def fragment_layout(data: RuntimeData, glb_path: str | os.PathLike | None = None
 
 
 def _part_planes(gameready: dict[str, np.ndarray], p: int) -> tuple[tuple[np.ndarray, ...], ...] | None:
-    """Per fragment, each convex part's face planes ``(m, 4)``: rows ``(n, c)``, unit ``n``, inside ``n . x + c <= 0``.
-
-    None when a fragment has no parts (the hit fragment then falls back to centroids).
-    """
-    # on first use: only the atlas needs hulls of the runtime file's parts
-    from scipy.spatial import ConvexHull, QhullError
-
-    vertices = np.asarray(gameready["collision_vertices"], dtype=np.float64)
-    part_ptr = np.asarray(gameready["collision_part_offsets"], dtype=np.int64)
-    fragment_ptr = np.asarray(gameready["collision_fragment_offsets"], dtype=np.int64)
-    out = []
-    for j in range(p):
-        parts = []
-        for i in range(int(fragment_ptr[j]), int(fragment_ptr[j + 1])):
-            try:
-                hull = ConvexHull(vertices[part_ptr[i]:part_ptr[i + 1]])
-            except QhullError:  # a flat part: it holds no volume, so no hit lands inside it
-                continue
-            parts.append(hull.equations)
-        if not parts:
-            return None
-        out.append(tuple(parts))
-    return tuple(out)
+    """Per fragment, each convex part's face planes (:func:`fracture_cli.geometry.parts.part_planes`)."""
+    return part_planes(gameready_parts(gameready, p))
 
 
 def _layout_from_glb(data: RuntimeData, glb_path: str) -> FragmentLayout | None:

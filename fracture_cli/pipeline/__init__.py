@@ -330,7 +330,7 @@ def _runtime(state: PipelineState, options: RuntimeOptions) -> PipelineState:
         from fracture_cli.stages.stress.stage import with_stress
 
         data = with_stress(data, state.need("tet_mesh", "runtime"), state.need("pieces", "runtime"), frags,
-                           state.eta, graph, options)
+                           state.eta, graph, options, parts=state.collision)
     # Mass properties and collision parts for engines that read the runtime file only (FORMAT.md section 8).
     physics = state.physics if state.physics is not None else fragment_physics(frags, state.collision, frags.pivot)
     data = dataclasses.replace(data, gameready=runtime_arrays(physics))

@@ -209,7 +209,7 @@ def _refine(ctx: Context, plan: Plan) -> Refinement | str:
     physics = tuple(fragment_physics(children, parts, children.pivot))
     checks = {**checks, **collision_checks, **nesting(surface, children)}
     return Refinement(fragment=plan.fragment, children=children, parts=parts, physics=physics,
-                      body=body_arrays(ctx, plan, children), checks=checks)
+                      body=body_arrays(ctx, plan, children, parts), checks=checks)
 
 
 def _child_regions(ctx: Context, plan: Plan, surface: SurfaceMesh) -> Regions:
@@ -272,8 +272,12 @@ def nesting(parent: SurfaceMesh, children: Fragments) -> dict[str, float]:
             "parent_distance": worst}
 
 
-def body_arrays(ctx: Context, plan: Plan, children: Fragments) -> dict[str, np.ndarray]:
-    """The body's runtime arrays (see :class:`Refinement`), in the asset's units, float32/int32 as written."""
+def body_arrays(ctx: Context, plan: Plan, children: Fragments, parts: tuple | None = None) -> dict[str, np.ndarray]:
+    """The body's runtime arrays (see :class:`Refinement`), in the asset's units, float32/int32 as written.
+
+    ``parts``: the children's collision parts (model space), where the stress criterion's blocks model places
+    every site's hit.
+    """
     sub = submesh(ctx.tet_mesh, plan.tets)
     volume = float(np.abs(sub.tet_volumes).sum())
     scale = np.sqrt(volume)  # unit-RMS modes over the body, a unit-mass impulse (ALGORITHM.md section 8)
@@ -295,14 +299,14 @@ def body_arrays(ctx: Context, plan: Plan, children: Fragments) -> dict[str, np.n
     }
     runtime = ctx.stages["runtime"]
     if runtime.criterion == "stress":
-        body.update(_stress(ctx, plan, sub, children, (edges, areas), body))
+        body.update(_stress(ctx, plan, sub, children, (edges, areas), body, parts))
     if runtime.damage:
         body["crack_ptr"], body["crack_segments"] = crack_segments(children, edges)
     return body
 
 
 def _stress(ctx: Context, plan: Plan, sub: TetMesh, children: Fragments, graph: tuple[np.ndarray, np.ndarray],
-            body: dict) -> dict[str, np.ndarray]:
+            body: dict, parts: tuple | None = None) -> dict[str, np.ndarray]:
     """The stress criterion's arrays of the body (:func:`fracture_cli.stages.stress.stage.with_stress` on its tets)."""
     # on first use: the elasticity solve loads only for the stress criterion
     from fracture_cli.stages.stress.stage import with_stress
@@ -311,7 +315,7 @@ def _stress(ctx: Context, plan: Plan, sub: TetMesh, children: Fragments, graph: 
                        edge_areas=body["edge_areas"], fragment_names=tuple(str(j) for j in range(len(body["W"][0]))))
     options = dataclasses.replace(ctx.stages["runtime"], radius=ctx.radius * ctx.options.radius_factor)
     stressed = with_stress(data, sub, plan.pieces, children, submesh_eta(ctx.tet_mesh, plan.tets, sub, ctx.eta), graph,
-                           options)
+                           options, parts=parts)
     return {name: np.asarray(value) for name, value in stressed.stress.items()}
 
 

@@ -60,6 +60,10 @@ class RuntimeOptions:
     stress_measure: str = option("tension_shear", "stress criterion: what loads a bond: 'tension' (normal traction) "
                                                   "or 'tension_shear' (traction without its compressive part)",
                                  choices=("tension_shear", "tension"))
+    stress_model: str = option("blocks", "stress criterion: what responds to the hit: 'blocks' (every fragment a rigid "
+                                         "body, the faults the elastic part, the hit on the fragment it lands on: it "
+                                         "loads every bond of that fragment) or 'tets' (linear elasticity on the "
+                                         "bake's tet mesh)", choices=("blocks", "tets"))
     stress_max_bonds: int = option(48, "stress criterion: at most this many bonds per site (0 = no limit)",
                                    min=0, max=100000)
     damage: bool = option(False, "write damage that adds up (format version 2, feature 'damage'): a hit below a "

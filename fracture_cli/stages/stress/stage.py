@@ -35,6 +35,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fracture_cli.errors import StageError
+from fracture_cli.geometry.parts import nearest_parts, part_planes
+from fracture_cli.stages.stress.blocks import block_tractions
 from fracture_cli.stages.stress.bonds import (
     BondFaces,
     ContactPoints,
@@ -44,7 +46,7 @@ from fracture_cli.stages.stress.bonds import (
     split_into_patches,
     tet_fragments,
 )
-from fracture_cli.stages.stress.gains import site_bond_tractions
+from fracture_cli.stages.stress.gains import site_bond_tractions, site_patches
 from fracture_cli.types import Fragments, Pieces, TetMesh
 
 if TYPE_CHECKING:  # the runtime stage imports this module
@@ -81,6 +83,11 @@ class StressParameters:
     patches : int
         Each fault is cut into ``patches x patches`` quadrant patches
         (:func:`fracture_cli.stages.stress.bonds.split_into_patches`); 1 = the whole fault's mean traction.
+    model : {"tets", "blocks"}
+        What responds to the hit: linear elasticity on the tet mesh
+        (:func:`fracture_cli.stages.stress.gains.site_bond_tractions`), or the fragments as rigid blocks held by
+        elastic faults, the load on the fragment each site lands on
+        (:func:`fracture_cli.stages.stress.blocks.block_tractions`).
     measure : {"tension_shear", "tension"}
         What loads a bond: ``"tension"``, the normal traction ``n . sigma n`` (Rankine on the fault plane);
         ``"tension_shear"``, the traction vector without its compressive part, ``|sigma n - min(0, s_nn) n|``,
@@ -96,6 +103,7 @@ class StressParameters:
     reach: float = 0.05
     patches: int = 2
     measure: str = "tension_shear"
+    model: str = "blocks"
 
 
 def round_bits(values: np.ndarray, bits: int = SIGNIFICANT_BITS) -> np.ndarray:
@@ -115,7 +123,8 @@ def round_bits(values: np.ndarray, bits: int = SIGNIFICANT_BITS) -> np.ndarray:
 
 
 def stress_arrays(tet_mesh: TetMesh, pieces: Pieces, fragments: Fragments, eta: np.ndarray | None, edges: np.ndarray,
-                  edge_areas: np.ndarray, parameters: StressParameters) -> dict[str, np.ndarray]:
+                  edge_areas: np.ndarray, parameters: StressParameters,
+                  site_owner: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """The four stress arrays of the runtime file (module docstring).
 
     Parameters
@@ -132,6 +141,9 @@ def stress_arrays(tet_mesh: TetMesh, pieces: Pieces, fragments: Fragments, eta: 
     edge_areas : (e,) float
         Their fault areas, normalized units squared.
     parameters : StressParameters
+    site_owner : (s,) int, optional
+        ``model = "blocks"``: the fragment every contact site lands on (the one whose collision parts are
+        nearest, as a game's collider reports it); by default the fragment with the most of the site's load.
 
     Returns
     -------
@@ -155,8 +167,14 @@ def stress_arrays(tet_mesh: TetMesh, pieces: Pieces, fragments: Fragments, eta: 
         patch_of[patch_bond[::-1]] = np.arange(len(patch_bond))[::-1]
         contacts = dataclasses.replace(contacts, bond=patch_of[contacts.bond])
     vector = parameters.measure == "tension_shear"
-    traction = site_bond_tractions(tet_mesh, patches, sites, parameters.radius, parameters.youngs_modulus,
-                                   parameters.poisson_ratio, contacts, parameters.reach, vector)  # (s, 3, P or 3P)
+    if parameters.model == "blocks":
+        traction = block_tractions(tet_mesh, owner, patches, edges[patch_bond],
+                                   patch_normals(tet_mesh, patches, contacts, len(patch_bond)),
+                                   site_patches(tet_mesh, sites, parameters.radius).T.tocsr(), parameters.reach,
+                                   parameters.poisson_ratio, contacts, vector, site_owner)
+    else:
+        traction = site_bond_tractions(tet_mesh, patches, sites, parameters.radius, parameters.youngs_modulus,
+                                       parameters.poisson_ratio, contacts, parameters.reach, vector)  # (s, 3, P|3P)
     strength = round_bits(bond_strengths(faces, eta, areas, parameters.tensile_strength))
     score = None
     if vector:
@@ -289,7 +307,8 @@ def sparsify(gain: np.ndarray, strength: np.ndarray, keep: float, max_bonds: int
 
 
 def with_stress(data: RuntimeData, tet_mesh: TetMesh, pieces: Pieces, fragments: Fragments, eta: np.ndarray | None,
-                graph: tuple[np.ndarray, np.ndarray], options: RuntimeOptions) -> RuntimeData:
+                graph: tuple[np.ndarray, np.ndarray], options: RuntimeOptions,
+                parts: tuple | None = None) -> RuntimeData:
     """``data`` (RuntimeData) with the stress criterion's arrays, criterion ``"stress"`` and its parameters.
 
     Parameters
@@ -301,6 +320,9 @@ def with_stress(data: RuntimeData, tet_mesh: TetMesh, pieces: Pieces, fragments:
     graph : ((e, 2) int, (e,) float)
         The fragment graph (normalized areas) the runtime data was built from.
     options : RuntimeOptions
+    parts : tuple of tuple of (k, 3) float, optional
+        Every fragment's convex collision parts, model space (as ``data.sites``): with
+        ``stress_model = "blocks"`` each site loads the fragment whose parts are nearest it.
     """
     edges = np.asarray(graph[0], dtype=np.int64).reshape(-1, 2)
     areas = np.asarray(graph[1], dtype=np.float64).reshape(-1)
@@ -312,10 +334,17 @@ def with_stress(data: RuntimeData, tet_mesh: TetMesh, pieces: Pieces, fragments:
                                   poisson_ratio=float(options.poisson_ratio),
                                   tensile_strength=float(options.tensile_strength), keep=float(options.stress_keep),
                                   max_bonds=int(options.stress_max_bonds), radius=float(options.radius),
-                                  reach=float(options.stress_reach), measure=str(options.stress_measure))
-    arrays = stress_arrays(tet_mesh, pieces, fragments, eta, edges, areas, parameters)
+                                  reach=float(options.stress_reach), measure=str(options.stress_measure),
+                                  model=str(options.stress_model))
+    owner = None
+    if parameters.model == "blocks" and parts is not None:
+        planes = part_planes(parts)
+        if planes is not None:
+            owner = nearest_parts(planes, np.asarray(data.sites, dtype=np.float64))
+    arrays = stress_arrays(tet_mesh, pieces, fragments, eta, edges, areas, parameters, owner)
     info = {"youngs_modulus": parameters.youngs_modulus, "poisson_ratio": parameters.poisson_ratio,
             "tensile_strength": parameters.tensile_strength, "keep": parameters.keep,
             "max_bonds": parameters.max_bonds, "reach": parameters.reach, "measure": parameters.measure,
+            "model": parameters.model,
             "significant_bits": SIGNIFICANT_BITS}
     return dataclasses.replace(data, criterion="stress", stress=arrays, stress_info=info)

@@ -203,7 +203,9 @@ LEVEL_BAKES = [("pillar.glb", "stone", "pillar_levels", ("levels.count=2", "leve
 def rebake_sample_assets(dest: str) -> None:
     """Bake every sample asset with its manifest recipe and copy its runtime file to ``dest``."""
     bakes = [(asset, recipe, os.path.splitext(asset)[0], ()) for asset, recipe in sample_assets()]
-    bakes += [(asset, recipe, name, ("--set", "runtime.criterion=stress")) for asset, recipe, name in STRESS_BAKES]
+    # The chair's stress file predates the blocks model (the default since): it stays the tet mesh's response.
+    bakes += [(asset, recipe, name, ("--set", "runtime.criterion=stress", "--set", "runtime.stress_model=tets"))
+              for asset, recipe, name in STRESS_BAKES]
     bakes += [(asset, recipe, name, tuple(x for value in sets for x in ("--set", value)))
               for asset, recipe, name, sets in LEVEL_BAKES]
     for asset, recipe, name, extra in bakes:
