@@ -16,7 +16,8 @@ from click.testing import CliRunner
 from fracture_cli.cli import cli
 from fracture_cli.errors import InputError
 from fracture_cli.io.inputs import input_files, read_input, recording_reads
-from fracture_cli.stages.load import load_surface, size_limits
+from fracture_cli.stages.load import load_surface
+from fracture_cli.stages.load.read import size_limits
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "data"))
 from make_bad_corpus import Gltf, box, box_primitive, icosphere, obj_text  # noqa: E402

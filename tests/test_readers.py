@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from fracture_cli.errors import InputError
-from fracture_cli.stages.load import double_sided_back_faces, load_surface
+from fracture_cli.stages.load import load_surface
+from fracture_cli.stages.load.read import double_sided_back_faces
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "data"))
 from make_bad_corpus import Gltf, box, box_primitive, concat, obj_text, stl_binary

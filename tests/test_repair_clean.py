@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fracture_cli.stages.load import surface_from_trimesh
+from fracture_cli.stages.load.read import surface_from_trimesh
 from fracture_cli.stages.repair import repair_surface
 from fracture_cli.stages.repair import solid as repair_module
 from fracture_cli.stages.repair.clean import closed_as_given

@@ -5,7 +5,7 @@ import pytest
 import trimesh
 
 from fracture_cli.geometry import trigeom
-from fracture_cli.stages.load import surface_from_trimesh
+from fracture_cli.stages.load.read import surface_from_trimesh
 from fracture_cli.stages.smooth import sliding
 
 

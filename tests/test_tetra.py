@@ -153,7 +153,7 @@ def test_cage_with_a_needle_face_still_tetrahedralizes(caplog):
     import trimesh
 
     from fracture_cli.stages.cage import CageOptions, cage
-    from fracture_cli.stages.load import surface_from_trimesh
+    from fracture_cli.stages.load.read import surface_from_trimesh
     from fracture_cli.stages.tetra import TetraOptions, tetra
 
     box = trimesh.creation.box(extents=(0.5773, 0.3, 0.3))

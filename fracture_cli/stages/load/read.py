@@ -1,11 +1,7 @@
-"""The ``load`` stage: read a mesh file into a :class:`~fracture_cli.types.SurfaceMesh`.
+"""The ``load`` stage's work: probe, read, join and check a mesh file.
 
-Every format goes through one function, :func:`load_surface`: it refuses what
-is over the triangle limit or mislabelled before decoding (:mod:`fracture_cli.io.probe`),
-reads the file's parts with the format's reader (:mod:`fracture_cli.io.parts`), joins them
-(one material slot per material of the file), checks what the pipeline relies
-on (finite coordinates, at least one triangle), and reports problems as
-one-line :class:`InputError` messages that name the file.
+:func:`fracture_cli.stages.load.load_surface` is the stage's entry point (its docstring says what is read);
+this module reads, so that the package itself loads none of the readers.
 """
 
 from __future__ import annotations
@@ -13,7 +9,6 @@ from __future__ import annotations
 import logging
 import os
 import stat
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -23,31 +18,13 @@ from fracture_cli.geometry.rows import group_rows, unique_inverse, unique_rows, 
 from fracture_cli.io.inputs import file_kind
 from fracture_cli.io.parts import read_parts
 from fracture_cli.io.probe import probe_triangles
-from fracture_cli.options import option
+from fracture_cli.stages.load.options import READERS, LoadOptions
 from fracture_cli.types import Material, Normalization, SurfaceMesh
 
 if TYPE_CHECKING:
     import trimesh
 
 log = logging.getLogger(__name__)
-
-# Extension -> file type; the only formats we promise to read.
-READERS = {
-    ".obj": "obj",
-    ".ply": "ply",
-    ".stl": "stl",
-    ".off": "off",
-    ".glb": "glb",
-    ".gltf": "gltf",
-}
-
-
-@dataclass(frozen=True)
-class LoadOptions:
-    """Options of the ``load`` stage."""
-
-    max_triangles: int = option(5_000_000, "refuse inputs with more triangles than this", min=1)
-
 
 # Warn when 32-bit coordinates are coarser than this fraction of the model's bounding-box diagonal.
 _PRECISION_WARNING = 1e-5
@@ -232,29 +209,8 @@ def _row_ids(rows: np.ndarray) -> np.ndarray:
     return unique_rows(rows, return_inverse=True)[1].reshape(-1)
 
 
-def load_surface(path: str | os.PathLike, options: LoadOptions = LoadOptions()) -> SurfaceMesh:
-    """Read a mesh file into a normalized :class:`SurfaceMesh`.
-
-    Parameters
-    ----------
-    path : str or PathLike
-        An OBJ, PLY, STL, OFF, GLB or glTF file.
-    options : LoadOptions, optional
-        Limits applied while loading.
-
-    Returns
-    -------
-    SurfaceMesh
-        All geometry of the file (scene node transforms applied), with UVs,
-        normals, vertex colours and material ids where present, normalized to a
-        unit bounding-box diagonal (ALGORITHM.md section 0).
-
-    Raises
-    ------
-    InputError
-        Missing, empty or unreadable file; unsupported extension; no triangles;
-        NaN or inf coordinates; more triangles than ``options.max_triangles``.
-    """
+def read_surface(path: str | os.PathLike, options: LoadOptions) -> SurfaceMesh:
+    """The stage's work (:func:`fracture_cli.stages.load.load_surface`)."""
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
     if ext not in READERS:
