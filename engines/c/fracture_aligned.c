@@ -894,7 +894,8 @@ static int32_t clip_crossing(const double *sv, const double *dist, int32_t *cros
     return index;
 }
 
-static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, double eps) {
+/* `axes`: the plane's cap axes (plane_basis) when the caller keeps them, as 6 doubles after a flag: 0 until found. */
+static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, double *axes, double eps) {
     /* the arrays as restrict locals: a store through one no longer makes the compiler reload the others */
     const double *restrict sv = src->v, *restrict splane = src->plane;
     const int32_t *restrict sloops = src->loops, *restrict soff = src->loop_off, *restrict sisnew = src->isnew;
@@ -996,14 +997,22 @@ static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, d
     dst->nv = nv;
     if (npoints >= 3) {
         if (nl + npoints > lcap) return CLIP_OVERFLOW;
-        double cx = 0, cy = 0, cz = 0, a[3], b[3];
+        double cx = 0, cy = 0, cz = 0, own[7];
         double *restrict keys = w->keys;
         for (int32_t i = 0; i < npoints; ++i) {
             const double *x = dv + 3 * points[i];
             cx = cx + x[0]; cy = cy + x[1]; cz = cz + x[2];
         }
         cx = cx / npoints; cy = cy / npoints; cz = cz / npoints;
-        plane_basis(plane, a, b);
+        if (!axes) { /* nowhere to keep them: found for this clip only */
+            own[0] = 0.0;
+            axes = own;
+        }
+        if (axes[0] == 0.0) {
+            plane_basis(plane, axes + 1, axes + 4);
+            axes[0] = 1.0;
+        }
+        const double *a = axes + 1, *b = axes + 4;
         for (int32_t i = 0; i < npoints; ++i) {
             const double *x = dv + 3 * points[i];
             double dd[3] = {x[0] - cx, x[1] - cy, x[2] - cz};
@@ -1113,6 +1122,7 @@ typedef struct hit {
     double *sites;   /* (S, 3) placed */
     const int32_t *nb_off, *nb; /* neighbours of the pattern's cells (offsets relative to the pattern) */
     double *planes;  /* (N, 4): the bisector of each neighbour entry */
+    double *axes;    /* (N, 7): a flag, then its cap axes for clip_poly once found (most are used by many pieces) */
     double *split;       /* the split stack of split_polygon: corners */
     size_t split_used, split_cap;
     int32_t *split_tags;  /* the corners' nearest cells (one per corner of `split`: at split_used / 8) */
@@ -1215,15 +1225,15 @@ static void push_polygon(hit *h, int32_t cell, int32_t material, const double *c
 
 /* `src` clipped by planes (4 doubles each, `stride` doubles apart) in order, skipping those the piece's sphere lies
  * inside; returns the result (src itself, or a work buffer other than src) or NULL when nothing is left. */
-static const poly *clip_by(hit *h, const poly *src, const double *planes, int32_t count, const double *c, double r,
-                           double eps) {
+static const poly *clip_by(hit *h, const poly *src, const double *planes, double *axes, int32_t count,
+                           const double *c, double r, double eps) {
     work *w = h->w;
     const poly *cur = src;
     for (int32_t e = 0; e < count; ++e) {
         const double *plane = planes + 4 * e;
         if (dot3(plane, c) - plane[3] < -r) continue;
         poly *next = cur == &w->buf[1] ? &w->buf[2] : &w->buf[1];
-        int res = clip_poly(w, cur, next, plane, eps);
+        int res = clip_poly(w, cur, next, plane, axes ? axes + 7 * e : NULL, eps);
         if (res == CLIP_OVERFLOW) { h->limit = 1; return NULL; }
         if (res == CLIP_EMPTY) return NULL;
         if (res == CLIP_DONE) cur = next;
@@ -1348,9 +1358,9 @@ static void cut_piece(hit *h, int32_t k) {
                 if (v != witness && dot3(plane, base->v + 3 * v) - plane[3] <= eps) { witness = v; empty = 0; }
         }
         if (empty) continue;
-        const poly *cur = clip_by(h, base, planes, nplanes, c, r, eps);
+        const poly *cur = clip_by(h, base, planes, h->axes + 7 * h->nb_off[i], nplanes, c, r, eps);
         for (int32_t e = h->wall_off[i]; cur && straddle && e < h->wall_off[i + 1]; ++e)
-            cur = clip_by(h, cur, h->boundary + 4 * h->walls[e], 1, c, r, eps); /* the boundary planes of cell i */
+            cur = clip_by(h, cur, h->boundary + 4 * h->walls[e], NULL, 1, c, r, eps); /* the boundary planes of cell i */
         if (h->limit) return;
         if (cur) {
             int32_t before_count = nrec;
@@ -1365,14 +1375,14 @@ static void cut_piece(hit *h, int32_t k) {
             const double *plane = h->boundary + 4 * b;
             double flipped[4] = {-plane[0], -plane[1], -plane[2], -plane[3]};
             poly *next = cur == &w->buf[1] ? &w->buf[2] : &w->buf[1];
-            int res = clip_poly(w, cur, next, flipped, eps);
+            int res = clip_poly(w, cur, next, flipped, NULL, eps);
             if (res == CLIP_OVERFLOW) { h->limit = 1; return; }
             if (res != CLIP_EMPTY) {
                 int32_t before_count = nrec;
                 if (!push_kept(h, outer, k, res == CLIP_SAME ? cur : next, keep, &nrec)) return;
                 if (nrec > before_count) has_outer = 1;
             }
-            res = clip_poly(w, cur, next, plane, eps); /* `next` is free again: what lay beyond is recorded */
+            res = clip_poly(w, cur, next, plane, NULL, eps); /* `next` is free again: what lay beyond is recorded */
             if (res == CLIP_OVERFLOW) { h->limit = 1; return; }
             if (res == CLIP_EMPTY) break;
             if (res == CLIP_DONE) cur = next;
@@ -1499,7 +1509,7 @@ static size_t scratch_bytes(const fra_data *d, int32_t *vcap, int32_t *fcap, int
     int32_t N = d->rows[A_CELL_NEIGHBORS], S = d->max_sites;
     return 3 * poly_bytes + sizeof(double) * ((size_t)*vcap * 4 + 2 * 8 * (size_t)*ccap) +
            sizeof(int32_t) * ((size_t)*vcap * 5 + 3 * (size_t)*lcap) + sizeof(double) * (3 * (size_t)S + (size_t)S) +
-           sizeof(int32_t) * 7 * (size_t)S + sizeof(double) * 4 * (size_t)N + 48 * 16 +
+           sizeof(int32_t) * 7 * (size_t)S + sizeof(double) * 11 * (size_t)N + 48 * 16 +
            split_bytes(S, d->rows[A_BOUNDARY_PLANES]) +
            sizeof(double) * (3 * 8 * (size_t)*ccap + 5 * (size_t)d->rows[A_BOUNDARY_PLANES]) +
            sizeof(int32_t) * ((size_t)*ccap + (size_t)d->rows[A_BOUNDARY_PLANES] + (size_t)d->max_corner_ids) +
@@ -1554,6 +1564,8 @@ static fra_status setup(const fra_data *d, int32_t q, const double *point, const
     for (int32_t i = 0; ok && i < h->S; ++i) h->cells[i] = 0;
     h->kept = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->S, &ok);
     h->planes = (double *)grab(a, sizeof(double) * 4 * (size_t)N, &ok);
+    h->axes = (double *)grab(a, sizeof(double) * 7 * (size_t)N, &ok);
+    for (int32_t e = 0; ok && e < N; ++e) h->axes[7 * e] = 0.0;
     size_t levels = (size_t)(h->S < 128 ? h->S : 128) + 1;
     h->split_cap = levels * 2 * 8 * (2 * (size_t)(3 + d->rows[A_BOUNDARY_PLANES] + (int32_t)levels) + 2);
     h->split_cells_cap = levels * 2 * (size_t)(h->S + 1);
