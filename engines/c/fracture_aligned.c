@@ -912,29 +912,26 @@ static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, d
         first_beyond++;
     }
     if (first_beyond == snv) return CLIP_SAME;
-    int plus = 0, minus = 0, zero = 0;
+    /* A corner lies beyond: the distances, sides and kept corners in one pass, without a branch (a dropped corner
+     * is copied and then overwritten). All for nothing only when nothing is left (no corner of side -1): rare. */
+    int minus = 0, zero = 0;
+    int32_t nv = 0, ncross = 0;
     for (int32_t i = 0; i < snv; ++i) {
         const double *x = sv + 3 * i;
         double s = ((n0 * x[0] + n1 * x[1]) + n2 * x[2]) - h;
         int above = s > eps, below = s < -eps;
         dist[i] = s;
         side[i] = above - below;
-        plus |= above;
         minus |= below;
         zero |= above == below;
-    }
-    if (!plus) return CLIP_SAME;
-    if (!minus) return CLIP_EMPTY;
-    int32_t nv = 0, ncross = 0;
-    for (int32_t i = 0; i < snv; ++i) { /* the kept corners, without a branch (a dropped one is overwritten) */
-        int32_t kept = side[i] <= 0;
         cross_head[i] = -1;
-        renumber[i] = kept ? nv : -1;
-        dv[3 * nv] = sv[3 * i];
-        dv[3 * nv + 1] = sv[3 * i + 1];
-        dv[3 * nv + 2] = sv[3 * i + 2];
-        nv += kept;
+        renumber[i] = above ? -1 : nv;
+        dv[3 * nv] = x[0];
+        dv[3 * nv + 1] = x[1];
+        dv[3 * nv + 2] = x[2];
+        nv += !above;
     }
+    if (!minus) return CLIP_EMPTY;
     int32_t kept_vertices = nv, nf = 0, nl = 0, dropped = 0;
     doff[0] = 0;
     for (int32_t f = 0; f < snf; ++f) {
