@@ -894,7 +894,8 @@ static int32_t clip_crossing(const double *sv, const double *dist, int32_t *cros
     return index;
 }
 
-/* `axes`: the plane's cap axes (plane_basis) when the caller keeps them, as 6 doubles after a flag: 0 until found. */
+/* `axes`, when the caller keeps the plane's cap axes across clips: 7 doubles, a flag (0 until found), then the axes a
+ * and b of plane_basis; NULL: found for this clip alone. */
 static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, double *axes, double eps) {
     /* the arrays as restrict locals: a store through one no longer makes the compiler reload the others */
     const double *restrict sv = src->v, *restrict splane = src->plane;
@@ -1220,8 +1221,9 @@ static void push_polygon(hit *h, int32_t cell, int32_t material, const double *c
         push_triangle(h, cell, material, corners, corners + 8 * q, corners + 8 * (q + 1));
 }
 
-/* `src` clipped by planes (4 doubles each, `stride` doubles apart) in order, skipping those the piece's sphere lies
- * inside; returns the result (src itself, or a work buffer other than src) or NULL when nothing is left. */
+/* `src` clipped by planes (4 doubles each) in order, skipping those the piece's sphere lies inside; `axes`: 7 doubles
+ * per plane for clip_poly, or NULL. Returns the result (src itself, or a work buffer other than src) or NULL when
+ * nothing is left. */
 static const poly *clip_by(hit *h, const poly *src, const double *planes, double *axes, int32_t count,
                            const double *c, double r, double eps) {
     work *w = h->w;
