@@ -307,7 +307,9 @@ struct fra_data {
     double *piece_mass;    /* (P, 4): volume, centroid */
     double *piece_tri_radius; /* (P,): the farthest corner of the piece's triangles from its sphere's centre */
     double *tri_sphere;       /* (T, 4): each stored triangle's corners' mean and their largest distance to it */
-    int32_t max_faces, max_vertices, max_degree, max_sites;
+    int32_t *corner_id;       /* (T, 3): each triangle corner's position among the distinct ones of its piece */
+    int32_t *piece_corner_ids; /* (P,): the number of distinct corners of each piece's triangles */
+    int32_t max_faces, max_vertices, max_degree, max_sites, max_corner_ids;
 };
 
 #define F32(d, a) ((const float *)(d)->array[a])
@@ -350,6 +352,8 @@ void fra_free(fra_data *d) {
     free(d->piece_mass);
     free(d->piece_tri_radius);
     free(d->tri_sphere);
+    free(d->corner_id);
+    free(d->piece_corner_ids);
     free(d);
 }
 
@@ -362,6 +366,49 @@ static int offsets_ok(const int32_t *off, int32_t count, int32_t rows, int32_t e
 
 static void piece_mass(const fra_data *d, int32_t k, double out[4]);
 static double dot3(const double *a, const double *b);
+
+typedef struct corner_key {
+    float x[3];
+    int32_t corner; /* index into the (T * 3) corners */
+} corner_key;
+
+static int compare_corners(const void *pa, const void *pb) {
+    const corner_key *a = (const corner_key *)pa, *b = (const corner_key *)pb;
+    for (int c = 0; c < 3; ++c)
+        if (a->x[c] != b->x[c]) return a->x[c] < b->x[c] ? -1 : 1;
+    return (a->corner > b->corner) - (a->corner < b->corner);
+}
+
+/* corner_id: the triangles of a piece share corners (about six each); numbered here, the cut finds each distinct
+ * corner's nearest cell once per piece instead of once per triangle. Equal positions (by value) share a number. */
+static fra_status number_corners(fra_data *d) {
+    const int32_t *pt = I32(d, A_PIECE_TRIANGLE_OFFSETS);
+    const float *tp = F32(d, A_TRIANGLE_POSITIONS);
+    size_t corners = 3 * (size_t)d->T;
+    d->corner_id = (int32_t *)malloc((corners > 0 ? corners : 1) * sizeof(int32_t));
+    d->piece_corner_ids = (int32_t *)malloc((size_t)d->P * sizeof(int32_t));
+    corner_key *keys = (corner_key *)malloc((corners > 0 ? corners : 1) * sizeof(corner_key));
+    if (!d->corner_id || !d->piece_corner_ids || !keys) { free(keys); return FRA_ERR_MEMORY; }
+    d->max_corner_ids = 0;
+    for (int32_t k = 0; k < d->P; ++k) {
+        size_t first = 3 * (size_t)pt[k], count = 3 * (size_t)(pt[k + 1] - pt[k]);
+        for (size_t i = 0; i < count; ++i) {
+            memcpy(keys[i].x, tp + 3 * (first + i), sizeof keys[i].x);
+            keys[i].corner = (int32_t)(first + i);
+        }
+        qsort(keys, count, sizeof(corner_key), compare_corners);
+        int32_t ids = 0;
+        for (size_t i = 0; i < count; ++i) {
+            const float *x = keys[i].x, *y = i > 0 ? keys[i - 1].x : x;
+            ids += x[0] != y[0] || x[1] != y[1] || x[2] != y[2];
+            d->corner_id[keys[i].corner] = ids;
+        }
+        d->piece_corner_ids[k] = count > 0 ? ids + 1 : 0;
+        if (d->piece_corner_ids[k] > d->max_corner_ids) d->max_corner_ids = d->piece_corner_ids[k];
+    }
+    free(keys);
+    return FRA_OK;
+}
 
 static fra_status validate(fra_data *d, char *message, size_t size) {
     for (int a = 0; a < A_COUNT; ++a)
@@ -478,6 +525,7 @@ static fra_status validate(fra_data *d, char *message, size_t size) {
         }
         ts[3] = R;
     }
+    if (number_corners(d) != FRA_OK) return fail(FRA_ERR_MEMORY, message, size, "out of memory");
     return FRA_OK;
 }
 
@@ -846,7 +894,9 @@ static int32_t clip_crossing(const double *sv, const double *dist, int32_t *cros
     return index;
 }
 
-static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, double eps) {
+/* `axes`, when the caller keeps the plane's cap axes across clips: 7 doubles, a flag (0 until found), then the axes a
+ * and b of plane_basis; NULL: found for this clip alone. */
+static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, double *axes, double eps) {
     /* the arrays as restrict locals: a store through one no longer makes the compiler reload the others */
     const double *restrict sv = src->v, *restrict splane = src->plane;
     const int32_t *restrict sloops = src->loops, *restrict soff = src->loop_off, *restrict sisnew = src->isnew;
@@ -856,56 +906,64 @@ static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, d
     int32_t *restrict cross = w->cross, *restrict cross_head = w->cross_head, *restrict points = w->points;
     const int32_t snv = src->nv, snf = src->nf, vcap = w->vcap, fcap = w->fcap, lcap = w->lcap;
     const double n0 = plane[0], n1 = plane[1], n2 = plane[2], h = plane[3];
-    int plus = 0, minus = 0, zero = 0;
+    int32_t first_beyond = 0; /* a quick pass first: about half the clips leave the polyhedron unchanged */
+    while (first_beyond < snv) {
+        const double *x = sv + 3 * first_beyond;
+        if (((n0 * x[0] + n1 * x[1]) + n2 * x[2]) - h > eps) break;
+        first_beyond++;
+    }
+    if (first_beyond == snv) return CLIP_SAME;
+    /* A corner lies beyond: the distances, sides and kept corners in one pass, without a branch (a dropped corner
+     * is copied and then overwritten). All for nothing only when nothing is left (no corner of side -1): rare. */
+    int minus = 0, zero = 0;
+    int32_t nv = 0, ncross = 0;
     for (int32_t i = 0; i < snv; ++i) {
         const double *x = sv + 3 * i;
         double s = ((n0 * x[0] + n1 * x[1]) + n2 * x[2]) - h;
-        int sd = (s > eps) - (s < -eps);
+        int above = s > eps, below = s < -eps;
         dist[i] = s;
-        side[i] = sd;
-        plus |= sd == 1;
-        minus |= sd == -1;
-        zero |= sd == 0;
-    }
-    if (!plus) return CLIP_SAME;
-    if (!minus) return CLIP_EMPTY;
-    int32_t nv = 0, ncross = 0;
-    for (int32_t i = 0; i < snv; ++i) { /* the kept corners, without a branch (a dropped one is overwritten) */
-        int32_t kept = side[i] <= 0;
+        side[i] = above - below;
+        minus |= below;
+        zero |= above == below;
         cross_head[i] = -1;
-        renumber[i] = kept ? nv : -1;
-        dv[3 * nv] = sv[3 * i];
-        dv[3 * nv + 1] = sv[3 * i + 1];
-        dv[3 * nv + 2] = sv[3 * i + 2];
-        nv += kept;
+        renumber[i] = above ? -1 : nv;
+        dv[3 * nv] = x[0];
+        dv[3 * nv + 1] = x[1];
+        dv[3 * nv + 2] = x[2];
+        nv += !above;
     }
+    if (!minus) return CLIP_EMPTY;
     int32_t kept_vertices = nv, nf = 0, nl = 0, dropped = 0;
     doff[0] = 0;
     for (int32_t f = 0; f < snf; ++f) {
         const int32_t *loop = sloops + soff[f];
         int32_t count = soff[f + 1] - soff[f], start = nl;
         if (nf + 2 > fcap) return CLIP_OVERFLOW;
-        int32_t crossings_before = ncross;
         int tight = nl + 2 * count > lcap; /* each edge adds two entries at most: else no check per edge */
-        int32_t a = loop[0], sa = side[a]; /* the edges in loop order: (a, b) = (loop[t - 1], loop[t]), then the last */
-        for (int32_t t = 1; t < count; ++t) {
-            int32_t b = loop[t], sb = side[b];
+        if (!tight) { /* most faces have no corner beyond: their corners renumbered, in one pass without branches */
+            int32_t any = 0, all = -1;
+            for (int32_t t = 0; t < count; ++t) {
+                int32_t r = renumber[loop[t]];
+                dloops[nl + t] = r;
+                any |= r; /* negative when a corner is dropped (side 1) */
+                all &= r; /* negative when every corner is */
+            }
+            if (all < 0) continue; /* wholly beyond: dropped, and no crossing made */
+            if (any >= 0) {
+                nl += count;
+                memcpy(dplane + 4 * nf, splane + 4 * f, 4 * sizeof(double));
+                disnew[nf] = sisnew[f];
+                doff[++nf] = nl;
+                continue;
+            }
+        }
+        int32_t crossings_before = ncross;
+        for (int32_t t = 0; t < count; ++t) { /* the edges (loop[t], loop[t + 1]) in loop order, the closing one last */
+            int32_t a = loop[t], b = loop[t + 1 < count ? t + 1 : 0], sa = side[a];
             if (tight && nl + 2 > lcap) return CLIP_OVERFLOW;
             dloops[nl] = renumber[a]; /* kept when its side is <= 0 (written either way: no branch) */
             nl += sa <= 0;
-            if (sa * sb == -1) {
-                int32_t index = clip_crossing(sv, dist, cross, cross_head, dv, a, b, &nv, &ncross, vcap, lcap);
-                if (index < 0) return CLIP_OVERFLOW;
-                dloops[nl++] = index;
-            }
-            a = b; sa = sb;
-        }
-        { /* the closing edge (loop[count - 1], loop[0]) */
-            int32_t b = loop[0], sb = side[b];
-            if (tight && nl + 2 > lcap) return CLIP_OVERFLOW;
-            dloops[nl] = renumber[a];
-            nl += sa <= 0;
-            if (sa * sb == -1) {
+            if (sa * side[b] == -1) {
                 int32_t index = clip_crossing(sv, dist, cross, cross_head, dv, a, b, &nv, &ncross, vcap, lcap);
                 if (index < 0) return CLIP_OVERFLOW;
                 dloops[nl++] = index;
@@ -937,14 +995,22 @@ static int clip_poly(work *w, const poly *src, poly *dst, const double *plane, d
     dst->nv = nv;
     if (npoints >= 3) {
         if (nl + npoints > lcap) return CLIP_OVERFLOW;
-        double cx = 0, cy = 0, cz = 0, a[3], b[3];
+        double cx = 0, cy = 0, cz = 0, own[7];
         double *restrict keys = w->keys;
         for (int32_t i = 0; i < npoints; ++i) {
             const double *x = dv + 3 * points[i];
             cx = cx + x[0]; cy = cy + x[1]; cz = cz + x[2];
         }
         cx = cx / npoints; cy = cy / npoints; cz = cz / npoints;
-        plane_basis(plane, a, b);
+        if (!axes) { /* nowhere to keep them: found for this clip only */
+            own[0] = 0.0;
+            axes = own;
+        }
+        if (axes[0] == 0.0) {
+            plane_basis(plane, axes + 1, axes + 4);
+            axes[0] = 1.0;
+        }
+        const double *a = axes + 1, *b = axes + 4;
         for (int32_t i = 0; i < npoints; ++i) {
             const double *x = dv + 3 * points[i];
             double dd[3] = {x[0] - cx, x[1] - cy, x[2] - cz};
@@ -1054,6 +1120,7 @@ typedef struct hit {
     double *sites;   /* (S, 3) placed */
     const int32_t *nb_off, *nb; /* neighbours of the pattern's cells (offsets relative to the pattern) */
     double *planes;  /* (N, 4): the bisector of each neighbour entry */
+    double *axes;    /* (N, 7): a flag, then its cap axes for clip_poly once found (most are used by many pieces) */
     double *split;       /* the split stack of split_polygon: corners */
     size_t split_used, split_cap;
     int32_t *split_tags;  /* the corners' nearest cells (one per corner of `split`: at split_used / 8) */
@@ -1067,6 +1134,7 @@ typedef struct hit {
     const int32_t *wall_off, *walls; /* per cell (offsets relative to the pattern), its boundary planes */
     double *tri_a, *tri_b, *tri_c; /* (ccap, 8) polygon buffers for the triangles */
     int32_t *tri_tags;             /* (ccap,) their corners' nearest cells for split_polygon */
+    int32_t *corner_tags;          /* (max_corner_ids,) the nearest kept cell of each corner of the piece (-1: not yet) */
     int32_t *cells, *kept; /* cells: the triangles made in each cell so far */
     double *dists;
     unsigned char *parts_begin;
@@ -1153,17 +1221,18 @@ static void push_polygon(hit *h, int32_t cell, int32_t material, const double *c
         push_triangle(h, cell, material, corners, corners + 8 * q, corners + 8 * (q + 1));
 }
 
-/* `src` clipped by planes (4 doubles each, `stride` doubles apart) in order, skipping those the piece's sphere lies
- * inside; returns the result (src itself, or a work buffer other than src) or NULL when nothing is left. */
-static const poly *clip_by(hit *h, const poly *src, const double *planes, int32_t count, const double *c, double r,
-                           double eps) {
+/* `src` clipped by planes (4 doubles each) in order, skipping those the piece's sphere lies inside; `axes`: 7 doubles
+ * per plane for clip_poly, or NULL. Returns the result (src itself, or a work buffer other than src) or NULL when
+ * nothing is left. */
+static const poly *clip_by(hit *h, const poly *src, const double *planes, double *axes, int32_t count,
+                           const double *c, double r, double eps) {
     work *w = h->w;
     const poly *cur = src;
     for (int32_t e = 0; e < count; ++e) {
         const double *plane = planes + 4 * e;
         if (dot3(plane, c) - plane[3] < -r) continue;
         poly *next = cur == &w->buf[1] ? &w->buf[2] : &w->buf[1];
-        int res = clip_poly(w, cur, next, plane, eps);
+        int res = clip_poly(w, cur, next, plane, axes ? axes + 7 * e : NULL, eps);
         if (res == CLIP_OVERFLOW) { h->limit = 1; return NULL; }
         if (res == CLIP_EMPTY) return NULL;
         if (res == CLIP_DONE) cur = next;
@@ -1288,9 +1357,9 @@ static void cut_piece(hit *h, int32_t k) {
                 if (v != witness && dot3(plane, base->v + 3 * v) - plane[3] <= eps) { witness = v; empty = 0; }
         }
         if (empty) continue;
-        const poly *cur = clip_by(h, base, planes, nplanes, c, r, eps);
+        const poly *cur = clip_by(h, base, planes, h->axes + 7 * h->nb_off[i], nplanes, c, r, eps);
         for (int32_t e = h->wall_off[i]; cur && straddle && e < h->wall_off[i + 1]; ++e)
-            cur = clip_by(h, cur, h->boundary + 4 * h->walls[e], 1, c, r, eps); /* the boundary planes of cell i */
+            cur = clip_by(h, cur, h->boundary + 4 * h->walls[e], NULL, 1, c, r, eps); /* the boundary planes of cell i */
         if (h->limit) return;
         if (cur) {
             int32_t before_count = nrec;
@@ -1305,14 +1374,14 @@ static void cut_piece(hit *h, int32_t k) {
             const double *plane = h->boundary + 4 * b;
             double flipped[4] = {-plane[0], -plane[1], -plane[2], -plane[3]};
             poly *next = cur == &w->buf[1] ? &w->buf[2] : &w->buf[1];
-            int res = clip_poly(w, cur, next, flipped, eps);
+            int res = clip_poly(w, cur, next, flipped, NULL, eps);
             if (res == CLIP_OVERFLOW) { h->limit = 1; return; }
             if (res != CLIP_EMPTY) {
                 int32_t before_count = nrec;
                 if (!push_kept(h, outer, k, res == CLIP_SAME ? cur : next, keep, &nrec)) return;
                 if (nrec > before_count) has_outer = 1;
             }
-            res = clip_poly(w, cur, next, plane, eps); /* `next` is free again: what lay beyond is recorded */
+            res = clip_poly(w, cur, next, plane, NULL, eps); /* `next` is free again: what lay beyond is recorded */
             if (res == CLIP_OVERFLOW) { h->limit = 1; return; }
             if (res == CLIP_EMPTY) break;
             if (res == CLIP_DONE) cur = next;
@@ -1338,6 +1407,7 @@ static void cut_piece(hit *h, int32_t k) {
     /* With a part in the rest, the boundary planes in order cut the triangles; a plane that every corner of every
      * triangle of the piece lies inside of (beyond eps, with a margin for rounding: sphere (c, R) of the triangles'
      * corners, |n| <= 1 + 1e-5) leaves each one unchanged, and is skipped. */
+    for (int32_t i = 0; i < d->piece_corner_ids[k]; ++i) h->corner_tags[i] = -1;
     int32_t nwalls = 0;
     if (has_outer) {
         double R = d->piece_tri_radius[k];
@@ -1386,6 +1456,12 @@ static void cut_piece(hit *h, int32_t k) {
         if (count < 3) continue;
         if (nkept == 0) { push_polygon(h, outer, mat[t], polygon, count); continue; }
         for (int32_t q = 0; q < count; ++q) h->tri_tags[q] = -1;
+        if (whole) /* still the stored triangle: its corners' nearest cells, each found once per piece */
+            for (int q = 0; q < 3; ++q) {
+                int32_t id = d->corner_id[3 * (size_t)t + (size_t)q];
+                if (h->corner_tags[id] < 0) h->corner_tags[id] = nearest(h, polygon + 8 * q, h->kept, nkept);
+                h->tri_tags[q] = h->corner_tags[id];
+            }
         split_polygon(h, polygon, h->tri_tags, count, h->kept, nkept, eps, mat[t]);
         if (h->limit) return;
     }
@@ -1432,10 +1508,10 @@ static size_t scratch_bytes(const fra_data *d, int32_t *vcap, int32_t *fcap, int
     int32_t N = d->rows[A_CELL_NEIGHBORS], S = d->max_sites;
     return 3 * poly_bytes + sizeof(double) * ((size_t)*vcap * 4 + 2 * 8 * (size_t)*ccap) +
            sizeof(int32_t) * ((size_t)*vcap * 5 + 3 * (size_t)*lcap) + sizeof(double) * (3 * (size_t)S + (size_t)S) +
-           sizeof(int32_t) * 7 * (size_t)S + sizeof(double) * 4 * (size_t)N + 48 * 16 +
+           sizeof(int32_t) * 7 * (size_t)S + sizeof(double) * 11 * (size_t)N + 48 * 16 +
            split_bytes(S, d->rows[A_BOUNDARY_PLANES]) +
            sizeof(double) * (3 * 8 * (size_t)*ccap + 5 * (size_t)d->rows[A_BOUNDARY_PLANES]) +
-           sizeof(int32_t) * ((size_t)*ccap + (size_t)d->rows[A_BOUNDARY_PLANES]) +
+           sizeof(int32_t) * ((size_t)*ccap + (size_t)d->rows[A_BOUNDARY_PLANES] + (size_t)d->max_corner_ids) +
            sizeof(work) +
            sizeof(hit);
 }
@@ -1487,6 +1563,8 @@ static fra_status setup(const fra_data *d, int32_t q, const double *point, const
     for (int32_t i = 0; ok && i < h->S; ++i) h->cells[i] = 0;
     h->kept = (int32_t *)grab(a, sizeof(int32_t) * (size_t)h->S, &ok);
     h->planes = (double *)grab(a, sizeof(double) * 4 * (size_t)N, &ok);
+    h->axes = (double *)grab(a, sizeof(double) * 7 * (size_t)N, &ok);
+    for (int32_t e = 0; ok && e < N; ++e) h->axes[7 * e] = 0.0;
     size_t levels = (size_t)(h->S < 128 ? h->S : 128) + 1;
     h->split_cap = levels * 2 * 8 * (2 * (size_t)(3 + d->rows[A_BOUNDARY_PLANES] + (int32_t)levels) + 2);
     h->split_cells_cap = levels * 2 * (size_t)(h->S + 1);
@@ -1505,6 +1583,7 @@ static fra_status setup(const fra_data *d, int32_t q, const double *point, const
     h->tri_b = (double *)grab(a, sizeof(double) * 8 * (size_t)ccap, &ok);
     h->tri_c = (double *)grab(a, sizeof(double) * 8 * (size_t)ccap, &ok);
     h->tri_tags = (int32_t *)grab(a, sizeof(int32_t) * (size_t)ccap, &ok);
+    h->corner_tags = (int32_t *)grab(a, sizeof(int32_t) * (size_t)d->max_corner_ids, &ok);
     if (!ok) return FRA_ERR_ARENA;
     /* the frame: d = direction / max |component|, normalized; (u, v) = plane_basis(d) */
     double m = fabs(direction[0]);
