@@ -19,6 +19,7 @@ from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.hulls import MIN_PART_VOLUME, hull_of, mesh_of
 from fracture_cli.geometry.mass import mass_properties
 from fracture_cli.geometry.meshtopo import unique_edges
+from fracture_cli.stages.collision import kernels
 
 # A coordinate axis is not tried as a cut normal when a principal axis is this close (cosine, ~15 degrees).
 _SAME_AXIS = 0.966
@@ -227,14 +228,10 @@ def _cut_points(V: np.ndarray, edges: np.ndarray, ends: tuple[np.ndarray, np.nda
     ``s`` (e,) of the edges' first and second vertices.
 
     ``s - offset > 0`` exactly when ``s > offset`` (a difference of two floats is 0 only if they are equal), so
-    the crossing edges are found without a difference per edge.
+    the crossing edges are found without a difference per edge. Compiled (:func:`.kernels.cut_points`): numpy's
+    call overhead over a part's few hundred edges was most of the time, once per candidate.
     """
-    sa, sb = ends
-    crossing = np.flatnonzero((sa > offset) != (sb > offset))
-    da, db = sa[crossing] - offset, sb[crossing] - offset
-    t = da / (da - db)
-    a = V[edges[crossing, 0]]
-    return a + t[:, None] * (V[edges[crossing, 1]] - a)
+    return kernels.cut_points(V, np.ascontiguousarray(edges, dtype=np.int64), ends[0], ends[1], float(offset))
 
 
 def _halves_hull_volume(V: np.ndarray, s: np.ndarray, offset: float, cut: np.ndarray) -> float:
@@ -244,10 +241,8 @@ def _halves_hull_volume(V: np.ndarray, s: np.ndarray, offset: float, cut: np.nda
     ``cut`` (c, 3) where edges cross the plane (:func:`_cut_points`), so each
     half's hull comes from points alone, without a boolean.
     """
-    d = s - offset
     total = 0.0
-    for side in (d > 0, d <= 0):
-        points = np.vstack([V[side], cut])
+    for points in kernels.split_points(V, s, float(offset), cut):
         if len(points) >= 4:
             total += hull_of(points).volume()
     return total
