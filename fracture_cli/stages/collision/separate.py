@@ -122,18 +122,15 @@ def _volume_beyond(material: _Material, normal: np.ndarray, offsets: np.ndarray 
     offsets = np.atleast_1d(np.asarray(offsets, dtype=np.float64))
     # Triangles wholly below every plane add nothing: only the others are measured (found from their centroids'
     # heights; a part's overlap with its neighbour is near its surface, so they are few). The kept triangles are
-    # in order and measured as if all were: the same sums, bit for bit.
-    near = np.flatnonzero(material.centroid @ normal + material.radius > offsets.min())
-    h = np.sort(material.triangles[near] @ normal, axis=1)
-    weight = material.area[near] @ normal
-    # Triangles wholly beyond every plane: a mean that is linear in the offset, summed once.
-    full = h[:, 0] > offsets.max()
-    result = weight[full] @ h[full].mean(axis=1) - offsets * weight[full].sum()
-    reach = ~full & (h[:, 2] > offsets.min())
-    # The mean of the positive part per plane and triangle, case by case (compiled: numpy's masks and
-    # temporaries over an overlap's few dozen triangles were most of the time; the same operations).
-    positive = kernels.positive_means(np.ascontiguousarray(h[reach]), offsets)
-    return result + positive @ weight[reach]
+    # in order and measured as if all were: the same sums, bit for bit. Triangles wholly beyond every plane add
+    # a mean that is linear in the offset, summed once. Compiled (.kernels.beyond_terms): numpy's masks and
+    # temporaries over an overlap's few dozen triangles were most of the time; the sums stay numpy's.
+    full_weight, full_mean, heights, weight = kernels.beyond_terms(
+        material.triangles, material.area, material.centroid, material.radius, normal, float(offsets.min()),
+        float(offsets.max()))
+    result = full_weight @ full_mean - offsets * full_weight.sum()
+    # The mean of the positive part per plane and triangle, case by case (compiled as well).
+    return result + kernels.positive_means(heights, offsets) @ weight
 
 
 def separate_parts(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = None,
