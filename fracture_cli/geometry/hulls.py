@@ -109,9 +109,16 @@ def simplify_hull(points: np.ndarray, max_vertices: int) -> np.ndarray:
     # follow (up to rounding, far below the tol.ROUNDOFF that stops the loop), so it is never the farthest again and
     # is not looked at again: most of a dense hull's corners drop out after a few insertions.
     outside_ids = np.setdiff1d(np.arange(len(corners)), chosen)
+    # on first use: numba loads when a part needs the cap, not with this module (io.physics imports it)
+    from fracture_cli.geometry.hull_kernels import outside_distances
+
     while len(chosen) < max_vertices and len(outside_ids):
-        normal, offset = face_planes(*hull_mesh(corners[chosen]))
-        outside = max_beyond(corners[outside_ids], normal, offset)
+        V, F = hull_mesh(corners[chosen])
+        # max_beyond(corners[outside_ids], *face_planes(V, F)), compiled: the same bits, without numpy's
+        # per-call overhead, which was most of a step's time.
+        outside, planes = outside_distances(corners[outside_ids], V, F)
+        if planes == 0:
+            outside = max_beyond(corners[outside_ids], *face_planes(V, F))  # no plane: numpy's error
         farthest = int(np.argmax(outside))  # the first of equals: the ids are in order
         if outside[farthest] <= tol.ROUNDOFF * scale:
             break
