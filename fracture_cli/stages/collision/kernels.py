@@ -19,9 +19,9 @@ from fracture_cli.system.jit import njit
 
 
 @njit(error_model="numpy")
-def cut_points(V: np.ndarray, edges: np.ndarray, sa: np.ndarray, sb: np.ndarray,
-               offset: float) -> np.ndarray:  # pragma: no cover (compiled)
-    """The points where mesh edges cross the plane ``s == offset``, in edge order.
+def cut_points(V: np.ndarray, edges: np.ndarray, s: np.ndarray,
+               offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover (compiled)
+    """The points where mesh edges cross each of parallel planes ``s == offset``, in edge order.
 
     Parameters
     ----------
@@ -29,34 +29,42 @@ def cut_points(V: np.ndarray, edges: np.ndarray, sa: np.ndarray, sb: np.ndarray,
         Mesh vertices.
     edges : (e, 2) int64
         Vertex indices of each edge.
-    sa, sb : (e,) float64
-        Heights ``s`` of each edge's first and second vertex.
-    offset : float
-        The plane's height.
+    s : (n,) float64
+        Height of each vertex along the planes' normal.
+    offsets : (k,) float64
+        The planes' heights.
 
     Returns
     -------
-    (c, 3) float64
-        ``a + t (b - a)``, ``t = da / (da - db)``, ``da = sa - offset``, ``db = sb - offset``, for each edge
-        with exactly one end above the plane (``s > offset``), as
-        :func:`fracture_cli.stages.collision.decompose._cut_points` computes them in numpy.
+    points : (c, 3) float64
+        For each plane in turn, ``a + t (b - a)``, ``t = da / (da - db)``, ``da = s_a - offset``,
+        ``db = s_b - offset``, for each edge ``(a, b)`` with exactly one end above the plane (``s > offset``;
+        ``s - offset > 0`` exactly when ``s > offset``, as a difference of two floats is 0 only if they are
+        equal).
+    start : (k + 1,) int64
+        Plane ``i``'s points are ``points[start[i]:start[i + 1]]``.
     """
-    count = 0
-    for e in range(edges.shape[0]):
-        if (sa[e] > offset) != (sb[e] > offset):
-            count += 1
-    out = np.empty((count, 3))
-    k = 0
-    for e in range(edges.shape[0]):
-        if (sa[e] > offset) != (sb[e] > offset):
-            da = sa[e] - offset
-            db = sb[e] - offset
-            t = da / (da - db)
+    start = np.zeros(offsets.shape[0] + 1, dtype=np.int64)
+    for i in range(offsets.shape[0]):
+        count = 0
+        for e in range(edges.shape[0]):
+            if (s[edges[e, 0]] > offsets[i]) != (s[edges[e, 1]] > offsets[i]):
+                count += 1
+        start[i + 1] = start[i] + count
+    out = np.empty((start[-1], 3))
+    for i in range(offsets.shape[0]):
+        offset = offsets[i]
+        k = start[i]
+        for e in range(edges.shape[0]):
             a, b = edges[e, 0], edges[e, 1]
-            for d in range(3):
-                out[k, d] = V[a, d] + t * (V[b, d] - V[a, d])
-            k += 1
-    return out
+            if (s[a] > offset) != (s[b] > offset):
+                da = s[a] - offset
+                db = s[b] - offset
+                t = da / (da - db)
+                for d in range(3):
+                    out[k, d] = V[a, d] + t * (V[b, d] - V[a, d])
+                k += 1
+    return out, start
 
 
 @njit(error_model="numpy")
@@ -174,10 +182,11 @@ def beyond_terms(triangles: np.ndarray, area: np.ndarray, centroid: np.ndarray, 
     Notes
     -----
     The steps of the numpy expressions it replaced in
-    :func:`fracture_cli.stages.collision.separate.volume_beyond`, with their operations: triangles whose centroid height plus radius is not above ``low`` are skipped, and a height is
-    ``(x n0 + y n1) + z n2``, the order in which numpy's (pinned, SSE3) matrix-vector products sum three terms
-    (checked bit for bit on random data); the mean is ``((h0 + h1) + h2) / 3``, as numpy's. Triangles keep
-    their order.
+    :func:`fracture_cli.stages.collision.separate.volume_beyond`, with their operations: triangles whose
+    centroid height plus radius is not above ``low`` are skipped, and a height is ``(x n0 + y n1) + z n2``,
+    the order in which numpy's (pinned, SSE3) matrix-vector products sum three terms (tests/
+    test_collision_kernels.py checks it bit for bit); the mean is ``((h0 + h1) + h2) / 3``, as numpy's.
+    Triangles keep their order.
     """
     n0, n1, n2 = normal[0], normal[1], normal[2]
     t = triangles.shape[0]
@@ -229,7 +238,7 @@ def warm_kernels() -> int:
     V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     edges = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.int64)
     s = V[:, 2].copy()
-    cut = cut_points(V, edges, s[edges[:, 0]], s[edges[:, 1]], 0.5)
+    cut, _ = cut_points(V, edges, s, np.array([0.5]))
     split_points(V, s, 0.5, cut)
     positive_means(np.array([[0.0, 0.5, 1.0]]), np.array([0.25, 0.75]))
     triangles = V[np.array([[0, 2, 1], [0, 1, 3]])]
