@@ -79,10 +79,77 @@ def outside_distances(points: np.ndarray, V: np.ndarray, F: np.ndarray) -> tuple
     return outside, planes
 
 
+@njit(error_model="numpy")
+def plane_separates(corners_a: np.ndarray, normal: np.ndarray, offset: np.ndarray, corners_b: np.ndarray,
+                    slack: float) -> bool:  # pragma: no cover (compiled)
+    """Whether a plane ``normal . x = offset`` of a's has a's corners below it and b's beyond it, up to ``slack``.
+
+    Parameters
+    ----------
+    corners_a, corners_b : (k_a, 3), (k_b, 3) float64
+        Corners of two convex parts.
+    normal : (m, 3) float64
+        Unit outward normals of a's face planes.
+    offset : (m,) float64
+        Their offsets.
+    slack : float
+        Allowance on either side.
+
+    Returns
+    -------
+    bool
+        As ``((corners_a @ normal.T).max(axis=0) - offset <= slack) & ((corners_b @ normal.T).min(axis=0) -
+        offset >= -slack)`` has a True entry (a nan height fails the plane, as numpy's maximum and minimum keep
+        it); the planes in order, stopping at the first that separates.
+    """
+    for f in range(normal.shape[0]):
+        n0, n1, n2 = normal[f, 0], normal[f, 1], normal[f, 2]
+        top = -np.inf
+        for i in range(corners_a.shape[0]):
+            h = corners_a[i, 0] * n0 + corners_a[i, 1] * n1 + corners_a[i, 2] * n2
+            if not h <= top:  # a larger height, or a nan (then the test below fails)
+                top = h
+                if h != h:
+                    break
+        if not top - offset[f] <= slack:
+            continue
+        bottom = np.inf
+        for i in range(corners_b.shape[0]):
+            h = corners_b[i, 0] * n0 + corners_b[i, 1] * n1 + corners_b[i, 2] * n2
+            if not h >= bottom:
+                bottom = h
+                if h != h:
+                    break
+        if bottom - offset[f] >= -slack:
+            return True
+    return False
+
+
+@njit(error_model="numpy")
+def max_beyond(points: np.ndarray, normal: np.ndarray, offset: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """For each point (k, 3), the largest ``normal . x - offset`` (k,) over planes (normals (m, 3), offsets (m,),
+    m >= 1), as :func:`fracture_cli.geometry.hulls.max_beyond` (a nan height gives nan)."""
+    outside = np.empty(points.shape[0])
+    for i in range(points.shape[0]):
+        p0, p1, p2 = points[i, 0], points[i, 1], points[i, 2]
+        best = -np.inf
+        for f in range(normal.shape[0]):
+            h = (p0 * normal[f, 0] + p1 * normal[f, 1] + p2 * normal[f, 2]) - offset[f]
+            if f == 0 or h > best or h != h:
+                if best == best:  # numpy's maximum keeps a nan
+                    best = h
+        outside[i] = best
+    return outside
+
+
 def warm_kernels() -> int:
     """Compile (and cache) the kernel on a unit tetrahedron; ``make install`` calls it once. Returns the number
     of points outside it (1)."""
     V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], dtype=np.int64)
-    outside, _ = outside_distances(np.array([[0.1, 0.1, 0.1], [1.0, 1.0, 1.0]]), V, F)
+    points = np.array([[0.1, 0.1, 0.1], [1.0, 1.0, 1.0]])
+    outside, _ = outside_distances(points, V, F)
+    normal = np.array([[0.0, 0.0, 1.0]])
+    plane_separates(V, normal, np.array([1.0]), points, 0.0)
+    max_beyond(points, normal, np.array([1.0]))
     return int((outside > 0).sum())
