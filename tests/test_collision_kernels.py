@@ -1,7 +1,7 @@
 """The collision stage's compiled kernels give the bits of the numpy expressions they replaced.
 
 Each kernel spells out numpy's operation order (the einsum of three-term rows, the pinned OpenBLAS products of
-three-vectors, numpy's three-element sums); a numpy or OpenBLAS that summed otherwise would change the bakes'
+three-vectors, numpy's pairwise and row sums); a numpy or OpenBLAS that summed otherwise would change the bakes'
 bytes, and these comparisons on random data say where.
 """
 
@@ -10,8 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fracture_cli.geometry import hull_kernels
+from fracture_cli.geometry import hull_kernels, mass_kernels
 from fracture_cli.geometry.hulls import face_planes, hull_mesh
+from fracture_cli.geometry.mass import mass_properties
+from fracture_cli.geometry.mass_kernels import mass_properties as compiled_mass_properties
 from fracture_cli.stages.collision import kernels
 from fracture_cli.stages.collision.separate import _Material, _volume_beyond
 from fracture_cli.system import detmath
@@ -99,3 +101,24 @@ def test_hull_distances_are_the_numpy_ones(seed):
     # A part beyond a face plane of the other: that plane separates them (up to the rounding of the plane).
     size = np.abs(V).max()
     assert hull_kernels.plane_separates(V, normal, offset, V + 10.0 * size * normal[0], 1e-9 * size)
+
+
+@pytest.mark.parametrize("seed", RNG_SEEDS)
+def test_compiled_mass_properties_are_numpys(seed):
+    rng = np.random.default_rng(seed)
+    V, F = hull_mesh(_points(rng, int(rng.integers(4, 3000))) + rng.normal(size=3) * 10.0)
+    # Unused vertices and a shuffled face order as well (the origin is the used vertices' box centre).
+    V = np.vstack([V, _points(rng, 5)])
+    F = F[rng.permutation(len(F))]
+    for faces in (F, F[:, ::-1], F[:0]):
+        expected, got = mass_properties(V, faces), compiled_mass_properties(V, faces)
+        assert got.volume == expected.volume
+        assert np.array_equal(got.center, expected.center)
+        assert np.array_equal(got.inertia, expected.inertia)
+
+
+def test_pairwise_sum_is_numpys():
+    rng = np.random.default_rng(7)
+    for count in list(range(0, 300)) + [511, 1024, 1031, 4096, 9999, 70001]:
+        v = rng.normal(size=count) * 10.0 ** rng.integers(-6, 6, size=count)
+        assert mass_kernels._pairwise_sum(v) == v.sum()

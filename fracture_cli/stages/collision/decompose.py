@@ -17,7 +17,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.hulls import MIN_PART_VOLUME, hull_of, mesh_of
-from fracture_cli.geometry.mass import mass_properties
+from fracture_cli.geometry.mass_kernels import mass_properties
 from fracture_cli.geometry.meshtopo import unique_edges
 from fracture_cli.stages.collision import kernels
 

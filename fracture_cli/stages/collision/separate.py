@@ -30,7 +30,8 @@ from fracture_cli.geometry.hulls import (
     overlap_bound_separated,
     surface_area,
 )
-from fracture_cli.geometry.mass import MassProperties, mass_properties
+from fracture_cli.geometry.mass import MassProperties
+from fracture_cli.geometry.mass_kernels import mass_properties
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.geometry.trigeom import cross3
 from fracture_cli.stages.collision import kernels
