@@ -1,14 +1,16 @@
-"""Compiled (numba) element-wise loops of the collision stage: a plane's cut of a mesh and the positive parts of
-linear functions over triangles.
+"""Compiled (numba) loops of the collision stage: a plane's cut of a mesh, the corners of its halves, and the
+triangle terms of :func:`~fracture_cli.stages.collision.separate.volume_beyond`.
 
-Both loops were numpy expressions over small arrays (a part's few hundred
-edges, an overlap's few dozen triangles) evaluated tens of thousands of times
-per bake, where numpy's per-call overhead and temporaries were most of the
-time. Each kernel computes the same IEEE operations, in the same order, as
-the numpy expression it replaces (no fastmath, so no reassociation and no
-fused multiply-adds): the values are the same bits on every CPU. Reductions
-(sums, dot products) stay with the numpy callers, whose summation order is
-numpy's and OpenBLAS's.
+These were numpy expressions over small arrays (a part's few hundred edges,
+an overlap's few dozen triangles) evaluated tens of thousands of times per
+bake, where numpy's per-call overhead and temporaries were most of the time.
+Each kernel computes the same IEEE operations, in the same order, as the
+numpy expressions it replaced (no fastmath, so no reassociation and no fused
+multiply-adds): the values are the same bits. The three-term dot products
+are summed in the order of numpy's (pinned) matrix products, spelled out;
+longer sums (dot products over triangles, totals) stay with the numpy
+callers. tests/test_collision_kernels.py compares each kernel with its numpy
+form, bit for bit.
 """
 
 from __future__ import annotations
