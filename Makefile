@@ -56,6 +56,7 @@ lock: $(UV)
 KERNELS := fracture_cli/system/jit.py fracture_cli/geometry/trigeom_kernels.py fracture_cli/geometry/trigeom_grid.py fracture_cli/geometry/trigeom_topology.py \
            fracture_cli/geometry/surface_query.py fracture_cli/geometry/surface_kernels.py \
            fracture_cli/stages/modes/solver/partition_kernels.py fracture_cli/stages/modes/solver/maxflow_kernel.py \
+           fracture_cli/stages/collision/kernels.py fracture_cli/geometry/hull_kernels.py fracture_cli/geometry/mass_kernels.py \
            $(wildcard fracture_cli/stages/simplify/collapse_*.py)
 $(VENV)/.kernels: $(STAMP) $(KERNELS)
 	$(PY) -c "from fracture_cli.stages.simplify.warm import warm_kernels; warm_kernels()"
@@ -65,6 +66,9 @@ $(VENV)/.kernels: $(STAMP) $(KERNELS)
 	$(PY) -c "from fracture_cli.geometry.surface_query import warm_kernels; warm_kernels()"
 	$(PY) -c "from fracture_cli.stages.modes.solver.partition_kernels import warm_kernels; warm_kernels()"
 	$(PY) -c "from fracture_cli.stages.modes.solver.maxflow_kernel import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.stages.collision.kernels import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.geometry.hull_kernels import warm_kernels; warm_kernels()"
+	$(PY) -c "from fracture_cli.geometry.mass_kernels import warm_kernels; warm_kernels()"
 	@touch $@
 
 # `fracture view`'s browser files: three.js (npm, pinned by web/package-lock.json) and the

@@ -109,9 +109,16 @@ def simplify_hull(points: np.ndarray, max_vertices: int) -> np.ndarray:
     # follow (up to rounding, far below the tol.ROUNDOFF that stops the loop), so it is never the farthest again and
     # is not looked at again: most of a dense hull's corners drop out after a few insertions.
     outside_ids = np.setdiff1d(np.arange(len(corners)), chosen)
+    # on first use: numba loads when a part needs the cap, not with this module (io.physics imports it)
+    from fracture_cli.geometry.hull_kernels import outside_distances
+
     while len(chosen) < max_vertices and len(outside_ids):
-        normal, offset = face_planes(*hull_mesh(corners[chosen]))
-        outside = max_beyond(corners[outside_ids], normal, offset)
+        V, F = hull_mesh(corners[chosen])
+        # max_beyond(corners[outside_ids], *face_planes(V, F)), compiled: the same bits, without numpy's
+        # per-call overhead, which was most of a step's time.
+        outside, planes = outside_distances(corners[outside_ids], V, F)
+        if planes == 0:
+            outside = max_beyond(corners[outside_ids], *face_planes(V, F))  # no plane: numpy's error
         farthest = int(np.argmax(outside))  # the first of equals: the ids are in order
         if outside[farthest] <= tol.ROUNDOFF * scale:
             break
@@ -125,11 +132,20 @@ def simplify_hull(points: np.ndarray, max_vertices: int) -> np.ndarray:
 def max_beyond(points: np.ndarray, normal: np.ndarray, offset: np.ndarray) -> np.ndarray:
     """For points (k, 3), the largest ``normal . x - offset`` (k,) over planes (normals (m, 3), offsets (m,)).
 
-    The same values as ``(points @ normal.T - offset).max(axis=1)``, reduced along the transposed view: numpy
-    reduces a short contiguous row at a time, ~8x slower for a dense hull's thousands of corners.
+    The same values as ``(points @ normal.T - offset).max(axis=1)``, compiled
+    (:func:`.hull_kernels.max_beyond`: the same bits, without numpy's overhead over a part's few dozen planes);
+    numpy's product where there is no plane (its error) or a point.
     """
+    if len(normal) and len(points):
+        # on first use: numba loads with the collision stage, not with this module (io.physics imports it)
+        from fracture_cli.geometry import hull_kernels
+
+        return hull_kernels.max_beyond(np.ascontiguousarray(points, dtype=np.float64),
+                                       np.ascontiguousarray(normal, dtype=np.float64),
+                                       np.ascontiguousarray(offset, dtype=np.float64))
     heights = points @ normal.T
     heights -= offset
+    # Reduced along the transposed view: numpy reduces a short contiguous row at a time, ~8x slower.
     return np.maximum.reduce(heights.T, axis=0)
 
 
@@ -157,6 +173,15 @@ def overlap_bound_separated(corners_a: np.ndarray, planes_a: tuple[np.ndarray, n
     normal, offset = planes_a
     if len(corners_b) == 0 or len(normal) == 0:
         return True
-    supports = (corners_a @ normal.T).max(axis=0) - offset <= slack
+    if len(corners_a):
+        # Compiled (the same products and comparisons, stopping at the first separating plane): thousands of
+        # pairs per bake ask, and numpy's overhead over a part's few dozen corners was most of the time.
+        from fracture_cli.geometry import hull_kernels
+
+        return bool(hull_kernels.plane_separates(np.ascontiguousarray(corners_a, dtype=np.float64),
+                                                 np.ascontiguousarray(normal, dtype=np.float64),
+                                                 np.ascontiguousarray(offset, dtype=np.float64),
+                                                 np.ascontiguousarray(corners_b, dtype=np.float64), float(slack)))
+    supports = (corners_a @ normal.T).max(axis=0) - offset <= slack  # no corner: numpy's error
     beyond = (corners_b @ normal.T).min(axis=0) - offset >= -slack
     return bool((supports & beyond).any())

@@ -142,7 +142,10 @@ def principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     largest = max(float(np.abs(tensor).max()), tol.SMALLEST_DIVISOR)
     tensor = np.where(np.abs(tensor) > tol.ROUNDOFF * largest, tensor, 0.0)
     moments, axes = np.linalg.eigh(tensor)
-    best = max(_PERMUTATIONS, key=lambda perm: (float(np.abs(axes[np.arange(3), list(perm)]).sum()), perm))
+    # Scored with Python floats: the sum numpy forms of three entries, ((a + b) + c), without six array
+    # round trips per call (the collision stage asks for thousands of overlaps' axes).
+    size = np.abs(axes).tolist()
+    best = max(_PERMUTATIONS, key=lambda perm: ((size[0][perm[0]] + size[1][perm[1]]) + size[2][perm[2]], perm))
     axes, moments = axes[:, list(best)], moments[list(best)]
     axes = axes * np.where(np.diag(axes) < 0, -1.0, 1.0)[None, :]
     if np.linalg.det(axes) < 0:

@@ -51,7 +51,7 @@ from fracture_cli.geometry.hulls import (
     solid_of,
     surface_area,
 )
-from fracture_cli.geometry.mass import mass_properties
+from fracture_cli.geometry.mass_kernels import mass_properties
 from fracture_cli.io.physics import COLLISION_FORMATS
 from fracture_cli.stages.collision.decompose import convex_decomposition, decomposition_hulls
 from fracture_cli.stages.collision.options import STAGE, CollisionOptions

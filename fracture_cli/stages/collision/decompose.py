@@ -17,8 +17,9 @@ from scipy.spatial import ConvexHull, QhullError
 
 from fracture_cli.geometry import tolerances as tol
 from fracture_cli.geometry.hulls import MIN_PART_VOLUME, hull_of, mesh_of
-from fracture_cli.geometry.mass import mass_properties
+from fracture_cli.geometry.mass_kernels import mass_properties
 from fracture_cli.geometry.meshtopo import unique_edges
+from fracture_cli.stages.collision import kernels
 
 # A coordinate axis is not tried as a cut normal when a principal axis is this close (cosine, ~15 degrees).
 _SAME_AXIS = 0.966
@@ -138,18 +139,20 @@ def _best_cut(part: manifold3d.Manifold,
     cannot win, so the choice is that of computing every cost (the smallest, the first candidate on a tie).
     """
     V, F = mesh_of(part)
-    edges = unique_edges(F)  # (a row-wise np.unique took 8 s of the 1M bench bake)
+    # (a row-wise np.unique took 8 s of the 1M bench bake)
+    edges = np.ascontiguousarray(unique_edges(F), dtype=np.int64)
     props = mass_properties(V, F)
     _, axes = props.principal()
     # (normal, offset, heights of the vertices along the normal, points where the edges cross the plane), in
-    # the fixed order; the crossings once, for the bound and the cost alike.
+    # the fixed order; the crossings once, for the bound and the cost alike, all offsets of a normal at once
+    # (compiled: numpy's overhead per offset over a part's few hundred edges was most of their time).
     candidates = []
     for normal in _cut_normals(axes):
         s = V @ normal
         lo, hi = float(s.min()), float(s.max())
-        ends = (s[edges[:, 0]], s[edges[:, 1]])  # once per normal, not per offset
-        candidates += [(normal, offset, s, _cut_points(V, edges, ends, offset))
-                       for offset in lo + (hi - lo) * _CUT_FRACTIONS]
+        offsets = lo + (hi - lo) * _CUT_FRACTIONS
+        cut, start = kernels.cut_points(V, edges, s, offsets)
+        candidates += [(normal, offset, s, cut[start[k]:start[k + 1]]) for k, offset in enumerate(offsets)]
     bounds = _cost_bounds(V, candidates) if len(V) > _BOUND_VERTICES else np.zeros(len(candidates))
     best, best_cost = None, hull.volume() * (1.0 - tol.TIE)
     for index in np.argsort(bounds, kind="stable").tolist():
@@ -222,32 +225,15 @@ def _thin(points: np.ndarray, cell: float) -> np.ndarray:
     return points[np.sort(first)]
 
 
-def _cut_points(V: np.ndarray, edges: np.ndarray, ends: tuple[np.ndarray, np.ndarray], offset: float) -> np.ndarray:
-    """The points (c, 3) where the mesh edges (e, 2) cross the plane ``s == offset``; ``ends``: the heights
-    ``s`` (e,) of the edges' first and second vertices.
-
-    ``s - offset > 0`` exactly when ``s > offset`` (a difference of two floats is 0 only if they are equal), so
-    the crossing edges are found without a difference per edge.
-    """
-    sa, sb = ends
-    crossing = np.flatnonzero((sa > offset) != (sb > offset))
-    da, db = sa[crossing] - offset, sb[crossing] - offset
-    t = da / (da - db)
-    a = V[edges[crossing, 0]]
-    return a + t[:, None] * (V[edges[crossing, 1]] - a)
-
-
 def _halves_hull_volume(V: np.ndarray, s: np.ndarray, offset: float, cut: np.ndarray) -> float:
     """Total hull volume of the two halves of a closed mesh cut at ``s == offset``.
 
     The corners of a half are the mesh vertices on its side plus the points
-    ``cut`` (c, 3) where edges cross the plane (:func:`_cut_points`), so each
+    ``cut`` (c, 3) where edges cross the plane (:func:`.kernels.cut_points`), so each
     half's hull comes from points alone, without a boolean.
     """
-    d = s - offset
     total = 0.0
-    for side in (d > 0, d <= 0):
-        points = np.vstack([V[side], cut])
+    for points in kernels.split_points(V, s, float(offset), cut):
         if len(points) >= 4:
             total += hull_of(points).volume()
     return total

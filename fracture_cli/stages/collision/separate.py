@@ -30,9 +30,11 @@ from fracture_cli.geometry.hulls import (
     overlap_bound_separated,
     surface_area,
 )
-from fracture_cli.geometry.mass import MassProperties, mass_properties
+from fracture_cli.geometry.mass import MassProperties
+from fracture_cli.geometry.mass_kernels import mass_properties
 from fracture_cli.geometry.rows import unique_rows
 from fracture_cli.geometry.trigeom import cross3
+from fracture_cli.stages.collision import kernels
 from fracture_cli.stages.fragments.interfaces import coincident_faces
 from fracture_cli.system import detmath, parallel
 
@@ -121,28 +123,15 @@ def _volume_beyond(material: _Material, normal: np.ndarray, offsets: np.ndarray 
     offsets = np.atleast_1d(np.asarray(offsets, dtype=np.float64))
     # Triangles wholly below every plane add nothing: only the others are measured (found from their centroids'
     # heights; a part's overlap with its neighbour is near its surface, so they are few). The kept triangles are
-    # in order and measured as if all were: the same sums, bit for bit.
-    near = np.flatnonzero(material.centroid @ normal + material.radius > offsets.min())
-    h = np.sort(material.triangles[near] @ normal, axis=1)
-    weight = material.area[near] @ normal
-    # Triangles wholly beyond every plane: a mean that is linear in the offset, summed once.
-    full = h[:, 0] > offsets.max()
-    result = weight[full] @ h[full].mean(axis=1) - offsets * weight[full].sum()
-    reach = ~full & (h[:, 2] > offsets.min())
-    x = h[None, reach, :] - offsets[:, None, None]  # (k, t, 3)
-    x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
-    mean = (x0 + x1 + x2) / 3.0
-    # Each case's formula only where it applies (the cubes are libm pow calls, ~60 ns each): the same values.
-    positive = np.zeros_like(mean)
-    every = x0 > 0
-    positive[every] = mean[every]
-    two = ~every & (x1 > 0)
-    a0, a1, a2 = x0[two], x1[two], x2[two]
-    positive[two] = mean[two] + detmath.cube(np.maximum(-a0, 0.0)) / (3.0 * (a1 - a0) * (a2 - a0))
-    one = ~every & ~(x1 > 0) & (x2 > 0)
-    a0, a1, a2 = x0[one], x1[one], x2[one]
-    positive[one] = detmath.cube(a2) / (3.0 * (a2 - a0) * (a2 - a1))
-    return result + positive @ weight[reach]
+    # in order and measured as if all were: the same sums, bit for bit. Triangles wholly beyond every plane add
+    # a mean that is linear in the offset, summed once. Compiled (.kernels.beyond_terms): numpy's masks and
+    # temporaries over an overlap's few dozen triangles were most of the time; the sums stay numpy's.
+    full_weight, full_mean, heights, weight = kernels.beyond_terms(
+        material.triangles, material.area, material.centroid, material.radius, normal, float(offsets.min()),
+        float(offsets.max()))
+    result = full_weight @ full_mean - offsets * full_weight.sum()
+    # The mean of the positive part per plane and triangle, case by case (compiled as well).
+    return result + kernels.positive_means(heights, offsets) @ weight
 
 
 def separate_parts(parts: list[np.ndarray], materials: Sequence[_Mesh] | None = None,
