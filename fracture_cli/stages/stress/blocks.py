@@ -78,18 +78,20 @@ def _patch_points(tet_mesh: TetMesh, patches: BondFaces, contacts: ContactPoints
     return total / np.where(weight > 0.0, weight, 1.0)[:, None]
 
 
-def _opening_operators(points: np.ndarray, ends: np.ndarray, center: np.ndarray, p: int) -> np.ndarray:
-    """``D`` (P, 3, 6p): the opening ``u_Q(x) - u_P(x)`` at every patch centroid from the blocks' motions."""
-    D = np.zeros((len(points), 3, 6 * p))
-    eye = np.broadcast_to(np.eye(3), (len(points), 3, 3))
-    rows = np.arange(len(points))
-    for side, sign in ((1, 1.0), (0, -1.0)):
-        block = ends[:, side]
-        arm = _cross_matrix(points - center[block])  # theta x r = -[r]_x theta
-        for c in range(3):
-            D[rows[:, None], np.arange(3)[None, :], (6 * block + c)[:, None]] += sign * eye[:, :, c]
-            D[rows[:, None], np.arange(3)[None, :], (6 * block + 3 + c)[:, None]] -= sign * arm[:, :, c]
-    return D
+def _opening_operators(points: np.ndarray, ends: np.ndarray, center: np.ndarray, p: int) -> sp.csr_matrix:
+    """``D`` (3P, 6p) sparse: the opening ``u_Q(x) - u_P(x)`` at every patch centroid (rows ``3 k + c``) from the
+    blocks' motions (columns ``6 A + j``: translation ``j < 3``, rotation ``j >= 3``); 12 entries per row."""
+    count = len(points)
+    local = np.zeros((count, 3, 12))  # the patch's 3 x 12 block: P's six unknowns, then Q's
+    for side, sign in ((0, -1.0), (1, 1.0)):
+        arm = _cross_matrix(points - center[ends[:, side]])  # theta x r = -[r]_x theta
+        local[:, :, 6 * side: 6 * side + 3] = sign * np.eye(3)[None, :, :]
+        local[:, :, 6 * side + 3: 6 * side + 6] = -sign * arm
+    rows = np.repeat(np.arange(3 * count), 12)
+    blocks = np.stack([ends[:, 0], ends[:, 1]], axis=1)  # (P, 2)
+    per_patch = (6 * blocks[:, :, None] + np.arange(6)[None, None, :]).reshape(count, 12)  # (P, 12)
+    cols = np.repeat(per_patch[:, None, :], 3, axis=1).reshape(-1)
+    return sp.csr_matrix((local.reshape(-1), (rows, cols)), shape=(3 * count, 6 * p))
 
 
 def _loads(tet_mesh: TetMesh, owner: np.ndarray, center: np.ndarray, patchT: sp.csr_matrix, p: int,
@@ -166,9 +168,10 @@ def block_tractions(tet_mesh: TetMesh, owner: np.ndarray, patches: BondFaces, pa
     shear = (1.0 - 2.0 * poisson_ratio) / (2.0 * (1.0 - poisson_ratio))
     nn = normals[:, :, None] * normals[:, None, :]
     stiff = shear * np.eye(3)[None, :, :] + (1.0 - shear) * nn  # (P, 3, 3): traction per unit opening
-    D = _opening_operators(points, patch_ends, center, p)  # (P, 3, 6p)
-    traction_op = np.einsum("pij,pjk->pik", stiff, D)  # (P, 3, 6p)
-    K = np.einsum("pji,pjk->ik", D * area[:, None, None], traction_op)  # sum_p a_p D^T S D
+    D = _opening_operators(points, patch_ends, center, p)  # (3P, 6p)
+    stiff_blocks = sp.block_diag(list(stiff), format="csr") if count else sp.csr_matrix((0, 0))
+    traction_op = (stiff_blocks @ D).tocsr()  # (3P, 6p): traction per unit motion
+    K = (D.T @ sp.diags(np.repeat(area, 3)) @ traction_op).toarray()  # sum_p a_p D_p^T S_p D_p
     M = np.zeros((6 * p, 6 * p))
     for a in range(p):
         M[6 * a: 6 * a + 3, 6 * a: 6 * a + 3] = mass[a] * np.eye(3)
@@ -179,8 +182,7 @@ def block_tractions(tet_mesh: TetMesh, owner: np.ndarray, patches: BondFaces, pa
     except (sla.LinAlgError, ValueError) as exc:
         raise StageError(f"cannot solve the blocks' impact step ({exc})", stage=STAGE) from None
     s = patchT.shape[0]
-    t = np.einsum("pik,kj->jpi", traction_op, Q)  # (3s, P, 3)
-    t = t.reshape(s, 3, count, 3)
+    t = np.asarray(traction_op @ Q).reshape(count, 3, s, 3).transpose(2, 3, 0, 1)  # (s, k, P, c)
     if vector:
         return t.reshape(s, 3, 3 * count)
     return (t[..., 0] * normals[None, None, :, 0] + t[..., 1] * normals[None, None, :, 1]) \
