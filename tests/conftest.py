@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 
 import pytest
 
@@ -16,6 +17,11 @@ SAMPLE_FILES = ("pillar.glb", "chair.glb", "vase.obj")
 
 
 def pytest_configure(config):
+    # A run started in the background (nohup, `&` in a script) inherits SIGINT ignored, and so would every process
+    # the Ctrl-C tests start (a Python started with SIGINT ignored keeps ignoring it): give this process, and so its
+    # children, the disposition a terminal's run has.
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     # Before any test touches manifold3d: its TBB pool without worker threads, so the tests' forked workers
     # (fracture_cli.system.parallel) never inherit a TBB lock (what a bake's parallel.using() does first).
     from fracture_cli.system import parallel

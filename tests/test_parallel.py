@@ -109,17 +109,18 @@ def test_large_input_crop_gives_the_same_fragments(monkeypatch):
     """Above _CROP_TRIANGLES pieces are cut from crops of the input: same fragments, same volumes."""
     from test_fragments import cage_tets, octant_pieces, uv_sphere
 
-    import fracture_cli.stages.fragments as fr
+    import fracture_cli.stages.fragments.cut as fr
     from fracture_cli.geometry.trigeom import signed_volume
+    from fracture_cli.stages.fragments import fragments
     from fracture_cli.stages.smooth import SmoothOptions, smooth
 
     surf = uv_sphere()
     tm = cage_tets()
     regions = smooth(tm, octant_pieces(tm), SmoothOptions(smoothing=0.0))
-    whole = fr.fragments(surf, regions)
+    whole = fragments(surf, regions)
     monkeypatch.setattr(fr, "_CROP_TRIANGLES", 0)
     monkeypatch.setattr(fr, "_CROP_GROUPS", 3)
-    cropped = fr.fragments(surf, regions)
+    cropped = fragments(surf, regions)
     assert [f.piece for f in cropped.fragments] == [f.piece for f in whole.fragments]
     for a, b in zip(cropped.fragments, whole.fragments):
         assert np.isclose(signed_volume(a.vertices, a.faces), signed_volume(b.vertices, b.faces), rtol=1e-9)
