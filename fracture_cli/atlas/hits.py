@@ -175,26 +175,26 @@ def rest_groups(data: RuntimeData) -> np.ndarray:
 
 
 def detached(groups: np.ndarray, rest: np.ndarray, volumes: np.ndarray) -> np.ndarray:
-    """Which fragments (p,) bool are outside the main group of their rest component (module docstring).
+    """Which fragments (n,) bool are outside the main group of their rest component (module docstring).
 
     Parameters
     ----------
-    groups : (p,) int
-        Groups after the hit (smallest-index labels).
-    rest : (p,) int
-        Groups with every bond intact (:func:`rest_groups`).
-    volumes : (p,) float
+    groups : (n,) int
+        Groups after the hit: any integer labels (smallest-index labels for one body; the levels' leaves
+        number a split fragment's children's groups after the others, :mod:`fracture_cli.atlas.leaves`).
+    rest : (n,) int
+        The rest component of every fragment (:func:`rest_groups`); a group lies in one.
+    volumes : (n,) float
         Fragment volumes (or equal weights).
     """
-    p = len(groups)
-    group_volume = np.bincount(groups, weights=volumes, minlength=p)
+    weight: dict[int, float] = {}
+    for g, v in zip(groups.tolist(), volumes.tolist()):  # in fragment order, as a running sum
+        weight[g] = weight.get(g, 0.0) + v
     main: dict[int, int] = {}
-    for g in np.flatnonzero(groups == np.arange(p)).tolist():  # ascending: ties keep the smallest id
-        r = int(rest[g])
-        if r not in main or group_volume[g] > group_volume[main[r]]:
+    for g, r in sorted(set(zip(groups.tolist(), rest.tolist()))):  # ascending labels: ties keep the smallest
+        if r not in main or weight[g] > weight[main[r]]:
             main[r] = g
-    main_of = np.array([main[int(r)] for r in rest.tolist()], dtype=np.int64)
-    return groups != main_of
+    return np.array([g != main[r] for g, r in zip(groups.tolist(), rest.tolist())], dtype=bool)
 
 
 def nearest_fragment(centroids: np.ndarray, point: np.ndarray) -> int:

@@ -31,11 +31,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracture_cli.atlas.criterion import BreakingImpulses
-from fracture_cli.atlas.hits import HitAnalysis, analyse_hit, groups_at
+from fracture_cli.atlas.hits import HitAnalysis, analyse_hit, detached, groups_at
 from fracture_cli.atlas.layout import FragmentLayout, fragment_layout
 from fracture_cli.runtime.format import RuntimeData
 from fracture_cli.runtime.impact import components
-from fracture_cli.runtime.levels import body_of, body_view, children_range
+from fracture_cli.runtime.levels import body_of, body_view
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,8 +50,8 @@ class StruckHit:
         The level-1 fragment hit; None without fragment positions.
     child : HitAnalysis or None
         The struck fragment's body's answer (its children, local indices), or None.
-    child_first : int
-        Global index of the struck fragment's first child (0 without children).
+    child_view : RuntimeData or None
+        The struck fragment's body as a runtime file of its own (docs/FORMAT.md 14.3), or None.
     child_layout : FragmentLayout or None
         The children's volumes and centroids (the body's view), or None.
     """
@@ -59,7 +59,7 @@ class StruckHit:
     hit: HitAnalysis
     struck: int | None
     child: HitAnalysis | None = None
-    child_first: int = 0
+    child_view: RuntimeData | None = None
     child_layout: FragmentLayout | None = None
 
     @property
@@ -117,8 +117,7 @@ def struck_hit(data: RuntimeData, layout: FragmentLayout, hit: HitAnalysis, crit
     if body not in child_layouts:
         child_layouts[body] = fragment_layout(view)
     child = analyse_hit(view, hit.point, hit.direction, criterion)
-    return StruckHit(hit=hit, struck=struck, child=child, child_first=children_range(data, body).start,
-                     child_layout=child_layouts[body])
+    return StruckHit(hit=hit, struck=struck, child=child, child_view=view, child_layout=child_layouts[body])
 
 
 def leaves_at(data: RuntimeData, layout: FragmentLayout, sh: StruckHit, magnitude: float,
@@ -135,14 +134,13 @@ def leaves_at(data: RuntimeData, layout: FragmentLayout, sh: StruckHit, magnitud
     rest : (p,) int
         Level-1 groups with every bond intact (:func:`fracture_cli.atlas.hits.rest_groups`).
     """
-    groups = groups_at(data, sh.hit, magnitude)
     volumes = np.asarray(layout.volumes, dtype=np.float64)
-    if not sh.split(magnitude) or sh.struck is None or sh.child is None or sh.child_layout is None:
-        return Leaves(volumes=volumes, centroids=layout.centroids, detached=_outside_main(groups, rest, volumes),
-                      struck=sh.struck)
+    if not sh.split(magnitude) or sh.struck is None or sh.child_view is None or sh.child is None \
+            or sh.child_layout is None:
+        return Leaves(volumes=volumes, centroids=layout.centroids,
+                      detached=detached(groups_at(data, sh.hit, magnitude), rest, volumes), struck=sh.struck)
     keep = np.arange(data.p) != sh.struck
-    view = body_view(data, body_of(data, sh.struck))
-    child_groups = groups_at(view, sh.child, magnitude) + data.p  # after every level-1 group id
+    child_groups = groups_at(sh.child_view, sh.child, magnitude) + data.p  # after every level-1 group id
     groups = np.concatenate([_groups_without(data, sh.hit, magnitude, sh.struck)[keep], child_groups])
     volumes = np.concatenate([volumes[keep], np.asarray(sh.child_layout.volumes, dtype=np.float64)])
     centroids = None
@@ -151,7 +149,7 @@ def leaves_at(data: RuntimeData, layout: FragmentLayout, sh: StruckHit, magnitud
     components = np.concatenate([rest[keep], np.full(len(child_groups), rest[sh.struck])])
     local = sh.child_layout.hit_fragment(sh.hit.point)
     struck = None if local is None else int(np.count_nonzero(keep)) + local
-    return Leaves(volumes=volumes, centroids=centroids, detached=_outside_main(groups, components, volumes),
+    return Leaves(volumes=volumes, centroids=centroids, detached=detached(groups, components, volumes),
                   struck=struck)
 
 
@@ -164,15 +162,3 @@ def _groups_without(data: RuntimeData, hit: HitAnalysis, magnitude: float, gone:
     edges = np.asarray(data.edges, dtype=np.int64)
     kept = (hit.magnitudes >= magnitude) & (edges[:, 0] != gone) & (edges[:, 1] != gone)
     return components(data.p, edges[kept, 0], edges[kept, 1])
-
-
-def _outside_main(groups: np.ndarray, components: np.ndarray, volumes: np.ndarray) -> np.ndarray:
-    """(n,) bool: leaves outside the heaviest piece of their component; ties by the smallest piece id."""
-    weight: dict[int, float] = {}
-    for g, v in zip(groups.tolist(), volumes.tolist()):
-        weight[g] = weight.get(g, 0.0) + v
-    main: dict[int, int] = {}
-    for g, c in sorted(set(zip(groups.tolist(), components.tolist()))):  # ascending ids: ties keep the smallest
-        if c not in main or weight[g] > weight[main[c]]:
-            main[c] = g
-    return np.array([g != main[c] for g, c in zip(groups.tolist(), components.tolist())], dtype=bool)

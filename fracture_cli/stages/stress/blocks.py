@@ -102,11 +102,11 @@ def _loads(tet_mesh: TetMesh, owner: np.ndarray, center: np.ndarray, patchT: sp.
     whose tets hold the most of the load spread ``patchT`` (s, n) gives it), at the spread's centroid, with its
     torque about the block's centre: a hit touches one fragment, as a game's collider reports it.
     """
-    T = np.asarray(tet_mesh.tets, dtype=np.int64)
-    volume = np.abs(np.asarray(tet_mesh.tet_volumes, dtype=np.float64))
     V = np.asarray(tet_mesh.vertices, dtype=np.float64)
     s = patchT.shape[0]
     if site_owner is None:
+        T = np.asarray(tet_mesh.tets, dtype=np.int64)
+        volume = np.abs(np.asarray(tet_mesh.tet_volumes, dtype=np.float64))
         mine = owner >= 0
         share = sp.coo_matrix((np.repeat(volume[mine], 4), (T[mine].reshape(-1), np.repeat(owner[mine], 4))),
                               shape=(tet_mesh.num_vertices, p)).tocsr()  # (n, p): tet volume at vertex j of block A
