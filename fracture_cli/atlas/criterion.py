@@ -122,6 +122,55 @@ def stress_breaking_impulses(data: RuntimeData, site: int, direction: np.ndarray
     out = np.full(data.num_edges, np.inf)
     pulled = g > 0.0
     out[bonds[pulled]] = (float(data.default_threshold) * stress.strength[bonds[pulled]]) / g[pulled]
+    if stress.sharing is not None:
+        gain = np.zeros(data.num_edges)
+        gain[bonds] = g
+        struck = stress.sharing.incident[int(stress.sharing.site_fragment[site])]
+        out[struck] = shared_breaking_impulses(gain[struck], float(data.default_threshold) * stress.strength[struck],
+                                               np.asarray(stress.sharing.areas)[struck], stress.sharing.kappa)
+    return out
+
+
+def shared_breaking_impulses(gain: np.ndarray, capacity: np.ndarray, area: np.ndarray, kappa: float) -> np.ndarray:
+    """Breaking impulses of the struck fragment's bonds when they share load (docs/FORMAT.md section 11.1).
+
+    At magnitude ``M`` with the bonds ``X`` broken, bond ``k`` carries ``M * h_k`` with ``h_k = g_k + kappa *
+    L / A * area_k`` (``L``: the positive gains over ``X``, ``A``: the intact area) and breaks when that exceeds
+    ``T * S_k``. The gains only grow as ``X`` does, so the runtime's passes at ``M`` break exactly the bonds
+    this event sweep finds below ``M``: the next bond to break on its own, then every bond the shared load
+    breaks at that same magnitude, and so on.
+
+    Parameters
+    ----------
+    gain : (f,) float64
+        ``g`` per unit impulse along the hit's direction (0 for bonds the site does not list).
+    capacity : (f,) float64
+        ``T * S`` of each bond.
+    area : (f,) float64
+        Fault areas.
+    kappa : float
+        The concentration.
+
+    Returns
+    -------
+    (f,) float64
+        The smallest magnitude above which each bond is broken (``+inf``: never).
+    """
+    out = np.full(len(gain), np.inf)
+    broken = np.zeros(len(gain), dtype=bool)
+    level = 0.0
+    while not broken.all():
+        load = float(np.maximum(gain[broken], 0.0).sum())
+        held = float(area[~broken].sum())
+        h = gain + (kappa * load / held) * area if load > 0.0 and held > 0.0 else gain
+        with np.errstate(divide="ignore", invalid="ignore"):
+            at = np.where(~broken & (h > 0.0), capacity / np.where(h > 0.0, h, 1.0), np.inf)
+        if not np.isfinite(at).any():
+            break
+        level = max(level, float(at.min()))
+        now = ~broken & (at <= level)  # the next break, then what the shared load breaks at the same magnitude
+        broken |= now
+        out[now] = level
     return out
 
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from fracture_cli.runtime.gameready import GAMEREADY_LAYOUT, check_gameready
 from fracture_cli.runtime.levels import ALL_LEVEL_LAYOUTS, body_view, check_level_structure, level_counts, num_bodies
-from fracture_cli.runtime.stress import CRITERIA, STRESS_LAYOUT, check_stress
+from fracture_cli.runtime.stress import CRITERIA, SHARING_LAYOUT, STRESS_LAYOUT, check_sharing, check_stress
 from fracture_cli.runtime.structure import ANCHOR_LAYOUT, CRACK_LAYOUT, check_anchored, check_cracks, check_damage
 
 FORMAT_VERSION = 1  # what a bake without any version-2 feature writes (byte-identical to before version 2)
@@ -29,8 +29,8 @@ ARRAY_LAYOUT: dict[str, tuple[str, int]] = {
     "edge_areas": ("float32", 1),
 }
 FILE_DTYPES = {"float32": np.dtype("<f4"), "int32": np.dtype("<i4")}
-ALL_LAYOUTS = {**ARRAY_LAYOUT, **GAMEREADY_LAYOUT, **STRESS_LAYOUT, **ANCHOR_LAYOUT, **CRACK_LAYOUT,
-               **ALL_LEVEL_LAYOUTS}
+ALL_LAYOUTS = {**ARRAY_LAYOUT, **GAMEREADY_LAYOUT, **STRESS_LAYOUT, **SHARING_LAYOUT, **ANCHOR_LAYOUT,
+               **CRACK_LAYOUT, **ALL_LEVEL_LAYOUTS}
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,9 +67,13 @@ class RuntimeData:
     criterion : str
         ``"modes"`` (version 1) or ``"stress"`` (version 2 with feature ``"stress"``).
     stress : dict of str -> array
-        The arrays of :data:`fracture_cli.runtime.stress.STRESS_LAYOUT` (criterion ``"stress"`` only).
+        The arrays of :data:`fracture_cli.runtime.stress.STRESS_LAYOUT` (criterion ``"stress"`` only), and with
+        ``sharing`` the one of :data:`~fracture_cli.runtime.stress.SHARING_LAYOUT` (``site_fragment (s,)``).
     stress_info : dict
         The stress criterion's material parameters (header key ``stress``; informational).
+    sharing : dict
+        ``{"concentration": kappa}`` (feature ``"sharing"``, docs/FORMAT.md section 11.1): the struck fragment's
+        bonds share the load of its broken ones; empty: they do not.
     anchored : (p,) int32 or None
         1 where the fragment is bonded to the world (feature ``"anchors"``, docs/FORMAT.md section 12).
     damage : dict
@@ -104,6 +108,7 @@ class RuntimeData:
     criterion: str = "modes"
     stress: dict[str, np.ndarray] = field(default_factory=dict)
     stress_info: dict = field(default_factory=dict)
+    sharing: dict = field(default_factory=dict)
     anchored: np.ndarray | None = None
     damage: dict = field(default_factory=dict)
     cracks: dict[str, np.ndarray] = field(default_factory=dict)
@@ -116,7 +121,7 @@ class RuntimeData:
     def features(self) -> tuple[str, ...]:
         """The format-2 features the data needs (sorted; empty: a version-1 file)."""
         present = {"anchors": self.anchored is not None, "damage": bool(self.damage), "stress": bool(self.stress),
-                   "levels": bool(self.levels)}
+                   "levels": bool(self.levels), "sharing": bool(self.sharing)}
         return tuple(name for name in sorted(present) if present[name])
 
     @property
@@ -155,6 +160,9 @@ class RuntimeData:
             if name in self.gameready:
                 arrays[name] = np.ascontiguousarray(self.gameready[name], dtype=FILE_DTYPES[dtype])
         for name, (dtype, _) in STRESS_LAYOUT.items():
+            if name in self.stress:
+                arrays[name] = np.ascontiguousarray(self.stress[name], dtype=FILE_DTYPES[dtype])
+        for name, (dtype, _) in SHARING_LAYOUT.items():
             if name in self.stress:
                 arrays[name] = np.ascontiguousarray(self.stress[name], dtype=FILE_DTYPES[dtype])
         if self.anchored is not None:
@@ -229,6 +237,13 @@ def check_runtime(data: RuntimeData) -> str | None:
         problem = check_stress(data.stress, s, expected["edges"][0])
         if problem:
             return problem
+    if data.sharing:
+        problem = ("the feature 'sharing' needs criterion 'stress'" if data.criterion != "stress"
+                   else check_sharing(data.sharing, data.stress.get("site_fragment"), s, p))
+        if problem:
+            return problem
+    elif "site_fragment" in data.stress:
+        return "site_fragment without the feature 'sharing'"
     return _check_structure(data) or _check_levels(data)
 
 

@@ -34,7 +34,7 @@ from fracture_cli.runtime.data import (  # noqa: F401  (UNITS_NOTE, GAMEREADY_LA
 )
 from fracture_cli.runtime.header import parse_header
 from fracture_cli.runtime.levels import ALL_LEVEL_LAYOUTS
-from fracture_cli.runtime.stress import STRESS_LAYOUT, header_features
+from fracture_cli.runtime.stress import SHARING_LAYOUT, STRESS_LAYOUT, header_features
 from fracture_cli.runtime.structure import ANCHOR_LAYOUT, CRACK_LAYOUT, DAMAGE_KEYS, check_damage
 
 FORMAT_NAME = "fracture-modes-runtime"
@@ -99,6 +99,8 @@ def encode(data: RuntimeData, bin_name: str) -> tuple[bytes, bytes]:
         header["criterion"] = data.criterion
         if data.stress:
             header["stress"] = {key: data.stress_info[key] for key in sorted(data.stress_info)}
+        if data.sharing:
+            header["sharing"] = {"concentration": float(data.sharing["concentration"])}
         if data.damage:
             header["damage"] = {key: float(data.damage[key]) for key in DAMAGE_KEYS}
         if data.anchored is not None and data.anchors_info:
@@ -208,11 +210,16 @@ def decode(header_bytes: bytes, binary: bytes, path: str = "<memory>") -> Runtim
                  if name in table}
     stress = ({name: _array(table, name, binary, path, STRESS_LAYOUT) for name in STRESS_LAYOUT}
               if "stress" in features else {})
+    sharing: dict = {}
+    if "sharing" in features:  # docs/FORMAT.md section 11.1
+        stress.update({name: _array(table, name, binary, path, SHARING_LAYOUT) for name in SHARING_LAYOUT})
+        sharing = header["sharing"] if isinstance(header.get("sharing"), dict) else {"concentration": None}
     info: dict = header["stress"] if isinstance(header.get("stress"), dict) else {}
     structure: dict[str, Any] = _decode_structure(header, features, table, binary, path) if version >= 2 else {}
     data = RuntimeData(fragment_names=names, transform=transform, default_threshold=threshold,
                        radius=radius, units=units, gameready=gameready, criterion=criterion, stress=stress,
-                       stress_info=dict(info), sites=arrays["sites"], B=arrays["B"], W=arrays["W"],
+                       stress_info=dict(info), sharing=dict(sharing), sites=arrays["sites"], B=arrays["B"],
+                       W=arrays["W"],
                        edges=arrays["edges"], edge_areas=arrays["edge_areas"], **structure)
     problem = check_runtime(data)
     if problem is None and data.dim != dim:

@@ -78,7 +78,8 @@ class _Prepared:
         self.WdW = np.ascontiguousarray(np.concatenate([W.reshape(k, p * d), dW.reshape(k, self.e * d)], axis=1))
         self.split = p * d
         self.forest = _SpanningForest(p, self.edge_p, self.edge_q)
-        self.stress = PreparedStress(data.stress, self.e) if data.criterion == "stress" else None
+        self.stress = (PreparedStress(data.stress, self.e, edges, data.edge_areas, data.sharing)
+                       if data.criterion == "stress" else None)
         self.anchored = None if data.anchored is None else np.flatnonzero(np.asarray(data.anchored) == 1)
         # (c, q) of docs/FORMAT.md section 12.4; a file without "damage" acts as c = 1, r = 0 (a state
         # then only remembers broken bonds).
@@ -349,6 +350,8 @@ def apply_hit(data: RuntimeData, state: np.ndarray | None, point, impulse, thres
     displacement = out[: prep.split].reshape(prep.p, prep.d)
     limit = threshold / m  # Python floats: overflow gives inf (nothing breaks), underflow 0.0
     measure, bound = _measure(prep, out[prep.split:], site, nx, ny, nz, limit)
+    if prep.stress is not None and prep.stress.sharing is not None:  # section 11.1: the struck fragment's bonds
+        measure = prep.stress.sharing.share(site, measure, np.asarray(bound), None if state is None else state <= 0.0)
     now_broken = measure > bound
     if prep.damage is None and state is None:  # version 1 and "stress" alone: nothing can crack
         now_cracked = np.zeros(prep.e, dtype=bool)

@@ -48,6 +48,8 @@ LEVEL_STRESS_LAYOUT: dict[str, tuple[str, int]] = {
     "body_site_bond_gain": ("float32", 2),
     "body_bond_strength": ("float32", 1),
 }
+# With feature "sharing" (section 11.1): the fragment each row of body_sites loads, local to its body.
+LEVEL_SHARING_LAYOUT: dict[str, tuple[str, int]] = {"body_site_fragment": ("int32", 1)}
 # With the game-ready arrays of section 9: the same per child (fragment p + c is row c).
 LEVEL_GAMEREADY_LAYOUT: dict[str, tuple[str, int]] = {
     "child_volume": ("float32", 1),
@@ -62,8 +64,8 @@ LEVEL_CRACK_LAYOUT: dict[str, tuple[str, int]] = {
     "body_crack_ptr": ("int32", 1),
     "body_crack_segments": ("float32", 3),
 }
-ALL_LEVEL_LAYOUTS: dict[str, tuple[str, int]] = {**LEVELS_LAYOUT, **LEVEL_STRESS_LAYOUT, **LEVEL_GAMEREADY_LAYOUT,
-                                                 **LEVEL_CRACK_LAYOUT}
+ALL_LEVEL_LAYOUTS: dict[str, tuple[str, int]] = {**LEVELS_LAYOUT, **LEVEL_STRESS_LAYOUT, **LEVEL_SHARING_LAYOUT,
+                                                 **LEVEL_GAMEREADY_LAYOUT, **LEVEL_CRACK_LAYOUT}
 # The game-ready arrays of section 9 and the children's names for them (same order).
 _GAMEREADY_OF_CHILD = {
     "fragment_volume": "child_volume",
@@ -234,6 +236,8 @@ def _make_view(data: RuntimeData, body: int) -> RuntimeData:
         n0, n1 = int(ptr[0]), int(ptr[-1])
         stress = {"site_bonds_ptr": ptr - n0, "site_bonds": lv["body_site_bonds"][n0:n1],
                   "site_bond_gain": lv["body_site_bond_gain"][n0:n1], "bond_strength": lv["body_bond_strength"][e0:e1]}
+        if "body_site_fragment" in lv:
+            stress["site_fragment"] = lv["body_site_fragment"][s0:s1]
     gameready: dict[str, np.ndarray] = {}
     if "child_collision_fragment_offsets" in lv:
         owners = np.asarray(lv["child_collision_fragment_offsets"][g0: g1 + 1], dtype=np.int64)
@@ -278,6 +282,8 @@ def check_level_structure(data: RuntimeData) -> str | None:
     wanted = dict(LEVELS_LAYOUT)
     if data.criterion == "stress":
         wanted.update(LEVEL_STRESS_LAYOUT)
+    if data.sharing:
+        wanted.update(LEVEL_SHARING_LAYOUT)
     if data.gameready:
         wanted.update(LEVEL_GAMEREADY_LAYOUT)
     if any(name in lv for name in LEVEL_CRACK_LAYOUT):
@@ -287,7 +293,7 @@ def check_level_structure(data: RuntimeData) -> str | None:
         return f"feature 'levels' needs the arrays {', '.join(missing)}"
     extra = [name for name in lv if name not in wanted]
     if extra:
-        return f"levels arrays {', '.join(extra)} do not belong to this file (criterion or game-ready data)"
+        return f"levels arrays {', '.join(extra)} do not belong to this file (criterion, sharing or game-ready data)"
     for name in wanted:
         if np.asarray(lv[name]).ndim != ALL_LEVEL_LAYOUTS[name][1]:
             return f"array {name} has {np.asarray(lv[name]).ndim} dimensions, expected {ALL_LEVEL_LAYOUTS[name][1]}"
@@ -341,6 +347,8 @@ def _offsets_problem(data: RuntimeData, S: int, E: int, C: int) -> str | None:
         problem = _ptr_problem(np.asarray(lv["body_site_bonds_ptr"], dtype=np.int64), "body_site_bonds_ptr", S + 1, N)
         if problem or np.asarray(lv["body_bond_strength"]).shape != (E,):
             return problem or f"body_bond_strength must have {E} entries"
+    if "body_site_fragment" in lv and np.asarray(lv["body_site_fragment"]).shape != (S,):
+        return f"body_site_fragment must have {S} entries"
     if "child_collision_fragment_offsets" in lv:
         parts = np.asarray(lv["child_collision_part_offsets"], dtype=np.int64)
         problem = (_ptr_problem(np.asarray(lv["child_collision_fragment_offsets"], dtype=np.int64),

@@ -16,6 +16,8 @@ Depends on numpy only.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 # name -> (dtype, number of dimensions), in file order (after the game-ready arrays).
@@ -25,9 +27,11 @@ STRESS_LAYOUT: dict[str, tuple[str, int]] = {
     "site_bond_gain": ("float32", 2),
     "bond_strength": ("float32", 1),
 }
-KNOWN_FEATURES: tuple[str, ...] = ("anchors", "damage", "levels", "stress")
+# Feature "sharing" (docs/FORMAT.md section 11.1): the fragment each site loads, after the four above.
+SHARING_LAYOUT: dict[str, tuple[str, int]] = {"site_fragment": ("int32", 1)}
+KNOWN_FEATURES: tuple[str, ...] = ("anchors", "damage", "levels", "sharing", "stress")
 """The ``features`` this reader implements (``"anchors"`` and ``"damage"``: :mod:`fracture_cli.runtime.structure`;
-``"levels"``: :mod:`fracture_cli.runtime.levels`)."""
+``"levels"``: :mod:`fracture_cli.runtime.levels`; ``"sharing"``: :class:`PreparedStress`)."""
 CRITERIA: tuple[str, ...] = ("modes", "stress")
 
 
@@ -53,7 +57,32 @@ def header_features(header: dict, version: int) -> tuple[tuple[str, ...], str]:
         raise ValueError(f"runtime file needs criterion {criterion!r}, which this reader does not implement")
     if criterion == "stress" and "stress" not in features:
         raise ValueError("runtime file has criterion 'stress' but does not list feature 'stress'")
+    if "sharing" in features and criterion != "stress":
+        raise ValueError("runtime file has feature 'sharing' without criterion 'stress'")
     return tuple(features), str(criterion)
+
+
+def check_sharing(sharing: dict, site_fragment: np.ndarray | None, s: int, p: int) -> str | None:
+    """Why the feature ``"sharing"``'s object and array do not fit ``s`` sites and ``p`` fragments, or None.
+
+    Parameters
+    ----------
+    sharing : dict
+        The header's ``sharing`` object: ``concentration`` a finite number > 0.
+    site_fragment : (s,) int or None
+        Values in ``0 .. p-1``.
+    """
+    kappa = sharing.get("concentration")
+    if isinstance(kappa, bool) or not isinstance(kappa, (int, float)) or not math.isfinite(kappa) or kappa <= 0:
+        return f"sharing.concentration must be a finite number > 0, got {kappa!r}"
+    if site_fragment is None:
+        return "the feature 'sharing' needs the array site_fragment"
+    fragment = np.asarray(site_fragment)
+    if fragment.shape != (s,):
+        return f"array site_fragment has shape {list(fragment.shape)}, expected [{s}]"
+    if s and (fragment.min() < 0 or fragment.max() >= p):
+        return f"site_fragment must be fragment indices in 0..{p - 1}"
+    return None
 
 
 def check_stress(arrays: dict[str, np.ndarray], s: int, e: int) -> str | None:
@@ -94,10 +123,14 @@ def check_stress(arrays: dict[str, np.ndarray], s: int, e: int) -> str | None:
 
 
 class PreparedStress:
-    """Float64 copies of the stress arrays for fast per-hit evaluation."""
+    """Float64 copies of the stress arrays for fast per-hit evaluation (and section 11.1's sharing)."""
 
-    def __init__(self, arrays: dict[str, np.ndarray], e: int):
+    def __init__(self, arrays: dict[str, np.ndarray], e: int, edges: np.ndarray | None = None,
+                 areas: np.ndarray | None = None, sharing: dict | None = None):
         self.e = e
+        self.sharing: Sharing | None = None
+        if sharing and edges is not None and areas is not None:
+            self.sharing = Sharing(arrays["site_fragment"], edges, areas, float(sharing["concentration"]))
         self.ptr = np.asarray(arrays["site_bonds_ptr"], dtype=np.int64)
         self.bonds = np.asarray(arrays["site_bonds"], dtype=np.int64)
         gain = np.asarray(arrays["site_bond_gain"], dtype=np.float64)
@@ -112,18 +145,81 @@ class PreparedStress:
         g += self.g2[lo:hi] * nz
         return self.bonds[lo:hi], g
 
-    def broken(self, site: int, nx: float, ny: float, nz: float, limit: float) -> np.ndarray:
-        """Which bonds (e,) bool break for the scaled impulse ``n'`` and scaled threshold ``limit = T / m``."""
-        bonds, g = self.gains(site, nx, ny, nz)
-        out = np.zeros(self.e, dtype=bool)
-        out[bonds] = g > limit * self.strength[bonds]
-        return out
 
-    def loads(self, site: int, nx: float, ny: float, nz: float, limit: float) -> np.ndarray:
-        """``L_e = max(0, g) / (limit * S_e)`` (e,) float64 (informational; 0 off the list, inf at limit 0)."""
-        bonds, g = self.gains(site, nx, ny, nz)
-        out = np.zeros(self.e)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            value = np.maximum(g, 0.0) / (limit * self.strength[bonds])
-        out[bonds] = np.where(g > 0.0, value, 0.0)
-        return out
+class Sharing:
+    """Load sharing among the struck fragment's bonds (feature ``"sharing"``, docs/FORMAT.md section 11.1).
+
+    Parameters
+    ----------
+    site_fragment : (s,) int
+        The fragment each site loads.
+    edges : (e, 2) int
+        The bonds.
+    areas : (e,) float
+        Their fault areas (``edge_areas``).
+    concentration : float
+        ``kappa > 0``.
+    """
+
+    def __init__(self, site_fragment: np.ndarray, edges: np.ndarray, areas: np.ndarray, concentration: float):
+        self.site_fragment = np.asarray(site_fragment, dtype=np.int64)
+        edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        self.areas = np.asarray(areas, dtype=np.float64).tolist()
+        self.kappa = float(concentration)
+        p = int(max(edges.max() + 1 if len(edges) else 0, self.site_fragment.max() + 1 if len(self.site_fragment)
+                    else 0))
+        self.incident: list[list[int]] = [[] for _ in range(p)]
+        for index, (a, b) in enumerate(edges.tolist()):  # increasing bond index per fragment
+            self.incident[a].append(index)
+            self.incident[b].append(index)
+
+    def share(self, site: int, measure: np.ndarray, bound: np.ndarray, broken_before: np.ndarray | None
+              ) -> np.ndarray:
+        """Section 11.1's passes: the measure (e,) float64 after the struck fragment's bonds share their load.
+
+        Parameters
+        ----------
+        site : int
+            The hit's site.
+        measure : (e,) float64
+            ``a0``: section 11's ``g`` for the site's bonds, 0 for the others (not modified).
+        bound : (e,) float64
+            ``b = t * S``.
+        broken_before : (e,) bool or None
+            Bonds already broken (a damage state's ``health <= 0``), None for none.
+
+        Returns
+        -------
+        (e,) float64
+            The measure ``a``: ``a0`` off the struck fragment, the pass values on it.
+        """
+        bonds = self.incident[int(self.site_fragment[site])]
+        a0 = [float(measure[e]) for e in bonds]
+        b = [float(bound[e]) for e in bonds]
+        area = [self.areas[e] for e in bonds]
+        out = [x > y or (broken_before is not None and bool(broken_before[e])) for e, x, y in zip(bonds, a0, b)]
+        a = list(a0)
+        while True:
+            load, held = 0.0, 0.0  # sums in increasing bond order, as the spec says
+            for i in range(len(bonds)):
+                if out[i]:
+                    load = load + max(a0[i], 0.0)
+            for i in range(len(bonds)):
+                if not out[i]:
+                    held = held + area[i]
+            if load == 0.0 or held == 0.0:
+                break
+            q = (self.kappa * load) / held
+            new = []
+            for i in range(len(bonds)):
+                if not out[i]:
+                    a[i] = a0[i] + q * area[i]  # Python floats: overflow gives inf, inf * 0 NaN (holds)
+                    if a[i] > b[i]:
+                        new.append(i)
+            if not new:
+                break
+            for i in new:
+                out[i] = True
+        result = np.array(measure, dtype=np.float64, copy=True)
+        result[bonds] = a
+        return result

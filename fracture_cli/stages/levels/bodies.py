@@ -74,6 +74,8 @@ def with_levels(data: RuntimeData, result: Levels) -> RuntimeData:
         ).astype(np.int32)
         for name in ("site_bonds", "site_bond_gain", "bond_strength"):
             levels["body_" + name] = np.concatenate([b[name] for b in bodies])
+    if data.sharing:  # docs/FORMAT.md section 11.1: local fragment indices, one per body site
+        levels["body_site_fragment"] = np.concatenate([b["site_fragment"] for b in bodies]).astype(np.int32)
     if data.gameready:
         ready = runtime_arrays([body for r in result.refinements for body in r.physics])
         levels.update({CHILD_GAMEREADY[name]: value for name, value in ready.items()})

@@ -24,6 +24,8 @@ class RuntimeOptions:
     criterion, youngs_modulus, poisson_ratio, tensile_strength, stress_keep, stress_reach, stress_max_bonds
         The stress criterion (:mod:`fracture_cli.stages.stress`); ``criterion = "modes"`` ignores the others
         and writes version 1 as before.
+    load_sharing : float, optional (default 2.0)
+        Stress criterion: ``kappa`` of feature ``"sharing"`` (docs/FORMAT.md section 11.1), 0 = off.
     threshold : float, optional (default 3.0)
         Default toughness written to the file (games may override it per hit).
         Dimensionless per unit of impulse: an impulse of magnitude ``m`` breaks
@@ -64,6 +66,9 @@ class RuntimeOptions:
                                          "body, the faults the elastic part, the hit on the fragment it lands on: it "
                                          "loads every bond of that fragment) or 'tets' (linear elasticity on the "
                                          "bake's tet mesh)", choices=("blocks", "tets"))
+    load_sharing: float = option(2.0, "stress criterion: when bonds of the fragment hit break, their load goes to its "
+                                      "other bonds, concentrated this much (a crack tip's stress concentration; "
+                                      "0: no sharing, one bond breaks at a time)", min=0.0, max=100.0)
     stress_max_bonds: int = option(48, "stress criterion: at most this many bonds per site (0 = no limit)",
                                    min=0, max=100000)
     damage: bool = option(False, "write damage that adds up (format version 2, feature 'damage'): a hit below a "

@@ -94,6 +94,27 @@ def _opening_operators(points: np.ndarray, ends: np.ndarray, center: np.ndarray,
     return sp.csr_matrix((local.reshape(-1), (rows, cols)), shape=(3 * count, 6 * p))
 
 
+def most_loaded_block(tet_mesh: TetMesh, owner: np.ndarray, patchT: sp.csr_matrix, p: int) -> np.ndarray:
+    """Per site (s,) int64: the fragment whose tets hold the most of the site's load spread (ties: the smallest).
+
+    Parameters
+    ----------
+    tet_mesh : TetMesh
+    owner : (t,) int
+        Fragment of every tet (-1: none).
+    patchT : (s, n) sparse
+        Each site's load spread over the tet mesh's vertices.
+    p : int
+        Number of fragments.
+    """
+    T = np.asarray(tet_mesh.tets, dtype=np.int64)
+    volume = np.abs(np.asarray(tet_mesh.tet_volumes, dtype=np.float64))
+    mine = owner >= 0
+    share = sp.coo_matrix((np.repeat(volume[mine], 4), (T[mine].reshape(-1), np.repeat(owner[mine], 4))),
+                          shape=(tet_mesh.num_vertices, p)).tocsr()  # (n, p): tet volume at vertex j of block A
+    return np.asarray((patchT @ share).toarray().argmax(axis=1)).reshape(-1).astype(np.int64)
+
+
 def _loads(tet_mesh: TetMesh, owner: np.ndarray, center: np.ndarray, patchT: sp.csr_matrix, p: int,
            site_owner: np.ndarray | None) -> np.ndarray:
     """``F`` (6p, 3s): the generalized force of a unit force along axis ``k`` at site ``v`` (column ``3 v + k``).
@@ -105,12 +126,7 @@ def _loads(tet_mesh: TetMesh, owner: np.ndarray, center: np.ndarray, patchT: sp.
     V = np.asarray(tet_mesh.vertices, dtype=np.float64)
     s = patchT.shape[0]
     if site_owner is None:
-        T = np.asarray(tet_mesh.tets, dtype=np.int64)
-        volume = np.abs(np.asarray(tet_mesh.tet_volumes, dtype=np.float64))
-        mine = owner >= 0
-        share = sp.coo_matrix((np.repeat(volume[mine], 4), (T[mine].reshape(-1), np.repeat(owner[mine], 4))),
-                              shape=(tet_mesh.num_vertices, p)).tocsr()  # (n, p): tet volume at vertex j of block A
-        site_owner = np.asarray((patchT @ share).toarray().argmax(axis=1)).reshape(-1)  # ties: the smallest index
+        site_owner = most_loaded_block(tet_mesh, owner, patchT, p)
     site_owner = np.asarray(site_owner, dtype=np.int64).reshape(-1)
     point = np.stack([np.asarray(patchT @ V[:, c]).reshape(-1) for c in range(3)], axis=1)  # (s, 3)
     arm = point - center[site_owner]

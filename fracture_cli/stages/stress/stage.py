@@ -36,7 +36,7 @@ import numpy as np
 
 from fracture_cli.errors import StageError
 from fracture_cli.geometry.parts import nearest_parts, part_planes
-from fracture_cli.stages.stress.blocks import block_tractions
+from fracture_cli.stages.stress.blocks import block_tractions, most_loaded_block
 from fracture_cli.stages.stress.bonds import (
     BondFaces,
     ContactPoints,
@@ -142,14 +142,15 @@ def stress_arrays(tet_mesh: TetMesh, pieces: Pieces, fragments: Fragments, eta: 
         Their fault areas, normalized units squared.
     parameters : StressParameters
     site_owner : (s,) int, optional
-        ``model = "blocks"``: the fragment every contact site lands on (the one whose collision parts are
-        nearest, as a game's collider reports it); by default the fragment with the most of the site's load.
+        The fragment every contact site lands on (the one whose collision parts are nearest, as a game's
+        collider reports it): ``model = "blocks"`` loads it; by default the fragment with the most of the
+        site's load spread.
 
     Returns
     -------
     dict
         ``site_bonds_ptr (s + 1,) int32``, ``site_bonds (nnz,) int32``, ``site_bond_gain (nnz, 3) float32``,
-        ``bond_strength (e,) float32``.
+        ``bond_strength (e,) float32``, and ``site_fragment (s,) int32``: ``site_owner`` (feature ``"sharing"``).
     """
     started = time.perf_counter()
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
@@ -167,11 +168,13 @@ def stress_arrays(tet_mesh: TetMesh, pieces: Pieces, fragments: Fragments, eta: 
         patch_of[patch_bond[::-1]] = np.arange(len(patch_bond))[::-1]
         contacts = dataclasses.replace(contacts, bond=patch_of[contacts.bond])
     vector = parameters.measure == "tension_shear"
+    spread = site_patches(tet_mesh, sites, parameters.radius).T.tocsr()
+    if site_owner is None:
+        site_owner = most_loaded_block(tet_mesh, owner, spread, max(int(owner.max()) + 1, len(fragments.fragments)))
     if parameters.model == "blocks":
         traction = block_tractions(tet_mesh, owner, patches, edges[patch_bond],
                                    patch_normals(tet_mesh, patches, contacts, len(patch_bond)),
-                                   site_patches(tet_mesh, sites, parameters.radius).T.tocsr(), parameters.reach,
-                                   parameters.poisson_ratio, contacts, vector, site_owner)
+                                   spread, parameters.reach, parameters.poisson_ratio, contacts, vector, site_owner)
     else:
         traction = site_bond_tractions(tet_mesh, patches, sites, parameters.radius, parameters.youngs_modulus,
                                        parameters.poisson_ratio, contacts, parameters.reach, vector)  # (s, 3, P|3P)
@@ -192,6 +195,7 @@ def stress_arrays(tet_mesh: TetMesh, pieces: Pieces, fragments: Fragments, eta: 
         "site_bonds": bonds.astype(np.int32),
         "site_bond_gain": kept.astype(np.float32),
         "bond_strength": strength.astype(np.float32),
+        "site_fragment": np.asarray(site_owner, dtype=np.int32),
     }
 
 
@@ -321,8 +325,9 @@ def with_stress(data: RuntimeData, tet_mesh: TetMesh, pieces: Pieces, fragments:
         The fragment graph (normalized areas) the runtime data was built from.
     options : RuntimeOptions
     parts : tuple of tuple of (k, 3) float, optional
-        Every fragment's convex collision parts, model space (as ``data.sites``): with
-        ``stress_model = "blocks"`` each site loads the fragment whose parts are nearest it.
+        Every fragment's convex collision parts, model space (as ``data.sites``): each site lands on the
+        fragment whose parts are nearest it (``stress_model = "blocks"`` loads it; ``load_sharing`` shares
+        among its bonds).
     """
     edges = np.asarray(graph[0], dtype=np.int64).reshape(-1, 2)
     areas = np.asarray(graph[1], dtype=np.float64).reshape(-1)
@@ -337,14 +342,19 @@ def with_stress(data: RuntimeData, tet_mesh: TetMesh, pieces: Pieces, fragments:
                                   reach=float(options.stress_reach), measure=str(options.stress_measure),
                                   model=str(options.stress_model))
     owner = None
-    if parameters.model == "blocks" and parts is not None:
+    if parts is not None:
         planes = part_planes(parts)
         if planes is not None:
             owner = nearest_parts(planes, np.asarray(data.sites, dtype=np.float64))
     arrays = stress_arrays(tet_mesh, pieces, fragments, eta, edges, areas, parameters, owner)
+    sharing: dict = {}
+    if float(options.load_sharing) > 0.0:  # docs/FORMAT.md section 11.1
+        sharing = {"concentration": float(options.load_sharing)}
+    else:
+        del arrays["site_fragment"]
     info = {"youngs_modulus": parameters.youngs_modulus, "poisson_ratio": parameters.poisson_ratio,
             "tensile_strength": parameters.tensile_strength, "keep": parameters.keep,
             "max_bonds": parameters.max_bonds, "reach": parameters.reach, "measure": parameters.measure,
             "model": parameters.model,
             "significant_bits": SIGNIFICANT_BITS}
-    return dataclasses.replace(data, criterion="stress", stress=arrays, stress_info=info)
+    return dataclasses.replace(data, criterion="stress", stress=arrays, stress_info=info, sharing=sharing)

@@ -392,15 +392,38 @@ CASES = [
                                                  "body_edge_ptr"], 16, 0x5A),
      "ok", "levels arrays in another order, non-zero gaps"),
     ("ok_levels", "levels", lambda h, b: (h, b), "ok", "the levels base file itself"),
+    # docs/FORMAT.md section 11.1 (base: sharing_dyadic, features "sharing" and "stress": s = 3, p = 5).
+    ("sharing_object_missing", "sharing", _edit(["sharing"], ...), "rejected",
+     "feature 'sharing' without the sharing object"),
+    ("sharing_concentration_zero", "sharing", _edit(["sharing", "concentration"], 0.0), "rejected",
+     "sharing.concentration 0"),
+    ("sharing_concentration_negative", "sharing", _edit(["sharing", "concentration"], -2.0), "rejected",
+     "sharing.concentration < 0"),
+    ("sharing_concentration_string", "sharing", _edit(["sharing", "concentration"], "2"), "rejected",
+     "sharing.concentration is a string"),
+    ("sharing_concentration_huge", "sharing", _text(lambda t: t.replace(b'"concentration": 2.0',
+                                                                         b'"concentration": 1e400')),
+     "rejected", "sharing.concentration overflows a double (not finite)"),
+    ("sharing_array_missing", "sharing", _edit(["arrays", "site_fragment"], ...), "rejected",
+     "feature 'sharing' without site_fragment"),
+    ("sharing_fragment_out_of_range", "sharing", lambda h, b: _poke(h, b, "site_fragment", 1, "i", 5), "rejected",
+     "site_fragment names fragment 5 (the file has 5)"),
+    ("sharing_fragment_negative", "sharing", lambda h, b: _poke(h, b, "site_fragment", 2, "i", -1), "rejected",
+     "site_fragment -1"),
+    ("sharing_without_stress", "sharing",
+     lambda h, b: _edit(["criterion"], "modes")(*_edit(["features"], ["sharing"])(h, b)), "rejected",
+     "feature 'sharing' with criterion 'modes'"),
+    ("ok_sharing", "sharing", lambda h, b: (h, b), "ok", "the sharing base file itself"),
 ]
 
 
-def generate(out: str, example_json: str, dyadic_json: str, structure_json: str, levels_json: str) -> list[str]:
+def generate(out: str, example_json: str, dyadic_json: str, structure_json: str, levels_json: str,
+             sharing_json: str) -> list[str]:
     """Write every case and ``index.json`` into ``out``; returns the paths written (relative to its parent)."""
     os.makedirs(out, exist_ok=True)
     bases = {}
     for key, path in (("example", example_json), ("dyadic", dyadic_json), ("structure", structure_json),
-                      ("levels", levels_json)):
+                      ("levels", levels_json), ("sharing", sharing_json)):
         with open(path, encoding="utf-8") as fh:
             header = json.load(fh)
         with open(os.path.join(os.path.dirname(path), header["buffer"]["uri"]), "rb") as fh:
@@ -429,7 +452,7 @@ def generate(out: str, example_json: str, dyadic_json: str, structure_json: str,
         if expect == "ok":
             entry["vectors"] = vectors
             entry["fragment_names"] = UNICODE_NAMES if name == "ok_unicode_names" else header["fragment_names"]
-        if base in ("structure", "levels"):  # a reader without these features refuses every such file: skip by name
+        if base in ("structure", "levels", "sharing"):  # a reader without these features refuses such a file
             entry["features"] = list(bases[base][0]["features"])
         if name == "crc_mismatch":
             entry["only_crc"] = True

@@ -42,6 +42,7 @@ import levels  # noqa: E402
 import reference  # noqa: E402
 import reference_damage  # noqa: E402
 import reference_levels  # noqa: E402
+import sharing  # noqa: E402
 import structures  # noqa: E402
 
 from fracture_cli.runtime.format import RuntimeData, load_runtime, write_runtime  # noqa: E402
@@ -196,6 +197,8 @@ def sample_assets() -> list[tuple[str, str]]:
 
 # Sample assets baked with the stress criterion too: (asset, recipe, name of the runtime file here).
 STRESS_BAKES = [("chair.glb", "wood", "chair_stress")]
+# ... and with the stress criterion's defaults (blocks, load sharing kappa 2: docs/FORMAT.md section 11.1).
+SHARING_BAKES = [("chair.glb", "wood", "chair_sharing")]
 # ... and with two levels of fracture (docs/FORMAT.md section 14), fast settings: (asset, recipe, name, --set values).
 LEVEL_BAKES = [("pillar.glb", "stone", "pillar_levels", ("levels.count=2", "levels.ratio=0.5"))]
 
@@ -204,8 +207,10 @@ def rebake_sample_assets(dest: str) -> None:
     """Bake every sample asset with its manifest recipe and copy its runtime file to ``dest``."""
     bakes = [(asset, recipe, os.path.splitext(asset)[0], ()) for asset, recipe in sample_assets()]
     # The chair's stress file predates the blocks model (the default since): it stays the tet mesh's response.
-    bakes += [(asset, recipe, name, ("--set", "runtime.criterion=stress", "--set", "runtime.stress_model=tets"))
+    bakes += [(asset, recipe, name, ("--set", "runtime.criterion=stress", "--set", "runtime.stress_model=tets",
+                                     "--set", "runtime.load_sharing=0"))
               for asset, recipe, name in STRESS_BAKES]
+    bakes += [(asset, recipe, name, ("--set", "runtime.criterion=stress")) for asset, recipe, name in SHARING_BAKES]
     bakes += [(asset, recipe, name, tuple(x for value in sets for x in ("--set", value)))
               for asset, recipe, name, sets in LEVEL_BAKES]
     for asset, recipe, name, extra in bakes:
@@ -531,7 +536,8 @@ def generate(out: str, rebake: bool = False) -> list[str]:
     stems = [os.path.splitext(asset)[0] for asset, _ in sample_assets()]
     stress_stems = [name for _, _, name in STRESS_BAKES]
     level_stems = [name for _, _, name, _ in LEVEL_BAKES]
-    for stem in stems + stress_stems + level_stems:
+    sharing_stems = [name for _, _, name in SHARING_BAKES]
+    for stem in stems + stress_stems + level_stems + sharing_stems:
         if os.path.abspath(out) != HERE and not rebake:
             for suffix in (".fracture.json", ".fracture.bin"):
                 shutil.copyfile(os.path.join(HERE, stem + suffix), os.path.join(out, stem + suffix))
@@ -558,7 +564,8 @@ def generate(out: str, rebake: bool = False) -> list[str]:
     written += [f"{name}{suffix}" for name in structure for suffix in (".fracture.json", ".fracture.bin")]
     # Levels (docs/FORMAT.md section 14): after every other file, so the seeds above stay as they were.
     first_seed = len([*small, *stems, *stress_small, *stress_stems, *structure])
-    for offset, name in enumerate(_levels_files(out, small) + level_stems):
+    level_names = _levels_files(out, small) + level_stems
+    for offset, name in enumerate(level_names):
         seed = first_seed + offset
         data = load_runtime(os.path.join(out, f"{name}.fracture.json"))
         rt = reference_levels.LevelFile.from_data(data).view(0)
@@ -568,12 +575,16 @@ def generate(out: str, rebake: bool = False) -> list[str]:
         levels.write_level_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", data, seed,
                                    impacts, vector_entry)
         written += [f"{name}{suffix}" for suffix in (".fracture.json", ".fracture.bin", ".vectors.json")]
+    # Load sharing (docs/FORMAT.md section 11.1): after every other file, so the seeds above stay as they were.
+    first_seed += len(level_names)
+    written += _sharing_vectors(out, first_seed, sharing_stems)
     written += corrupt.generate(
         os.path.join(out, "corrupt"),
         os.path.join(out, "example.fracture.json"),
         os.path.join(out, "dyadic_d3.fracture.json"),
         os.path.join(out, "structure_dyadic.fracture.json"),
         os.path.join(out, "levels_dyadic.fracture.json"),
+        os.path.join(out, "sharing_dyadic.fracture.json"),
     )
     return written
 
@@ -588,6 +599,34 @@ def _levels_files(out: str, small: dict) -> list[str]:
     for name, data in files.items():
         write_runtime(data, os.path.join(out, f"{name}.fracture.json"))
     return list(files)
+
+
+def _sharing_vectors(out: str, first_seed: int, stems: list[str]) -> list[str]:
+    """Write the section-11.1 runtime files (sharing.py) and the vectors of those and ``stems``; the names written."""
+    base = sharing.sharing_dyadic()
+    files = {"sharing_dyadic": base, "damage_sharing": sharing.damage_sharing(base),
+             "levels_sharing": sharing.levels_sharing()}
+    written = []
+    for name, data in files.items():
+        write_runtime(data, os.path.join(out, f"{name}.fracture.json"))
+        written += [f"{name}.fracture.json", f"{name}.fracture.bin"]
+    for offset, name in enumerate([*files, *stems]):
+        seed = first_seed + offset
+        data = load_runtime(os.path.join(out, f"{name}.fracture.json"))
+        count = SAMPLE_IMPACTS if name in stems else 8
+        if data.levels:
+            rt = reference_levels.LevelFile.from_data(data).view(0)
+            impacts = designed_impacts(rt, np.random.default_rng(100 + seed)) + random_impacts(rt, count, 200 + seed)
+            levels.write_level_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", data,
+                                       seed, impacts, vector_entry)
+        else:
+            rt = reference.Runtime.from_data(data)
+            impacts = (sharing.SHARING_TIES if name == "sharing_dyadic" else []) + designed_impacts(
+                rt, np.random.default_rng(100 + seed)) + random_impacts(rt, count, 200 + seed)
+            seqs = structures.sequences(rt, 300 + seed, vector_entry) if data.damage else None
+            write_vectors(os.path.join(out, f"{name}.vectors.json"), f"{name}.fracture.json", rt, impacts, seqs)
+        written.append(f"{name}.vectors.json")
+    return written
 
 
 def _structure_files(out: str, small: dict, stress_small: dict) -> list[str]:

@@ -44,6 +44,8 @@ class Runtime:
         With the stress criterion: ``(ptr, bonds, gains, strength)`` as lists (gains of 3-tuples).
     anchored : list or None
         Feature ``"anchors"`` (docs/FORMAT.md section 12): 0/1 per fragment.
+    sharing : tuple or None
+        Feature ``"sharing"`` (section 11.1): ``(site_fragment, edge_areas, concentration)``.
     damage : tuple or None
         Feature ``"damage"``: ``(c, r)``, the crack level and the damage rate.
     """
@@ -57,12 +59,13 @@ class Runtime:
     stress: tuple | None = None
     anchored: list | None = None
     damage: tuple | None = None
+    sharing: tuple | None = None
 
     @property
     def features(self) -> list:
         """The file's version-2 features, sorted."""
         present = {"anchors": self.anchored is not None, "damage": self.damage is not None,
-                   "stress": self.criterion == "stress"}
+                   "stress": self.criterion == "stress", "sharing": self.sharing is not None}
         return [name for name in sorted(present) if present[name]]
 
     @property
@@ -87,12 +90,17 @@ class Runtime:
                       [tuple(g) for g in arrays["site_bond_gain"].tolist()], arrays["bond_strength"].tolist())
         anchored = None if data.anchored is None else [int(x) for x in data.anchored.tolist()]
         damage = (float(data.damage["crack_level"]), float(data.damage["damage_rate"])) if data.damage else None
+        sharing = None
+        if getattr(data, "sharing", None):
+            sharing = (data.stress["site_fragment"].tolist(), [float(a) for a in data.edge_areas.tolist()],
+                       float(data.sharing["concentration"]))
         return cls(sites=[tuple(float(c) for c in s) for s in data.sites.tolist()],
                    B=[[tuple(m) for m in site] for site in data.B.tolist()],
                    W=[[tuple(f) for f in mode] for mode in data.W.tolist()],
                    edges=[tuple(e) for e in data.edges.tolist()],
                    default_threshold=float(data.default_threshold),
-                   criterion=getattr(data, "criterion", "modes"), stress=stress, anchored=anchored, damage=damage)
+                   criterion=getattr(data, "criterion", "modes"), stress=stress, anchored=anchored, damage=damage,
+                   sharing=sharing)
 
 
 @dataclass(frozen=True)
@@ -271,23 +279,71 @@ def stress_gains(rt: Runtime, v: int, n) -> list:
     return out
 
 
-def stress_test(rt: Runtime, v: int, n, t: float) -> tuple[list, list, float]:
-    """Broken bonds, loads and the smallest relative gap to a tie, stress criterion (section 11).
+def stress_measures(rt: Runtime, v: int, n, t: float, before: list | None = None) -> tuple[list, list, list]:
+    """``(a, b, scale)`` lists over the bonds, stress criterion (sections 11 and 11.1).
 
-    Bond ``e`` of the list breaks when ``g > t * S_e``; the gap is ``|g - t S_e|`` over
-    ``sum |G_c n_c| + t S_e`` (the magnitudes that went into the comparison).
+    ``a``: ``g`` for site ``v``'s list, 0 for the others, then (feature ``"sharing"``) the passes of section
+    11.1 with ``before`` (bool per bond: broken by an earlier hit) in the starting set; ``b = t * S``;
+    ``scale``: the magnitudes behind ``a`` (``sum |G_c n_c|`` plus the shared load ``q * area``).
     """
-    strength = rt.stress[3]
-    broken = [False] * len(rt.edges)
-    loads = [0.0] * len(rt.edges)
+    ptr, _, gains, strength = rt.stress
+    e = len(rt.edges)
+    a, scale = [0.0] * e, [0.0] * e
+    for j, (bond, g) in zip(range(ptr[v], ptr[v + 1]), stress_gains(rt, v, n)):
+        a[bond] = g
+        scale[bond] = sum(abs(gains[j][c] * n[c]) for c in range(3))
+    b = [t * strength[i] for i in range(e)]
+    if rt.sharing is not None:
+        a, scale = share(rt, v, a, b, scale, before)
+    return a, b, scale
+
+
+def share(rt: Runtime, v: int, a0: list, b: list, scale: list, before: list | None) -> tuple[list, list]:
+    """Section 11.1's passes, literally: the struck fragment's bonds share the load of its broken ones."""
+    site_fragment, areas, kappa = rt.sharing
+    f = site_fragment[v]
+    F = [i for i, (P, Q) in enumerate(rt.edges) if P == f or Q == f]  # increasing bond index
+    out = {i for i in F if a0[i] > b[i] or (before is not None and before[i])}
+    a, sc = list(a0), list(scale)
+    while True:
+        L = 0.0
+        for i in F:
+            if i in out:
+                L = L + max(a0[i], 0.0)
+        A = 0.0
+        for i in F:
+            if i not in out:
+                A = A + areas[i]
+        if L == 0 or A == 0:
+            break
+        q = (kappa * L) / A
+        new = []
+        for i in F:
+            if i not in out:
+                a[i] = a0[i] + q * areas[i]
+                sc[i] = scale[i] + abs(q * areas[i])
+                if a[i] > b[i]:
+                    new.append(i)
+        if not new:
+            break
+        out.update(new)
+    return a, sc
+
+
+def stress_test(rt: Runtime, v: int, n, t: float) -> tuple[list, list, float]:
+    """Broken bonds, loads and the smallest relative gap to a tie, stress criterion (sections 11, 11.1).
+
+    Bond ``e`` breaks when its measure ``a > t * S_e``; the gap is ``|a - t S_e|`` over
+    ``scale + t S_e`` (the magnitudes that went into the comparison).
+    """
+    a, b, scale = stress_measures(rt, v, n, t)
+    broken = [a[e] > b[e] for e in range(len(a))]
+    loads = [0.0] * len(a)
     margin = math.inf
-    ptr, _, gains, _ = rt.stress
-    for j, (e, g) in zip(range(ptr[v], ptr[v + 1]), stress_gains(rt, v, n)):
-        limit = t * strength[e]
-        broken[e] = g > limit
-        if g > 0:
-            loads[e] = g / limit if limit > 0 else (math.inf if limit == 0 else 0.0)
-        scale = sum(abs(gains[j][c] * n[c]) for c in range(3)) + (limit if math.isfinite(limit) else 0.0)
-        if math.isfinite(limit) and scale > 0:
-            margin = min(margin, abs(g - limit) / scale)
+    for e in range(len(a)):
+        if a[e] > 0:
+            loads[e] = a[e] / b[e] if b[e] > 0 else (math.inf if b[e] == 0 else 0.0)
+        total = scale[e] + (b[e] if math.isfinite(b[e]) else 0.0)
+        if math.isfinite(b[e]) and total > 0 and (scale[e] > 0 or a[e] != 0):
+            margin = min(margin, abs(a[e] - b[e]) / total)
     return broken, loads, margin

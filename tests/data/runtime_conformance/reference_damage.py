@@ -19,17 +19,16 @@ import reference
 HEALTH_MARGIN = 1e-7
 
 
-def measures(rt: reference.Runtime, r: reference.Response) -> list:
-    """``(a, b, scale)`` per bond (section 12.4 step 2): the measure, the limit, the magnitudes behind ``a``."""
+def measures(rt: reference.Runtime, r: reference.Response, health: list | None = None) -> list:
+    """``(a, b, scale)`` per bond (section 12.4 step 2): the measure, the limit, the magnitudes behind ``a``.
+
+    ``health``: the state before the hit (feature ``"sharing"`` starts its passes with the broken bonds).
+    """
     if rt.criterion != "stress":
         return reference.modes_measures(rt, r.disp, r.alpha_scale, r.t)
-    ptr, bonds, gains, strength = rt.stress
-    a = [0.0] * len(rt.edges)
-    scale = [0.0] * len(rt.edges)
-    for j, (e, g) in zip(range(ptr[r.v], ptr[r.v + 1]), reference.stress_gains(rt, r.v, r.n)):
-        a[e] = g
-        scale[e] = sum(abs(gains[j][c] * r.n[c]) for c in range(3))
-    return [(a[e], r.t * strength[e], scale[e]) for e in range(len(rt.edges))]
+    before = None if health is None else [h <= 0 for h in health]
+    a, b, scale = reference.stress_measures(rt, r.v, r.n, r.t, before)
+    return list(zip(a, b, scale))
 
 
 def damage_factor(rt: reference.Runtime) -> tuple[float, float]:
@@ -50,7 +49,7 @@ def hit(rt: reference.Runtime, health: list, point, impulse, threshold) -> refer
     c, q = damage_factor(rt)
     e = len(rt.edges)
     now_broken, now_cracked = [False] * e, [False] * e
-    rows = measures(rt, r) if r.m != 0 else [(0.0, math.inf, 0.0)] * e
+    rows = measures(rt, r, health) if r.m != 0 else [(0.0, math.inf, 0.0)] * e
     crack_margin = math.inf
     for i, (a, b, scale) in enumerate(rows):
         if r.m == 0:

@@ -32,6 +32,7 @@ class LevelFile:
     edges: list
     thresholds: list
     stress: tuple | None  # (ptr, bonds, gains, strength) over all body sites / bonds
+    sharing: tuple | None = None  # (body_site_fragment, body_edge_areas): feature "sharing" (section 11.1)
 
     @classmethod
     def from_data(cls, data) -> LevelFile:
@@ -47,7 +48,9 @@ class LevelFile:
                    B=[[tuple(m) for m in site] for site in lv["body_B"].tolist()],
                    W=[[tuple(f) for f in mode] for mode in lv["body_W"].tolist()],
                    edges=[tuple(e) for e in lv["body_edges"].tolist()],
-                   thresholds=[float(t) for t in data.levels_info["thresholds"]], stress=stress)
+                   thresholds=[float(t) for t in data.levels_info["thresholds"]], stress=stress,
+                   sharing=(lv["body_site_fragment"].tolist(), [float(a) for a in lv["body_edge_areas"].tolist()])
+                   if "body_site_fragment" in lv else None)
 
     @property
     def bodies(self) -> int:
@@ -89,10 +92,13 @@ class LevelFile:
             ptr, bonds, gains, strength = self.stress
             n0, n1 = ptr[s0], ptr[s1]
             stress = ([x - n0 for x in ptr[s0: s1 + 1]], bonds[n0:n1], gains[n0:n1], strength[e0:e1])
+        sharing = None
+        if self.sharing is not None and self.body0.sharing is not None:
+            sharing = (self.sharing[0][s0:s1], self.sharing[1][e0:e1], self.body0.sharing[2])
         return reference.Runtime(sites=self.sites[s0:s1], B=self.B[s0:s1], W=[mode[g0:g1] for mode in self.W],
                                  edges=self.edges[e0:e1], default_threshold=self.thresholds[self.body_level(b) - 1],
                                  criterion=self.body0.criterion, stress=stress, anchored=None,
-                                 damage=self.body0.damage)
+                                 damage=self.body0.damage, sharing=sharing)
 
 
 def typical_load(rt: reference.Runtime, point, direction) -> float:
