@@ -51,9 +51,13 @@ def require_tool(name: str, package: str) -> str:
 # The format-2 features (docs/FORMAT.md section 11) each engine reader implements: its harness runs the
 # vector files that need them (``vector_names(READER_FEATURES[reader])``) and skips only the others.
 READER_FEATURES: dict[str, tuple[str, ...]] = {
+    # engines/c
     "c": ("anchors", "damage", "levels", "stress"),
+    # engines/csharp
     "csharp": ("anchors", "damage", "levels", "stress"),
+    # engines/godot
     "gdscript": ("anchors", "damage", "levels", "stress"),
+    # engines/web
     "js": ("anchors", "damage", "levels", "stress"),
 }
 
