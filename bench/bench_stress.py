@@ -57,6 +57,7 @@ def _cell(value, key: str) -> str:
 VARIANTS = (
     ("modes", (), "modes"),
     ("stress", ("runtime.criterion=stress",), "stress"),
+    ("stress, no sharing", ("runtime.criterion=stress", "runtime.load_sharing=0"), "stress"),
     ("stress, tets", ("runtime.criterion=stress", "runtime.stress_model=tets"), "stress"),
 )
 # Manifest rows also get the stress criterion with two levels, the children's bonds at a tenth of the threshold.
@@ -128,7 +129,9 @@ def run(quick: bool = False, default_recipe: bool = True, overrides: tuple[str, 
         "",
         "Each sample asset baked per recipe in fresh processes with `runtime.criterion = \"modes\"`, with "
         "`\"stress\"` (the default `stress_model = \"blocks\"`: rigid fragments held by elastic faults, the hit "
-        "on the fragment it lands on), with `\"stress\"` and `stress_model = \"tets\"` (elasticity on the tet "
+        "on the fragment it lands on; and the default `load_sharing = 2`: the struck fragment's bonds share the "
+        "load of its broken ones, docs/FORMAT.md section 11.1), the same with `load_sharing = 0` (\"no sharing\"), "
+        "with `\"stress\"` and `stress_model = \"tets\"` (elasticity on the tet "
         "mesh), and for the manifest recipes with `\"stress\"` and two levels (`levels.count = 2`, children's "
         "bonds at `levels.threshold_factor = 0.1`; the atlas counts the leaves shown), each swept by its criterion "
         "(`run_atlas`, 200 hits; figures defined in "
