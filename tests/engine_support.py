@@ -58,7 +58,7 @@ READER_FEATURES: dict[str, tuple[str, ...]] = {
     # engines/godot
     "gdscript": ("anchors", "damage", "levels", "stress"),
     # engines/web
-    "js": ("anchors", "damage", "levels", "stress"),
+    "js": ("anchors", "damage", "levels", "sharing", "stress"),
 }
 
 

@@ -1,7 +1,8 @@
 // fracture_runtime.js: a reader of the fracture-modes runtime file (version 1, and version 2
-// with features "stress", the stress criterion of docs/FORMAT.md section 11, "anchors" and
-// "damage", structures and damage that adds up, section 12) and the realtime impact projection,
-// written from docs/FORMAT.md alone.
+// with features "stress", the stress criterion of docs/FORMAT.md section 11, "sharing", load
+// sharing among the struck fragment's bonds, section 11.1, "anchors" and "damage", structures and
+// damage that adds up, section 12, and "levels", fragments that break again, section 14) and the
+// realtime impact projection, written from docs/FORMAT.md alone.
 //
 // A standalone ES module with no dependencies; it runs in browsers and in Node.js (>= 18).
 // MIT licence, Copyright (c) fracture developers (see LICENSE next to this file).
@@ -28,8 +29,8 @@
 
 export const FORMAT_NAME = 'fracture-modes-runtime';
 export const FORMAT_VERSION = 2;  // the newest version this reader reads
-/** The version-2 features this reader implements (docs/FORMAT.md sections 11 and 12). */
-export const KNOWN_FEATURES = ['anchors', 'damage', 'levels', 'stress'];
+/** The version-2 features this reader implements (docs/FORMAT.md sections 11, 11.1, 12 and 14). */
+export const KNOWN_FEATURES = ['anchors', 'damage', 'levels', 'sharing', 'stress'];
 
 // name -> [dtype, number of dimensions]; also the order of the arrays in the binary file.
 const ARRAY_LAYOUT = [
@@ -46,6 +47,8 @@ const STRESS_LAYOUT = [
   ['site_bond_gain', 'float32', 2],
   ['bond_strength', 'float32', 1],
 ];
+// Load sharing (docs/FORMAT.md section 11.1), after the stress arrays; only with feature "sharing".
+const SHARING_LAYOUT = [['site_fragment', 'int32', 1]];
 // Structures (docs/FORMAT.md section 12): the anchored flags with feature "anchors"; the crack
 // segments (drawing only, optional in any version-2 file) both or neither.
 const ANCHOR_LAYOUT = [['anchored', 'int32', 1]];
@@ -172,6 +175,18 @@ function checkHeader(h) {
   if (!h.arrays || typeof h.arrays !== 'object') fail('the header has no arrays table');
   if (stressOf(h) && !isCount(c.site_bonds)) fail('counts.site_bonds must be a non-negative integer');
   if (featuresOf(h).includes('damage')) checkDamage(h.damage);
+  if (featuresOf(h).includes('sharing')) checkSharing(h.sharing);
+}
+
+// Section 11.1: the sharing object's concentration kappa, a finite number > 0.
+function checkSharing(sharing) {
+  if (!sharing || typeof sharing !== 'object' || Array.isArray(sharing)) {
+    fail("runtime file lists feature 'sharing' but has no header object 'sharing'");
+  }
+  const kappa = sharing.concentration;
+  if (typeof kappa !== 'number' || !Number.isFinite(kappa) || !(kappa > 0)) {
+    fail(`sharing.concentration must be a finite number > 0, got ${typeof kappa === 'number' ? kappa : JSON.stringify(kappa)}`);
+  }
 }
 
 /** The (checked) header's features; none in version 1. */
@@ -208,6 +223,9 @@ function checkFeatures(h) {
     fail(`runtime file needs criterion '${criterion}', which this reader does not implement`);
   }
   const stress = features.includes('stress');
+  if (features.includes('sharing') && criterion !== 'stress') {
+    fail("runtime file has feature 'sharing' without criterion 'stress'");
+  }
   if (criterion === 'stress' && !stress) fail("runtime file has criterion 'stress' but does not list feature 'stress'");
   if (criterion !== 'stress' && stress) {
     fail("runtime file lists feature 'stress' but its criterion is 'modes' (the stress arrays come with criterion 'stress')");
@@ -234,7 +252,7 @@ function expectedShapes(h) {
   const segments = h.arrays.crack_segments;
   const n = segments && Array.isArray(segments.shape) ? segments.shape[0] : -1;
   return { sites: [s, 3], B: [s, k, d], W: [k, p, d], edges: [e, 2], edge_areas: [e],
-    site_bonds_ptr: [s + 1], site_bonds: [nnz], site_bond_gain: [nnz, 3], bond_strength: [e],
+    site_bonds_ptr: [s + 1], site_bonds: [nnz], site_bond_gain: [nnz, 3], bond_strength: [e], site_fragment: [s],
     anchored: [p], crack_ptr: [e + 1], crack_segments: [n, 2, 3] };
 }
 
@@ -306,6 +324,12 @@ export function parseRuntime(header, binary, options = {}) {
   if (stressOf(h)) {
     for (const [name, dtype, ndim] of STRESS_LAYOUT) arrays[name] = readArray(name, dtype, ndim, h.arrays[name], view, shapes);
     checkStress(arrays, h.counts.sites, h.counts.edges);
+    if (featuresOf(h).includes('sharing')) {
+      const [name, dtype, ndim] = SHARING_LAYOUT[0];
+      if (!h.arrays[name]) fail("the feature 'sharing' needs the array site_fragment");
+      arrays[name] = readArray(name, dtype, ndim, h.arrays[name], view, shapes);
+      if (!arrays[name].every((f) => f >= 0 && f < p)) fail(`site_fragment must be fragment indices in 0..${p - 1}`);
+    }
   }
   readStructure(h, arrays, view, shapes);
   const runtime = new FractureRuntime(h, arrays);
@@ -414,6 +438,11 @@ export class FractureRuntime {
     this.siteBonds = arrays.site_bonds || null;         // (nnz,) Int32Array: the bond (edge) of each entry
     this.siteBondGain = arrays.site_bond_gain || null;  // (nnz, 3) G: tensile force per unit impulse along x, y, z
     this.bondStrength = arrays.bond_strength || null;   // (e,) S
+    // Section 11.1, feature "sharing": kappa and the fragment each site loads (null without the feature);
+    // the bonds of each fragment j, by increasing index, are fragmentBonds[fragmentBondsPtr[j] .. [j+1]-1].
+    this.sharing = arrays.site_fragment ? { concentration: header.sharing.concentration } : null;
+    this.siteFragment = arrays.site_fragment || null;   // (s,) Int32Array
+    if (this.sharing) this._buildFragmentBonds();
     // Section 12: the version-2 features, the fragments bonded to the world, the damage parameters and the
     // crack segments (drawing only). Null (features: empty) when the file does not have them.
     this.features = featuresOf(header).slice();
@@ -787,7 +816,7 @@ export class FractureRuntime {
     let jumps = null;
     let loads = null;
     if (this.criterion === 'stress') {
-      loads = this._stressMeasures(site, nUnit, limit, measure, bound);
+      loads = this._stressMeasures(site, nUnit, limit, measure, bound, state);
       if (keep) disp = this._displacement(alpha);
     } else {
       disp = this._displacement(alpha);
@@ -839,20 +868,79 @@ export class FractureRuntime {
 
   // Criterion "stress" (docs/FORMAT.md section 11): the measure of bond e of site v's list is
   // g = (G0 n'0 + G1 n'1) + G2 n'2 (in this order) against the limit t * S[e]; every other bond has
-  // measure 0. Fills measure and bound; returns loads: L_e = g / (t * S_e) for listed bonds with g > 0, else 0.
-  _stressMeasures(site, nUnit, limit, measure, bound) {
+  // measure 0; with feature "sharing", then section 11.1's passes (state: the damage state before this
+  // hit, whose broken bonds start in the set X; null: none). Fills measure and bound; returns loads:
+  // a / b with the final measure a for bonds with a > 0 (b = 0: Infinity), else 0.
+  _stressMeasures(site, nUnit, limit, measure, bound, state = null) {
     const { siteBondsPtr: ptr, siteBonds: bonds, siteBondGain: G, bondStrength: S, numEdges: e } = this;
     const loads = new Float64Array(e);
     for (let b = 0; b < e; b++) bound[b] = limit * S[b];
     const [n0, n1, n2] = nUnit;
     for (let j = ptr[site]; j < ptr[site + 1]; j++) {
-      const edge = bonds[j];
-      const g = G[3 * j] * n0 + G[3 * j + 1] * n1 + G[3 * j + 2] * n2;
-      measure[edge] = g;
-      const b = bound[edge];
-      if (g > 0) loads[edge] = b > 0 ? g / b : b === 0 ? Infinity : 0;
+      measure[bonds[j]] = G[3 * j] * n0 + G[3 * j + 1] * n1 + G[3 * j + 2] * n2;
+    }
+    if (this.sharing) this._share(site, measure, bound, state);
+    for (let r = 0; r < e; r++) {
+      const a = measure[r];
+      const b = bound[r];
+      if (a > 0) loads[r] = b > 0 ? a / b : b === 0 ? Infinity : 0;
     }
     return loads;
+  }
+
+  // The bonds of each fragment by increasing index (F of section 11.1 for every fragment f).
+  _buildFragmentBonds() {
+    const { numFragments: p, numEdges: e, edges } = this;
+    const ptr = new Int32Array(p + 1);
+    for (let m = 0; m < 2 * e; m++) ptr[edges[m] + 1]++;
+    for (let j = 0; j < p; j++) ptr[j + 1] += ptr[j];
+    const next = ptr.slice(0, p);
+    const list = new Int32Array(2 * e);
+    for (let m = 0; m < e; m++) {  // in bond order: each fragment's list ascends
+      list[next[edges[2 * m]]++] = m;
+      list[next[edges[2 * m + 1]]++] = m;
+    }
+    this.fragmentBondsPtr = ptr;
+    this.fragmentBonds = list;
+  }
+
+  // Section 11.1, literally (double precision, sums in increasing bond order): the bonds F of the struck
+  // fragment f = siteFragment[site] share the load of those that broke, in passes. measure holds a0 on
+  // entry and the final measure a on return (only F's entries change); bound is b = t * S.
+  _share(site, measure, bound, state) {
+    const f = this.siteFragment[site];
+    const first = this.fragmentBondsPtr[f];
+    const count = this.fragmentBondsPtr[f + 1] - first;
+    const F = this.fragmentBonds.subarray(first, first + count);
+    const kappa = this.sharing.concentration;
+    const area = this.edgeAreas;
+    const a0 = new Float64Array(count);
+    const out = new Uint8Array(count);  // X, over F
+    const fresh = new Uint8Array(count);
+    for (let i = 0; i < count; i++) {
+      const e = F[i];
+      a0[i] = measure[e];
+      out[i] = a0[i] > bound[e] || (state !== null && state[e] <= 0) ? 1 : 0;
+    }
+    for (;;) {
+      let L = 0;
+      for (let i = 0; i < count; i++) if (out[i]) L = L + Math.max(a0[i], 0);
+      let A = 0;
+      for (let i = 0; i < count; i++) if (!out[i]) A = A + area[F[i]];
+      if (L === 0 || A === 0) break;
+      const q = (kappa * L) / A;
+      let added = false;
+      for (let i = 0; i < count; i++) {
+        if (out[i]) continue;
+        const e = F[i];
+        const a = a0[i] + q * area[e];  // one product, one sum; inf * 0 = NaN holds
+        measure[e] = a;
+        fresh[i] = a > bound[e] ? 1 : 0;
+        if (fresh[i]) added = true;
+      }
+      if (!added) break;
+      for (let i = 0; i < count; i++) if (fresh[i]) { out[i] = 1; fresh[i] = 0; }  // after the pass
+    }
   }
 
   // Section 12.4 step 4: broken, cracked, groups and anchored after the update (stateless: this hit's breaks).
@@ -915,6 +1003,8 @@ const LEVEL_ARRAYS = [['parent', 'int32', 1], ['body_fragment', 'int32', 1], ['b
   ['body_edge_ptr', 'int32', 1], ['body_edges', 'int32', 2], ['body_edge_areas', 'float32', 1]];
 const LEVEL_STRESS = [['body_site_bonds_ptr', 'int32', 1], ['body_site_bonds', 'int32', 1],
   ['body_site_bond_gain', 'float32', 2], ['body_bond_strength', 'float32', 1]];
+// With feature "sharing" (section 11.1): the fragment each row of body_sites loads, local to its body.
+const LEVEL_SHARING = [['body_site_fragment', 'int32', 1]];
 const LEVEL_CRACKS = [['body_crack_ptr', 'int32', 1], ['body_crack_segments', 'float32', 3]];
 
 function ptrOk(ptr, first, end) {
@@ -949,7 +1039,9 @@ Object.assign(FractureRuntime.prototype, {
     const c = h.counts;
     const stress = this.criterion === 'stress';
     const cracks = LEVEL_CRACKS.some(([name]) => h.arrays[name] !== undefined);
-    const layout = [...LEVEL_ARRAYS, ...(stress ? LEVEL_STRESS : []), ...(cracks ? LEVEL_CRACKS : [])];
+    const sharing = this.sharing !== null;
+    const layout = [...LEVEL_ARRAYS, ...(stress ? LEVEL_STRESS : []), ...(sharing ? LEVEL_SHARING : []),
+      ...(cracks ? LEVEL_CRACKS : [])];
     const a = {};
     for (const [name, dtype, ndim] of layout) {
       const entry = h.arrays[name];
@@ -982,6 +1074,7 @@ Object.assign(FractureRuntime.prototype, {
     const N = stress ? a.body_site_bonds.length : 0;
     if (stress && (!same('body_site_bonds_ptr', [S + 1]) || !same('body_site_bond_gain', [N, 3]) ||
         !same('body_bond_strength', [E]) || c.body_site_bonds !== N)) fail('levels stress arrays do not agree');
+    if (sharing && !same('body_site_fragment', [S])) fail(`body_site_fragment must have ${S} entries`);
     const n = cracks ? a.body_crack_segments.shape[0] : 0;
     if (cracks && (!same('body_crack_ptr', [E + 1]) || !same('body_crack_segments', [n, 2, 3]) ||
         c.body_crack_segments !== n)) fail('levels crack arrays do not agree');
@@ -1032,7 +1125,7 @@ Object.assign(FractureRuntime.prototype, {
       lv.stateOffsets[b] = this.numEdges + edgePtr[b];
     }
     lv.stateOffsets[nb] = this.numEdges + E;
-    const features = [...(stress ? ['stress'] : []), ...(this.damage ? ['damage'] : [])];
+    const features = [...(this.damage ? ['damage'] : []), ...(sharing ? ['sharing'] : []), ...(stress ? ['stress'] : [])];
     for (let b = 1; b < nb; b++) {
       const [s0, s1, g0, g1, e0, e1] = [sitePtr[b], sitePtr[b + 1], child[b] - p, child[b + 1] - p, edgePtr[b], edgePtr[b + 1]];
       const [sb, cb, eb] = [s1 - s0, g1 - g0, e1 - e0];
@@ -1052,6 +1145,8 @@ Object.assign(FractureRuntime.prototype, {
           ['site_bonds', 'int32', [n1 - n0], a.body_site_bonds.subarray(n0, n1)],
           ['site_bond_gain', 'float32', [n1 - n0, 3], a.body_site_bond_gain.subarray(3 * n0, 3 * n1)],
           ['bond_strength', 'float32', [eb], a.body_bond_strength.subarray(e0, e1)]);
+        // Values within the body's children: checked when parseRuntime reads the view.
+        if (sharing) arrays.push(['site_fragment', 'int32', [sb], a.body_site_fragment.subarray(s0, s1)]);
       }
       if (cracks) {
         const ptr = a.body_crack_ptr.subarray(e0, e1 + 1);
@@ -1064,7 +1159,7 @@ Object.assign(FractureRuntime.prototype, {
         dim: d, counts, fragment_names: names.slice(g0, g1), transform: this.transform,
         default_threshold: thresholds[bodyLevel - 1],
         impact_radius: Number.isFinite(radii[bodyLevel - 1]) ? radii[bodyLevel - 1] : this.impactRadius,
-        damage: h.damage }, arrays);
+        damage: h.damage, ...(sharing ? { sharing: h.sharing } : {}) }, arrays);
       try {
         lv.views.push(parseRuntime(viewHeader, bytes, { checkCrc: false, jumpTable: options.jumpTable, [VIEW]: true }));
       } catch (err) {
