@@ -414,16 +414,23 @@ CASES = [
      lambda h, b: _edit(["criterion"], "modes")(*_edit(["features"], ["sharing"])(h, b)), "rejected",
      "feature 'sharing' with criterion 'modes'"),
     ("ok_sharing", "sharing", lambda h, b: (h, b), "ok", "the sharing base file itself"),
+    # ... with levels (base: levels_sharing: body 1 has 3 children and 2 sites)
+    ("levels_sharing_array_missing", "levels_sharing", _edit(["arrays", "body_site_fragment"], ...), "rejected",
+     "feature 'sharing' with levels but without body_site_fragment"),
+    ("levels_sharing_fragment_out_of_range", "levels_sharing",
+     lambda h, b: _poke(h, b, "body_site_fragment", 1, "i", 3), "rejected",
+     "body_site_fragment names local child 3 (body 1 has 3)"),
+    ("ok_levels_sharing", "levels_sharing", lambda h, b: (h, b), "ok", "the levels + sharing base file itself"),
 ]
 
 
 def generate(out: str, example_json: str, dyadic_json: str, structure_json: str, levels_json: str,
-             sharing_json: str) -> list[str]:
+             sharing_json: str, levels_sharing_json: str) -> list[str]:
     """Write every case and ``index.json`` into ``out``; returns the paths written (relative to its parent)."""
     os.makedirs(out, exist_ok=True)
     bases = {}
     for key, path in (("example", example_json), ("dyadic", dyadic_json), ("structure", structure_json),
-                      ("levels", levels_json), ("sharing", sharing_json)):
+                      ("levels", levels_json), ("sharing", sharing_json), ("levels_sharing", levels_sharing_json)):
         with open(path, encoding="utf-8") as fh:
             header = json.load(fh)
         with open(os.path.join(os.path.dirname(path), header["buffer"]["uri"]), "rb") as fh:
@@ -452,7 +459,7 @@ def generate(out: str, example_json: str, dyadic_json: str, structure_json: str,
         if expect == "ok":
             entry["vectors"] = vectors
             entry["fragment_names"] = UNICODE_NAMES if name == "ok_unicode_names" else header["fragment_names"]
-        if base in ("structure", "levels", "sharing"):  # a reader without these features refuses such a file
+        if base in ("structure", "levels", "sharing", "levels_sharing"):  # a reader without these features refuses
             entry["features"] = list(bases[base][0]["features"])
         if name == "crc_mismatch":
             entry["only_crc"] = True

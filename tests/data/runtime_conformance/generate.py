@@ -585,6 +585,7 @@ def generate(out: str, rebake: bool = False) -> list[str]:
         os.path.join(out, "structure_dyadic.fracture.json"),
         os.path.join(out, "levels_dyadic.fracture.json"),
         os.path.join(out, "sharing_dyadic.fracture.json"),
+        os.path.join(out, "levels_sharing.fracture.json"),
     )
     return written
 
