@@ -56,7 +56,7 @@ READER_FEATURES: dict[str, tuple[str, ...]] = {
     # engines/csharp
     "csharp": ("anchors", "damage", "levels", "stress"),
     # engines/godot
-    "gdscript": ("anchors", "damage", "levels", "stress"),
+    "gdscript": ("anchors", "damage", "levels", "sharing", "stress"),
     # engines/web
     "js": ("anchors", "damage", "levels", "sharing", "stress"),
 }

@@ -12,6 +12,9 @@
 # whose group holds an anchored fragment (bonded to the world) stay StaticBodies, only free pieces
 # become RigidBodies; cracked bonds are drawn as lines along the file's crack segments.
 #
+# Load sharing (feature "sharing", docs/FORMAT.md section 11.1) needs nothing here: FractureRuntime's hits
+# apply it (the struck fragment's bonds share the load of its broken ones) whenever the file says so.
+#
 # Levels (runtime format version 2, feature "levels", docs/FORMAT.md section 14): the body keeps one object
 # state and every hit goes through FractureRuntime.hit_piece() on the fragment struck (pass it as `struck`, e.g.
 # the "fragment" metadata of the CollisionShape the physics engine reports; default: the body's fragment

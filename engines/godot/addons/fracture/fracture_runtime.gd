@@ -2,8 +2,9 @@
 #
 # Loads `<stem>.fracture.json` + `<stem>.fracture.bin`, validates them and answers "which
 # fragments break off" for a hit (docs/FORMAT.md of the fracture repository, format version 1, and
-# version 2 with features "stress", the stress criterion of section 11, "anchors" and "damage",
-# structures and damage that adds up, section 12, and "levels", fragments that break again, section 14).
+# version 2 with features "stress", the stress criterion of section 11, "sharing", its load sharing among the
+# struck fragment's bonds (section 11.1), "anchors" and "damage", structures and damage that adds up, section 12,
+# and "levels", fragments that break again, section 14).
 # All arithmetic in GDScript floats (64-bit doubles); never through Vector3 (32-bit floats).
 #
 #   var runtime = FractureRuntime.new()
@@ -23,16 +24,19 @@ extends Reference
 class_name FractureRuntime
 
 const FORMAT_VERSION := 2  # the newest version this reader reads
-const KNOWN_FEATURES := ["anchors", "damage", "levels", "stress"]  # the version-2 features this reader implements
+# The version-2 features this reader implements.
+const KNOWN_FEATURES := ["anchors", "damage", "levels", "sharing", "stress"]
 # The five arrays of section 2, the four of the stress criterion (section 11, with feature "stress"),
-# then those of section 12: anchored (feature "anchors") and the optional crack arrays.
+# then those of section 12: anchored (feature "anchors") and the optional crack arrays; last site_fragment
+# (section 11.1, feature "sharing").
 const ARRAY_NAMES := ["sites", "B", "W", "edges", "edge_areas", "site_bonds_ptr", "site_bonds", "site_bond_gain",
-		"bond_strength", "anchored", "crack_ptr", "crack_segments"]
-const ARRAY_RANKS := [2, 3, 3, 2, 1, 1, 1, 2, 1, 1, 1, 3]
-const INT_ARRAYS := [3, 5, 6, 9, 10]
+		"bond_strength", "anchored", "crack_ptr", "crack_segments", "site_fragment"]
+const ARRAY_RANKS := [2, 3, 3, 2, 1, 1, 1, 2, 1, 1, 1, 3, 1]
+const INT_ARRAYS := [3, 5, 6, 9, 10, 12]
 const ANCHORED := 9
 const CRACK_PTR := 10
 const CRACK_SEGMENTS := 11
+const SITE_FRAGMENT := 12
 const KD_LEAF := 16
 const MAX_DEPTH := 64
 const BOUND_SLACK := 1e-9  # far above the rounding of a k-term sum in double
@@ -53,6 +57,10 @@ var error_message := ""
 # How a hit decides which bonds break: "modes" (section 4) or "stress" (section 11, with the arrays below).
 var criterion := "modes"
 var site_bonds_count := 0  # stress criterion: entries of the per-site bond lists (counts.site_bonds)
+# Feature "sharing" (section 11.1): the struck fragment's bonds share the load of its broken ones. kappa
+# (sharing.concentration) and the fragment each site loads; 0.0 and empty without the feature.
+var sharing_concentration := 0.0
+var site_fragment := PoolIntArray()  # (s,)
 # Section 12 (version 2): the file's features, the fragments bonded to the world (1) or not (0), the damage
 # parameters, and where each bond's fault meets the surface (drawing only). Empty or defaults without them.
 var features := []
@@ -74,6 +82,7 @@ var _max_bound := 0.0  # largest per-edge bound, see _edge_bounds()
 # Arrays copied (in C++) at the start of each projection instead of filled in GDScript loops.
 var _identity := []   # 0, 1, ..., p - 1
 var _no_edges := []   # e times false
+var _zero_edges := [] # e times 0.0
 var _zero_modes := [] # k times 0.0
 var _no_anchors := [] # p times 0
 # Criterion "stress": site v's bonds are entries _bond_ptr[v] .. _bond_ptr[v + 1] - 1 of _bond_edge and
@@ -83,6 +92,8 @@ var _bond_edge := PoolIntArray()
 var _bond_gain := PoolRealArray()
 var _bond_strength := PoolRealArray()
 var _stress := false  # set by _parse_header for the file being loaded
+var _sharing := false  # set by _parse_header: feature "sharing" (with criterion "stress")
+var _incident := []  # with "sharing": per fragment, its bonds (P or Q is the fragment) by increasing index
 var _features := []  # set by _parse_header for the file being loaded
 var _view := false  # a body's view made by _read_levels (version 2 without features)
 var _damage_factor := 0.0  # q = r / (1 - c) of section 12.4, once per file (0 when c = 1)
@@ -178,9 +189,11 @@ func _parse_header(header: PoolByteArray):
 
 # Section 11: version 2 lists the features it needs (refused by name when unknown) and a criterion;
 # version 1 ignores both keys. Like the reference reader, a file that lists "stress" must use
-# criterion "stress" (the stress arrays come with the criterion). Sets _stress; null on failure.
+# criterion "stress" (the stress arrays come with the criterion), and "sharing" needs it. Sets _stress and
+# _sharing; null on failure.
 func _check_features(top: Dictionary, version: int):
 	_stress = false
+	_sharing = false
 	_features = []
 	if version < 2:
 		return true
@@ -206,7 +219,10 @@ func _check_features(top: Dictionary, version: int):
 	if crit != "stress" and has_stress:
 		return _fail("runtime file lists feature 'stress' but its criterion is 'modes' (the stress arrays come " +
 				"with criterion 'stress')")
+	if "sharing" in features and crit != "stress":
+		return _fail("runtime file has feature 'sharing' without criterion 'stress'")
 	_stress = has_stress
+	_sharing = "sharing" in features
 	_features = features
 	return true
 
@@ -335,6 +351,9 @@ func _check_shapes(top, shapes, counts, names, header_dim, threshold, radius, tr
 			return _fail("edge %d is (%d, %d): edges must be (P, Q) with 0 <= P < Q < %d" % [m, P, Q, w[1]])
 	if _stress and _check_stress(shapes, counts, table, peer, arrays) == null:
 		return null
+	var shared = _check_sharing(top, table, peer, binary.size(), s[0], w[1]) if _sharing else PoolIntArray()
+	if shared == null:
+		return null
 	var structure = _check_structure(top, table, counts, peer, binary.size(), e[0], w[1])
 	if structure == null:
 		return null
@@ -352,6 +371,8 @@ func _check_shapes(top, shapes, counts, names, header_dim, threshold, radius, tr
 	_bond_edge = arrays[6] if _stress else PoolIntArray()
 	_bond_gain = arrays[7] if _stress else PoolRealArray()
 	_bond_strength = arrays[8] if _stress else PoolRealArray()
+	sharing_concentration = _number(top["sharing"]["concentration"]) if _sharing else 0.0
+	site_fragment = shared
 	sites_count = s[0]
 	modes = w[0]
 	fragments = w[1]
@@ -368,6 +389,13 @@ func _check_shapes(top, shapes, counts, names, header_dim, threshold, radius, tr
 	_W = arrays[2]
 	edges = arrays[3]
 	edge_areas = arrays[4]
+	_incident = []
+	if _sharing:
+		for _j in range(fragments):
+			_incident.append([])
+		for m in range(edges_count):  # increasing bond index within each fragment's list
+			_incident[edges[2 * m]].append(m)
+			_incident[edges[2 * m + 1]].append(m)
 	return true
 
 
@@ -407,6 +435,29 @@ func _check_stress(shapes: Array, counts: Dictionary, table: Dictionary, peer: S
 		if x < 0.0:
 			return _fail("bond_strength must be >= 0")
 	return true
+
+
+# Section 11.1: the sharing object (concentration kappa, a finite number > 0) and site_fragment (s,) of
+# fragment indices 0..p-1. The array, or null on failure.
+func _check_sharing(top: Dictionary, table: Dictionary, peer: StreamPeerBuffer, size: int, s: int, p: int):
+	var sharing = top.get("sharing")
+	if not sharing is Dictionary:
+		return _fail("runtime file lists feature 'sharing' but has no header object 'sharing'")
+	var kappa = _number(sharing.get("concentration"))
+	if kappa == null or not _finite(kappa) or not kappa > 0.0:
+		return _fail("sharing.concentration must be a finite number > 0")
+	if not table.has("site_fragment"):
+		return _fail("the feature 'sharing' needs the array site_fragment")
+	var shape = _check_array(table.get("site_fragment"), SITE_FRAGMENT, size)
+	if shape == null:
+		return null
+	if shape[0] != s:
+		return _fail("array site_fragment has shape %s, expected [%d]" % [str(shape), s])
+	var values = _read_entry(peer, table, SITE_FRAGMENT)
+	for f in values:
+		if f < 0 or f >= p:
+			return _fail("site_fragment must be fragment indices in 0..%d" % (p - 1))
+	return values
 
 
 # Section 12.2: anchored (p,) of 0/1 with "anchors"; the damage object (0 < c <= 1, finite r >= 0) with
@@ -920,8 +971,10 @@ func _whole_graph() -> void:
 	for j in range(fragments):
 		_identity.append(j)
 	_no_edges = []
+	_zero_edges = []
 	for m in range(edges_count):
 		_no_edges.append(false)
+		_zero_edges.append(0.0)
 	_zero_modes = []
 	for i in range(modes):
 		_zero_modes.append(0.0)
@@ -1206,9 +1259,23 @@ func _modes_damage(state: Array, disp: Array, t: float, now_cracked: Array) -> v
 
 # Step 3 for criterion "stress": the site's listed bonds, measure g = (G0 n'0 + G1 n'1) + G2 n'2 against
 # the limit b = t * S[e]; every other bond has measure 0 and neither cracks nor breaks.
+# With "sharing" the measure is section 11.1's (every bond: those off the site's list and the struck fragment's
+# have measure 0, which neither cracks nor breaks), with the bonds broken earlier (health <= 0) in the set X.
 func _stress_damage(state: Array, site: int, n0: float, n1: float, n2: float, t: float, now_cracked: Array) -> void:
 	var c := crack_level
 	var q := _damage_factor
+	if _sharing:
+		var measure := _shared_measure(site, n0, n1, n2, t, state)
+		for edge in range(edges_count):
+			var a: float = measure[edge]
+			var b: float = t * _bond_strength[edge]
+			if a > c * b:  # one product
+				now_cracked[edge] = true
+				var h: float = state[edge]
+				if h > 0.0:
+					h = 0.0 if a > b else h - q * (a / b - c)  # a / b: one division
+					state[edge] = h if h > 0.0 else 0.0
+		return
 	var G := _bond_gain
 	for j in range(_bond_ptr[site], _bond_ptr[site + 1]):
 		var g: float = G[3 * j] * n0 + G[3 * j + 1] * n1 + G[3 * j + 2] * n2
@@ -1242,11 +1309,19 @@ func _anchored_of(groups: PoolIntArray) -> Array:
 # Criterion "stress" (docs/FORMAT.md section 11): bond e of the site's list breaks when
 # g = (G0 n'0 + G1 n'1) + G2 n'2 > t * S[e] (in this order, strictly); every other bond holds.
 # Marks `broken`; returns whether any bond broke.
+# With "sharing", the test is on section 11.1's measure, after the struck fragment's bonds shared the load.
 func _stress_break(site: int, n0: float, n1: float, n2: float, t: float, broken: Array) -> bool:
 	var G := _bond_gain
 	var S := _bond_strength
 	var E := _bond_edge
 	var hit_any := false
+	if _sharing:
+		var measure := _shared_measure(site, n0, n1, n2, t, [])
+		for edge in range(edges_count):
+			if measure[edge] > t * S[edge]:
+				broken[edge] = true
+				hit_any = true
+		return hit_any
 	for j in range(_bond_ptr[site], _bond_ptr[site + 1]):
 		var g: float = G[3 * j] * n0 + G[3 * j + 1] * n1 + G[3 * j + 2] * n2
 		var edge: int = E[j]
@@ -1255,6 +1330,60 @@ func _stress_break(site: int, n0: float, n1: float, n2: float, t: float, broken:
 			broken[edge] = true
 			hit_any = true
 	return hit_any
+
+
+# Section 11.1 (feature "sharing"): the measure a of every bond, doubles. a0 is section 11's g for the site's
+# listed bonds (0 for the others), b = t * S; the bonds F of the struck fragment f = site_fragment[site] (by
+# increasing index) run passes: X starts as the bonds of F with a0 > b (and, with a damage `state` (not []),
+# those whose health is <= 0); each pass spreads L = sum of max(a0, 0) over F in X on A = sum of the areas of
+# F not in X, q = (kappa * L) / A, gives every bond of F not in X a = a0 + q * area and adds those with a > b
+# to X after the pass; it stops when L or A is 0 or no bond joins X. Sums in increasing bond order, literally
+# as the spec says (so every reader's measures are the same doubles).
+func _shared_measure(site: int, n0: float, n1: float, n2: float, t: float, state: Array) -> Array:
+	var a: Array = _zero_edges.duplicate()
+	var G := _bond_gain
+	for j in range(_bond_ptr[site], _bond_ptr[site + 1]):
+		a[_bond_edge[j]] = G[3 * j] * n0 + G[3 * j + 1] * n1 + G[3 * j + 2] * n2
+	var F: Array = _incident[site_fragment[site]]
+	var count := F.size()
+	var with_state := not state.empty()
+	var a0 := []
+	var b := []
+	var area := []
+	var out := []
+	for i in range(count):
+		var e: int = F[i]
+		var x: float = a[e]
+		var y: float = t * _bond_strength[e]
+		a0.append(x)
+		b.append(y)
+		area.append(edge_areas[e])  # float32, exact as a double
+		out.append(x > y or (with_state and state[e] <= 0.0))
+	var kappa := sharing_concentration
+	while true:
+		var L := 0.0
+		for i in range(count):
+			if out[i] and a0[i] > 0.0:  # max(a0, 0) (not max(): 32-bit in Godot 3); adding 0 changes nothing
+				L = L + a0[i]
+		var A := 0.0
+		for i in range(count):
+			if not out[i]:
+				A = A + area[i]
+		if L == 0.0 or A == 0.0:
+			break
+		var q: float = (kappa * L) / A
+		var marked := []
+		for i in range(count):
+			if not out[i]:
+				var x: float = a0[i] + q * area[i]  # one product, one sum (inf * 0 is NaN, which holds)
+				a[F[i]] = x
+				if x > b[i]:
+					marked.append(i)
+		if marked.empty():
+			break
+		for i in marked:
+			out[i] = true
+	return a
 
 
 # disp'[j, c] = sum over i of alpha'[i] W[i, j, c], each sum in mode order.
@@ -1320,9 +1449,9 @@ func _break(disp: Array, t: float, broken: Array) -> PoolIntArray:
 
 const LEVEL_ARRAYS := ["parent", "body_fragment", "body_child_ptr", "body_site_ptr", "body_sites", "body_B", "body_W",
 		"body_edge_ptr", "body_edges", "body_edge_areas", "body_site_bonds_ptr", "body_site_bonds",
-		"body_site_bond_gain", "body_bond_strength", "body_crack_ptr", "body_crack_segments"]
-const LEVEL_RANKS := [1, 1, 1, 1, 2, 3, 3, 1, 2, 1, 1, 1, 2, 1, 1, 3]
-const LEVEL_INTS := [0, 1, 2, 3, 7, 8, 10, 11, 14]
+		"body_site_bond_gain", "body_bond_strength", "body_crack_ptr", "body_crack_segments", "body_site_fragment"]
+const LEVEL_RANKS := [1, 1, 1, 1, 2, 3, 3, 1, 2, 1, 1, 1, 2, 1, 1, 3, 1]
+const LEVEL_INTS := [0, 1, 2, 3, 7, 8, 10, 11, 14, 16]
 
 var level_count := 1  # the deepest level
 var child_names := []  # the names of fragments p .. p_all - 1
@@ -1362,7 +1491,7 @@ func _read_levels(top: Dictionary, binary: PoolByteArray):
 	var peer := StreamPeerBuffer.new()
 	peer.data_array = binary
 	for i in range(LEVEL_ARRAYS.size()):
-		if (i >= 10 and i < 14 and not _stress) or (i >= 14 and not cracks):
+		if (i >= 10 and i < 14 and not _stress) or (i >= 14 and i < 16 and not cracks) or (i == 16 and not _sharing):
 			continue
 		var name: String = LEVEL_ARRAYS[i]
 		var shape = _check_level_array(table.get(name), i, binary.size())
@@ -1410,6 +1539,8 @@ func _read_levels(top: Dictionary, binary: PoolByteArray):
 	if _stress and (shapes["body_site_bonds_ptr"] != [S + 1] or shapes["body_site_bond_gain"] != [N, 3] \
 			or shapes["body_bond_strength"] != [E] or _integer(counts.get("body_site_bonds")) != N):
 		return _fail("levels stress arrays do not agree with each other or counts")
+	if _sharing and shapes["body_site_fragment"] != [S]:  # its values: each body's view checks them (0 .. c_b - 1)
+		return _fail("array body_site_fragment must have %d entries, one per row of body_sites" % S)
 	var n: int = shapes["body_crack_segments"][0] if cracks else 0
 	if cracks and (shapes["body_crack_ptr"] != [E + 1] or shapes["body_crack_segments"] != [n, 2, 3] \
 			or _integer(counts.get("body_crack_segments")) != n):
@@ -1530,6 +1661,9 @@ func _make_view(b: int, a: Dictionary, K: int, C: int, cracks: bool, threshold: 
 				["site_bond_gain", false, [n1 - n0, 3], _slice(a["body_site_bond_gain"], 3 * n0, 3 * (n1 - n0))],
 				["bond_strength", false, [eb], _slice(a["body_bond_strength"], e0, eb)]]
 		counts["site_bonds"] = _int(n1 - n0)
+		if _sharing:
+			arrays.append(["site_fragment", true, [sb], _slice(a["body_site_fragment"], s0, sb)])
+			features.append("sharing")
 		features.append("stress")
 	if has_damage:
 		features.append("damage")
@@ -1565,6 +1699,8 @@ func _make_view(b: int, a: Dictionary, K: int, C: int, cracks: bool, threshold: 
 			"buffer": {"uri": "view.fracture.bin", "byte_length": _int(peer.get_size())}, "arrays": entries}
 	if has_damage:
 		view_top["damage"] = top["damage"]
+	if _sharing:
+		view_top["sharing"] = top["sharing"]  # the file's kappa applies to every body
 	var view = get_script().new()
 	view._view = true
 	if view._check_features(view_top, 2) == null or view._load_parsed(view_top, peer.data_array, false) != OK:
